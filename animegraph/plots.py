@@ -1,0 +1,67 @@
+"""Pictures an animator checks: speech, phones and facial measures over time."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ingest.corpus import face
+
+#: Distances between markers that read as facial actions whatever the head does.
+MEASURES: tuple[tuple[str, str, str], ...] = (
+    ("mouth opening (mm)", "ulip_in_c", "llip_in_c"),
+    ("lip corner to eye (mm)", "lip_corner_r", "eye_out_r"),
+    ("brow to eye (mm)", "brow_r1", "eye_in_r"),
+)
+
+
+def plot_clips(clips: Sequence, path: Path, *, title: str = "") -> Path:
+    """Plot speech, phones and facial measures of clips of one sentence.
+
+    Parameters
+    ----------
+    clips : sequence of ingest.corpus.synthetic.Clip
+        The first is drawn with its waveform and phone labels; all are overlaid in the
+        measure panels, labelled by emotion.
+    path : Path
+        PNG file to write.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = 2 + len(MEASURES)
+    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.0 * rows), sharex=True)
+    first = clips[0]
+    utt = first.utterance
+    t_audio = np.arange(len(utt.audio)) / utt.sample_rate
+    axes[0].plot(t_audio, utt.audio, lw=0.4, color="0.3")
+    axes[0].set_ylabel(f"speech\n({first.spec.emotion})")
+    for k, seg in enumerate(utt.phones):
+        if seg.phone == "SIL":
+            continue
+        mid = 0.5 * (seg.start + seg.end)
+        axes[0].axvline(seg.start, color="0.85", lw=0.5)
+        axes[0].text(mid, 0.9 if k % 2 else 0.7, seg.phone, ha="center", fontsize=6,
+                     transform=axes[0].get_xaxis_transform())
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, clip in enumerate(clips):
+        t = np.arange(len(clip.markers)) / clip.fps
+        for ax, (name, a, b) in zip(axes[1:], MEASURES, strict=False):
+            ax.plot(t, face.marker_distance(clip.markers, a, b), lw=1,
+                    color=colors[i % len(colors)], label=clip.spec.emotion)
+            ax.set_ylabel(name)
+        pitch = clip.controls[:, face.CONTROLS.index("head_pitch")]
+        axes[-1].plot(t, pitch, lw=1, color=colors[i % len(colors)])
+    axes[-1].set_ylabel("head pitch (deg)")
+    axes[-1].set_xlabel("time (s)")
+    axes[1].legend(loc="upper right", fontsize=7, ncol=len(clips))
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,1 @@
+"""Corpus generators: the synthetic expressive speech + facial motion-capture corpus."""

@@ -1,0 +1,194 @@
+"""Phone-label files (``<clip>.phones.csv``).
+
+One header line ``start,end,phone``, then one line per phone segment: start and end
+times in seconds with six decimals, and an ARPAbet phone of
+:data:`ingest.phones.PHONE_SET` (upper case, no stress digit)::
+
+    start,end,phone
+    0.000000,0.120000,SIL
+    0.120000,0.185000,HH
+
+Segments are sorted and do not overlap (gaps are allowed).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import math
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import NamedTuple
+
+from db.errors import DataError, ParameterError
+from ingest.formats.c3d import atomic_write
+from ingest.phones import PHONE_SET
+
+logger = logging.getLogger(__name__)
+
+HEADER: tuple[str, str, str] = ("start", "end", "phone")
+#: Decimals written for times (a microsecond; the format asks for at least four).
+TIME_DECIMALS = 6
+
+
+class Segment(NamedTuple):
+    """One labelled phone: ``phone`` from ``start`` to ``end`` seconds."""
+
+    phone: str
+    start: float
+    end: float
+
+    @property
+    def duration(self) -> float:
+        """Length in seconds."""
+        return self.end - self.start
+
+
+def _as_segment(item: object, index: int) -> Segment:
+    """Turn an object with ``.phone .start .end`` or a 3-tuple into a rounded Segment."""
+    if all(hasattr(item, name) for name in ("phone", "start", "end")):
+        phone, start, end = item.phone, item.start, item.end  # type: ignore[attr-defined]
+    elif isinstance(item, tuple | list) and len(item) == 3:
+        phone, start, end = item
+    else:
+        raise ParameterError(
+            f"segments[{index}]: expected (phone, start, end) or an object with "
+            f".phone .start .end, got {item!r}"
+        )
+    if not isinstance(phone, str) or phone not in PHONE_SET:
+        raise ParameterError(f"segments[{index}].phone: unknown phone {phone!r}")
+    times = []
+    for name, value in (("start", start), ("end", end)):
+        if isinstance(value, bool):
+            raise ParameterError(f"segments[{index}].{name}: expected seconds, got {value!r}")
+        try:
+            seconds = float(value)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(
+                f"segments[{index}].{name}: expected seconds, got {value!r}"
+            ) from exc
+        if not math.isfinite(seconds) or seconds < 0:
+            raise ParameterError(
+                f"segments[{index}].{name}: expected finite seconds >= 0, got {value!r}"
+            )
+        times.append(round(seconds, TIME_DECIMALS))
+    return Segment(phone, times[0], times[1])
+
+
+def _order_error(segment: Segment, previous: Segment | None) -> str | None:
+    """Describe why ``segment`` cannot follow ``previous``, or return None."""
+    if not segment.start < segment.end:
+        return f"start {segment.start} is not before end {segment.end}"
+    if previous is not None:
+        if segment.start < previous.start:
+            return f"start {segment.start} is before the previous start {previous.start}"
+        if segment.start < previous.end:
+            return f"start {segment.start} overlaps the previous segment ending {previous.end}"
+    return None
+
+
+def write_phones_csv(path: str | os.PathLike[str], segments: Iterable[object]) -> None:
+    """Write phone segments to a ``.phones.csv`` file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; written to a temporary file beside it, then renamed.
+    segments : iterable
+        Sorted, non-overlapping segments, each an object with ``.phone``, ``.start``
+        and ``.end`` attributes (seconds) or a ``(phone, start, end)`` tuple. Times are
+        rounded to :data:`TIME_DECIMALS` decimals before they are checked.
+
+    Raises
+    ------
+    ParameterError
+        If a segment has an unknown phone, bad times, ``start >= end``, or is out of
+        order or overlaps the one before.
+    DataError
+        If the file cannot be written.
+    """
+    if isinstance(segments, str | bytes) or not isinstance(segments, Iterable):
+        raise ParameterError(f"segments: expected an iterable of segments, got {segments!r}")
+    rows: list[Segment] = []
+    for index, item in enumerate(segments):
+        segment = _as_segment(item, index)
+        problem = _order_error(segment, rows[-1] if rows else None)
+        if problem is not None:
+            raise ParameterError(f"segments[{index}]: {problem}")
+        rows.append(segment)
+
+    text = io.StringIO()
+    out = csv.writer(text, lineterminator="\n")
+    out.writerow(HEADER)
+    for segment in rows:
+        out.writerow(
+            (f"{segment.start:.{TIME_DECIMALS}f}", f"{segment.end:.{TIME_DECIMALS}f}",
+             segment.phone)
+        )
+    with atomic_write(path) as handle:
+        handle.write(text.getvalue().encode("utf-8"))
+    logger.debug("wrote %s: %d segments", path, len(rows))
+
+
+def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
+    """Read phone segments from a ``.phones.csv`` file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; the header must be ``start,end,phone``.
+
+    Returns
+    -------
+    list of Segment
+        The segments in file order (possibly empty if the file has only a header).
+
+    Raises
+    ------
+    DataError
+        If the file is missing, empty, not UTF-8, has a wrong header, or a line (named
+        by its number) has the wrong field count, an unknown phone, bad times,
+        ``start >= end``, or is out of order or overlaps the line before.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"phones file not found: {path}")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"phones file is not UTF-8 text: {path}") from exc
+    lines = csv.reader(io.StringIO(text))
+    try:
+        header = next(lines, None)
+        if header is None:
+            raise DataError(f"phones file is empty: {path}")
+        if tuple(field.strip().lower() for field in header) != HEADER:
+            raise DataError(
+                f"{path}:1: expected header 'start,end,phone', got {','.join(header)!r}"
+            )
+        segments: list[Segment] = []
+        for row in lines:
+            line = lines.line_num
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue  # blank line
+            if len(row) != 3:
+                raise DataError(f"{path}:{line}: expected 3 fields, got {len(row)}: {row!r}")
+            start_text, end_text, phone = (field.strip() for field in row)
+            if phone not in PHONE_SET:
+                raise DataError(f"{path}:{line}: unknown phone {phone!r}")
+            try:
+                start, end = float(start_text), float(end_text)
+            except ValueError as exc:
+                raise DataError(f"{path}:{line}: bad time in {row!r}") from exc
+            if not (math.isfinite(start) and math.isfinite(end)) or start < 0:
+                raise DataError(f"{path}:{line}: times must be finite and >= 0, got {row!r}")
+            segment = Segment(phone, start, end)
+            problem = _order_error(segment, segments[-1] if segments else None)
+            if problem is not None:
+                raise DataError(f"{path}:{line}: {problem}")
+            segments.append(segment)
+    except csv.Error as exc:
+        raise DataError(f"{path}:{lines.line_num}: malformed CSV: {exc}") from exc
+    return segments

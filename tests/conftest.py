@@ -1,0 +1,49 @@
+"""Shared fixtures: a seeded rng, a tiny synthetic corpus built once per session."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def tiny_config():
+    from ingest.corpus.synthetic import CorpusConfig
+
+    # 3 sentences in all five emotions and 2 in one, 2 takes each: 34 clips.
+    return CorpusConfig(sentences=5, parallel=3, variations=2, seed=7)
+
+
+@pytest.fixture(scope="session")
+def tiny_corpus(tmp_path_factory, tiny_config) -> Path:
+    """A small synthetic corpus on disk, generated once for the whole session."""
+    from ingest.corpus.synthetic import generate_corpus
+
+    out = tmp_path_factory.mktemp("corpus") / "tiny"
+    generate_corpus(out, tiny_config, workers=2)
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _isolated_cache(tmp_path_factory, monkeypatch):
+    """Keep every test's cache (the demo's default corpus) out of the user's home."""
+    from animegraph.cache import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+def require_shared(*parts: str) -> Path:
+    """Path under ../shared/data, or skip the test with the reason it is missing."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"needs {path} (the shared data beside the project), which is absent")
+    return path

@@ -1,0 +1,41 @@
+"""``animegraph demo`` on the embedded default data, as a new user runs it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from animegraph.cache import default_corpus_dir
+from animegraph.cli import main
+from animegraph.demo import DEMO_SENTENCE
+from ingest.corpus.sentences import cmudict, words
+from ingest.corpus.synthetic import CorpusConfig, plan_corpus
+from ingest.formats.c3d import read_c3d
+
+
+def test_demo_sentence_is_held_out_and_pronounceable():
+    texts = {s.text for s in plan_corpus(CorpusConfig())}
+    assert DEMO_SENTENCE not in texts
+    assert all(w in cmudict() for w in words(DEMO_SENTENCE))
+
+
+def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--quiet"]) == 0
+    first = capsys.readouterr().out
+    assert "generated" in first
+    meta = json.loads((default_corpus_dir() / "corpus.json").read_text())
+    assert meta["n_clips"] == len(plan_corpus(CorpusConfig()))
+    assert meta["duration_s"] >= 300  # at least five minutes of speech
+
+    png = out / "demo.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    motion = read_c3d(out / "demo_happy.c3d")
+    assert motion.points.shape[1] >= 60 and np.isfinite(motion.points).mean() > 0.98
+
+    stamp = (default_corpus_dir() / "corpus.json").stat().st_mtime_ns
+    assert main(["demo", "--out", str(out), "--quiet", "--emotion", "sad"]) == 0
+    assert "reused" in capsys.readouterr().out
+    assert (default_corpus_dir() / "corpus.json").stat().st_mtime_ns == stamp
+    assert (out / "demo_sad.wav").exists()
