@@ -490,7 +490,9 @@ class _Engine:
                 with open(self.lib_path, "rb") as source:
                     image = source.read()
                 fd = os.memfd_create("animegraph-libespeak-ng", os.MFD_CLOEXEC)
-                os.write(fd, image)
+                view = memoryview(image)
+                while view:
+                    view = view[os.write(fd, view) :]
                 private = f"/proc/self/fd/{fd}"
                 _unload(ctypes.CDLL(private))  # loadable from there?
             except OSError as exc:

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from db.atomic import replace_dir
 from db.errors import ParameterError
 from ingest.corpus import articulation, face, gestures
 from ingest.corpus.emotions import EMOTIONS, EmotionStyle, vary
@@ -356,7 +357,7 @@ def generate_corpus(
         frames = int(sum(f for _, _, f in done))
         n_sentences = len({s.sentence_id for s in specs})
         _write_corpus_files(staging, config, specs, duration)
-        _move_into_place(staging, out)
+        replace_dir(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -390,19 +391,3 @@ def _write_corpus_files(
         },
     }
     (folder / "corpus.json").write_text(json.dumps(meta, indent=1))
-
-
-def _move_into_place(staging: Path, out: Path) -> None:
-    """Swap the finished staging folder in for ``out`` (replacing it if present)."""
-    old = None
-    if out.exists():
-        old = out.parent / f".{out.name}.old-{uuid.uuid4().hex[:8]}"
-        out.rename(old)
-    try:
-        staging.rename(out)
-    except BaseException:
-        if old is not None:
-            old.rename(out)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

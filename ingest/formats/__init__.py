@@ -10,7 +10,8 @@ raises :class:`db.errors.DataError` naming the file for a missing or bad file.
 
 from collections.abc import Callable
 
-from ingest.formats.c3d import MarkerData, atomic_write, read_c3d, write_c3d
+from db.atomic import atomic_write
+from ingest.formats.c3d import MarkerData, read_c3d, write_c3d
 from ingest.formats.phones_csv import Segment, read_phones_csv, write_phones_csv
 from ingest.formats.wav import read_wav, write_wav
 

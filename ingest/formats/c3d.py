@@ -5,9 +5,6 @@ Marker data crosses this boundary as :class:`MarkerData`: positions of shape
 markers are stored with the C3D convention for invalid points (residual -1,
 coordinates 0). Points are stored as 32-bit floats (``POINT:SCALE`` -1), so a round
 trip is exact to float32 precision.
-
-This module also holds :func:`atomic_write`, the temporary-file-and-rename helper
-every writer in :mod:`ingest.formats` uses.
 """
 
 from __future__ import annotations
@@ -16,17 +13,15 @@ import io
 import logging
 import math
 import os
-import secrets
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import c3d
 import numpy as np
 
+from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 
 logger = logging.getLogger(__name__)
@@ -41,56 +36,6 @@ MAX_MARKERS = 255
 _C3D_MAGIC = 0x50
 #: Factors from the ``POINT:UNITS`` values accepted on read to millimetres.
 _UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
-
-
-@contextmanager
-def atomic_write(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
-    """Open a temporary file beside ``path`` for binary writing, then move it onto ``path``.
-
-    The temporary file is created in the target's folder (so the final
-    :func:`os.replace` is atomic), flushed and fsynced when the ``with`` block ends
-    normally, then renamed onto ``path``. If the block, the flush or the rename fails
-    the temporary file is removed and an existing ``path`` is left untouched.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The file to create or replace.
-
-    Yields
-    ------
-    BinaryIO
-        The open temporary file.
-
-    Raises
-    ------
-    DataError
-        If the folder is missing or the file cannot be written (wraps the ``OSError``).
-    """
-    target = Path(path)
-    folder = target.parent
-    if not folder.is_dir():
-        raise DataError(f"cannot write {target}: folder {folder} does not exist")
-    tmp = folder / f".{target.name}.{secrets.token_hex(6)}.tmp"
-    try:
-        # os.open with mode 0o666 honours the umask, as a plain open() of the target would.
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-    except OSError as exc:
-        raise DataError(f"cannot write {target}: {exc.strerror or exc}") from exc
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            yield handle
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException as exc:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:  # pragma: no cover - nothing more can be done
-            logger.warning("could not remove temporary file %s", tmp)
-        if isinstance(exc, OSError):
-            raise DataError(f"cannot write {target}: {exc.strerror or exc}") from exc
-        raise
 
 
 @dataclass(frozen=True)

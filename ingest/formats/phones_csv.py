@@ -22,8 +22,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import NamedTuple
 
+from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
-from ingest.formats.c3d import atomic_write
 from ingest.phones import PHONE_SET
 
 logger = logging.getLogger(__name__)

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import soundfile
 
+from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
-from ingest.formats.c3d import atomic_write
 
 logger = logging.getLogger(__name__)
 
