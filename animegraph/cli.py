@@ -91,6 +91,48 @@ def build_parser() -> argparse.ArgumentParser:
                       help="worker processes for the corpus (default: all cores)")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=_cmd_demo)
+
+    ing = sub.add_parser(
+        "ingest", help="add mocap clips + speech to a motion database",
+        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; landmarks "
+        "tracked from video) with their speech, segment them into phonemes and store them as "
+        "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
+        "a bad clip is rejected with its reason while the others go in.",
+    )
+    ing.add_argument("sources", nargs="+", type=Path, metavar="SRC",
+                     help="clip files or folders")
+    ing.add_argument("--db", required=True, type=Path, help="database folder")
+    ing.add_argument("--workers", type=_whole_number, default=1,
+                     help="worker processes (default 1)")
+    ing.add_argument("--variance", type=_number, default=0.95,
+                     help="share of motion variance PCA keeps (paper: 0.95-0.98)")
+    ing.add_argument("--fps", type=_number, default=None,
+                     help="database frame rate (default: the highest of the clips)")
+    ing.add_argument("--no-lag-correction", action="store_true",
+                     help="keep landmark motion where it is instead of shifting it by the "
+                     "estimated lip-audio lag")
+    ing.add_argument("--quiet", action="store_true", help="no progress bar")
+    ing.set_defaults(func=_cmd_ingest)
+
+    sql = sub.add_parser(
+        "sql", help="run a read-only SQL query on a database",
+        description="Run SQL (DuckDB) over the database's tables: clips, animes, frames, "
+        "audio, channels, model_arrays, components. Only SELECT queries run.",
+    )
+    sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
+                     "GROUP BY 1\"")
+    sql.add_argument("--db", required=True, type=Path, help="database folder")
+    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
+    sql.add_argument("-o", "--output", type=Path, default=None,
+                     help="write here instead of standard output (required for parquet)")
+    sql.add_argument("--max-rows", type=_whole_number, default=50,
+                     help="rows shown in table format (default 50)")
+    sql.set_defaults(func=_cmd_sql)
+
+    info = sub.add_parser("info", help="summarise a database")
+    info.add_argument("--db", required=True, type=Path, help="database folder")
+    info.add_argument("--json", action="store_true", help="the summary as JSON")
+    info.set_defaults(func=_cmd_info)
     return parser
 
 
@@ -142,6 +184,47 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_ingest(args: argparse.Namespace) -> int:
+    from ingest.pipeline import IngestConfig, ingest
+
+    config = IngestConfig(variance=args.variance, fps=args.fps,
+                          correct_lag=not args.no_lag_correction)
+    report = ingest(args.sources, args.db, config, workers=args.workers,
+                    progress=lambda total: _progress(total, args.quiet, "clip"))
+    for line in report.lines():
+        print(line)
+    return 1 if report.count("rejected") else 0
+
+
+def _cmd_sql(args: argparse.Namespace) -> int:
+    from animegraph.tabular import format_table
+    from db.sql import query
+    from db.store import Database
+
+    if args.format == "parquet" and args.output is None:
+        raise UsageError("animegraph sql: --format parquet needs --output FILE")
+    result = query(Database.open(args.db), args.query)
+    text = format_table(result, args.format, max_rows=args.max_rows, output=args.output)
+    if text is not None:
+        sys.stdout.write(text)
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    import json
+
+    from animegraph.info import database_info, info_lines
+    from db.store import Database
+
+    info = database_info(Database.open(args.db))
+    if args.json:
+        print(json.dumps(info, indent=1))
+    else:
+        for line in info_lines(info):
+            print(line)
+    return 0
+
+
 def _configure_logging(verbosity: int) -> None:
     level = logging.WARNING if verbosity == 0 else logging.INFO if verbosity == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="animegraph: %(levelname)s: %(message)s",
@@ -155,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         _configure_logging(args.verbose)
         if args.command is None:
-            raise UsageError("animegraph: choose a command: corpus, demo "
+            raise UsageError("animegraph: choose a command: corpus, demo, ingest, sql, info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

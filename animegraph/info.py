@@ -1,0 +1,59 @@
+"""``animegraph info``: what a motion database holds."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from db.store import Database
+from ingest.phones import PHONES
+
+
+def database_info(db: Database) -> dict:
+    """A JSON-able summary of ``db``: manifest, phones, segmentation, components."""
+    m = db.manifest
+    animes = db.table("animes", columns=["phoneme"]).column("phoneme").to_pylist()
+    clips = db.table("clips", columns=["segmentation", "speaker"]).to_pylist()
+    components = db.table("components").to_pylist()
+    phones = Counter(animes)
+    return {
+        "path": str(db.root), "version": db.version_dir.name,
+        "schema_version": m["schema_version"], "animegraph_version": m.get("animegraph_version"),
+        "created": m.get("created"), "kind": m["kind"], "n_channels": m["n_channels"],
+        "fps": m["fps"], "n_clips": m["n_clips"], "n_animes": m["n_animes"],
+        "n_frames": m["n_frames"], "duration_s": m["duration_s"],
+        "clips_per_emotion": m["clips_per_emotion"], "corpora": m["corpora"],
+        "speakers": sorted({c["speaker"] for c in clips if c["speaker"]}),
+        "segmentation": dict(Counter(c["segmentation"] for c in clips)),
+        "phones": dict(sorted(phones.items(), key=lambda kv: -kv[1])),
+        "phones_missing": [p for p in PHONES if p not in phones],
+        "n_pcs": m["n_pcs"], "variance_kept": m["variance_kept"],
+        "variance_target": m["variance_target"], "ica_converged": m["ica_converged"],
+        "components": components,
+    }
+
+
+def info_lines(info: dict) -> list[str]:
+    """The summary as lines of text."""
+    emotions = ", ".join(f"{e} {n}" for e, n in info["clips_per_emotion"].items())
+    rare = sorted(info["phones"].items(), key=lambda kv: kv[1])[:5]
+    lines = [
+        f"database:   {info['path']} ({info['version']}, schema {info['schema_version']}, "
+        f"written by animegraph {info['animegraph_version']} at {info['created']})",
+        f"motion:     {info['kind']}, {info['n_channels']} channels at {info['fps']:g} fps",
+        f"clips:      {info['n_clips']} ({emotions}); {info['duration_s'] / 60:.1f} min, "
+        f"{info['n_frames']} frames; corpora {', '.join(info['corpora'])}",
+        f"speakers:   {', '.join(info['speakers']) or '(not given)'}",
+        f"animes:     {info['n_animes']}; {len(info['phones'])} phones present"
+        + (f", missing {' '.join(info['phones_missing'])}" if info["phones_missing"] else "")
+        + "; rarest " + ", ".join(f"{p} {n}" for p, n in rare),
+        "segmented:  " + ", ".join(f"{k} {v}" for k, v in info["segmentation"].items()),
+        f"model:      {info['n_pcs']} principal components keep "
+        f"{100 * info['variance_kept']:.1f} % of the variance (target "
+        f"{100 * info['variance_target']:.0f} %), as many independent components; FastICA "
+        + ("converged" if info["ica_converged"] else "did NOT converge"),
+        "components: #   motion share   low-pass cutoff",
+    ]
+    for c in info["components"]:
+        lines.append(f"            {c['component']:<3d} {100 * c['motion_share']:6.1f} %"
+                     f"       {c['cutoff_hz']:6.2f} Hz")
+    return lines

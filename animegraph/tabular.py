@@ -1,0 +1,88 @@
+"""Printing query results: a readable table, or CSV, JSON lines, Parquet."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from db.atomic import atomic_write
+
+
+def _shorten(value) -> str:
+    if isinstance(value, list):
+        head = ", ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in value[:3])
+        return f"[{head}{', ...' if len(value) > 3 else ''}] ({len(value)})"
+    if isinstance(value, bytes):
+        return f"<{len(value)} bytes>"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return "NULL" if value is None else str(value)
+
+
+def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
+                 output: Path | None = None) -> str | None:
+    """Render ``table`` as ``fmt`` (table, csv, json, parquet).
+
+    Returns the text, or None when it was written to ``output``.
+    """
+    if fmt == "parquet":
+        with atomic_write(output) as handle:
+            pq.write_table(table, handle)
+        return None
+    if fmt == "csv":
+        buffer = io.BytesIO()
+        flat = pa.table({n: _csv_safe(table.column(n)) for n in table.column_names})
+        pacsv.write_csv(flat, buffer)
+        text = buffer.getvalue().decode()
+    elif fmt == "json":
+        import json
+
+        text = "".join(json.dumps(row, default=_json) + "\n" for row in table.to_pylist())
+    else:
+        text = _pretty(table, max_rows)
+    if output is not None:
+        with atomic_write(output) as handle:
+            handle.write(text.encode())
+        return None
+    return text
+
+
+def _csv_safe(column: pa.ChunkedArray) -> pa.ChunkedArray:
+    # CSV has no lists: write them as space-separated numbers.
+    if pa.types.is_list(column.type) or pa.types.is_large_list(column.type):
+        return pa.chunked_array([pa.array(
+            [None if v is None else " ".join(str(x) for x in v) for v in column.to_pylist()],
+            pa.string())])
+    if pa.types.is_binary(column.type):
+        return pa.chunked_array([pa.array([None if v is None else v.hex()
+                                           for v in column.to_pylist()], pa.string())])
+    return column
+
+
+def _json(value):
+    if isinstance(value, bytes):
+        return value.hex()
+    return str(value)
+
+
+def _pretty(table: pa.Table, max_rows: int) -> str:
+    names = table.column_names
+    rows = table.slice(0, max_rows).to_pylist()
+    cells = [[_shorten(r[n]) for n in names] for r in rows]
+    widths = [max([len(n)] + [len(c[i]) for c in cells]) for i, n in enumerate(names)]
+    widths = [min(w, 60) for w in widths]
+
+    def line(values):
+        return "  ".join(v[:w].ljust(w) for v, w in zip(values, widths, strict=True)).rstrip()
+
+    out = [line(names), line(["-" * w for w in widths])]
+    out += [line(c) for c in cells]
+    if table.num_rows > max_rows:
+        out.append(f"... {table.num_rows - max_rows} more rows ({table.num_rows} in all)")
+    else:
+        out.append(f"({table.num_rows} row{'s' if table.num_rows != 1 else ''})")
+    return "\n".join(out) + "\n"

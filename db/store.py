@@ -1,0 +1,258 @@
+"""The motion database: versioned Parquet datasets behind an atomic ``CURRENT`` pointer.
+
+A database is a folder::
+
+    DB/CURRENT                      name of the live version, e.g. "v000003"
+    DB/v000003/manifest.json        schema version, database version, summary, tables
+    DB/v000003/clips/emotion=<e>/part-0.parquet   one row per utterance
+    DB/v000003/animes/emotion=<e>/part-0.parquet  one row per phoneme instance (anime)
+    DB/v000003/frames/emotion=<e>/part-0.parquet  full-rate motion, one row per frame
+    DB/v000003/audio/part-0.parquet               each clip's speech (16-bit PCM)
+    DB/v000003/channels.parquet                   what each motion channel is
+    DB/v000003/model_arrays.parquet               PCA/ICA means, components, mixing ...
+    DB/v000003/components.parquet                 one row per independent component
+    DB/reports/                                   ingest reports
+
+Every table is plain Parquet with hive partitioning, readable by any Parquet engine
+(DuckDB, Spark, pandas). A write builds a complete new version in a hidden staging
+folder, renames it into place and only then replaces ``CURRENT`` (one atomic rename),
+so a failed or killed write leaves the previous version live and unchanged. The
+version before the live one is kept for readers that still have it open; older ones
+are removed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import secrets
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+
+from db.atomic import atomic_write
+from db.errors import DataError
+
+logger = logging.getLogger(__name__)
+
+#: Version of the table layout; readers refuse other versions.
+SCHEMA_VERSION = 1
+#: Tables partitioned by emotion (a column they all carry).
+PARTITIONED = ("clips", "animes", "frames")
+#: Tables stored as one folder of part files (unpartitioned) or one file.
+FOLDER_TABLES = ("audio",)
+FILE_TABLES = ("channels", "model_arrays", "components")
+TABLES = PARTITIONED + FOLDER_TABLES + FILE_TABLES
+
+_VERSION = re.compile(r"^v(\d{6})$")
+_CURRENT = "CURRENT"
+
+
+def is_database(path: str | os.PathLike) -> bool:
+    """True if ``path`` is a database folder (it has a ``CURRENT`` pointer)."""
+    return (Path(path) / _CURRENT).is_file()
+
+
+def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict) -> Path:
+    """Write a new version of the database at ``path`` and make it the live one.
+
+    Parameters
+    ----------
+    path : path
+        Database folder (created if absent).
+    tables : dict of str to pyarrow.Table
+        Every name in :data:`TABLES`. Partitioned tables need an ``emotion`` column.
+    manifest : dict
+        Summary to store (JSON-serialisable); the schema and database versions and
+        the table list are added here.
+
+    Returns
+    -------
+    Path
+        The new version's folder.
+    """
+    root = Path(path)
+    missing = set(TABLES) - set(tables)
+    if missing:
+        raise ValueError(f"missing tables: {sorted(missing)}")
+    for name in PARTITIONED:
+        if "emotion" not in tables[name].column_names:
+            raise ValueError(f"table {name} needs an emotion column to be partitioned by")
+    root.mkdir(parents=True, exist_ok=True)
+    previous = current_version(root) if is_database(root) else None
+    number = 1 + max([_number(p.name) for p in root.iterdir() if _VERSION.match(p.name)],
+                     default=0)
+    name = f"v{number:06d}"
+    staging = root / f".{name}.partial-{secrets.token_hex(4)}"
+    try:
+        staging.mkdir()
+        for table_name, table in tables.items():
+            _write_table(staging, table_name, table)
+        info = {
+            **manifest,
+            "schema_version": SCHEMA_VERSION,
+            "db_version": number,
+            "tables": {t: int(tables[t].num_rows) for t in TABLES},
+        }
+        (staging / "manifest.json").write_text(json.dumps(info, indent=1, default=_json))
+        _fsync_tree(staging)
+        staging.rename(root / name)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    with atomic_write(root / _CURRENT) as handle:
+        handle.write(name.encode())
+    _prune(root, keep={name, previous} - {None})
+    return root / name
+
+
+def _write_table(folder: Path, name: str, table: pa.Table) -> None:
+    if name in PARTITIONED:
+        ds.write_dataset(
+            table, folder / name, format="parquet",
+            partitioning=ds.partitioning(pa.schema([("emotion", pa.string())]), flavor="hive"),
+            basename_template="part-{i}.parquet", max_rows_per_group=64 * 1024,
+            existing_data_behavior="error",
+        )
+    elif name in FOLDER_TABLES:
+        (folder / name).mkdir()
+        pq.write_table(table, folder / name / "part-0.parquet")
+    else:
+        pq.write_table(table, folder / f"{name}.parquet")
+
+
+def _fsync_tree(folder: Path) -> None:
+    # Data must be on disk before CURRENT points at it, or a crash could expose
+    # a version whose files are empty.
+    for path in folder.rglob("*"):
+        if path.is_file():
+            with open(path, "rb") as handle:
+                os.fsync(handle.fileno())
+
+
+def _prune(root: Path, keep: set[str]) -> None:
+    for child in root.iterdir():
+        stale_version = _VERSION.match(child.name) and child.name not in keep
+        stale_staging = child.name.startswith(".v") and ".partial-" in child.name
+        if child.is_dir() and (stale_version or stale_staging):
+            shutil.rmtree(child, ignore_errors=True)
+
+
+def _number(name: str) -> int:
+    return int(_VERSION.match(name).group(1))
+
+
+def _json(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def current_version(path: str | os.PathLike) -> str:
+    """Name of the live version of the database at ``path``."""
+    root = Path(path)
+    try:
+        name = (root / _CURRENT).read_text().strip()
+    except FileNotFoundError:
+        raise DataError(f"{root} is not an animegraph database (no {_CURRENT} file)") from None
+    if not _VERSION.match(name) or not (root / name).is_dir():
+        raise DataError(f"database {root} is damaged: {_CURRENT} names {name!r}, not a version")
+    return name
+
+
+@dataclass(frozen=True)
+class Database:
+    """A read-only view of the live version of a database.
+
+    Attributes
+    ----------
+    root : Path
+        The database folder.
+    version_dir : Path
+        Folder of the version that was live when the database was opened.
+    manifest : dict
+        That version's manifest.
+    """
+
+    root: Path
+    version_dir: Path
+    manifest: dict
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> Database:
+        """Open the database at ``path``.
+
+        Raises
+        ------
+        DataError
+            If ``path`` is not a database, is damaged, or has another schema version.
+        """
+        root = Path(path)
+        if not root.exists():
+            raise DataError(f"database {root} does not exist")
+        version_dir = root / current_version(root)
+        try:
+            manifest = json.loads((version_dir / "manifest.json").read_text())
+        except (OSError, ValueError) as exc:
+            raise DataError(f"database {root} is damaged: cannot read its manifest") from exc
+        if manifest.get("schema_version") != SCHEMA_VERSION:
+            raise DataError(
+                f"database {root} has schema version {manifest.get('schema_version')}, "
+                f"this animegraph reads version {SCHEMA_VERSION}"
+            )
+        return cls(root=root, version_dir=version_dir, manifest=manifest)
+
+    def table_path(self, name: str) -> Path:
+        """Where the table ``name`` lives (a folder, or one file)."""
+        if name in FILE_TABLES:
+            return self.version_dir / f"{name}.parquet"
+        return self.version_dir / name
+
+    def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:
+        """Read a table (optionally some columns, rows matching a pyarrow ``filter``)."""
+        if name not in TABLES:
+            raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
+        try:
+            if name in PARTITIONED:
+                dataset = ds.dataset(self.table_path(name), format="parquet", partitioning="hive")
+            else:
+                dataset = ds.dataset(self.table_path(name), format="parquet")
+            return dataset.to_table(columns=columns, filter=filter)
+        except (OSError, pa.ArrowException) as exc:
+            raise DataError(f"database {self.root} is damaged: cannot read {name}: {exc}") from exc
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...)."""
+        return arrays_from_table(self.table("model_arrays"))
+
+
+def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:
+    """Store named float arrays as rows (name, shape, values) — no pickles."""
+    names = sorted(arrays)
+    return pa.table({
+        "name": pa.array(names, pa.string()),
+        "shape": pa.array([list(np.shape(arrays[n])) for n in names], pa.list_(pa.int64())),
+        "values": pa.array([np.asarray(arrays[n], dtype=np.float64).ravel() for n in names],
+                           pa.list_(pa.float64())),
+    })
+
+
+def arrays_from_table(table: pa.Table) -> dict[str, np.ndarray]:
+    """Inverse of :func:`arrays_to_table`."""
+    out = {}
+    names = table.column("name").to_pylist()
+    shapes = table.column("shape").to_pylist()
+    values = table.column("values")
+    for i, (name, shape) in enumerate(zip(names, shapes, strict=True)):
+        flat = values[i].values.to_numpy(zero_copy_only=False)
+        out[name] = flat.reshape(shape)
+    return out

@@ -1,0 +1,135 @@
+"""A clip as read from disk: motion, speech, text and labels, whatever the source kind.
+
+Readers of every corpus kind (marker, animation-curve, landmark) return a
+:class:`RawClip`; everything after reading works on its generic
+``(n_frames, n_channels)`` motion and its :class:`ChannelSchema`, never on the kind.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from db.errors import DataError
+from ingest.formats.phones_csv import Segment
+
+#: Kinds of motion a clip can carry.
+KINDS = ("markers", "curves", "landmarks")
+
+
+@dataclass(frozen=True)
+class ChannelSchema:
+    """What each motion channel is.
+
+    Attributes
+    ----------
+    kind : str
+        ``"markers"`` (3D marker x/y/z triples), ``"curves"`` (named animation
+        curves, e.g. blendshape weights) or ``"landmarks"`` (3D points tracked from
+        video, head pose removed).
+    names : tuple of str
+        One name per channel: ``"<marker>.x"``/``.y``/``.z`` for point kinds, the curve
+        name for curves.
+    groups : tuple of str
+        Motion group of each channel (Cao et al. §3.2: ``"head"``, ``"upper_face"``,
+        ``"lips"``; ``"pose"`` for a removed rigid head pose; ``"other"`` if unknown).
+    units : str
+        ``"mm"`` for markers, ``"unit"`` for curves and normalised landmarks.
+    """
+
+    kind: str
+    names: tuple[str, ...]
+    groups: tuple[str, ...]
+    units: str
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise DataError(f"channel kind must be one of {KINDS}, got {self.kind!r}")
+        if len(self.names) != len(self.groups):
+            raise DataError(f"{len(self.names)} channel names but {len(self.groups)} groups")
+        if len(set(self.names)) != len(self.names):
+            raise DataError("channel names must be unique")
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.names)
+
+    @classmethod
+    def for_points(cls, kind: str, labels, groups, units: str) -> ChannelSchema:
+        """Schema of x/y/z triples of named points (markers or landmarks)."""
+        names = tuple(f"{label}.{axis}" for label in labels for axis in "xyz")
+        return cls(kind=kind, names=names, groups=tuple(g for g in groups for _ in "xyz"),
+                   units=units)
+
+
+@dataclass(frozen=True, eq=False)
+class RawClip:
+    """One utterance as read from its files.
+
+    Attributes
+    ----------
+    clip_id : str
+        Unique within its corpus (file stem by default).
+    corpus : str
+        Name of the corpus (folder name by default).
+    source : Path
+        The motion file (or clip folder) it was read from.
+    motion : np.ndarray, shape (n_frames, n_channels)
+        Motion, float64; NaN where a channel is missing (marker dropouts).
+    fps : float
+        Frames per second of ``motion``.
+    schema : ChannelSchema
+        What the channels are.
+    audio : np.ndarray, shape (n_samples,)
+        Mono speech, float32 in [-1, 1].
+    sample_rate : int
+        Audio sample rate in Hz.
+    text : str or None
+        Transcript, if any.
+    phones : tuple of ingest.formats.phones_csv.Segment, or None
+        Phone labels (ARPAbet, seconds) shipped with the clip, if any.
+    emotion, speaker, sentence_id : str or None
+        Metadata, if known.
+    checksum : str
+        SHA-256 over the clip's source files: re-ingesting an unchanged clip is a no-op.
+    extra : dict
+        Reader-specific facts worth keeping (e.g. an estimated lip-audio lag).
+    """
+
+    clip_id: str
+    corpus: str
+    source: Path
+    motion: np.ndarray
+    fps: float
+    schema: ChannelSchema
+    audio: np.ndarray
+    sample_rate: int
+    checksum: str
+    text: str | None = None
+    phones: tuple[Segment, ...] | None = None
+    emotion: str | None = None
+    speaker: str | None = None
+    sentence_id: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.motion.shape[0])
+
+    @property
+    def duration(self) -> float:
+        """Audio duration in seconds."""
+        return len(self.audio) / self.sample_rate
+
+
+def checksum_files(paths) -> str:
+    """SHA-256 (hex) over the bytes of ``paths`` in the given order, names excluded."""
+    digest = hashlib.sha256()
+    for path in paths:
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+    return digest.hexdigest()

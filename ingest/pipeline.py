@@ -1,0 +1,294 @@
+"""``animegraph ingest``: source folders in, a new version of the motion database out.
+
+1. Find the clips under the sources (:func:`ingest.readers.discover`).
+2. Per clip, in worker processes: read it, skip it if the database already has it with
+   the same checksum, else prepare it (:func:`ingest.prepare.prepare_clip`). A clip that
+   fails is rejected with its reason; the others go on.
+3. If anything was added or changed: the clips already in the database and the new ones
+   are decomposed together (PCA keeping 95 % of the variance, then FastICA over the
+   whole corpus, Cao et al. §4.1 and §5.1.2), the per-component low-pass cutoffs are
+   learned (§4.3), the anime nodes are built, and a new database version is written
+   atomically (:func:`db.store.write_version`).
+4. A report (one row per clip: added, replaced, unchanged or rejected, with the reason)
+   is returned, and saved beside the database.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import multiprocessing
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from db.atomic import atomic_write
+from db.errors import DataError, ParameterError
+from db.store import Database, is_database, write_version
+from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
+from ingest.prepare import PreparedClip, prepare_clip
+from ingest.readers import ClipSource, discover, load
+from ingest.tables import build_tables, prepared_from_database
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class IngestConfig:
+    """Settings of an ingest; the defaults are the paper's."""
+
+    variance: float = VARIANCE_KEPT  # PCA variance kept (§4.1: 95 %)
+    energy: float = ENERGY_KEPT  # energy below each component's cutoff (§4.3: 99 %)
+    fps: float | None = None  # database frame rate (default: the existing database's, else
+    #                           the highest among the new clips)
+    correct_lag: bool = True  # shift landmark motion by its estimated lip-audio lag
+    random_state: int = 0  # FastICA seed
+
+
+@dataclass(frozen=True)
+class ClipReport:
+    """What happened to one clip."""
+
+    source: str
+    clip_id: str
+    status: str  # added | replaced | unchanged | rejected
+    reason: str = ""
+    n_animes: int = 0
+    segmentation: str = ""
+    duration_s: float = 0.0
+
+
+@dataclass
+class IngestReport:
+    """What an ingest did."""
+
+    db: Path
+    clips: list[ClipReport] = field(default_factory=list)
+    written: bool = False
+    version: str | None = None
+    seconds: float = 0.0
+    summary: dict = field(default_factory=dict)
+
+    def count(self, status: str) -> int:
+        return sum(1 for c in self.clips if c.status == status)
+
+    def lines(self) -> list[str]:
+        """A short human summary, rejected clips with their reasons."""
+        head = (f"{self.count('added')} added, {self.count('replaced')} replaced, "
+                f"{self.count('unchanged')} unchanged, {self.count('rejected')} rejected "
+                f"in {self.seconds:.1f} s")
+        out = [head]
+        for c in self.clips:
+            if c.status == "rejected":
+                out.append(f"  rejected {c.source}: {c.reason}")
+        if self.written:
+            s = self.summary
+            out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
+                       f"{s['n_animes']} animes, {s['duration_s'] / 60:.1f} min, "
+                       f"{s['n_pcs']} principal / independent components "
+                       f"({100 * s['variance_kept']:.1f} % of the variance)")
+        else:
+            out.append(f"database {self.db} unchanged")
+        return out
+
+    def to_csv(self) -> str:
+        buffer = io.StringIO()
+        names = list(ClipReport.__dataclass_fields__)
+        writer = csv.DictWriter(buffer, fieldnames=names)
+        writer.writeheader()
+        for c in self.clips:
+            writer.writerow(asdict(c))
+        return buffer.getvalue()
+
+
+def _work(args: tuple[ClipSource, dict[tuple[str, str], str], float | None, bool]):
+    """Worker: read one clip and prepare it unless the database already has it."""
+    source, known, fps, correct_lag = args
+    try:
+        raw = load(source)
+        if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
+            return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
+        clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag)
+        status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
+        report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
+                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
+        return report, clip
+    except DataError as exc:
+        return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
+
+
+def ingest(
+    sources: Sequence[str | os.PathLike],
+    db_path: str | os.PathLike,
+    config: IngestConfig | None = None,
+    *,
+    workers: int = 1,
+    progress: Callable[[int], Callable] | None = None,
+) -> IngestReport:
+    """Ingest clips found under ``sources`` into the database at ``db_path``.
+
+    Parameters
+    ----------
+    sources : sequence of path
+        Files or folders holding clips of any supported kind.
+    db_path : path
+        Database folder; created if absent.
+    config : IngestConfig, optional
+    workers : int
+        Processes preparing clips in parallel.
+    progress : callable, optional
+        ``progress(total)`` returns a wrapper for an iterable of finished clips.
+
+    Raises
+    ------
+    ParameterError
+        If a source does not exist, nothing ingestable is found, ``db_path`` is
+        something else than a database, or every clip is rejected.
+    """
+    config = config or IngestConfig()
+    started = time.perf_counter()
+    db_path = Path(db_path)
+    for s in sources:
+        if not Path(s).exists():
+            raise ParameterError(f"source {s} does not exist")
+    if workers < 1:
+        raise ParameterError(f"workers must be >= 1, got {workers}")
+    existing: Database | None = None
+    if is_database(db_path):
+        existing = Database.open(db_path)
+    elif db_path.exists() and (not db_path.is_dir() or any(db_path.iterdir())):
+        raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+
+    found = discover([Path(s) for s in sources])
+    if not found:
+        raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
+    known: dict[tuple[str, str], str] = {}
+    fps = config.fps
+    if existing is not None:
+        clips = existing.table("clips", columns=["corpus", "clip_id", "checksum"]).to_pylist()
+        known = {(c["corpus"], c["clip_id"]): c["checksum"] for c in clips}
+        fps = existing.manifest["fps"]
+        if config.fps is not None and config.fps != fps:
+            raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")
+
+    report = IngestReport(db=db_path)
+    results = _run(found, known, fps, config, workers, progress)
+    new: list[PreparedClip] = []
+    for clip_report, clip in results:
+        report.clips.append(clip_report)
+        if clip is not None:
+            new.append(clip)
+
+    if new:
+        kept = []
+        if existing is not None:
+            replaced = {c.key for c in new}
+            kept = [c for c in prepared_from_database(existing) if c.key not in replaced]
+        target_fps = fps or max(c.fps for c in new)
+        new = [_at_fps(c, target_fps) for c in new]
+        everything = _consistent(kept, new, report)
+        if everything:
+            _write(db_path, everything, config, target_fps, report)
+    report.seconds = time.perf_counter() - started
+    _save_report(db_path, report)
+    if not report.written and report.count("rejected") == len(report.clips):
+        raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
+                             f"{report.clips[0].source}: {report.clips[0].reason}")
+    return report
+
+
+def _run(found, known, fps, config, workers, progress):
+    jobs = [(s, known, fps, config.correct_lag) for s in found]
+    if workers == 1 or len(jobs) == 1:
+        results = map(_work, jobs)
+        return list(progress(len(jobs))(results) if progress else results)
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        results = pool.map(_work, jobs, chunksize=4)
+        return list(progress(len(jobs))(results) if progress else results)
+
+
+def _at_fps(clip: PreparedClip, fps: float) -> PreparedClip:
+    """Clips prepared before the database's rate was known are brought to it here."""
+    if clip.fps == fps:
+        return clip
+    from dataclasses import replace
+
+    from ingest.motion import resample_motion
+
+    motion = resample_motion(clip.motion, clip.fps, fps).astype(np.float32)
+    missing = resample_motion(clip.missing.astype(np.float64), clip.fps, fps) > 0.5
+    return replace(clip, motion=motion, missing=missing, fps=fps)
+
+
+def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
+                report: IngestReport) -> list[PreparedClip]:
+    """Drop new clips whose channels differ from the database's (or the first clip's)."""
+    reference = kept[0].schema if kept else new[0].schema
+    out = list(kept)
+    by_id = {(r.clip_id, r.source): r for r in report.clips}
+    for clip in new:
+        if clip.schema == reference:
+            out.append(clip)
+            continue
+        reason = (f"its channels ({clip.schema.kind}, {clip.schema.n_channels}) differ from "
+                  f"the database's ({reference.kind}, {reference.n_channels})")
+        old = by_id[(clip.clip_id, clip.source)]
+        report.clips[report.clips.index(old)] = ClipReport(old.source, old.clip_id,
+                                                           "rejected", reason=reason)
+    return out if len(out) > len(kept) else []
+
+
+def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
+           report: IngestReport) -> None:
+    motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
+    model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
+    model.fit(motion)
+    del motion
+    sources = [model.transform(c.motion) for c in clips]
+    cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
+    tables = build_tables(clips, model, cutoffs)
+    emotions: dict[str, int] = {}
+    for c in clips:
+        emotions[c.emotion] = emotions.get(c.emotion, 0) + 1
+    summary = {
+        "animegraph_version": _version(), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "kind": clips[0].schema.kind, "fps": fps, "n_channels": clips[0].schema.n_channels,
+        "n_clips": len(clips), "n_animes": tables["animes"].num_rows,
+        "n_frames": tables["frames"].num_rows,
+        "duration_s": round(sum(c.duration for c in clips), 3),
+        "clips_per_emotion": dict(sorted(emotions.items())),
+        "corpora": sorted({c.corpus for c in clips}),
+        "n_pcs": model.n_pcs_, "variance_kept": float(model.explained_variance_ratio_.sum()),
+        "variance_target": config.variance, "energy_target": config.energy,
+        "ica_converged": bool(model.ica_converged_),
+    }
+    version_dir = write_version(db_path, tables, summary)
+    report.written = True
+    report.version = version_dir.name
+    report.summary = summary
+
+
+def _save_report(db_path: Path, report: IngestReport) -> None:
+    if not db_path.is_dir():
+        return
+    folder = db_path / "reports"
+    folder.mkdir(exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    with atomic_write(folder / f"ingest-{stamp}-{os.getpid()}.csv") as handle:
+        handle.write(report.to_csv().encode())
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("animegraph")
+    except PackageNotFoundError:
+        return "unknown"

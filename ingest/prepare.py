@@ -1,0 +1,145 @@
+"""Per-clip ingest work: everything that does not need the rest of the corpus.
+
+A clip is read, its dropouts filled, its motion brought to the database's frame rate,
+its speech segmented into phones (given labels, else forced alignment of the
+transcript, else phone recognition) and its prosody curve computed (RASTA-PLP,
+Cao et al. §4.1). The result, a :class:`PreparedClip`, is what the corpus-wide steps
+(PCA/ICA, anime nodes, tables) work from; it is also what the database keeps of a
+clip, so a later ingest can rebuild the model without re-reading the sources.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from db.errors import DataError
+from ingest.clip import ChannelSchema, RawClip
+from ingest.features import RastaPlpConfig, rasta_plp
+from ingest.formats.phones_csv import Segment
+from ingest.motion import fill_gaps, resample_motion
+from ingest.segment import segment
+
+#: Emotion label of clips that come without one.
+UNKNOWN_EMOTION = "unknown"
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedClip:
+    """A clip ready to enter the database.
+
+    Attributes
+    ----------
+    motion : np.ndarray, shape (n_frames, n_channels), float32
+        Gap-filled motion at ``fps``.
+    missing : np.ndarray of bool, shape (n_frames, n_channels)
+        Where the recording had no value (filled by interpolation).
+    audio : np.ndarray, shape (n_samples,), int16
+        Speech.
+    phones : tuple of Segment
+        ARPAbet phone segments tiling the audio.
+    prosody : np.ndarray, shape (n_prosody_frames, 9), float32
+        RASTA-PLP curve of the whole clip, 100 frames per second.
+    """
+
+    clip_id: str
+    corpus: str
+    source: str
+    checksum: str
+    schema: ChannelSchema
+    fps: float
+    source_fps: float
+    motion: np.ndarray
+    missing: np.ndarray
+    audio: np.ndarray
+    sample_rate: int
+    phones: tuple[Segment, ...]
+    segmentation: str
+    prosody: np.ndarray
+    emotion: str
+    speaker: str | None
+    sentence_id: str | None
+    text: str | None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return len(self.audio) / self.sample_rate
+
+    @property
+    def key(self) -> tuple[str, str]:
+        """(corpus, clip_id): a clip's identity in the database."""
+        return self.corpus, self.clip_id
+
+
+def prepare_clip(
+    raw: RawClip,
+    *,
+    fps: float | None = None,
+    correct_lag: bool = True,
+    prosody_config: RastaPlpConfig | None = None,
+) -> PreparedClip:
+    """Turn a clip read from disk into a :class:`PreparedClip`.
+
+    Parameters
+    ----------
+    raw : RawClip
+        The clip as read.
+    fps : float, optional
+        Frame rate of the database (default: the clip's own).
+    correct_lag : bool
+        Shift motion by the lip-audio lag a reader estimated (``extra["lip_audio_lag_s"]``),
+        so lips and speech line up.
+
+    Raises
+    ------
+    DataError
+        With a one-line reason if the clip cannot be used.
+    """
+    filled, missing = fill_gaps(raw.motion, raw.schema.names)
+    extra = dict(raw.extra)
+    lag = extra.get("lip_audio_lag_s")
+    if correct_lag and lag is not None and abs(lag) * raw.fps >= 1.0:
+        filled = _shift(filled, float(lag), raw.fps)
+        missing = _shift(missing.astype(np.float64), float(lag), raw.fps) > 0.5
+        extra["lag_corrected_s"] = float(lag)
+    target = raw.fps if fps is None else float(fps)
+    if target != raw.fps:
+        filled = resample_motion(filled, raw.fps, target)
+        missing = resample_motion(missing.astype(np.float64), raw.fps, target) > 0.5
+
+    audio = np.asarray(raw.audio, dtype=np.float32)
+    if not np.any(np.abs(audio) > 1e-4):
+        raise DataError("the audio is silent")
+    phones, method = segment(audio, raw.sample_rate, text=raw.text,
+                             labels=list(raw.phones) if raw.phones else None)
+    if all(p.phone == "SIL" for p in phones):
+        raise DataError("no speech found in the audio (every phone is silence)")
+    prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)
+    pcm = np.round(np.clip(audio, -1, 1) * 32767).astype(np.int16)
+    return PreparedClip(
+        clip_id=raw.clip_id, corpus=raw.corpus, source=str(raw.source), checksum=raw.checksum,
+        schema=raw.schema, fps=target, source_fps=raw.fps,
+        motion=filled.astype(np.float32), missing=missing, audio=pcm,
+        sample_rate=raw.sample_rate, phones=tuple(Segment(*p) for p in phones),
+        segmentation=method, prosody=prosody.astype(np.float32),
+        emotion=raw.emotion or UNKNOWN_EMOTION, speaker=raw.speaker,
+        sentence_id=raw.sentence_id, text=raw.text, extra=extra,
+    )
+
+
+def _shift(motion: np.ndarray, lag_s: float, fps: float) -> np.ndarray:
+    """Delay motion by ``lag_s`` seconds (lips leading the audio: positive), edge-padded."""
+    shift = int(round(lag_s * fps))
+    if shift == 0:
+        return motion
+    out = np.empty_like(motion)
+    if shift > 0:  # motion came early: move it later
+        out[shift:] = motion[:-shift]
+        out[:shift] = motion[0]
+    else:
+        out[:shift] = motion[-shift:]
+        out[shift:] = motion[-1]
+    return out
+

@@ -1,0 +1,239 @@
+"""From prepared clips and the corpus-wide model to the database's tables.
+
+Each utterance becomes a sequence of anime nodes a = <P, C, M, E> (Cao et al. 2005,
+§4.1, Eq. 1): phoneme label P, prosody curve C (the RASTA-PLP frames inside the
+phone), motion M (the phone's frames in independent-component space) and emotion E,
+linked to the previous and next node of the same recording — the Anime Graph.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections.abc import Sequence
+
+import numpy as np
+import pyarrow as pa
+
+from db.store import arrays_to_table
+from ingest.decompose import MotionDecomposer
+from ingest.features import RastaPlpConfig, slice_frames
+from ingest.prepare import PreparedClip
+
+_F32 = pa.list_(pa.float32())
+_F64 = pa.list_(pa.float64())
+
+#: Column types of the clips table (explicit, so all-null columns keep their type).
+CLIPS_SCHEMA = pa.schema([
+    ("clip_id", pa.string()), ("corpus", pa.string()), ("kind", pa.string()),
+    ("speaker", pa.string()), ("emotion", pa.string()), ("sentence_id", pa.string()),
+    ("text", pa.string()), ("fps", pa.float64()), ("source_fps", pa.float64()),
+    ("n_frames", pa.int32()), ("duration", pa.float64()), ("sample_rate", pa.int32()),
+    ("n_animes", pa.int32()), ("segmentation", pa.string()), ("phones", pa.string()),
+    ("phone_starts", _F64), ("phone_ends", _F64), ("prosody_frames", pa.int32()),
+    ("prosody", _F32), ("lip_audio_lag_s", pa.float64()), ("source", pa.string()),
+    ("checksum", pa.string()), ("extra", pa.string()),
+])
+
+
+def anime_frames(start: float, end: float, fps: float, n_frames: int) -> tuple[int, int]:
+    """Frame range [first, stop) of a phone from ``start`` to ``end`` seconds.
+
+    Every phone gets at least one frame, even one shorter than a frame period.
+    """
+    first = min(int(np.floor(start * fps + 1e-9)), n_frames - 1)
+    stop = min(max(int(np.ceil(end * fps - 1e-9)), first + 1), n_frames)
+    return first, stop
+
+
+def build_tables(
+    clips: Sequence[PreparedClip],
+    model: MotionDecomposer,
+    cutoffs: np.ndarray,
+    *,
+    prosody_config: RastaPlpConfig | None = None,
+) -> dict[str, pa.Table]:
+    """Every table of the database for ``clips`` (sorted by corpus and clip id)."""
+    cfg = prosody_config or RastaPlpConfig()
+    clips = sorted(clips, key=lambda c: c.key)
+    schema = clips[0].schema
+    clip_rows, anime_cols, frame_parts = [], _columns(), []
+    audio_rows = []
+    node = 0
+    sources_all = []
+    for clip in clips:
+        pcs = model.to_pcs(clip.motion)
+        sources = model.sources_from_pcs(pcs).astype(np.float32)
+        sources_all.append(sources)
+        n_phones = len(clip.phones)
+        for pos, seg in enumerate(clip.phones):
+            first, stop = anime_frames(seg.start, seg.end, clip.fps, len(clip.motion))
+            prosody = slice_frames(clip.prosody, seg.start, seg.end, hop_s=cfg.hop_s)
+            a = anime_cols
+            a["node_id"].append(node)
+            a["clip_id"].append(clip.clip_id)
+            a["corpus"].append(clip.corpus)
+            a["speaker"].append(clip.speaker)
+            a["emotion"].append(clip.emotion)
+            a["position"].append(pos)
+            a["phoneme"].append(seg.phone)
+            a["start_time"].append(seg.start)
+            a["end_time"].append(seg.end)
+            a["start_frame"].append(first)
+            a["end_frame"].append(stop)
+            a["n_frames"].append(stop - first)
+            a["prosody_frames"].append(len(prosody))
+            a["prosody"].append(prosody.ravel())
+            a["motion"].append(sources[first:stop].ravel())
+            a["first_pcs"].append(pcs[first].astype(np.float32))
+            a["last_pcs"].append(pcs[stop - 1].astype(np.float32))
+            a["prev_node"].append(node - 1 if pos > 0 else None)
+            a["next_node"].append(node + 1 if pos < n_phones - 1 else None)
+            node += 1
+        clip_rows.append(_clip_row(clip, n_phones))
+        frame_parts.append(_frames(clip))
+        audio_rows.append((clip.clip_id, clip.corpus, clip.sample_rate, clip.audio.tobytes()))
+
+    animes = pa.table({
+        **{k: anime_cols[k] for k in ("node_id", "clip_id", "corpus", "speaker", "emotion",
+                                     "position", "phoneme", "start_time", "end_time",
+                                     "start_frame", "end_frame", "n_frames",
+                                     "prosody_frames")},
+        "prosody": pa.array(anime_cols["prosody"], _F32),
+        "motion": pa.array(anime_cols["motion"], _F32),
+        "first_pcs": pa.array(anime_cols["first_pcs"], _F32),
+        "last_pcs": pa.array(anime_cols["last_pcs"], _F32),
+        "prev_node": pa.array(anime_cols["prev_node"], pa.int64()),
+        "next_node": pa.array(anime_cols["next_node"], pa.int64()),
+    })
+    audio = pa.table({
+        "clip_id": [r[0] for r in audio_rows], "corpus": [r[1] for r in audio_rows],
+        "sample_rate": pa.array([r[2] for r in audio_rows], pa.int32()),
+        "pcm16": pa.array([r[3] for r in audio_rows], pa.binary()),
+    })
+    channels = pa.table({
+        "channel": pa.array(np.arange(schema.n_channels), pa.int32()),
+        "name": list(schema.names), "group": list(schema.groups),
+        "kind": [schema.kind] * schema.n_channels, "units": [schema.units] * schema.n_channels,
+    })
+    arrays = {**model.to_arrays(), "ic_cutoff_hz": cutoffs}
+    return {
+        "clips": pa.Table.from_pylist(clip_rows, schema=CLIPS_SCHEMA),
+        "animes": animes,
+        "frames": pa.concat_tables(frame_parts),
+        "audio": audio,
+        "channels": channels,
+        "model_arrays": arrays_to_table(arrays),
+        "components": _components(model, sources_all, cutoffs),
+    }
+
+
+def _columns() -> dict[str, list]:
+    names = ("node_id clip_id corpus speaker emotion position phoneme start_time end_time "
+             "start_frame end_frame n_frames prosody_frames prosody motion first_pcs "
+             "last_pcs prev_node next_node").split()
+    return {n: [] for n in names}
+
+
+def _clip_row(clip: PreparedClip, n_animes: int) -> dict:
+    return {
+        "clip_id": clip.clip_id, "corpus": clip.corpus, "kind": clip.schema.kind,
+        "speaker": clip.speaker, "emotion": clip.emotion, "sentence_id": clip.sentence_id,
+        "text": clip.text, "fps": float(clip.fps), "source_fps": float(clip.source_fps),
+        "n_frames": int(len(clip.motion)), "duration": float(clip.duration),
+        "sample_rate": int(clip.sample_rate), "n_animes": n_animes,
+        "segmentation": clip.segmentation, "phones": " ".join(p.phone for p in clip.phones),
+        "phone_starts": [float(p.start) for p in clip.phones],
+        "phone_ends": [float(p.end) for p in clip.phones],
+        "prosody_frames": int(len(clip.prosody)),
+        "prosody": clip.prosody.ravel().tolist(),
+        "lip_audio_lag_s": clip.extra.get("lip_audio_lag_s"),
+        "source": clip.source, "checksum": clip.checksum,
+        "extra": json.dumps(clip.extra, default=float, sort_keys=True),
+    }
+
+
+def _frames(clip: PreparedClip) -> pa.Table:
+    n = len(clip.motion)
+    cols = {
+        "clip_id": pa.array([clip.clip_id] * n, pa.string()),
+        "corpus": pa.array([clip.corpus] * n, pa.string()),
+        "emotion": pa.array([clip.emotion] * n, pa.string()),
+        "frame": pa.array(np.arange(n, dtype=np.int32)),
+        "time": pa.array((np.arange(n) / clip.fps).astype(np.float32)),
+    }
+    for c, name in enumerate(clip.schema.names):
+        cols[name] = pa.array(clip.motion[:, c])
+    rows, chans = np.nonzero(clip.missing)
+    per_frame = [[] for _ in range(n)]
+    for r, c in zip(rows.tolist(), chans.tolist(), strict=True):
+        per_frame[r].append(c)
+    cols["missing"] = pa.array(per_frame, pa.list_(pa.int16()))
+    return pa.table(cols)
+
+
+def _components(model: MotionDecomposer, sources: list[np.ndarray],
+                cutoffs: np.ndarray) -> pa.Table:
+    """One row per independent component: its share of the motion and its cutoff."""
+    u = np.concatenate(sources).astype(np.float64)
+    u = u - u.mean(axis=0)
+    # Eq. 9: the motion one component alone reconstructs, in principal-component space
+    # (orthonormal, so its power there is its power in the original channels).
+    power = (u.var(axis=0) * (model.mixing_**2).sum(axis=0))
+    share = power / power.sum()
+    return pa.table({
+        "component": pa.array(np.arange(len(cutoffs)), pa.int32()),
+        "cutoff_hz": pa.array(cutoffs, pa.float64()),
+        "motion_share": pa.array(share, pa.float64()),
+    })
+
+
+def prepared_from_database(db) -> list[PreparedClip]:
+    """The clips of a database as :class:`PreparedClip` (to refit the model with more).
+
+    Parameters
+    ----------
+    db : db.store.Database
+    """
+    from ingest.clip import ChannelSchema
+    from ingest.formats.phones_csv import Segment
+
+    channels = db.table("channels").to_pylist()
+    schema = ChannelSchema(kind=channels[0]["kind"], names=tuple(c["name"] for c in channels),
+                           groups=tuple(c["group"] for c in channels),
+                           units=channels[0]["units"])
+    audio = {(r["corpus"], r["clip_id"]): r for r in db.table("audio").to_pylist()}
+    frames = db.table("frames").sort_by(
+        [("corpus", "ascending"), ("clip_id", "ascending"), ("frame", "ascending")])
+    keys = list(zip(frames.column("corpus").to_pylist(), frames.column("clip_id").to_pylist(),
+                    strict=True))
+    motion_all = np.stack([frames.column(n).to_numpy() for n in schema.names], axis=1)
+    missing_lists = frames.column("missing").to_pylist()
+    ranges, start = {}, 0
+    for key, group in itertools.groupby(keys):
+        stop = start + sum(1 for _ in group)
+        ranges[key] = slice(start, stop)
+        start = stop
+    out = []
+    for row in db.table("clips").to_pylist():
+        idx = ranges[(row["corpus"], row["clip_id"])]
+        missing = np.zeros((idx.stop - idx.start, schema.n_channels), dtype=bool)
+        for r, chans in enumerate(missing_lists[idx]):
+            if chans:
+                missing[r, chans] = True
+        sound = audio[(row["corpus"], row["clip_id"])]
+        phones = tuple(Segment(p, s, e) for p, s, e in zip(
+            row["phones"].split(), row["phone_starts"], row["phone_ends"], strict=True))
+        out.append(PreparedClip(
+            clip_id=row["clip_id"], corpus=row["corpus"], source=row["source"],
+            checksum=row["checksum"], schema=schema, fps=row["fps"],
+            source_fps=row["source_fps"], motion=motion_all[idx].astype(np.float32),
+            missing=missing, audio=np.frombuffer(sound["pcm16"], dtype=np.int16),
+            sample_rate=sound["sample_rate"], phones=phones,
+            segmentation=row["segmentation"],
+            prosody=np.asarray(row["prosody"], dtype=np.float32).reshape(
+                row["prosody_frames"], -1),
+            emotion=row["emotion"], speaker=row["speaker"], sentence_id=row["sentence_id"],
+            text=row["text"], extra=json.loads(row["extra"]),
+        ))
+    return out

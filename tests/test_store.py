@@ -1,0 +1,134 @@
+"""The versioned Parquet store and its read-only SQL layer."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from db.errors import DataError, ParameterError
+from db.sql import check_read_only, query
+from db.store import (
+    TABLES,
+    Database,
+    arrays_from_table,
+    arrays_to_table,
+    current_version,
+    write_version,
+)
+
+
+def _tables(n_clips=2, tag="a"):
+    emotions = ["happy", "sad"][:n_clips]
+    clips = pa.table({"clip_id": [f"{tag}{i}" for i in range(n_clips)], "emotion": emotions})
+    animes = pa.table({"node_id": pa.array(range(2 * n_clips), pa.int64()),
+                       "clip_id": [f"{tag}{i // 2}" for i in range(2 * n_clips)],
+                       "phoneme": ["AA", "B"] * n_clips,
+                       "emotion": [emotions[i // 2] for i in range(2 * n_clips)]})
+    frames = pa.table({"clip_id": [f"{tag}0"] * 3, "emotion": ["happy"] * 3,
+                       "frame": pa.array([0, 1, 2], pa.int32()),
+                       "jaw": pa.array([0.1, 0.2, 0.3], pa.float32())})
+    return {
+        "clips": clips, "animes": animes, "frames": frames,
+        "audio": pa.table({"clip_id": [f"{tag}0"], "pcm16": [b"\x00\x01"]}),
+        "channels": pa.table({"channel": [0], "name": ["jaw"]}),
+        "model_arrays": arrays_to_table({"m": np.arange(6.0).reshape(2, 3)}),
+        "components": pa.table({"component": [0], "cutoff_hz": [3.5]}),
+    }
+
+
+def test_write_then_read_every_table(tmp_path):
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    assert db.manifest["fps"] == 30.0 and db.manifest["db_version"] == 1
+    for name in TABLES:
+        assert db.table(name).num_rows == _tables()[name].num_rows
+    # Partitioned by emotion, hive style, readable by a plain Parquet reader.
+    assert (db.version_dir / "animes" / "emotion=happy").is_dir()
+    assert pq.read_table(db.version_dir / "channels.parquet").num_rows == 1
+    np.testing.assert_array_equal(db.arrays()["m"], np.arange(6.0).reshape(2, 3))
+
+
+def test_model_arrays_round_trip_exactly():
+    rng = np.random.default_rng(0)
+    arrays = {"a": rng.normal(size=(4, 5)), "b": rng.normal(size=7), "c": np.zeros((0, 3))}
+    back = arrays_from_table(arrays_to_table(arrays))
+    for k in arrays:
+        np.testing.assert_array_equal(back[k], arrays[k])
+
+
+def test_new_version_replaces_old_and_keeps_one_behind(tmp_path):
+    root = tmp_path / "db"
+    for tag in "abc":
+        write_version(root, _tables(tag=tag), {"fps": 30.0})
+    assert current_version(root) == "v000003"
+    assert sorted(p.name for p in root.iterdir() if p.name.startswith("v")) == [
+        "v000002", "v000003"]
+    assert Database.open(root).table("clips").column("clip_id").to_pylist()[0] == "c0"
+
+
+def test_failed_write_leaves_the_database_as_it_was(tmp_path, monkeypatch):
+    import db.store as store
+
+    root = tmp_path / "db"
+    write_version(root, _tables(tag="a"), {"fps": 30.0})
+    before = sorted(os.listdir(root))
+    real = store._write_table
+
+    def dies_on_audio(folder, name, table):  # as if killed half-way through the tables
+        if name == "audio":
+            raise KeyboardInterrupt
+        real(folder, name, table)
+
+    monkeypatch.setattr(store, "_write_table", dies_on_audio)
+    with pytest.raises(KeyboardInterrupt):
+        write_version(root, _tables(tag="b"), {"fps": 30.0})
+    assert sorted(os.listdir(root)) == before
+    assert Database.open(root).table("clips").column("clip_id").to_pylist() == ["a0", "a1"]
+    broken = _tables(tag="c")
+    broken["animes"] = pa.table({"node_id": [1]})  # nothing to partition by
+    with pytest.raises(ValueError, match="emotion"):
+        write_version(root, broken, {"fps": 30.0})
+    assert sorted(os.listdir(root)) == before
+
+
+def test_not_a_database(tmp_path):
+    with pytest.raises(DataError, match="does not exist"):
+        Database.open(tmp_path / "nothing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(DataError, match="not an animegraph database"):
+        Database.open(tmp_path / "empty")
+    (tmp_path / "empty" / "CURRENT").write_text("v000009")
+    with pytest.raises(DataError, match="damaged"):
+        Database.open(tmp_path / "empty")
+
+
+def test_sql_reads_the_views(tmp_path):
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    out = query(db, "SELECT emotion, count(*) AS n FROM animes GROUP BY 1 ORDER BY 1")
+    assert out.to_pylist() == [{"emotion": "happy", "n": 2}, {"emotion": "sad", "n": 2}]
+    out = query(db, "SELECT avg(jaw) AS m FROM frames")
+    assert out.column("m")[0].as_py() == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("sql", [
+    "COPY (SELECT 1) TO 'x.csv'", "CREATE TABLE t(a INT)", "INSERT INTO clips VALUES (1)",
+    "ATTACH 'other.db'", "SET threads = 1", "INSTALL httpfs", "SELECT 1; DROP VIEW clips",
+])
+def test_sql_refuses_writes(sql):
+    with pytest.raises(ParameterError, match="only SELECT"):
+        check_read_only(sql)
+
+
+def test_sql_errors_are_one_line(tmp_path):
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    with pytest.raises(ParameterError) as err:
+        query(db, "SELECT no_such_column FROM animes")
+    assert "\n" not in str(err.value)
+    with pytest.raises(ParameterError, match="parse"):
+        check_read_only("SELEC 1")
