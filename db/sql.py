@@ -68,9 +68,9 @@ def query(db: Database, sql: str) -> pa.Table:
         statements = duckdb.extract_statements(sql)
         for statement in statements[:-1]:
             con.execute(statement.query)
-        result = con.execute(statements[-1].query)
-        # DuckDB 2 renamed fetch_arrow_table to to_arrow_table.
-        fetch = getattr(result, "to_arrow_table", None) or result.fetch_arrow_table
+        relation = con.sql(statements[-1].query)
+        # DuckDB 2 renamed a relation's arrow() to to_arrow_table().
+        fetch = getattr(relation, "to_arrow_table", None) or relation.arrow
         return fetch()
     except duckdb.Error as exc:
         raise ParameterError(f"query failed: {_first_line(exc)}") from None

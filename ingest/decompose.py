@@ -73,7 +73,9 @@ class MotionDecomposer(TransformerMixin, BaseEstimator):
         if X.shape[0] < 3:
             raise DataError(f"need at least 3 frames to decompose motion, got {X.shape[0]}")
         n_max = min(X.shape)
-        pca = PCA(n_components=n_max, svd_solver="full").fit(X)
+        # Eigen-decomposition of the channel covariance: exact like a full SVD, and
+        # fast for motion's tall (many frames, few channels) matrices.
+        pca = PCA(n_components=n_max, svd_solver="covariance_eigh").fit(X)
         cumulative = np.cumsum(pca.explained_variance_ratio_)
         n_pcs = int(np.searchsorted(cumulative, self.variance - 1e-12) + 1)
         n_pcs = min(n_pcs, n_max)

@@ -15,7 +15,8 @@ Columbia University, 2005), step by step:
 
 1. ``powspec`` -- short-time power spectrum: symmetric Hann window (Matlab ``hanning``),
    FFT length the next power of two, samples scaled to the 16-bit range (x 32768) and a
-   constant ``win_len`` added to every bin, the expected spectrum of a one-LSB white dither.
+   constant ``win_len`` added to every bin (Ellis' stand-in for a white dither of about one
+   LSB: the floor that keeps every log finite, see :func:`rasta_plp`).
 2. ``audspec`` / ``fft2barkmx`` -- integration into ``ceil(bark(sr / 2)) + 1`` critical
    bands one Bark apart (for the default band edges), trapezoidal in Bark: flat over 1 Bark,
    a skirt rising 10 dB/Bark below and one falling 25 dB/Bark above (Hermansky 1990's
@@ -25,7 +26,8 @@ Columbia University, 2005), step by step:
    (1 - 0.94 z^-1)`` (:data:`RASTA_NUMERATOR`, :data:`RASTA_DENOMINATOR`); the first four
    frames only prime the filter's state and are output as zeros (Ellis' initial conditions,
    which avoid a start-up transient from each band's level).
-4. ``postaud`` -- equal-loudness pre-emphasis (Hermansky's 40 dB curve) and the
+4. ``postaud`` -- equal-loudness pre-emphasis (the ICSI ``rasta`` form of Hermansky 1990's
+   approximation to the 40 dB equal-loudness curve) and the
    intensity-loudness power law ``** 0.33``; the first and last bands are replaced by their
    neighbours.
 5. ``dolpc`` -- autocorrelation as the inverse DFT of the (symmetrically extended)
@@ -76,6 +78,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "RASTA_DENOMINATOR",
     "RASTA_NUMERATOR",
+    "SAMPLE_RATE_RANGE",
     "RastaPlpConfig",
     "frame_times",
     "mfcc",
@@ -83,12 +86,12 @@ __all__ = [
     "slice_frames",
 ]
 
-#: Numerator of the RASTA filter, ``-[-2, -1, 0, 1, 2] / 10`` (Ellis ``rastafilt.m``; the FIR
-#: regression slope of Hermansky & Morgan 1994, eq. 1, without its ``z^4`` advance).
+#: Numerator of the RASTA filter, ``-[-2, -1, 0, 1, 2] / 10`` (Ellis ``rastafilt.m``; the
+#: regression-slope FIR part of Hermansky & Morgan 1994's filter, made causal: no ``z^4``).
 RASTA_NUMERATOR: np.ndarray = np.array([0.2, 0.1, 0.0, -0.1, -0.2])
 RASTA_NUMERATOR.setflags(write=False)
-#: Denominator of the RASTA filter: one pole at 0.94 (Ellis ``rastafilt.m``, ICSI ``rasta``;
-#: Hermansky & Morgan 1994 print 0.98).
+#: Denominator of the RASTA filter: one pole at 0.94 (Ellis ``rastafilt.m``, after ICSI's
+#: ``rasta``; the 1994 paper's filter has its pole at 0.98).
 RASTA_DENOMINATOR: np.ndarray = np.array([1.0, -0.94])
 RASTA_DENOMINATOR.setflags(write=False)
 
@@ -104,6 +107,10 @@ _TIME_EPS = 1e-9  # tolerance, in frames, when comparing times with frame centre
 @dataclass(frozen=True)
 class RastaPlpConfig:
     """Options of :func:`rasta_plp` (Cao et al. 2005 §4.1; Ellis ``rastaplp.m``).
+
+    The critical bands are spread evenly in Bark over ``[min_freq, max_freq]``; their number
+    is always ``ceil(bark(sr / 2)) + 1``, as in ``audspec.m``, so narrowing the range makes
+    the bands overlap more rather than fewer.
 
     Raises :class:`~db.errors.ParameterError` on construction if a value is out of range;
     ``max_freq`` and ``model_order`` are also checked against the sample rate by
@@ -165,7 +172,7 @@ def _is_real(value: object) -> bool:
 
 
 def _check_audio(audio: object) -> np.ndarray:
-    """Return ``audio`` as a float64 ``(n_samples,)`` array, or raise."""
+    """Return ``audio`` as a floating-point ``(n_samples,)`` array (not copied), or raise."""
     array = np.asarray(audio)
     if array.ndim != 1:
         raise ParameterError(
@@ -178,7 +185,6 @@ def _check_audio(audio: object) -> np.ndarray:
         raise ParameterError(
             f"audio must be floating point samples in [-1, 1], got dtype {array.dtype}"
         )
-    array = array.astype(np.float64, copy=False)
     if not np.isfinite(array).all():
         raise DataError(f"audio has {int((~np.isfinite(array)).sum())} non-finite samples")
     return array
@@ -234,6 +240,7 @@ def _band_spectrogram(
     hop_s : float
         Frame hop; frame ``k`` is centred on sample ``round(k * hop_s * sample_rate)``.
     window : np.ndarray, shape (win_len,)
+        Analysis window, including any scaling of the samples.
     n_fft : int
         FFT length, ``>= win_len`` (the frame is zero-padded).
     reduce : callable
@@ -246,16 +253,20 @@ def _band_spectrogram(
     win_len = len(window)
     n_frames = _n_frames(len(audio), sample_rate, hop_s)
     centres = np.floor(np.arange(n_frames) * (hop_s * sample_rate) + 0.5).astype(np.int64)
-    starts = centres - win_len // 2  # relative to the unpadded signal
-    left = win_len // 2
-    right = max(0, int(starts[-1]) + win_len - len(audio))
-    padded = np.zeros(left + len(audio) + right)
-    padded[left : left + len(audio)] = audio
+    starts = centres - win_len // 2
     offsets = np.arange(win_len)
     out = []
     for first in range(0, n_frames, _CHUNK_FRAMES):
-        idx = (starts[first : first + _CHUNK_FRAMES] + left)[:, None] + offsets
-        spectrum = scipy.fft.rfft(padded[idx] * window, n=n_fft, axis=1)
+        chunk = starts[first : first + _CHUNK_FRAMES]
+        # The samples this batch needs, zero where the windows reach past the signal: no
+        # padded copy of the whole (possibly hour-long) signal.
+        lo, hi = int(chunk[0]), int(chunk[-1]) + win_len
+        segment = np.zeros(hi - lo)
+        a, b = max(lo, 0), min(hi, len(audio))
+        if b > a:
+            segment[a - lo : b - lo] = audio[a:b]
+        frames = segment[(chunk - lo)[:, None] + offsets] * window
+        spectrum = scipy.fft.rfft(frames, n=n_fft, axis=1)
         out.append(reduce(spectrum.real**2 + spectrum.imag**2))
     return np.concatenate(out, axis=0)
 
@@ -444,16 +455,19 @@ def rasta_plp(
     Notes
     -----
     *Floor.* Before the log, every power-spectrum bin gets ``+ win_len`` on the 16-bit scale
-    (Ellis' dither term: the expected power of white noise of one LSB, about -90 dB re full
-    scale). Digital silence therefore gives the spectrum of faint white noise and finite
-    cepstra, and quiet passages are compared with a fixed, level-independent floor.
+    (Ellis' dither term: about the spectrum of white noise of 1.6 LSB RMS, -83 dB re a
+    full-scale sine, whatever the sample rate). Digital silence therefore has the spectrum of
+    faint white noise and finite cepstra, and quiet passages meet a fixed, level-independent
+    floor rather than one relative to the file's loudest frame.
 
-    *RASTA timing.* The RASTA filter is causal and designed for 100 frames/s: with
-    ``rasta=True`` the first four frames are flat spectra (all cepstra but ``c_0`` zero) and
-    each output frame lags its input by the filter's delay (two frames for the FIR part;
-    the IIR part delays slow modulations further). This is the reference behaviour and is
-    the same for the database and the query, so matching is unaffected. Another ``hop_s``
-    rescales the filter's modulation pass-band (1-12 Hz at 10 ms).
+    *RASTA timing.* The RASTA filter is causal and designed for 100 frames/s. With
+    ``rasta=True`` the first four frames (up to 30 ms) carry no information: they are the
+    cepstrum of a unit critical-band spectrum, whatever the signal. Output frames lag the
+    modulations they respond to by the filter's group delay: about 2 frames at 4-10 Hz,
+    4.7 at 2 Hz, 9.5 at 1 Hz. This is the reference behaviour and is the same for the
+    database and the query; advancing the output by two frames made phone discrimination on
+    eSpeak speech worse, not better, so it is not compensated. Another ``hop_s`` rescales the
+    filter's modulation pass-band (-3 dB at 0.9-13.4 Hz for 10 ms).
 
     With ``rasta=True``, ``c_0`` is the RASTA-filtered log gain, a measure of loudness
     *change*; with ``rasta=False`` it tracks the log energy of the frame.
@@ -483,12 +497,13 @@ def rasta_plp(
             f"model_order must be below the {n_bands} critical bands at {sample_rate} Hz, "
             f"got {config.model_order!r}"
         )
-    window = np.hanning(win_len + 2)[1:-1]  # Matlab hanning(N): symmetric, no zero ends
+    # Matlab hanning(N) (symmetric, no zero ends), with powspec.m's scaling of the samples.
+    window = np.hanning(win_len + 2)[1:-1] * _INT16_SCALE
     dither = float(win_len)
     weights_t = np.ascontiguousarray(weights.T)
 
     bands = _band_spectrogram(
-        audio * _INT16_SCALE,
+        audio,
         sample_rate,
         hop_s=config.hop_s,
         window=window,

@@ -71,3 +71,75 @@ def resample_motion(motion: np.ndarray, fps: float, target_fps: float) -> np.nda
     t_in = np.arange(len(motion)) / fps
     t_out = np.arange(n_out) / target_fps
     return np.stack([np.interp(t_out, t_in, col) for col in np.asarray(motion).T], axis=1)
+
+
+def rigid_fit(points: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame rotation and translation taking ``points`` onto ``reference`` (Kabsch).
+
+    Parameters
+    ----------
+    points : np.ndarray, shape (n_frames, n_points, 3)
+    reference : np.ndarray, shape (n_points, 3)
+
+    Returns
+    -------
+    rotation : np.ndarray, shape (n_frames, 3, 3)
+    translation : np.ndarray, shape (n_frames, 3)
+        ``reference ~= points @ rotation.T + translation`` frame by frame.
+    """
+    pc = points.mean(axis=1, keepdims=True)
+    rc = reference.mean(axis=0)
+    cov = np.einsum("fki,kj->fij", points - pc, reference - rc)
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(np.einsum("fij,fjk->fik", u, vt)))
+    fix = np.ones((len(points), 3))
+    fix[:, 2] = d  # no reflections
+    rotation = np.einsum("fji,fj,fkj->fik", vt, fix, u)
+    translation = rc - np.einsum("fij,fj->fi", rotation, pc[:, 0])
+    return rotation, translation
+
+
+def stabilize_points(motion: np.ndarray, groups, reference: np.ndarray) -> np.ndarray:
+    """Remove rigid head motion from every point but the head group's own.
+
+    Cao et al. (2005, §3.2) organise the markers into three motion groups: rigid head
+    motion, upper face and lips. Here the head group's markers keep their world
+    trajectories (they carry the rigid motion), and every other point is expressed in
+    the head's frame, so facial deformation (speech, expression) is not swamped by the
+    head turning.
+
+    Parameters
+    ----------
+    motion : np.ndarray, shape (n_frames, 3 * n_points)
+        x/y/z triples.
+    groups : sequence of str, length 3 * n_points
+        Motion group of each channel; ``"head"`` marks the rigid group (>= 3 points).
+    reference : np.ndarray, shape (n_head_points, 3)
+        Head-group positions defining the head frame (the same for a whole database).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 3 * n_points)
+    """
+    pts = np.asarray(motion, dtype=np.float64).reshape(len(motion), -1, 3)
+    head = np.asarray(groups[::3]) == "head"
+    rotation, translation = rigid_fit(pts[:, head], reference)
+    out = pts.copy()
+    out[:, ~head] = np.einsum("fij,fkj->fki", rotation, pts[:, ~head]) + translation[:, None]
+    return out.reshape(len(motion), -1)
+
+
+def unstabilize_points(motion: np.ndarray, groups, reference: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`stabilize_points`: put the face back on the moving head."""
+    pts = np.asarray(motion, dtype=np.float64).reshape(len(motion), -1, 3)
+    head = np.asarray(groups[::3]) == "head"
+    rotation, translation = rigid_fit(pts[:, head], reference)
+    out = pts.copy()
+    local = pts[:, ~head] - translation[:, None]
+    out[:, ~head] = np.einsum("fji,fkj->fki", rotation, local)
+    return out.reshape(len(motion), -1)
+
+
+def head_points(groups) -> int:
+    """Number of points in the rigid head group of x/y/z-triple channels."""
+    return int(np.sum(np.asarray(groups[::3]) == "head"))

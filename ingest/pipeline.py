@@ -32,6 +32,7 @@ from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from db.store import Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
+from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.tables import build_tables, prepared_from_database
@@ -107,14 +108,15 @@ class IngestReport:
         return buffer.getvalue()
 
 
-def _work(args: tuple[ClipSource, dict[tuple[str, str], str], float | None, bool]):
+def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag = args
+    source, known, fps, correct_lag, reference = args
     try:
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
-        clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag)
+        clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
+                            head_reference=reference if _has_head(raw.schema) else None)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
@@ -170,15 +172,19 @@ def ingest(
         raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
     known: dict[tuple[str, str], str] = {}
     fps = config.fps
+    reference = None
     if existing is not None:
+        reference = existing.arrays().get("head_reference")
         clips = existing.table("clips", columns=["corpus", "clip_id", "checksum"]).to_pylist()
         known = {(c["corpus"], c["clip_id"]): c["checksum"] for c in clips}
         fps = existing.manifest["fps"]
         if config.fps is not None and config.fps != fps:
             raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")
 
+    if reference is None:
+        reference = _head_reference(found)
     report = IngestReport(db=db_path)
-    results = _run(found, known, fps, config, workers, progress)
+    results = _run(found, known, fps, config, workers, progress, reference)
     new: list[PreparedClip] = []
     for clip_report, clip in results:
         report.clips.append(clip_report)
@@ -194,7 +200,7 @@ def ingest(
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report)
+            _write(db_path, everything, config, target_fps, report, reference)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
@@ -203,8 +209,8 @@ def ingest(
     return report
 
 
-def _run(found, known, fps, config, workers, progress):
-    jobs = [(s, known, fps, config.correct_lag) for s in found]
+def _run(found, known, fps, config, workers, progress, reference):
+    jobs = [(s, known, fps, config.correct_lag, reference) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
@@ -212,6 +218,29 @@ def _run(found, known, fps, config, workers, progress):
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         results = pool.map(_work, jobs, chunksize=4)
         return list(progress(len(jobs))(results) if progress else results)
+
+
+def _has_head(schema) -> bool:
+    return schema.kind in ("markers", "landmarks") and head_points(schema.groups) >= 3
+
+
+def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
+    """The head frame of a new database: its first readable clip's mean head pose.
+
+    Rest positions from the corpus' ``markers.csv`` would do as well; the mean pose of
+    one clip needs nothing but the clip.
+    """
+    for source in found:
+        try:
+            raw = load(source)
+        except DataError:
+            continue
+        if not _has_head(raw.schema):
+            return None
+        filled, _ = fill_gaps(raw.motion, raw.schema.names)
+        pts = filled.reshape(len(filled), -1, 3)
+        return pts[:, np.asarray(raw.schema.groups[::3]) == "head"].mean(axis=0)
+    return None
 
 
 def _at_fps(clip: PreparedClip, fps: float) -> PreparedClip:
@@ -246,14 +275,15 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
-           report: IngestReport) -> None:
+           report: IngestReport, reference: np.ndarray | None) -> None:
     motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
     del motion
     sources = [model.transform(c.motion) for c in clips]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
-    tables = build_tables(clips, model, cutoffs)
+    extra_arrays = {} if reference is None else {"head_reference": reference}
+    tables = build_tables(clips, model, cutoffs, arrays=extra_arrays)
     emotions: dict[str, int] = {}
     for c in clips:
         emotions[c.emotion] = emotions.get(c.emotion, 0) + 1

@@ -18,7 +18,7 @@ from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.features import RastaPlpConfig, rasta_plp
 from ingest.formats.phones_csv import Segment
-from ingest.motion import fill_gaps, resample_motion
+from ingest.motion import fill_gaps, resample_motion, stabilize_points
 from ingest.segment import segment
 
 #: Emotion label of clips that come without one.
@@ -78,6 +78,7 @@ def prepare_clip(
     *,
     fps: float | None = None,
     correct_lag: bool = True,
+    head_reference: np.ndarray | None = None,
     prosody_config: RastaPlpConfig | None = None,
 ) -> PreparedClip:
     """Turn a clip read from disk into a :class:`PreparedClip`.
@@ -91,6 +92,9 @@ def prepare_clip(
     correct_lag : bool
         Shift motion by the lip-audio lag a reader estimated (``extra["lip_audio_lag_s"]``),
         so lips and speech line up.
+    head_reference : np.ndarray, shape (n_head_points, 3), optional
+        Head-group positions of the database: points of a clip with a rigid head group
+        are expressed in the head's frame (:func:`ingest.motion.stabilize_points`).
 
     Raises
     ------
@@ -98,6 +102,8 @@ def prepare_clip(
         With a one-line reason if the clip cannot be used.
     """
     filled, missing = fill_gaps(raw.motion, raw.schema.names)
+    if head_reference is not None:
+        filled = stabilize_points(filled, raw.schema.groups, head_reference)
     extra = dict(raw.extra)
     lag = extra.get("lip_audio_lag_s")
     if correct_lag and lag is not None and abs(lag) * raw.fps >= 1.0:

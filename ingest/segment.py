@@ -212,7 +212,7 @@ def _engine(mode: str) -> _Engine:
             "frate": FRAME_RATE, "loglevel": "ERROR", "bestpath": False,
         }
         if mode == "align":
-            options["lm"] = None
+            options.update(lm=None, **ALIGNER_OPTIONS)
         else:
             options.update(allphone=paths["allphone"], **RECOGNIZER_OPTIONS)
         start = time.perf_counter()
@@ -226,6 +226,8 @@ def _engine(mode: str) -> _Engine:
         return engine
 
 
+#: Settings of the aligner (beams, see the module docstring).
+ALIGNER_OPTIONS: dict[str, object] = {}
 #: Settings of the allphone recogniser (language weight, beams, phone insertion penalty).
 RECOGNIZER_OPTIONS: dict[str, object] = {"lw": 2.0, "beam": 1e-20, "pbeam": 1e-20}
 
@@ -666,7 +668,9 @@ def _phones_of(segments: Sequence[Segment], name: str) -> list[Segment]:
     return [_label(item, k) for k, item in enumerate(segments)]
 
 
-def boundary_errors(reference: Sequence[Segment], hypothesis: Sequence[Segment]) -> np.ndarray:
+def boundary_errors(
+    reference: Sequence[Segment], hypothesis: Sequence[Segment], *, signed: bool = False
+) -> np.ndarray:
     """Absolute differences (seconds) between matched phone onsets of two segmentations.
 
     The two phone sequences (``SIL`` included) are aligned by minimum edit distance
@@ -681,11 +685,14 @@ def boundary_errors(reference: Sequence[Segment], hypothesis: Sequence[Segment])
     ----------
     reference, hypothesis : sequence of Segment
         Segmentations of the same audio, in time order.
+    signed : bool, optional
+        Return ``hypothesis.start - reference.start`` instead of its absolute value (to
+        see a bias).
 
     Returns
     -------
     numpy.ndarray, shape (n_matched,), float64
-        Absolute onset errors in seconds, in reference order.
+        Onset errors in seconds, in reference order.
 
     Raises
     ------
@@ -695,12 +702,12 @@ def boundary_errors(reference: Sequence[Segment], hypothesis: Sequence[Segment])
     ref = _phones_of(reference, "reference")
     hyp = _phones_of(hypothesis, "hypothesis")
     pairs = edit_alignment([s.phone for s in ref], [s.phone for s in hyp])
-    errors = [
-        abs(ref[i].start - hyp[j].start)
+    errors = np.asarray([
+        hyp[j].start - ref[i].start
         for i, j in pairs
         if i is not None and j is not None and ref[i].phone == hyp[j].phone and ref[i].start > 0
-    ]
-    return np.asarray(errors, dtype=np.float64)
+    ], dtype=np.float64)
+    return errors if signed else np.abs(errors)
 
 
 def phone_error_rate(reference: Sequence[Segment], hypothesis: Sequence[Segment]) -> float:

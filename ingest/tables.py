@@ -52,8 +52,12 @@ def build_tables(
     cutoffs: np.ndarray,
     *,
     prosody_config: RastaPlpConfig | None = None,
+    arrays: dict[str, np.ndarray] | None = None,
 ) -> dict[str, pa.Table]:
-    """Every table of the database for ``clips`` (sorted by corpus and clip id)."""
+    """Every table of the database for ``clips`` (sorted by corpus and clip id).
+
+    ``arrays`` are stored with the model's (e.g. the head reference).
+    """
     cfg = prosody_config or RastaPlpConfig()
     clips = sorted(clips, key=lambda c: c.key)
     schema = clips[0].schema
@@ -116,7 +120,7 @@ def build_tables(
         "name": list(schema.names), "group": list(schema.groups),
         "kind": [schema.kind] * schema.n_channels, "units": [schema.units] * schema.n_channels,
     })
-    arrays = {**model.to_arrays(), "ic_cutoff_hz": cutoffs}
+    arrays = {**model.to_arrays(), "ic_cutoff_hz": cutoffs, **(arrays or {})}
     return {
         "clips": pa.Table.from_pylist(clip_rows, schema=CLIPS_SCHEMA),
         "animes": animes,

@@ -205,6 +205,32 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData) -> None:
                  data.n_markers, data.rate)
 
 
+#: numpy float32 of each C3D processor type whose floats are IEEE (DEC's are not).
+_IEEE_FLOAT = {"INTEL": "<f4", "MIPS": ">f4"}
+
+
+def _read_point_block(handle, reader, n_points: int, n_frames: int) -> list | np.ndarray | None:
+    """All frames at once, for IEEE-float files without analog data; else None.
+
+    The ``c3d`` package parses one frame per Python call (about 0.1 s per second of
+    120 fps capture); most files (float points, no analog) are one plain array.
+    """
+    dtype = _IEEE_FLOAT.get(reader.proc_type)
+    if dtype is None or reader.point_scale >= 0 or reader.analog_used:
+        return None
+    handle.seek((reader.header.data_block - 1) * 512)
+    n_values = n_frames * n_points * 4
+    block = handle.read(4 * n_values)
+    whole = len(block) // (16 * n_points)
+    data = np.frombuffer(block[: whole * 16 * n_points], dtype=dtype)
+    data = data.reshape(whole, n_points, 4).astype(np.float32)
+    # The fourth word holds camera bits and residual; a negative word marks an invalid
+    # point, and so does a NaN coordinate (as the c3d package treats them).
+    invalid = (data[:, :, 3].astype(np.int32) < 0) | np.isnan(data[:, :, :3]).any(axis=2)
+    data[:, :, 3] = np.where(invalid, -1.0, 0.0)
+    return list(data)
+
+
 def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     """Read marker data from a C3D file.
 
@@ -247,7 +273,9 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
                 raise DataError(f"C3D file has no marker points: {path}")
             if n_expected < 1:
                 raise DataError(f"C3D file has no frames: {path}")
-            raw = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=False)]
+            raw = _read_point_block(handle, reader, n_points, n_expected)
+            if raw is None:
+                raw = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=False)]
             rate = float(reader.point_rate)
             label_param = reader.get("POINT:LABELS")
             labels = [] if label_param is None else list(label_param.string_array)

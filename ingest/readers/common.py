@@ -1,0 +1,286 @@
+"""What every reader shares: :class:`ClipSource`, side files, and the checks on a clip.
+
+Checks made on every clip (each failure is one :class:`db.errors.DataError` line):
+
+- motion is a 2-D ``(n_frames, n_channels)`` array of finite numbers or NaN, with at
+  least one frame, and no channel (marker, curve, landmark) NaN in every frame;
+- the motion's duration ``n_frames / fps`` and the audio's duration agree within
+  :func:`duration_tolerance` = max(:data:`DURATION_TOLERANCE_S`,
+  :data:`DURATION_TOLERANCE_REL` x audio duration), i.e. 0.2 s, or 2 % for clips
+  longer than 10 s (video and audio tracks of real recordings commonly differ by a
+  frame or two plus codec padding; a wrong frame rate or a clip cut from the wrong
+  take is off by far more);
+- phone labels end no later than the audio (within the same tolerance);
+- a transcript file is not empty.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from db.errors import DataError
+from ingest.formats.htk_lab import read_htk_lab
+from ingest.formats.phones_csv import Segment, read_phones_csv
+from ingest.formats.textgrid import read_textgrid
+
+logger = logging.getLogger(__name__)
+
+#: Roles of a clip's files, in the order their bytes enter the clip's checksum.
+ROLES = (
+    "motion",  # the motion file (c3d/trc/csv, npy/curves.csv, landmarks.npy)
+    "audio",  # the speech (wav)
+    "labels",  # phone labels (phones.csv, TextGrid, lab)
+    "transcript",  # <stem>.txt
+    "metadata",  # <stem>.json / meta.json
+    "marker_table",  # markers.csv: marker -> motion group
+    "channel_names",  # curve names: <stem>.channels.txt, FACEGOOD's names .npy
+    "channel_list",  # FACEGOOD's bsname.txt (checked against the .npy names)
+    "settings",  # curves.json: corpus-level frame rate / channel names
+)
+#: Motion groups a channel may belong to (:class:`ingest.clip.ChannelSchema`).
+GROUPS = ("head", "upper_face", "lips", "pose", "other")
+
+#: Audio and motion durations may differ by max(DURATION_TOLERANCE_S, DURATION_TOLERANCE_REL
+#: x audio duration) seconds.
+DURATION_TOLERANCE_S = 0.2
+DURATION_TOLERANCE_REL = 0.02
+
+#: Metadata keys copied onto a :class:`ingest.clip.RawClip`.
+META_KEYS = ("text", "emotion", "speaker", "sentence_id")
+
+
+@dataclass(frozen=True, order=True)
+class ClipSource:
+    """One clip found on disk, before anything heavy is read.
+
+    Attributes
+    ----------
+    corpus : str
+        Corpus name (the corpus folder's name).
+    clip_id : str
+        Unique within the corpus (file stem or clip folder name).
+    kind : str
+        ``"markers"``, ``"curves"`` or ``"landmarks"``.
+    layout : str
+        Which reader loads it: ``"synthetic"`` (the project's corpus), ``"markers"``
+        (generic marker folder), ``"facegood"``, ``"curves"`` (generic curve clips) or
+        ``"talkingface"``.
+    source : Path
+        The motion file (or, for landmark clips, the clip folder).
+    files : tuple of (str, Path)
+        The clip's files as ``(role, path)`` in :data:`ROLES` order (roles absent from
+        the clip are left out; ``"audio"`` is absent when no audio file was found).
+    """
+
+    corpus: str
+    clip_id: str
+    kind: str
+    layout: str
+    source: Path
+    files: tuple[tuple[str, Path], ...]
+
+    @classmethod
+    def make(cls, corpus: str, clip_id: str, kind: str, layout: str, source: Path,
+             files: dict[str, Path | None]) -> ClipSource:
+        """Build a source from a ``role -> path`` dict (None entries dropped)."""
+        unknown = set(files) - set(ROLES)
+        if unknown:
+            raise ValueError(f"unknown file roles {sorted(unknown)}")
+        ordered = tuple((role, Path(files[role])) for role in ROLES if files.get(role))
+        return cls(corpus, clip_id, kind, layout, Path(source), ordered)
+
+    @property
+    def path(self) -> Path:
+        """The clip's main path (same as ``source``)."""
+        return self.source
+
+    def file(self, role: str) -> Path | None:
+        """The file playing ``role``, or None."""
+        for name, path in self.files:
+            if name == role:
+                return path
+        return None
+
+    @property
+    def paths(self) -> tuple[Path, ...]:
+        """All files, in checksum order."""
+        return tuple(path for _, path in self.files)
+
+
+def duration_tolerance(audio_seconds: float) -> float:
+    """Largest allowed difference (s) between motion and audio durations."""
+    return max(DURATION_TOLERANCE_S, DURATION_TOLERANCE_REL * audio_seconds)
+
+
+def check_durations(n_frames: int, fps: float, audio_seconds: float, where: Path) -> None:
+    """Raise DataError if the motion and audio durations disagree beyond the tolerance."""
+    motion_seconds = n_frames / fps
+    tolerance = duration_tolerance(audio_seconds)
+    if abs(motion_seconds - audio_seconds) > tolerance:
+        raise DataError(
+            f"{where}: motion lasts {motion_seconds:.3f} s ({n_frames} frames at {fps:g} fps) "
+            f"but audio {audio_seconds:.3f} s (tolerance {tolerance:.2f} s)"
+        )
+
+
+def check_motion(motion: np.ndarray, channel_names, where: Path, what: str = "channel",
+                 stride: int = 1) -> np.ndarray:
+    """Check a motion array; return it as C-contiguous float64.
+
+    Parameters
+    ----------
+    motion : np.ndarray, shape (n_frames, n_channels)
+        Motion as read.
+    channel_names : sequence of str
+        Names of the items checked for being missing throughout: one per channel, or
+        one per ``stride`` consecutive channels (a marker's x/y/z).
+    where : Path
+        Named in errors.
+    what : str
+        What an item is called in the message ("marker", "curve", "landmark").
+    stride : int
+        Channels per named item.
+
+    Raises
+    ------
+    DataError
+        If the array is not 2-D numeric with at least one frame, holds infinities, or
+        an item is NaN in every frame (the first few are named).
+    """
+    try:
+        motion = np.ascontiguousarray(motion, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"{where}: motion is not a numeric array") from None
+    if motion.ndim != 2 or motion.shape[0] < 1 or motion.shape[1] < 1:
+        raise DataError(
+            f"{where}: motion must be (n_frames, n_channels) with at least one of each, "
+            f"got shape {motion.shape}"
+        )
+    if np.isinf(motion).any():
+        raise DataError(f"{where}: motion has infinite values")
+    missing = np.isnan(motion).all(axis=0)
+    if stride > 1:
+        missing = missing.reshape(-1, stride).any(axis=1)
+    if missing.any():
+        names = [str(n) for n, gone in zip(channel_names, missing, strict=True) if gone]
+        shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        raise DataError(f"{where}: {what} {shown} missing (NaN) in every frame")
+    return motion
+
+
+def read_json_object(path: Path) -> dict:
+    """Read a JSON file holding an object; DataError naming the file otherwise."""
+    try:
+        value = json.loads(path.read_bytes().decode("utf-8-sig"))
+    except FileNotFoundError:
+        raise DataError(f"metadata file not found: {path}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"corrupt JSON in {path}: {exc}") from None
+    if not isinstance(value, dict):
+        raise DataError(f"{path}: expected a JSON object, got {type(value).__name__}")
+    return value
+
+
+def metadata_fields(meta: dict, path: Path) -> dict[str, str | None]:
+    """The :data:`META_KEYS` of a metadata object as str (numbers converted) or None."""
+    out: dict[str, str | None] = {}
+    for key in META_KEYS:
+        value = meta.get(key)
+        if value is None or (isinstance(value, str) and not value.strip()):
+            out[key] = None
+        elif isinstance(value, str | int) and not isinstance(value, bool):
+            out[key] = str(value).strip()
+        else:
+            raise DataError(f"{path}: {key!r} must be a string, got {value!r}")
+    return out
+
+
+def read_fps(meta: dict, path: Path) -> float | None:
+    """The ``fps`` of a metadata object (None if absent); DataError if not a rate."""
+    if "fps" not in meta:
+        return None
+    value = meta["fps"]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not (
+        math.isfinite(value) and value > 0
+    ):
+        raise DataError(f"{path}: 'fps' must be a number > 0, got {value!r}")
+    return float(value)
+
+
+def read_transcript(path: Path) -> str:
+    """Read a transcript file (UTF-8); DataError if it is empty or not text."""
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise DataError(f"transcript is not UTF-8 text: {path}") from None
+    text = " ".join(text.split())
+    if not text:
+        raise DataError(f"empty transcript file: {path}")
+    return text
+
+
+def read_labels(path: Path) -> list[Segment]:
+    """Read phone labels by file type: ``.phones.csv``, ``.TextGrid`` or ``.lab``."""
+    name = path.name.lower()
+    if name.endswith(".phones.csv"):
+        return read_phones_csv(path)
+    if name.endswith(".textgrid"):
+        return read_textgrid(path)
+    if name.endswith(".lab"):
+        return read_htk_lab(path)
+    raise DataError(f"unknown phone label file type: {path}")
+
+
+def check_labels(phones: list[Segment], audio_seconds: float, where: Path) -> None:
+    """Raise DataError if phone labels run past the end of the audio."""
+    if phones and phones[-1].end > audio_seconds + duration_tolerance(audio_seconds):
+        raise DataError(
+            f"{where}: phone labels end at {phones[-1].end:.3f} s, after the audio "
+            f"({audio_seconds:.3f} s)"
+        )
+
+
+def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
+    """Load a ``.npy`` array without pickles.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    legacy_pickle : bool
+        Fall back to unpickling (``encoding="latin1"``, for arrays saved by Python 2)
+        if the array holds Python objects. Only for files of a known corpus (FACEGOOD).
+
+    Raises
+    ------
+    DataError
+        If the file is missing, truncated or not a ``.npy`` array.
+    """
+    if not path.is_file():
+        raise DataError(f"array file not found: {path}")
+    with warnings.catch_warnings():
+        # numpy warns when it has to parse a Python-2 header ("(3295L, 116L)").
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            array = np.load(path, allow_pickle=False)
+        except ValueError as exc:
+            if not (legacy_pickle and "allow_pickle" in str(exc)):
+                raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
+            try:
+                array = np.load(path, allow_pickle=True, encoding="latin1")
+            except Exception as exc2:  # unpickling a corrupt file can raise anything
+                raise DataError(
+                    f"corrupt array file {path}: {type(exc2).__name__}: {exc2}"
+                ) from None
+        except (OSError, EOFError) as exc:
+            raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
+    if not isinstance(array, np.ndarray):
+        raise DataError(f"{path}: expected a .npy array, got {type(array).__name__}")
+    return array

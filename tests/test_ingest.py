@@ -1,0 +1,191 @@
+"""``animegraph ingest`` end to end on the synthetic corpus, and the database it writes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from animegraph.cli import main
+from db.errors import ParameterError
+from db.sql import query
+from db.store import Database, current_version
+from ingest.decompose import MotionDecomposer
+from ingest.formats.phones_csv import read_phones_csv
+from ingest.pipeline import ingest
+
+
+@pytest.fixture(scope="module")
+def tiny_db(tiny_corpus, tmp_path_factory):
+    path = tmp_path_factory.mktemp("db") / "tiny.db"
+    report = ingest([tiny_corpus], path, workers=2)
+    return path, report
+
+
+def test_every_clip_goes_in(tiny_db, tiny_corpus):
+    path, report = tiny_db
+    n = len(list((tiny_corpus / "clips").glob("*.c3d")))
+    assert report.count("added") == n and report.written
+    db = Database.open(path)
+    assert db.manifest["n_clips"] == n and db.manifest["fps"] == 120.0
+    assert db.manifest["kind"] == "markers" and db.manifest["n_channels"] == 216
+    assert len(list((path / "reports").glob("ingest-*.csv"))) == 1
+
+
+def test_animes_are_the_ground_truth_phones_linked_in_order(tiny_db, tiny_corpus):
+    db = Database.open(tiny_db[0])
+    animes = db.table("animes").sort_by("node_id").to_pylist()
+    by_clip = {}
+    for a in animes:
+        by_clip.setdefault(a["clip_id"], []).append(a)
+    for clip_id, nodes in by_clip.items():
+        truth = read_phones_csv(tiny_corpus / "clips" / f"{clip_id}.phones.csv")
+        assert [a["phoneme"] for a in nodes] == [s.phone for s in truth]
+        assert [a["position"] for a in nodes] == list(range(len(nodes)))
+        assert nodes[0]["prev_node"] is None and nodes[-1]["next_node"] is None
+        for a, b in zip(nodes, nodes[1:], strict=False):
+            assert a["next_node"] == b["node_id"] and b["prev_node"] == a["node_id"]
+            assert a["end_frame"] >= b["start_frame"] >= a["start_frame"]
+    clips = {c["clip_id"]: c for c in db.table("clips").to_pylist()}
+    assert {c["segmentation"] for c in clips.values()} == {"labels"}
+    meta = json.loads((tiny_corpus / "clips" / f"{animes[0]['clip_id']}.json").read_text())
+    assert clips[animes[0]["clip_id"]]["emotion"] == meta["emotion"]
+
+
+def test_prosody_curves_are_nine_rasta_plp_coefficients(tiny_db):
+    db = Database.open(tiny_db[0])
+    animes = db.table("animes", columns=["prosody", "prosody_frames", "end_time",
+                                         "start_time"]).to_pylist()
+    for a in animes[:200]:
+        assert len(a["prosody"]) == 9 * a["prosody_frames"] >= 9
+        assert np.isfinite(a["prosody"]).all()
+        assert a["prosody_frames"] <= round((a["end_time"] - a["start_time"]) / 0.01) + 2
+
+
+def test_model_keeps_95_percent_and_reconstructs_the_frames(tiny_db):
+    db = Database.open(tiny_db[0])
+    model = MotionDecomposer.from_arrays(db.arrays())
+    assert db.manifest["variance_kept"] >= 0.95
+    names = db.table("channels").column("name").to_pylist()
+    clip_id = db.table("clips").column("clip_id")[0].as_py()
+    frames = db.table("frames").filter(
+        __import__("pyarrow.compute").compute.field("clip_id") == clip_id).sort_by("frame")
+    motion = np.stack([frames.column(n).to_numpy() for n in names], axis=1)
+    animes = db.table("animes").filter(
+        __import__("pyarrow.compute").compute.field("clip_id") == clip_id).sort_by("node_id")
+    first = animes.to_pylist()[1]
+    ics = np.asarray(first["motion"]).reshape(first["n_frames"], -1)
+    recon = model.inverse_transform(ics)
+    orig = motion[first["start_frame"]:first["end_frame"]]
+    # What PCA leaves out is small next to the motion itself.
+    assert np.sqrt(np.mean((recon - orig) ** 2)) < 0.5 * np.sqrt(np.mean(
+        (orig - motion.mean(axis=0)) ** 2))
+    cut = db.table("components").column("cutoff_hz").to_numpy()
+    assert ((cut > 0) & (cut <= 60.0)).all()
+
+
+def test_dropouts_are_filled_and_remembered(tiny_db):
+    db = Database.open(tiny_db[0])
+    out = query(db, "SELECT count(*) AS n FROM frames WHERE len(missing) > 0")
+    assert out.column("n")[0].as_py() > 0
+    out = query(db, "SELECT count(*) AS n FROM frames WHERE isnan(\"lip_corner_r.x\")")
+    assert out.column("n")[0].as_py() == 0
+
+
+def test_reingesting_the_same_clips_changes_nothing(tiny_db, tiny_corpus):
+    path, _ = tiny_db
+    version = current_version(path)
+    report = ingest([tiny_corpus], path)
+    assert report.count("unchanged") == report.count("added") + report.count("unchanged")
+    assert not report.written and current_version(path) == version
+
+
+def test_a_bad_clip_is_rejected_and_the_others_go_in(tiny_corpus, tmp_path):
+    src = tmp_path / "corpus"
+    shutil.copytree(tiny_corpus, src)
+    victim = sorted((src / "clips").glob("*.wav"))[0]
+    victim.write_bytes(victim.read_bytes()[:100])  # truncated
+    report = ingest([src], tmp_path / "db")
+    rejected = [c for c in report.clips if c.status == "rejected"]
+    assert len(rejected) == 1 and victim.stem in rejected[0].source
+    assert rejected[0].reason and "\n" not in rejected[0].reason
+    assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added")
+
+
+def test_adding_clips_refits_the_model_over_everything(tiny_corpus, tmp_path):
+    first = tmp_path / "part" / tiny_corpus.name  # same corpus name: the same clips
+    (first / "clips").mkdir(parents=True)
+    shutil.copy(tiny_corpus / "corpus.json", first)
+    shutil.copy(tiny_corpus / "markers.csv", first)
+    clips = sorted({p.name.split(".")[0] for p in (tiny_corpus / "clips").iterdir()})
+    for stem in clips[:4]:
+        for f in (tiny_corpus / "clips").glob(f"{stem}.*"):
+            shutil.copy(f, first / "clips")
+    db = tmp_path / "db"
+    ingest([first], db)
+    assert Database.open(db).manifest["n_clips"] == 4
+    report = ingest([tiny_corpus], db)
+    assert report.count("unchanged") == 4 and report.count("added") == len(clips) - 4
+    assert Database.open(db).manifest["n_clips"] == len(clips)
+    assert current_version(db) == "v000002"
+
+
+def test_errors(tmp_path):
+    with pytest.raises(ParameterError, match="does not exist"):
+        ingest([tmp_path / "nope"], tmp_path / "db")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ParameterError, match="no clips found"):
+        ingest([tmp_path / "empty"], tmp_path / "db")
+    (tmp_path / "notdb").mkdir()
+    (tmp_path / "notdb" / "x.txt").write_text("mine")
+    with pytest.raises(ParameterError, match="not an animegraph database"):
+        ingest([tmp_path / "empty"], tmp_path / "notdb")
+
+
+# --- the command line --------------------------------------------------------------
+
+
+def test_cli_sql_info_and_formats(tiny_db, capsys, tmp_path):
+    path, _ = tiny_db
+    assert main(["info", "--db", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "markers, 216 channels at 120 fps" in out and "principal components" in out
+    sql = "SELECT phoneme, count(*) AS n FROM animes GROUP BY 1 ORDER BY n DESC LIMIT 3"
+    assert main(["sql", "--db", str(path), sql]) == 0
+    assert "phoneme" in capsys.readouterr().out
+    assert main(["sql", "--db", str(path), sql, "--format", "csv"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == '"phoneme","n"'
+    assert main(["sql", "--db", str(path), sql, "--format", "json"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == 3
+    out = tmp_path / "top.parquet"
+    assert main(["sql", "--db", str(path), sql, "--format", "parquet", "-o", str(out)]) == 0
+    assert pq.read_table(out).num_rows == 3
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["sql", "--db", "{db}", "DELETE FROM animes"], "only SELECT"),
+    (["sql", "--db", "{db}", "SELECT nope FROM animes"], "query failed"),
+    (["sql", "--db", "{tmp}", "SELECT 1"], "not an animegraph database"),
+    (["info", "--db", "{tmp}/missing"], "does not exist"),
+])
+def test_cli_errors_are_one_line(tiny_db, tmp_path, capsys, argv, needle):
+    argv = [a.format(db=tiny_db[0], tmp=tmp_path) for a in argv]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+
+
+def test_readme_queries_run(tiny_db):
+    db = Database.open(tiny_db[0])
+    per_emotion = query(db, "SELECT emotion, count(DISTINCT phoneme) AS phonemes, count(*) "
+                            "AS animes FROM animes GROUP BY emotion ORDER BY emotion")
+    assert per_emotion.num_rows == 5
+    longest = query(db, "SELECT clip_id, start_time, end_time - start_time AS dur FROM animes "
+                        "WHERE phoneme = 'AA' AND emotion = 'angry' ORDER BY dur DESC LIMIT 5")
+    assert longest.num_rows >= 1
+    prosody = query(db, "SELECT emotion, avg(list_avg(prosody)) AS mean_prosody, "
+                        "avg(prosody[1]) AS mean_c0 FROM animes GROUP BY emotion")
+    assert prosody.num_rows == 5
