@@ -18,11 +18,15 @@ from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.features import RastaPlpConfig, rasta_plp
 from ingest.formats.phones_csv import Segment
+from ingest.readers import shift_motion
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
 from ingest.segment import segment
 
 #: Emotion label of clips that come without one.
 UNKNOWN_EMOTION = "unknown"
+#: Smallest lip-audio lag corrected (s). Lips anticipate speech by a few tens of ms as a
+#: matter of course (coarticulation); larger leads are recording offsets.
+MIN_LAG_CORRECTED_S = 0.08
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,9 +110,9 @@ def prepare_clip(
         filled = stabilize_points(filled, raw.schema.groups, head_reference)
     extra = dict(raw.extra)
     lag = extra.get("lip_audio_lag_s")
-    if correct_lag and lag is not None and abs(lag) * raw.fps >= 1.0:
-        filled = _shift(filled, float(lag), raw.fps)
-        missing = _shift(missing.astype(np.float64), float(lag), raw.fps) > 0.5
+    if correct_lag and lag is not None and abs(lag) >= MIN_LAG_CORRECTED_S:
+        filled = shift_motion(filled, float(lag), raw.fps)
+        missing = shift_motion(missing.astype(np.float64), float(lag), raw.fps) > 0.5
         extra["lag_corrected_s"] = float(lag)
     target = raw.fps if fps is None else float(fps)
     if target != raw.fps:
@@ -133,19 +137,4 @@ def prepare_clip(
         emotion=raw.emotion or UNKNOWN_EMOTION, speaker=raw.speaker,
         sentence_id=raw.sentence_id, text=raw.text, extra=extra,
     )
-
-
-def _shift(motion: np.ndarray, lag_s: float, fps: float) -> np.ndarray:
-    """Delay motion by ``lag_s`` seconds (lips leading the audio: positive), edge-padded."""
-    shift = int(round(lag_s * fps))
-    if shift == 0:
-        return motion
-    out = np.empty_like(motion)
-    if shift > 0:  # motion came early: move it later
-        out[shift:] = motion[:-shift]
-        out[:shift] = motion[0]
-    else:
-        out[:shift] = motion[-shift:]
-        out[shift:] = motion[-1]
-    return out
 

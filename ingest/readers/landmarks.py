@@ -69,6 +69,10 @@ STABLE_LANDMARKS: tuple[int, ...] = (
 POSE_CHANNELS: tuple[str, ...] = (
     "pose.rx", "pose.ry", "pose.rz", "pose.tx", "pose.ty", "pose.tz", "pose.scale",
 )
+#: Lever arm (mm) that turns head rotation (rad) and relative scale change into
+#: millimetres, so the pose channels share the landmarks' units and PCA weighs them
+#: like facial motion of a point 10 cm from the head's centre.
+HEAD_RADIUS_MM = 100.0
 #: Audio file names tried in a clip folder, in order.
 AUDIO_NAMES = ("audio_16k.wav", "audio.wav")
 
@@ -95,6 +99,32 @@ class NormalisedLandmarks:
     points: np.ndarray
     pose: np.ndarray
     residual_mm: np.ndarray
+
+
+def pose_motion(pose: np.ndarray) -> np.ndarray:
+    """Head pose as motion channels in millimetres, relative to the clip's median pose.
+
+    Parameters
+    ----------
+    pose : np.ndarray, shape (n_frames, 7)
+        :attr:`NormalisedLandmarks.pose` (rotation vector in rad, position in pixels,
+        scale in pixels per mm).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 7)
+        Rotation as the arc (mm) a point :data:`HEAD_RADIUS_MM` from the centre travels,
+        translation in mm, scale change as the change (mm) of a :data:`HEAD_RADIUS_MM`
+        length. Where the camera was, how the video was framed and which way the head
+        turned on average differ from clip to clip and say nothing about head motion, so
+        each channel is relative to the clip's median.
+    """
+    scale = np.nanmedian(pose[:, 6])
+    out = np.empty_like(pose)
+    out[:, 0:3] = pose[:, 0:3] * HEAD_RADIUS_MM
+    out[:, 3:6] = pose[:, 3:6] / scale
+    out[:, 6] = (pose[:, 6] / scale - 1.0) * HEAD_RADIUS_MM
+    return out - np.nanmedian(out, axis=0)
 
 
 def similarity_fit(
@@ -267,7 +297,8 @@ def load_talkingface(source: ClipSource) -> RawClip:
 
     norm = normalise_landmarks(raw, float(width), float(height))
     n = len(raw)
-    motion = np.concatenate([norm.points.reshape(n, 3 * N_FACE), norm.pose], axis=1)
+    motion = np.concatenate([norm.points.reshape(n, 3 * N_FACE), pose_motion(norm.pose)],
+                            axis=1)
     schema = landmark_schema()
     motion = check_motion(motion, schema.names, lm_path, "channel")
 
