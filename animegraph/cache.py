@@ -21,3 +21,8 @@ def cache_dir() -> Path:
 def default_corpus_dir() -> Path:
     """Folder of the default synthetic corpus, generated on first use."""
     return cache_dir() / "corpus-default"
+
+
+def default_db_dir() -> Path:
+    """Folder of the database built from the default corpus, on first use."""
+    return cache_dir() / "db-default"

@@ -1,24 +1,29 @@
 """``animegraph demo``: the whole pipeline, as far as it exists, on the embedded default data.
 
 1. The default synthetic corpus is generated into the user's cache folder the first
-   time (a later run reuses it).
+   time, and ingested into the default motion database beside it (a later run reuses
+   both).
 2. A sentence that is not in the corpus is spoken in the chosen emotion and in
    neutral, with exact phone timing; its reference facial motion is made by the same
    face model as the corpus. These are the input and the ground truth that the later
-   stages (database, Anime Graph search, synthesis) are measured against.
+   stages (Anime Graph search, synthesis) are measured against; for each of its phones
+   the demo counts the anime nodes of the database that could match it.
 3. The outputs and a PNG plot are written to the output folder.
 """
 
 from __future__ import annotations
 
 import json
+import os
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from animegraph.cache import default_corpus_dir
+from animegraph.cache import default_corpus_dir, default_db_dir
 from animegraph.plots import plot_clips
 from db.errors import ParameterError
+from db.store import Database, is_database
 from ingest.corpus.emotions import EMOTIONS, style
 from ingest.corpus.synthetic import (
     ClipSpec,
@@ -43,18 +48,31 @@ class DemoResult:
     corpus_clips: int
     text: str
     emotion: str
+    db: Path | None = None
+    db_created: bool = False
+    db_summary: str = ""
+    candidates: list[tuple[str, int, int]] = field(default_factory=list)
     outputs: list[Path] = field(default_factory=list)
 
     def report(self) -> list[str]:
         """Lines to show the user."""
         state = "generated" if self.corpus_created else "reused"
+        db_state = "built" if self.db_created else "reused"
+        phones = [c for c in self.candidates if c[0] != "SIL"]
+        fewest = min(phones, key=lambda c: c[2]) if phones else None
+        missing = [c[0] for c in phones if c[1] == 0]
         lines = [
             f"corpus: {self.corpus} ({state}, {self.corpus_clips} clips)",
+            f"database: {self.db} ({db_state}; {self.db_summary})",
             f"held-out sentence ({self.emotion}): {self.text}",
+            f"search nodes: {len(phones)} phones; "
+            + (f"no anime in the database for {', '.join(sorted(set(missing)))}" if missing
+               else "every one has matching animes in the database")
+            + (f" (fewest in {self.emotion}: {fewest[0]}, {fewest[2]})" if fewest else ""),
             "outputs:",
             *[f"  {p}" for p in self.outputs],
-            "The database, Anime Graph search and synthesis stages are not built yet: the",
-            "motion written here is the reference (ground truth) from the corpus' face model.",
+            "The Anime Graph search and synthesis stages are not built yet: the motion",
+            "written here is the reference (ground truth) from the corpus' face model.",
         ]
         return lines
 
@@ -114,6 +132,9 @@ def run_demo(
     if not (default_corpus_dir() / "corpus.json").exists():
         say(f"generating the default corpus in {default_corpus_dir()} (once) ...")
     corpus, created, n_clips = ensure_default_corpus(workers=workers, progress=progress)
+    db_path, db_created = ensure_default_db(corpus, workers=workers, progress=progress,
+                                            say=say)
+    db = Database.open(db_path)
 
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -125,8 +146,13 @@ def run_demo(
         spec = ClipSpec(clip_id=f"demo_{emo}", sentence_id="demo", text=text, emotion=emo,
                         variation=1, speaker=config.speaker, seed=EMOTIONS.index(emo) + 1)
         clips.append(synthesize_clip(spec, config))
-    result = DemoResult(corpus=corpus, corpus_created=created, corpus_clips=n_clips,
-                        text=text, emotion=emotion)
+    m = db.manifest
+    result = DemoResult(
+        corpus=corpus, corpus_created=created, corpus_clips=n_clips, text=text,
+        emotion=emotion, db=db_path, db_created=db_created,
+        db_summary=f"{m['n_clips']} clips, {m['n_animes']} animes, {m['n_pcs']} components",
+        candidates=_candidates(db, clips[0], emotion),
+    )
     for clip in clips:
         write_clip(clip, out)
         stem = out / clip.spec.clip_id
@@ -136,3 +162,28 @@ def run_demo(
                      title=f"held-out sentence, {emotion} vs neutral: {text}")
     result.outputs.append(png)
     return result
+
+
+def ensure_default_db(
+    corpus: Path, *, workers: int | None = None,
+    progress: Callable[[int], Callable] | None = None,
+    say: Callable[[str], object] | None = None,
+) -> tuple[Path, bool]:
+    """Ingest the default corpus into the default database unless it is there already."""
+    from ingest.pipeline import ingest
+
+    path = default_db_dir()
+    if is_database(path):
+        return path, False
+    if say:
+        say(f"building the default database in {path} (once) ...")
+    ingest([corpus], path, workers=workers or os.cpu_count() or 1, progress=progress)
+    return path, True
+
+
+def _candidates(db: Database, clip, emotion: str) -> list[tuple[str, int, int]]:
+    """(phone, animes with that phoneme, of them in ``emotion``) for each input phone."""
+    table = db.table("animes", columns=["phoneme", "emotion"]).to_pylist()
+    total = Counter(r["phoneme"] for r in table)
+    same = Counter(r["phoneme"] for r in table if r["emotion"] == emotion)
+    return [(p.phone, total[p.phone], same[p.phone]) for p in clip.utterance.phones]

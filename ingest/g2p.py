@@ -252,7 +252,8 @@ _CONSONANT_GRAPHEMES: dict[str, tuple[str, ...]] = {
     "nk": ("NG", "K"), "qu": ("K", "W"), "wh": ("W",), "gh": (), "zh": ("ZH",),
     "b": ("B",), "d": ("D",), "f": ("F",), "h": ("HH",), "j": ("JH",), "k": ("K",),
     "l": ("L",), "m": ("M",), "n": ("N",), "p": ("P",), "q": ("K",), "r": ("R",),
-    "s": ("S",), "t": ("T",), "v": ("V",), "w": ("W",), "x": ("K", "S"), "z": ("Z",),
+    "s": ("S",), "t": ("T",), "v": ("V",), "w": ("W",), "x": ("K", "S"), "y": ("Y",),
+    "z": ("Z",), "c": ("K",), "g": ("G",),
 }
 _VOWEL_TEAMS: dict[str, tuple[str, ...]] = {
     "eigh": ("EY",), "augh": ("AO",), "ough": ("AO",),
@@ -292,8 +293,17 @@ def _is_vowel(word: str, i: int) -> bool:
     return c in _VOWEL_LETTERS
 
 
+_VOICELESS = frozenset({"P", "K", "S", "SH", "CH", "F", "TH"})
+
+
 def _rule_phones(word: str) -> list[str]:
     """Letter-to-sound rules over a lower-case ``a-z`` word (see :func:`rule_g2p`)."""
+    if len(word) > 4 and word.endswith("ed") and not _is_vowel(word, len(word) - 3):
+        # past tense: wanted -> IH D, pushed -> T, covered -> D
+        stem = _rule_phones(word[:-2] + ("e" if word[-3] in "cgsvz" else ""))
+        if stem and stem[-1] in ("T", "D"):
+            return stem + ["IH", "D"]
+        return stem + (["T"] if stem and stem[-1] in _VOICELESS else ["D"])
     suffix: tuple[str, ...] = ()
     for ending, phones in _SUFFIXES:
         if word.endswith(ending) and len(word) > len(ending) + 1:
@@ -352,14 +362,17 @@ def _rule_phones(word: str) -> list[str]:
             out += _CONSONANT_GRAPHEMES[grapheme]
             i += len(grapheme)
             continue
+        soft = (i + 1 < n and word[i + 1] in _FRONT) or (silent_e and i == n - 1)
         if c == "c":
-            out += ("S",) if _is_vowel(word, i + 1) and word[i + 1] in _FRONT else ("K",)
+            out += ("S",) if soft else ("K",)
             i += 1 + (rest.startswith("cc") and not (len(rest) > 2 and rest[2] in _FRONT))
             continue
         if c == "g" and not rest.startswith(("gh", "ng")):
-            soft = i + 1 < n and word[i + 1] in _FRONT and i > 0
-            out += ("JH",) if soft else ("G",)
+            out += ("JH",) if soft and i > 0 else ("G",)
             i += 2 if rest.startswith("gg") else 1
+            continue
+        if c == "h" and i > 0 and _is_vowel(word, i - 1) and not _is_vowel(word, i + 1):
+            i += 1  # silent after a vowel: oh, ah, hurrah
             continue
         if c == "x" and i == 0:
             out.append("Z")
@@ -373,7 +386,7 @@ def _rule_phones(word: str) -> list[str]:
             out.append("G")
             i += 2
             continue
-        out += _CONSONANT_GRAPHEMES[c]
+        out += _CONSONANT_GRAPHEMES.get(c, ())
         i += 1
         if i < n and word[i] == c:  # double consonant
             i += 1

@@ -42,7 +42,7 @@ def _clips(folder: Path, limit: int | None) -> list[Path]:
     return clips[:limit] if limit else clips
 
 
-def _evaluate(clip: Path, do_recognize: bool) -> dict:
+def _evaluate(clip: Path, do_recognize: bool, refine: bool) -> dict:
     meta = json.loads(clip.read_text())
     stem = clip.name[: -len(".json")]
     audio, rate = read_wav(clip.with_name(stem + ".wav"))
@@ -51,14 +51,14 @@ def _evaluate(clip: Path, do_recognize: bool) -> dict:
     out = {"clip": stem, "emotion": meta.get("emotion", "?"), "seconds": len(audio) / rate,
            "reference_boundaries": n_ref}
     start = time.perf_counter()
-    aligned = align(audio, rate, meta["text"])
+    aligned = align(audio, rate, meta["text"], refine=refine)
     out["align_time"] = time.perf_counter() - start
     out["align_errors"] = boundary_errors(reference, aligned).tolist()
     out["align_signed"] = boundary_errors(reference, aligned, signed=True).tolist()
     out["align_per"] = phone_error_rate(reference, aligned)
     if do_recognize:
         start = time.perf_counter()
-        recognized = recognize(audio, rate)
+        recognized = recognize(audio, rate, refine=refine)
         out["recognize_time"] = time.perf_counter() - start
         out["recognize_errors"] = boundary_errors(reference, recognized).tolist()
         out["recognize_per"] = phone_error_rate(reference, recognized)
@@ -124,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="corpus generation workers")
     parser.add_argument("--limit", type=int, help="evaluate only the first N clips")
     parser.add_argument("--no-recognize", action="store_true", help="skip phone recognition")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="keep PocketSphinx's 10 ms boundaries (no spectral refinement)")
     parser.add_argument("--json", type=Path, help="write the summary and per-clip rows here")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     args = parser.parse_args(argv)
@@ -140,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
             start = time.perf_counter()
             generate_corpus(folder, config, workers=args.workers)
             print(f"generated corpus in {time.perf_counter() - start:.1f} s", file=sys.stderr)
-        rows = [_evaluate(clip, do_recognize) for clip in _clips(folder, args.limit)]
+        rows = [_evaluate(clip, do_recognize, not args.no_refine)
+                for clip in _clips(folder, args.limit)]
 
     by_emotion: dict[str, list[dict]] = defaultdict(list)
     for row in rows:

@@ -6,7 +6,8 @@ import json
 
 import numpy as np
 
-from animegraph.cache import default_corpus_dir
+from animegraph.cache import default_corpus_dir, default_db_dir
+from db.store import Database, current_version
 from animegraph.cli import main
 from animegraph.demo import DEMO_SENTENCE
 from ingest.corpus.sentences import cmudict, words
@@ -24,7 +25,10 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--quiet"]) == 0
     first = capsys.readouterr().out
-    assert "generated" in first
+    assert "generated" in first and "built" in first
+    db = Database.open(default_db_dir())
+    assert db.manifest["n_clips"] == len(plan_corpus(CorpusConfig()))
+    assert "every one has matching animes" in first
     meta = json.loads((default_corpus_dir() / "corpus.json").read_text())
     assert meta["n_clips"] == len(plan_corpus(CorpusConfig()))
     assert meta["duration_s"] >= 300  # at least five minutes of speech
@@ -36,6 +40,8 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
 
     stamp = (default_corpus_dir() / "corpus.json").stat().st_mtime_ns
     assert main(["demo", "--out", str(out), "--quiet", "--emotion", "sad"]) == 0
-    assert "reused" in capsys.readouterr().out
+    second = capsys.readouterr().out
+    assert "(reused" in second and "reused;" in second
     assert (default_corpus_dir() / "corpus.json").stat().st_mtime_ns == stamp
+    assert current_version(default_db_dir()) == "v000001"
     assert (out / "demo_sad.wav").exists()
