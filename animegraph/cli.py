@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -129,6 +130,37 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rows shown in table format (default 50)")
     sql.set_defaults(func=_cmd_sql)
 
+    syn = sub.add_parser(
+        "synth", help="facial motion for speech, from a motion database",
+        description="Segment the speech into phones, search the Anime Graph for the best "
+        "matching anime sequence (Cao et al. 2005, Eq. 2: jump matches, jump cost, DTW "
+        "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
+    )
+    syn.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
+    syn.add_argument("--db", required=True, type=Path, help="database folder")
+    given = syn.add_mutually_exclusive_group()
+    given.add_argument("--text", default=None, help="transcript (forced alignment)")
+    given.add_argument("--labels", type=Path, default=None,
+                       help="phone labels (.phones.csv, .TextGrid or HTK .lab)")
+    syn.add_argument("--emotion", default=None, help="prefer animes of this emotion")
+    mode = syn.add_mutually_exclusive_group()
+    mode.add_argument("--exact", action="store_true",
+                      help="the global optimum (default)")
+    mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
+                      help="the paper's bounded look-ahead of K phonemes (3-6)")
+    mode.add_argument("--method", choices=("exact", "paper", "window", "dp"), default=None,
+                      help="search algorithm (paper: the published priority queue)")
+    syn.add_argument("-o", "--output", required=True, type=Path,
+                     help="motion file: .c3d (marker databases), .csv or .npz")
+    syn.add_argument("--explain", action="store_true",
+                     help="print where every phone's motion came from and its costs")
+    syn.add_argument("--explain-json", type=Path, default=None,
+                     help="write the explanation as JSON here")
+    syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
+    syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
+    syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
+    syn.set_defaults(func=_cmd_synth)
+
     info = sub.add_parser("info", help="summarise a database")
     info.add_argument("--db", required=True, type=Path, help="database folder")
     info.add_argument("--json", action="store_true", help="the summary as JSON")
@@ -210,6 +242,90 @@ def _cmd_sql(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_synth(args: argparse.Namespace) -> int:
+    import json
+    import time
+
+    from animegraph.synth import Model, synthesize, write_motion
+    from animegraph.synthesis import PostOptions
+    from ingest.formats.wav import read_wav
+
+    method = args.method or ("window" if args.window is not None else "exact")
+    if method == "window" and args.window is None:
+        raise UsageError("animegraph synth: --method window needs --window K")
+    if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
+        raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
+                         f"{args.output.name!r}")
+    t0 = time.perf_counter()
+    model = Model.load(args.db)
+    if args.emotion is not None and args.emotion not in model.graph.emotions:
+        raise UsageError(f"animegraph synth: emotion {args.emotion!r} is not in the database "
+                         f"(it has {', '.join(model.graph.emotions)})")
+    audio, sample_rate = read_wav(args.audio)
+    labels = _read_labels(args.labels) if args.labels else None
+    print(f"animegraph: loaded {model.graph.n_nodes} animes in "
+          f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
+          f"of speech ...", file=sys.stderr)
+    options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
+                          smooth=not args.no_smooth)
+    out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
+                     emotion=args.emotion, method=method, window=args.window,
+                     options=options)
+    write_motion(out, model, args.output)
+    r = out.result
+    t = out.timings
+    print(f"animegraph: {len(out.phones)} phones ({out.segmentation}), {r.n_jumps} jump "
+          f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
+          f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
+          f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}; "
+          f"wrote {args.output}", file=sys.stderr)
+    backoffs = sorted({f"{e['phone']}->{e['anime_phone']}" for e in out.explain
+                       if e["backoff"]})
+    if backoffs:
+        print(f"animegraph: phones missing from the database, backed off: "
+              f"{', '.join(backoffs)}", file=sys.stderr)
+    if args.explain:
+        import pyarrow as pa
+
+        from animegraph.tabular import format_table
+
+        print(format_table(pa.Table.from_pylist(out.explain), "table",
+                           max_rows=len(out.explain)), end="")
+    if args.explain_json:
+        from db.atomic import atomic_write
+
+        record = {"phones": out.explain, "joins": out.joins, "cost": r.cost,
+                  "n_jumps": r.n_jumps, "method": r.method, "timings": t}
+        with atomic_write(args.explain_json) as handle:
+            handle.write(json.dumps(record, indent=1, default=_jsonable).encode())
+    return 0
+
+
+def _jsonable(value):
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, tuple):
+        return list(value)
+    return str(value)
+
+
+def _read_labels(path: Path):
+    from ingest.formats.htk_lab import read_htk_lab
+    from ingest.formats.phones_csv import read_phones_csv
+    from ingest.formats.textgrid import read_textgrid
+
+    name = path.name.lower()
+    if name.endswith(".csv"):
+        return read_phones_csv(path)
+    if name.endswith(".textgrid"):
+        return read_textgrid(path)
+    if name.endswith(".lab"):
+        return read_htk_lab(path)
+    raise UsageError(f"animegraph synth: --labels must be .csv, .TextGrid or .lab, got {path}")
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     import json
 
@@ -238,7 +354,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         _configure_logging(args.verbose)
         if args.command is None:
-            raise UsageError("animegraph: choose a command: corpus, demo, ingest, sql, info "
+            raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, sql, "
+                             "info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "
@@ -250,6 +367,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AnimeGraphError as exc:
         print(f"animegraph: error: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:
+        # The reader went away (``animegraph sql ... | head``): not an error.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as exc:
         # Disk full, permission denied, a folder vanished: the environment, not a bug.
         where = f" {exc.filename}" if exc.filename else ""

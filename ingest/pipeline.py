@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from db.atomic import atomic_write
-from db.errors import DataError, ParameterError
+from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.motion import fill_gaps, head_points
@@ -121,7 +121,7 @@ def _work(args):
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
         return report, clip
-    except DataError as exc:
+    except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
 
 

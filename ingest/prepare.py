@@ -18,8 +18,8 @@ from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.features import RastaPlpConfig, rasta_plp
 from ingest.formats.phones_csv import Segment
-from ingest.readers import shift_motion
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
+from ingest.readers import shift_motion
 from ingest.segment import segment
 
 #: Emotion label of clips that come without one.
@@ -122,7 +122,7 @@ def prepare_clip(
     audio = np.asarray(raw.audio, dtype=np.float32)
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent")
-    phones, method = segment(audio, raw.sample_rate, text=raw.text,
+    phones, method = segment(audio, raw.sample_rate, text=raw.text or None,
                              labels=list(raw.phones) if raw.phones else None)
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")

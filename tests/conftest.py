@@ -33,6 +33,16 @@ def tiny_corpus(tmp_path_factory, tiny_config) -> Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def tiny_db(tiny_corpus, tmp_path_factory):
+    """The tiny corpus ingested into a database (path, ingest report), once per session."""
+    from ingest.pipeline import ingest
+
+    path = tmp_path_factory.mktemp("db") / "tiny.db"
+    report = ingest([tiny_corpus], path, workers=2)
+    return path, report
+
+
 @pytest.fixture(autouse=True)
 def _isolated_cache(tmp_path_factory, monkeypatch):
     """Keep every test's cache (the demo's default corpus) out of the user's home."""

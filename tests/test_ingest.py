@@ -18,13 +18,6 @@ from ingest.formats.phones_csv import read_phones_csv
 from ingest.pipeline import ingest
 
 
-@pytest.fixture(scope="module")
-def tiny_db(tiny_corpus, tmp_path_factory):
-    path = tmp_path_factory.mktemp("db") / "tiny.db"
-    report = ingest([tiny_corpus], path, workers=2)
-    return path, report
-
-
 def test_every_clip_goes_in(tiny_db, tiny_corpus):
     path, report = tiny_db
     n = len(list((tiny_corpus / "clips").glob("*.c3d")))
@@ -189,3 +182,18 @@ def test_readme_queries_run(tiny_db):
     prosody = query(db, "SELECT emotion, avg(list_avg(prosody)) AS mean_prosody, "
                         "avg(prosody[1]) AS mean_c0 FROM animes GROUP BY emotion")
     assert prosody.num_rows == 5
+
+
+def test_cli_ingest_reports_rejections_with_exit_status_1(tiny_corpus, tmp_path, capsys):
+    src = tmp_path / tiny_corpus.name
+    shutil.copytree(tiny_corpus, src)
+    victim = sorted((src / "clips").glob("*.c3d"))[0]
+    victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])  # truncated C3D
+    db = tmp_path / "db"
+    assert main(["ingest", str(src), "--db", str(db), "--quiet"]) == 1
+    out = capsys.readouterr().out
+    assert f"rejected {victim}" in out and "truncated" in out
+    assert "is now v000001" in out
+    assert main(["ingest", str(src), "--db", str(db), "--quiet"]) == 1  # still rejected
+    assert "database" in capsys.readouterr().out
+    assert current_version(db) == "v000001"

@@ -1,0 +1,590 @@
+"""Dynamic time warping of prosody curves (Cao et al. 2005, §4.2 Eq. 5 and §4.3).
+
+The search scores each candidate anime node by how well its prosody curve C (RASTA-PLP,
+one 9-vector per 10 ms frame) matches the input phone's curve once warped onto it
+(Eq. 5)::
+
+    C_audio = (1/m) * sum_k || C_input(k) - L(C_anime)(k) ||,    k = 1..m
+
+where ``m`` is the number of input frames, ``||.||`` the Euclidean norm and ``L`` the DTW
+operator warping the anime's curve onto the input's timeline. Post-processing (§4.3)
+reuses the same alignment to time-warp each anime's motion onto the input phone.
+
+Conventions
+-----------
+* Curves are ``(n_frames, n_features)``; ``x`` (the input) is the reference timeline and
+  ``y`` (the anime) is warped onto it.
+* Local cost: Euclidean distance between frames (``metric="euclidean"``, the ``||.||`` of
+  Eq. 5). ``metric="sqeuclidean"`` (squared distance) is offered for :func:`dtw` only; it
+  is tslearn's convention (``tslearn.metrics.dtw`` returns the square root of that
+  accumulated cost).
+* Steps (1, 0), (0, 1), (1, 1), all with weight 1; the path runs from (0, 0) to
+  (n-1, m-1). Ties while backtracking go to the diagonal, then to (i-1, j), then to
+  (i, j-1) (tslearn's order), so paths agree with tslearn's.
+* ``L``: where several anime frames are matched to one input frame, ``L`` takes their
+  mean (where one anime frame is matched to several input frames it is repeated). The
+  mean keeps every matched frame's contribution and is what :func:`warp_onto` returns.
+* ``band``: a Sakoe-Chiba radius with tslearn's meaning (``global_constraint=
+  "sakoe_chiba"``): around the diagonal, widened by ``|n - m|`` so that the corner is
+  always reachable. ``None`` (the default, and the paper's setting) leaves the warp free.
+
+The kernels are compiled with numba on first use and cached next to this module
+(``__pycache__``, or numba's user-wide cache when that is not writable). They assume
+valid input: every public function validates its arguments first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from numbers import Integral
+
+import numba
+import numpy as np
+
+from db.errors import ParameterError
+
+__all__ = ["DTWResult", "audio_cost", "audio_costs", "dtw", "warp_indices", "warp_onto"]
+
+_METRICS = {"euclidean": 0, "sqeuclidean": 1}
+
+#: ``audio_costs`` runs in parallel (numba ``prange``) from this many nodes on, when numba
+#: has more than one thread; below it the thread start-up costs more than it saves.
+_PARALLEL_MIN_NODES = 2048
+
+
+def _jit(**options):
+    """``numba.njit(cache=True, nogil=True)``, without the cache if no folder is writable.
+
+    numba looks for a writable cache folder when the function is decorated (next to this
+    module, then ``$NUMBA_CACHE_DIR`` or the user-wide cache) and raises ``RuntimeError``
+    if there is none; compiling on every run is then the only option, and needs no warning.
+    """
+
+    def wrap(func):
+        try:
+            return numba.njit(cache=True, nogil=True, **options)(func)
+        except RuntimeError:
+            return numba.njit(cache=False, nogil=True, **options)(func)
+
+    return wrap
+
+
+# --------------------------------------------------------------------------- kernels
+# Private: valid input assumed (finite, non-empty, matching widths, band >= 0 or -1).
+# Layout: the input x is passed transposed, ``xt`` of shape (d, n), and the accumulated
+# cost is stored as ``acc[j, i]`` (one row per frame j of y): the n local costs of a
+# frame of y are then computed with unit-stride inner loops that vectorise, and the
+# recurrence runs down contiguous rows. About 1.5x faster than the (i, j) layout.
+
+
+@_jit()
+def _band_limits(n, m, band, i):
+    """First and last j of row i of an (n, m) grid inside tslearn's Sakoe-Chiba band."""
+    if band < 0:
+        return 0, m - 1
+    if n <= m:
+        lo = i - band
+        hi = i + (m - n) + band
+    else:
+        lo = i - (n - m) - band
+        hi = i + band
+    return max(lo, 0), min(hi, m - 1)
+
+
+@_jit()
+def _accumulate(xt, y, band, metric, acc, c):
+    """Fill ``acc[:m, :n]``: acc[j, i] is the least cost of aligning x[:i+1] with y[:j+1].
+
+    ``c`` (n,) is workspace for one frame's local costs.
+    """
+    d, n = xt.shape
+    m = y.shape[0]
+    for j in range(m):
+        lo, hi = _band_limits(m, n, band, j)
+        for i in range(lo, hi + 1):
+            c[i] = 0.0
+        for k in range(d):
+            yk = np.float64(y[j, k])
+            for i in range(lo, hi + 1):
+                diff = xt[k, i] - yk
+                c[i] += diff * diff
+        if metric == 0:
+            for i in range(lo, hi + 1):
+                c[i] = np.sqrt(c[i])
+        for i in range(lo):
+            acc[j, i] = np.inf
+        for i in range(hi + 1, n):
+            acc[j, i] = np.inf
+        if j == 0:  # lo == 0: only steps along x
+            run = 0.0
+            for i in range(hi + 1):
+                run += c[i]
+                acc[0, i] = run
+            continue
+        up = np.inf  # acc[j, i - 1]
+        start = lo
+        if lo == 0:
+            up = acc[j - 1, 0] + c[0]
+            acc[j, 0] = up
+            start = 1
+        for i in range(start, hi + 1):
+            up = c[i] + min(min(acc[j - 1, i - 1], acc[j - 1, i]), up)
+            acc[j, i] = up
+
+
+@_jit()
+def _step_back(acc, i, j):
+    """Predecessor of (i, j) on the optimal path: diagonal, then (i-1, j), then (i, j-1)."""
+    if i == 0:
+        return 0, j - 1
+    if j == 0:
+        return i - 1, 0
+    diag = acc[j - 1, i - 1]
+    up = acc[j, i - 1]
+    left = acc[j - 1, i]
+    if diag <= up and diag <= left:
+        return i - 1, j - 1
+    if up <= left:
+        return i - 1, j
+    return i, j - 1
+
+
+@_jit()
+def _dtw_path(xt, y, band, metric):
+    """Accumulated cost and optimal path, (L, 2) int64 from (0, 0) to (n-1, m-1)."""
+    n = xt.shape[1]
+    m = y.shape[0]
+    acc = np.empty((m, n))
+    _accumulate(xt, y, band, metric, acc, np.empty(n))
+    path = np.empty((n + m - 1, 2), dtype=np.int64)
+    k = n + m - 2
+    i = n - 1
+    j = m - 1
+    path[k, 0] = i
+    path[k, 1] = j
+    while i > 0 or j > 0:
+        i, j = _step_back(acc, i, j)
+        k -= 1
+        path[k, 0] = i
+        path[k, 1] = j
+    return acc[m - 1, n - 1], path[k:].copy()
+
+
+@_jit()
+def _row_error(xt, i, total, count):
+    """|| x[i] - total / count ||: one term of Eq. 5."""
+    s = 0.0
+    for k in range(xt.shape[0]):
+        diff = xt[k, i] - total[k] / count
+        s += diff * diff
+    return np.sqrt(s)
+
+
+@_jit()
+def _audio_cost_one(xt, y, band, acc, c, total):
+    """Eq. 5 for one anime curve ``y``; ``acc`` (>= m, n), ``c`` (n,), ``total`` (d,) are
+    workspace.
+
+    Backtracks the optimal path from (n-1, m-1) and, since the cells of one input frame
+    i are consecutive on it, averages their anime frames on the fly: no path is kept.
+    """
+    d, n = xt.shape
+    m = y.shape[0]
+    _accumulate(xt, y, band, 0, acc, c)
+    for k in range(d):
+        total[k] = 0.0
+    count = 0
+    cost = 0.0
+    i = n - 1
+    j = m - 1
+    while True:
+        for k in range(d):
+            total[k] += y[j, k]
+        count += 1
+        if i == 0 and j == 0:
+            break
+        pi, pj = _step_back(acc, i, j)
+        if pi != i:
+            cost += _row_error(xt, i, total, count)
+            for k in range(d):
+                total[k] = 0.0
+            count = 0
+        i = pi
+        j = pj
+    cost += _row_error(xt, 0, total, count)
+    return cost / n
+
+
+@_jit()
+def _audio_costs_serial(xt, values, offsets, nodes, max_len, band, out):
+    d, n = xt.shape
+    acc = np.empty((max_len, n))
+    c = np.empty(n)
+    total = np.empty(d)
+    for t in range(nodes.shape[0]):
+        a = nodes[t]
+        out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, acc, c, total)
+
+
+@_jit(parallel=True)
+def _audio_costs_parallel(xt, values, offsets, nodes, max_len, band, n_chunks, out):
+    # Chunks, not nodes, in parallel: one workspace per chunk. (numba.get_num_threads()
+    # is not called in here: it would make the function uncachable.)
+    d, n = xt.shape
+    n_nodes = nodes.shape[0]
+    for chunk in numba.prange(n_chunks):
+        acc = np.empty((max_len, n))
+        c = np.empty(n)
+        total = np.empty(d)
+        for t in range(chunk * n_nodes // n_chunks, (chunk + 1) * n_nodes // n_chunks):
+            a = nodes[t]
+            out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, acc, c,
+                                     total)
+
+
+@_jit()
+def _first_nonfinite(values, offsets, nodes):
+    """Index into ``nodes`` of the first node whose curve is not finite, else -1."""
+    for t in range(nodes.shape[0]):
+        a = nodes[t]
+        for r in range(offsets[a], offsets[a + 1]):
+            for k in range(values.shape[1]):
+                if not np.isfinite(values[r, k]):
+                    return t
+    return -1
+
+
+# --------------------------------------------------------------------------- public API
+
+
+@dataclass(frozen=True, eq=False)
+class DTWResult:
+    """An optimal alignment of two curves.
+
+    Attributes
+    ----------
+    cost : float
+        Accumulated local cost along ``path`` (Euclidean distances by default, see
+        :func:`dtw`'s ``metric``).
+    path : np.ndarray of int64, shape (L, 2)
+        Pairs (i, j) of aligned frames of x and y, from (0, 0) to (n-1, m-1), each step
+        (1, 0), (0, 1) or (1, 1); ``max(n, m) <= L <= n + m - 1``.
+    """
+
+    cost: float
+    path: np.ndarray
+
+
+def dtw(x: np.ndarray, y: np.ndarray, *, band: int | None = None,
+        metric: str = "euclidean") -> DTWResult:
+    """Dynamic time warping of ``y`` onto ``x`` (Cao et al. 2005 §4.2 Eq. 5, §4.3).
+
+    Parameters
+    ----------
+    x : np.ndarray, shape (n, d)
+        The reference curve (the input phone's prosody C_input).
+    y : np.ndarray, shape (m, d)
+        The curve to warp (an anime's prosody C_anime).
+    band : int or None, optional
+        Sakoe-Chiba radius (tslearn's ``sakoe_chiba_radius``): frame i of x may only
+        match frames j of y with ``i - band <= j <= i + (m - n) + band`` when n <= m
+        (symmetrically when n > m). None: no constraint.
+    metric : {"euclidean", "sqeuclidean"}, optional
+        Local cost between frames: the Euclidean distance (Eq. 5's norm) or its square
+        (tslearn's convention: ``tslearn.metrics.dtw(x, y) ** 2`` equals the cost).
+
+    Returns
+    -------
+    DTWResult
+        ``cost``: the minimal accumulated local cost; ``path``: an optimal path.
+
+    Raises
+    ------
+    ParameterError
+        ``x`` or ``y`` not a non-empty finite 2-D array, different numbers of features,
+        bad ``band`` or ``metric``.
+    """
+    x = _curve("x", x, np.float64)
+    y = _curve("y", y, np.float64)
+    _same_width("y", y, "x", x)
+    if metric not in _METRICS:
+        raise ParameterError(f"metric must be 'euclidean' or 'sqeuclidean', got {metric!r}")
+    cost, path = _dtw_path(np.ascontiguousarray(x.T), y, _band(band), _METRICS[metric])
+    return DTWResult(cost=float(cost), path=path)
+
+
+def warp_onto(y: np.ndarray, path: np.ndarray, n: int) -> np.ndarray:
+    """The DTW operator L of Eq. 5: ``y``'s frames carried onto x's ``n`` frames.
+
+    Output frame i is the mean of the frames y[j] matched to i along ``path`` (usually
+    one; several when y is longer or slower there). Also warps any per-frame data that
+    shares y's timeline, such as the anime's motion resampled to its prosody frames (§4.3).
+
+    Parameters
+    ----------
+    y : np.ndarray, shape (m, d)
+        The curve to warp.
+    path : np.ndarray of int, shape (L, 2)
+        An alignment from (0, 0) to (n-1, m-1), e.g. ``dtw(x, y).path``.
+    n : int
+        Number of frames of the reference curve x.
+
+    Returns
+    -------
+    np.ndarray of float64, shape (n, d)
+
+    Raises
+    ------
+    ParameterError
+        ``y`` not a non-empty finite 2-D array, ``n`` not a positive integer, or ``path``
+        not a monotone path of unit steps from (0, 0) to (n-1, m-1).
+    """
+    n = _count("n", n)
+    y = _curve("y", y, np.float64)
+    path = _path(path, n, len(y))
+    starts = _row_starts(path)
+    sums = np.add.reduceat(y[path[:, 1]], starts, axis=0)
+    counts = np.diff(np.append(starts, len(path)))
+    return sums / counts[:, None]
+
+
+def warp_indices(n_out: int, path: np.ndarray) -> np.ndarray:
+    """Fractional frame of y to show at each of x's ``n_out`` frames (§4.3 time-warping).
+
+    Output frame i gets the mean of the frames j of y matched to it along ``path``:
+    sampling y (e.g. an anime's motion on its prosody timeline) at these positions, by
+    linear interpolation, plays it with the input phone's timing.
+
+    Parameters
+    ----------
+    n_out : int
+        Number of frames of the reference curve x (the input phone).
+    path : np.ndarray of int, shape (L, 2)
+        An alignment from (0, 0) to (n_out-1, m-1), e.g. ``dtw(x, y).path``.
+
+    Returns
+    -------
+    np.ndarray of float64, shape (n_out,)
+        Non-decreasing, within [0, m-1]; the first value is 0 and the last m-1 unless
+        several frames of y are matched to the first or last frame of x.
+
+    Raises
+    ------
+    ParameterError
+        ``n_out`` not a positive integer or ``path`` not a monotone path of unit steps
+        from (0, 0) to (n_out-1, m-1).
+    """
+    n_out = _count("n_out", n_out)
+    path = _path(path, n_out, None)
+    starts = _row_starts(path)
+    sums = np.add.reduceat(path[:, 1].astype(np.float64), starts)
+    return sums / np.diff(np.append(starts, len(path)))
+
+
+def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = None) -> float:
+    """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for one anime node.
+
+    ``(1/m) * sum_k || c_input[k] - L(c_anime)[k] ||`` with L the DTW operator of
+    :func:`warp_onto` (Euclidean local cost; frames of ``c_anime`` matched to one input
+    frame are averaged).
+
+    Parameters
+    ----------
+    c_input : np.ndarray, shape (m, d)
+        The input phone's prosody curve.
+    c_anime : np.ndarray, shape (m_a, d)
+        The anime node's prosody curve.
+    band : int or None, optional
+        Sakoe-Chiba radius, as in :func:`dtw`.
+
+    Returns
+    -------
+    float
+        The mean Euclidean distance per input frame; equal to the matching entry of
+        :func:`audio_costs`.
+
+    Raises
+    ------
+    ParameterError
+        A curve not a non-empty finite 2-D array, different numbers of features, bad
+        ``band``.
+    """
+    x = _curve("c_input", c_input, np.float64)
+    y = _curve("c_anime", c_anime, None)
+    _same_width("c_anime", y, "c_input", x)
+    out = np.empty(1)
+    offsets = np.array([0, len(y)], dtype=np.int64)
+    _audio_costs_serial(np.ascontiguousarray(x.T), y, offsets, np.zeros(1, dtype=np.int64),
+                        len(y), _band(band), out)
+    return float(out[0])
+
+
+def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
+                nodes: np.ndarray, *, band: int | None = None) -> np.ndarray:
+    """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for many anime nodes at once.
+
+    The search's hot path: one compiled loop over ``nodes`` (in parallel for large
+    batches), with the curves in the graph's ragged layout
+    (:attr:`animegraph.graph.AnimeGraph.prosody_values` and ``prosody_offsets``).
+
+    Parameters
+    ----------
+    c_input : np.ndarray, shape (m, d)
+        The input phone's prosody curve.
+    values : np.ndarray of float32 or float64, shape (n_frames, d)
+        Every node's curve, end to end.
+    offsets : np.ndarray of int, shape (n_nodes + 1,)
+        Node ``a``'s curve is ``values[offsets[a]:offsets[a + 1]]``.
+    nodes : np.ndarray of int, shape (k,)
+        The nodes to score (may be empty).
+    band : int or None, optional
+        Sakoe-Chiba radius, as in :func:`dtw`.
+
+    Returns
+    -------
+    np.ndarray of float64, shape (k,)
+        ``out[t] == audio_cost(c_input, values[offsets[a]:offsets[a + 1]])`` for
+        ``a = nodes[t]``, exactly.
+
+    Raises
+    ------
+    ParameterError
+        ``c_input`` not a non-empty finite 2-D array; ``values``, ``offsets`` or ``nodes``
+        malformed; a node out of range, with an empty curve or with non-finite values;
+        different numbers of features; bad ``band``.
+    """
+    x = _curve("c_input", c_input, np.float64)
+    values = _values(values)
+    _same_width("values", values, "c_input", x)
+    band = _band(band)
+    offsets = _int_vector("offsets", offsets)
+    if len(offsets) < 2:
+        raise ParameterError(f"offsets must have n_nodes + 1 >= 2 entries, got {len(offsets)}")
+    nodes = _int_vector("nodes", nodes)
+    out = np.empty(len(nodes))
+    if len(nodes) == 0:
+        return out
+    bad = np.flatnonzero((nodes < 0) | (nodes >= len(offsets) - 1))
+    if len(bad):
+        raise ParameterError(
+            f"nodes must be in [0, {len(offsets) - 1}), got {nodes[bad[0]]} at index {bad[0]}"
+        )
+    starts = offsets[nodes]
+    stops = offsets[nodes + 1]
+    bad = np.flatnonzero((starts < 0) | (stops <= starts) | (stops > len(values)))
+    if len(bad):
+        a = nodes[bad[0]]
+        raise ParameterError(
+            f"offsets must give node {a} a curve within values' {len(values)} frames, "
+            f"got [{starts[bad[0]]}, {stops[bad[0]]})"
+        )
+    t = _first_nonfinite(values, offsets, nodes)
+    if t >= 0:
+        raise ParameterError(f"values must be finite, got NaN or inf in node {nodes[t]}'s curve")
+    max_len = int((stops - starts).max())
+    xt = np.ascontiguousarray(x.T)
+    if len(nodes) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
+        n_chunks = min(len(nodes), 8 * numba.get_num_threads())
+        _audio_costs_parallel(xt, values, offsets, nodes, max_len, band, n_chunks, out)
+    else:
+        _audio_costs_serial(xt, values, offsets, nodes, max_len, band, out)
+    return out
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _curve(name: str, a, dtype) -> np.ndarray:
+    """A finite, non-empty (n_frames, n_features) array, C-contiguous.
+
+    ``dtype``: cast to it; None keeps float32 and float64 (and casts others to float64).
+    """
+    try:
+        arr = np.asarray(a)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be a (n_frames, n_features) array, got {exc}") from None
+    if arr.ndim != 2:
+        raise ParameterError(
+            f"{name} must be a (n_frames, n_features) array, got shape {arr.shape}")
+    if arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise ParameterError(f"{name} must not be empty, got shape {arr.shape}")
+    if arr.dtype.kind not in "iuf":
+        raise ParameterError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    if dtype is None:
+        dtype = arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64
+    arr = np.ascontiguousarray(arr, dtype=dtype)
+    finite = np.isfinite(arr)
+    if not finite.all():
+        frame = int(np.flatnonzero(~finite.all(axis=1))[0])
+        raise ParameterError(f"{name} must be finite, got {arr[frame][~finite[frame]][0]} "
+                             f"in frame {frame}")
+    return arr
+
+
+def _values(a) -> np.ndarray:
+    """The ragged values array: 2-D, float32 or float64 (finiteness is checked per node)."""
+    arr = np.asarray(a)
+    if arr.ndim != 2 or arr.shape[1] == 0:
+        raise ParameterError(
+            f"values must be a (n_frames, n_features) array, got shape {arr.shape}")
+    if arr.dtype.kind not in "iuf":
+        raise ParameterError(f"values must hold real numbers, got dtype {arr.dtype}")
+    dtype = arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64
+    return np.ascontiguousarray(arr, dtype=dtype)
+
+
+def _int_vector(name: str, a) -> np.ndarray:
+    arr = np.asarray(a)
+    if arr.ndim != 1 or (arr.dtype.kind not in "iu" and arr.size):
+        raise ParameterError(
+            f"{name} must be a 1-D integer array, got shape {arr.shape} dtype {arr.dtype}")
+    return np.ascontiguousarray(arr, dtype=np.int64)
+
+
+def _same_width(name: str, a: np.ndarray, ref_name: str, ref: np.ndarray) -> None:
+    if a.shape[1] != ref.shape[1]:
+        raise ParameterError(
+            f"{name} must have {ref.shape[1]} features like {ref_name}, got {a.shape[1]}")
+
+
+def _band(band) -> int:
+    if band is None:
+        return -1
+    if isinstance(band, bool) or not isinstance(band, Integral) or band < 0:
+        raise ParameterError(f"band must be None or a non-negative integer, got {band!r}")
+    return int(band)
+
+
+def _count(name: str, n) -> int:
+    if isinstance(n, bool) or not isinstance(n, Integral) or n < 1:
+        raise ParameterError(f"{name} must be a positive integer, got {n!r}")
+    return int(n)
+
+
+def _path(path, n: int, m: int | None) -> np.ndarray:
+    """A DTW path from (0, 0) to (n-1, m-1) of unit steps (any m when ``m`` is None)."""
+    arr = np.asarray(path)
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) == 0 or arr.dtype.kind not in "iu":
+        raise ParameterError(
+            f"path must be a non-empty (L, 2) integer array, got shape {arr.shape} "
+            f"dtype {arr.dtype}")
+    arr = arr.astype(np.int64, copy=False)
+    end = (n - 1, arr[-1, 1] if m is None else m - 1)
+    if tuple(arr[0]) != (0, 0) or tuple(arr[-1]) != end:
+        raise ParameterError(
+            f"path must run from (0, 0) to {end}, got {tuple(arr[0].tolist())} to "
+            f"{tuple(arr[-1].tolist())}")
+    steps = np.diff(arr, axis=0)
+    bad = np.flatnonzero((steps < 0).any(axis=1) | (steps > 1).any(axis=1)
+                         | (steps == 0).all(axis=1))
+    if len(bad):
+        k = int(bad[0])
+        raise ParameterError(
+            f"path must move by (1, 0), (0, 1) or (1, 1), got {tuple(arr[k].tolist())} -> "
+            f"{tuple(arr[k + 1].tolist())}")
+    return arr
+
+
+def _row_starts(path: np.ndarray) -> np.ndarray:
+    """Index in ``path`` of the first cell of each frame i (a valid path visits every i)."""
+    return np.flatnonzero(np.diff(path[:, 0], prepend=-1))

@@ -1,0 +1,187 @@
+"""The Anime Graph in memory: flat arrays over every anime node of a database.
+
+Cao et al. (2005, §4.1): every recorded utterance is a linked list of anime nodes
+a = <P, C, M, E>; the set of these lists is the Anime Graph. Here the graph is a
+struct of arrays (after the motion-matching databases of game animation): one entry
+per node for its phoneme, emotion, clip and links, and ragged blocks (values plus
+offsets) for its prosody curve C and its motion M, so a search touches contiguous
+memory and loading is a handful of column reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+
+from db.errors import DataError
+from db.store import Database
+from ingest.phones import PHONES
+
+#: Index of each phone in :data:`ingest.phones.PHONES`.
+PHONE_INDEX = {p: i for i, p in enumerate(PHONES)}
+
+
+@dataclass(frozen=True, eq=False)
+class AnimeGraph:
+    """Every anime node of a database.
+
+    Attributes
+    ----------
+    node_phone : np.ndarray of int16, shape (n_nodes,)
+        Index into :data:`ingest.phones.PHONES`.
+    node_emotion : np.ndarray of int16, shape (n_nodes,)
+        Index into ``emotions``.
+    node_clip : np.ndarray of int32, shape (n_nodes,)
+        Index into ``clip_ids``.
+    position : np.ndarray of int32, shape (n_nodes,)
+        Place of the node in its recording.
+    next_node, prev_node : np.ndarray of int64, shape (n_nodes,)
+        The following / preceding node of the same recording, -1 at its ends.
+    start_frame, end_frame : np.ndarray of int32, shape (n_nodes,)
+        Frames [start, end) of the node in its clip.
+    start_time, end_time : np.ndarray of float32, shape (n_nodes,)
+        Seconds.
+    prosody_offsets : np.ndarray of int64, shape (n_nodes + 1,)
+        Node ``a``'s prosody curve is ``prosody_values[prosody_offsets[a]:prosody_offsets[a+1]]``.
+    prosody_values : np.ndarray of float32, shape (n_prosody_frames, n_prosody)
+        RASTA-PLP frames (100 per second, 9 coefficients).
+    motion_offsets : np.ndarray of int64, shape (n_nodes + 1,)
+    motion_values : np.ndarray of float32, shape (n_motion_frames, n_ics)
+        Motion curves in independent-component space.
+    first_pcs, last_pcs : np.ndarray of float32, shape (n_nodes, n_pcs)
+        First and last motion frame of each node in principal-component space, where
+        Euclidean distance equals distance in the original channels (up to what PCA
+        left out): the jump cost's frames (Eq. 4).
+    by_phone : tuple of np.ndarray of int64
+        ``by_phone[p]``: the nodes whose phoneme is ``PHONES[p]``, ascending.
+    clip_ids, emotions : tuple of str
+    fps : float
+    n_channels : int
+        Channels of the original motion (for RMS distances).
+    """
+
+    node_phone: np.ndarray
+    node_emotion: np.ndarray
+    node_clip: np.ndarray
+    position: np.ndarray
+    next_node: np.ndarray
+    prev_node: np.ndarray
+    start_frame: np.ndarray
+    end_frame: np.ndarray
+    start_time: np.ndarray
+    end_time: np.ndarray
+    prosody_offsets: np.ndarray
+    prosody_values: np.ndarray
+    motion_offsets: np.ndarray
+    motion_values: np.ndarray
+    first_pcs: np.ndarray
+    last_pcs: np.ndarray
+    by_phone: tuple[np.ndarray, ...]
+    clip_ids: tuple[str, ...]
+    emotions: tuple[str, ...]
+    fps: float
+    n_channels: int
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.node_phone.shape[0])
+
+    def prosody(self, node: int) -> np.ndarray:
+        """Prosody curve C of ``node``: shape (n_frames, n_prosody)."""
+        return self.prosody_values[self.prosody_offsets[node]:self.prosody_offsets[node + 1]]
+
+    def motion(self, node: int) -> np.ndarray:
+        """Motion M of ``node`` in independent components: shape (n_frames, n_ics)."""
+        return self.motion_values[self.motion_offsets[node]:self.motion_offsets[node + 1]]
+
+    def nbytes(self) -> int:
+        """Memory held by the graph's arrays."""
+        total = 0
+        for value in self.__dict__.values():
+            if isinstance(value, np.ndarray):
+                total += value.nbytes
+            elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
+                total += sum(v.nbytes for v in value)
+        return total
+
+    @classmethod
+    def from_database(cls, db: Database) -> AnimeGraph:
+        """Load the graph of ``db`` (its animes table, sorted by node id).
+
+        Raises
+        ------
+        DataError
+            If the database has no animes or its node ids are not 0..n-1.
+        """
+        t = db.table("animes", columns=[
+            "node_id", "clip_id", "emotion", "position", "phoneme", "start_frame",
+            "end_frame", "start_time", "end_time", "prosody_frames", "prosody", "n_frames",
+            "motion", "first_pcs", "last_pcs", "prev_node", "next_node",
+        ]).sort_by("node_id")
+        n = t.num_rows
+        if n == 0:
+            raise DataError(f"database {db.root} has no anime nodes")
+        node_id = t.column("node_id").to_numpy()
+        if not np.array_equal(node_id, np.arange(n)):
+            raise DataError(f"database {db.root} is damaged: node ids are not 0..{n - 1}")
+
+        def codes(name: str) -> tuple[np.ndarray, tuple[str, ...]]:
+            encoded = t.column(name).combine_chunks().dictionary_encode()
+            return (encoded.indices.to_numpy().astype(np.int32),
+                    tuple(encoded.dictionary.to_pylist()))
+
+        clip_codes, clip_ids = codes("clip_id")
+        emotion_codes, emotions = codes("emotion")
+        phone_codes, phone_names = codes("phoneme")
+        try:
+            remap = np.array([PHONE_INDEX[p] for p in phone_names], dtype=np.int16)
+        except KeyError as exc:
+            raise DataError(f"database {db.root} has an unknown phoneme {exc}") from None
+        node_phone = remap[phone_codes]
+
+        prosody_values, prosody_offsets = _ragged(t.column("prosody"),
+                                                   t.column("prosody_frames").to_numpy())
+        motion_values, motion_offsets = _ragged(t.column("motion"),
+                                                t.column("n_frames").to_numpy())
+        first = _fixed(t.column("first_pcs"), n)
+        last = _fixed(t.column("last_pcs"), n)
+        by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)
+                         for p in range(len(PHONES)))
+        manifest = db.manifest
+        return cls(
+            node_phone=node_phone, node_emotion=emotion_codes.astype(np.int16),
+            node_clip=clip_codes, position=t.column("position").to_numpy().astype(np.int32),
+            next_node=_links(t.column("next_node")), prev_node=_links(t.column("prev_node")),
+            start_frame=t.column("start_frame").to_numpy().astype(np.int32),
+            end_frame=t.column("end_frame").to_numpy().astype(np.int32),
+            start_time=t.column("start_time").to_numpy().astype(np.float32),
+            end_time=t.column("end_time").to_numpy().astype(np.float32),
+            prosody_offsets=prosody_offsets, prosody_values=prosody_values,
+            motion_offsets=motion_offsets, motion_values=motion_values,
+            first_pcs=first, last_pcs=last, by_phone=by_phone, clip_ids=clip_ids,
+            emotions=emotions, fps=float(manifest["fps"]),
+            n_channels=int(manifest["n_channels"]),
+        )
+
+
+def _links(column: pa.ChunkedArray) -> np.ndarray:
+    return column.combine_chunks().fill_null(-1).to_numpy().astype(np.int64)
+
+
+def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flattened list column -> (values of shape (total_rows, width), row offsets)."""
+    flat = column.combine_chunks()
+    values = flat.values.to_numpy(zero_copy_only=False).astype(np.float32)
+    rows = rows_per_node.astype(np.int64)
+    total = int(rows.sum())
+    width = values.size // total if total else 0
+    offsets = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(rows, out=offsets[1:])
+    return values.reshape(total, width), offsets
+
+
+def _fixed(column: pa.ChunkedArray, n: int) -> np.ndarray:
+    values = column.combine_chunks().values.to_numpy(zero_copy_only=False)
+    return values.astype(np.float32).reshape(n, -1)

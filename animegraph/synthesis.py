@@ -1,0 +1,232 @@
+"""From a matching anime sequence to continuous motion (Cao et al. 2005, §4.3).
+
+Three steps, each optional so their effect can be measured:
+
+* **Time-warping** — each anime's motion is warped onto its input phone's timing with
+  the DTW path between the input's and the anime's prosody curves.
+* **Blending** — at a jump match (a_i, a_i+1 not consecutive in a recording) the join is
+  blended with a *helper pair* a_m -> a_n: connected nodes of the graph showing the same
+  phoneme transition, time-warped onto a_i and a_i+1, mixed in with a weight that rises
+  linearly to 1 at the joint and falls back (the paper's piecewise linear w). When the
+  graph has no such pair, each side is continued by the frames that follow a_i / precede
+  a_i+1 in their recordings (or extrapolated by velocity at a recording's end) and the
+  two are cross-faded linearly.
+* **Smoothing** — each independent component is low-pass filtered at the cutoff learned
+  from the database (99 % of that component's energy below it).
+
+Motion is handled in independent-component space, shape (n_frames, n_ics), at the
+database's frame rate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+from animegraph.dtw import dtw, warp_indices
+from animegraph.graph import AnimeGraph
+
+#: Prosody frames per second (RASTA-PLP hop of 10 ms).
+PROSODY_RATE = 100.0
+#: Order of the zero-phase Butterworth low-pass of the smoothing step.
+SMOOTHING_ORDER = 2
+
+
+@dataclass(frozen=True)
+class Phone:
+    """An input phone: label, start and end (s), and its prosody curve (m, 9)."""
+
+    phone: str
+    start: float
+    end: float
+    prosody: np.ndarray
+
+
+@dataclass(frozen=True)
+class PostOptions:
+    """Which post-processing steps run (all, as in the paper, by default)."""
+
+    time_warp: bool = True  # DTW on prosody; False: stretch each anime uniformly
+    blend: bool = True  # blend at jump matches
+    smooth: bool = True  # low-pass with the learned cutoffs
+
+
+def output_frames(phones: Sequence[Phone], fps: float) -> tuple[int, list[tuple[int, int]]]:
+    """Number of output frames and each phone's [first, stop) frame range (tiling)."""
+    end = phones[-1].end
+    n = max(1, int(round(end * fps)))
+    edges = [min(n, max(0, int(round(p.start * fps)))) for p in phones] + [n]
+    ranges = []
+    for i in range(len(phones)):
+        a, b = edges[i], max(edges[i + 1], edges[i])
+        ranges.append((a, b))
+    return n, ranges
+
+
+def warp_anime(graph: AnimeGraph, node: int, phone: Phone, n_out: int, *,
+               time_warp: bool = True) -> np.ndarray:
+    """The motion of ``node`` warped onto ``n_out`` frames of ``phone``.
+
+    Returns
+    -------
+    np.ndarray, shape (n_out, n_ics)
+    """
+    motion = graph.motion(node).astype(np.float64)
+    if n_out == 0:
+        return np.zeros((0, motion.shape[1]))
+    if len(motion) == 1:
+        return np.repeat(motion, n_out, axis=0)
+    # Position of each output frame in the input phone, as a fraction of its prosody frames.
+    u = (np.arange(n_out) + 0.5) / n_out
+    anime_prosody = graph.prosody(node)
+    if time_warp and len(phone.prosody) > 1 and len(anime_prosody) > 1:
+        path = dtw(phone.prosody, anime_prosody).path
+        src = warp_indices(len(phone.prosody), path)  # anime prosody index per input frame
+        v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
+        frac = v / (len(anime_prosody) - 1)
+    else:
+        frac = u
+    pos = np.clip(frac, 0.0, 1.0) * (len(motion) - 1)
+    return _interp_rows(motion, pos)
+
+
+def _interp_rows(motion: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, len(motion) - 1)
+    t = (pos - lo)[:, None]
+    return (1 - t) * motion[lo] + t * motion[hi]
+
+
+def find_helper_pair(graph: AnimeGraph, a: int, b: int, *, emotion: int | None = None):
+    """A connected pair (m, n = next_node[m]) with the phonemes of ``a`` and ``b``.
+
+    Prefers pairs of ``emotion`` and, among them, the one whose joint is closest to the
+    jump's two sides. Returns None if the graph shows no such transition.
+    """
+    pa, pb = graph.node_phone[a], graph.node_phone[b]
+    m = graph.by_phone[pa]
+    n = graph.next_node[m]
+    ok = n >= 0
+    m, n = m[ok], n[ok]
+    keep = graph.node_phone[n] == pb
+    m, n = m[keep], n[keep]
+    if len(m) == 0:
+        return None
+    score = (np.linalg.norm(graph.last_pcs[m] - graph.last_pcs[a], axis=1)
+             + np.linalg.norm(graph.first_pcs[n] - graph.first_pcs[b], axis=1))
+    if emotion is not None:
+        score = score + 1e6 * (graph.node_emotion[m] != emotion)
+    k = int(np.argmin(score))
+    return int(m[k]), int(n[k])
+
+
+def _continuation(graph: AnimeGraph, node: int, n: int, *, forward: bool) -> np.ndarray:
+    """``n`` frames after (or before) ``node`` in its recording, extrapolated past its ends."""
+    frames = []
+    step = graph.next_node if forward else graph.prev_node
+    cur = int(step[node])
+    have = 0
+    while cur >= 0 and have < n:
+        block = graph.motion(cur).astype(np.float64)
+        frames.append(block if forward else block[::-1])
+        have += len(block)
+        cur = int(step[cur])
+    own = graph.motion(node).astype(np.float64)
+    if have >= n:
+        out = np.concatenate(frames)[:n]
+    else:
+        # The recording ends: continue with the node's last velocity.
+        edge = own if forward else own[::-1]
+        last = (np.concatenate([edge] + frames) if frames else edge)
+        vel = last[-1] - last[-2] if len(last) > 1 else np.zeros(last.shape[1])
+        extra = last[-1] + vel * np.arange(1, n - have + 1)[:, None]
+        out = np.concatenate(frames + [extra]) if frames else extra
+    return out if forward else out[::-1]
+
+
+def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *,
+             cutoffs: np.ndarray | None = None, options: PostOptions | None = None,
+             emotion: int | None = None) -> tuple[np.ndarray, list[dict]]:
+    """Continuous motion for a matching anime sequence.
+
+    Parameters
+    ----------
+    graph : AnimeGraph
+    nodes : sequence of int, length n
+        The anime chosen for each input phone.
+    phones : sequence of Phone, length n
+        The input phones, tiling the utterance.
+    cutoffs : np.ndarray, shape (n_ics,), optional
+        Low-pass cutoff per independent component (Hz); needed for smoothing.
+    options : PostOptions, optional
+    emotion : int, optional
+        Emotion index preferred for helper pairs.
+
+    Returns
+    -------
+    motion : np.ndarray, shape (n_frames, n_ics)
+        At ``graph.fps``; ``n_frames = round(phones[-1].end * fps)``.
+    joins : list of dict
+        For each jump match: the input index, and how it was blended
+        (``"helper"`` with the pair, or ``"continuation"``).
+    """
+    opts = options or PostOptions()
+    fps = graph.fps
+    n, ranges = output_frames(phones, fps)
+    n_ics = graph.motion_values.shape[1]
+    pieces = [warp_anime(graph, int(a), p, b - s, time_warp=opts.time_warp)
+              for a, p, (s, b) in zip(nodes, phones, ranges, strict=True)]
+    motion = np.zeros((n, n_ics))
+    for (s, b), piece in zip(ranges, pieces, strict=True):
+        motion[s:b] = piece
+    joins = []
+    for i in range(len(nodes) - 1):
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        if graph.next_node[a] == b:
+            continue
+        join = {"index": i, "from": a, "to": b}
+        (s0, s1), (_, s2) = ranges[i], ranges[i + 1]
+        if opts.blend and s1 > s0 and s2 > s1:
+            pair = find_helper_pair(graph, a, b, emotion=emotion)
+            if pair is not None:
+                m, k = pair
+                helper = np.concatenate([
+                    warp_anime(graph, m, phones[i], s1 - s0, time_warp=opts.time_warp),
+                    warp_anime(graph, k, phones[i + 1], s2 - s1, time_warp=opts.time_warp),
+                ])
+                t = np.arange(s0, s2, dtype=np.float64)
+                w = np.where(t <= s1, (t - s0) / max(s1 - s0, 1), (s2 - 1 - t) /
+                             max(s2 - 1 - s1, 1))
+                w = np.clip(w, 0.0, 1.0)[:, None]
+                motion[s0:s2] = (1 - w) * motion[s0:s2] + w * helper
+                join.update(blend="helper", helper=(m, k))
+            else:
+                q, p = s2 - s1, s1 - s0
+                left = np.concatenate([motion[s0:s1], _continuation(graph, a, q, forward=True)])
+                right = np.concatenate([_continuation(graph, b, p, forward=False),
+                                        motion[s1:s2]])
+                w = np.linspace(0.0, 1.0, s2 - s0)[:, None]
+                motion[s0:s2] = (1 - w) * left + w * right
+                join.update(blend="continuation")
+        else:
+            join.update(blend="none")
+        joins.append(join)
+    if opts.smooth and cutoffs is not None:
+        motion = smooth(motion, cutoffs, fps)
+    return motion, joins
+
+
+def smooth(motion: np.ndarray, cutoffs: np.ndarray, fps: float) -> np.ndarray:
+    """Zero-phase low-pass of each column at its cutoff (Hz); columns at Nyquist pass."""
+    out = motion.copy()
+    nyquist = fps / 2
+    if len(motion) < 3 * (2 * SMOOTHING_ORDER + 1):
+        return out  # too short to filter without edge artefacts swamping it
+    for k, cut in enumerate(cutoffs):
+        if 0 < cut < 0.99 * nyquist:
+            sos = butter(SMOOTHING_ORDER, cut / nyquist, output="sos")
+            out[:, k] = sosfiltfilt(sos, motion[:, k])
+    return out
