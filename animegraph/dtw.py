@@ -4,16 +4,17 @@ The search scores each candidate anime node by how well its prosody curve C (RAS
 one 9-vector per 10 ms frame) matches the input phone's curve once warped onto it
 (Eq. 5)::
 
-    C_audio = (1/m) * sum_k || C_input(k) - L(C_anime)(k) ||,    k = 1..m
+    C_audio = (1/n) * sum_k || C_input(k) - L(C_anime)(k) ||,    k = 1..n
 
-where ``m`` is the number of input frames, ``||.||`` the Euclidean norm and ``L`` the DTW
-operator warping the anime's curve onto the input's timeline. Post-processing (§4.3)
-reuses the same alignment to time-warp each anime's motion onto the input phone.
+where ``n`` is the number of input frames (the paper's ``m``), ``||.||`` the Euclidean norm
+and ``L`` the DTW operator warping the anime's curve onto the input's timeline.
+Post-processing (§4.3) reuses the same alignment to time-warp each anime's motion onto the
+input phone.
 
 Conventions
 -----------
-* Curves are ``(n_frames, n_features)``; ``x`` (the input) is the reference timeline and
-  ``y`` (the anime) is warped onto it.
+* Curves are ``(n_frames, n_features)``; ``x`` (the input, n frames) is the reference
+  timeline and ``y`` (the anime, m frames) is warped onto it.
 * Local cost: Euclidean distance between frames (``metric="euclidean"``, the ``||.||`` of
   Eq. 5). ``metric="sqeuclidean"`` (squared distance) is offered for :func:`dtw` only; it
   is tslearn's convention (``tslearn.metrics.dtw`` returns the square root of that
@@ -28,9 +29,11 @@ Conventions
   "sakoe_chiba"``): around the diagonal, widened by ``|n - m|`` so that the corner is
   always reachable. ``None`` (the default, and the paper's setting) leaves the warp free.
 
-The kernels are compiled with numba on first use and cached next to this module
-(``__pycache__``, or numba's user-wide cache when that is not writable). They assume
-valid input: every public function validates its arguments first.
+The kernels are compiled with numba on first use (about 3 s per kernel) and cached on
+disk: in ``$NUMBA_CACHE_DIR`` if set, else in ``__pycache__`` next to this module, else
+(unwritable install) in numba's user-wide cache ``~/.cache/numba``; with none writable
+they are compiled in every process, silently. They assume valid input: every public
+function validates its arguments first.
 """
 
 from __future__ import annotations
@@ -48,16 +51,18 @@ __all__ = ["DTWResult", "audio_cost", "audio_costs", "dtw", "warp_indices", "war
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
 
 #: ``audio_costs`` runs in parallel (numba ``prange``) from this many nodes on, when numba
-#: has more than one thread; below it the thread start-up costs more than it saves.
-_PARALLEL_MIN_NODES = 2048
+#: has more than one thread. On 2 cores (OpenMP layer) parallel breaks even at ~10 nodes
+#: and is 1.6-1.8x faster from ~50 on; the margin keeps tiny batches off the thread pool.
+_PARALLEL_MIN_NODES = 64
 
 
 def _jit(**options):
     """``numba.njit(cache=True, nogil=True)``, without the cache if no folder is writable.
 
-    numba looks for a writable cache folder when the function is decorated (next to this
-    module, then ``$NUMBA_CACHE_DIR`` or the user-wide cache) and raises ``RuntimeError``
-    if there is none; compiling on every run is then the only option, and needs no warning.
+    numba looks for a writable cache folder when the function is decorated
+    (``$NUMBA_CACHE_DIR``, ``__pycache__`` next to this module, ``~/.cache/numba``) and
+    raises ``RuntimeError`` if there is none (numba 0.68: it does not fall back by itself);
+    compiling in every process is then the only option, and needs no warning.
     """
 
     def wrap(func):
@@ -97,6 +102,16 @@ def _accumulate(xt, y, band, metric, acc, c):
 
     ``c`` (n,) is workspace for one frame's local costs.
     """
+    # The constant -1 lets LLVM specialise the unconstrained case (2-3x faster than
+    # passing a run-time band through).
+    if band < 0:
+        _accumulate_band(xt, y, -1, metric, acc, c)
+    else:
+        _accumulate_band(xt, y, band, metric, acc, c)
+
+
+@_jit()
+def _accumulate_band(xt, y, band, metric, acc, c):
     d, n = xt.shape
     m = y.shape[0]
     for j in range(m):
@@ -384,15 +399,15 @@ def warp_indices(n_out: int, path: np.ndarray) -> np.ndarray:
 def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = None) -> float:
     """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for one anime node.
 
-    ``(1/m) * sum_k || c_input[k] - L(c_anime)[k] ||`` with L the DTW operator of
+    ``(1/n) * sum_k || c_input[k] - L(c_anime)[k] ||`` with L the DTW operator of
     :func:`warp_onto` (Euclidean local cost; frames of ``c_anime`` matched to one input
     frame are averaged).
 
     Parameters
     ----------
-    c_input : np.ndarray, shape (m, d)
+    c_input : np.ndarray, shape (n, d)
         The input phone's prosody curve.
-    c_anime : np.ndarray, shape (m_a, d)
+    c_anime : np.ndarray, shape (m, d)
         The anime node's prosody curve.
     band : int or None, optional
         Sakoe-Chiba radius, as in :func:`dtw`.
@@ -423,13 +438,16 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
                 nodes: np.ndarray, *, band: int | None = None) -> np.ndarray:
     """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for many anime nodes at once.
 
-    The search's hot path: one compiled loop over ``nodes`` (in parallel for large
-    batches), with the curves in the graph's ragged layout
-    (:attr:`animegraph.graph.AnimeGraph.prosody_values` and ``prosody_offsets``).
+    The search's hot path: one compiled loop over ``nodes`` (in parallel from
+    ``_PARALLEL_MIN_NODES`` nodes on), with the curves in the graph's ragged layout
+    (:attr:`animegraph.graph.AnimeGraph.prosody_values` and ``prosody_offsets``). Only the
+    curves of ``nodes`` are read (and checked for NaN/inf). Eq. 5 depends only on the
+    input phone and the anime node, not on the rest of the sequence, so one call per
+    input phone over its candidates (``graph.by_phone[p]``) serves the whole search.
 
     Parameters
     ----------
-    c_input : np.ndarray, shape (m, d)
+    c_input : np.ndarray, shape (n, d)
         The input phone's prosody curve.
     values : np.ndarray of float32 or float64, shape (n_frames, d)
         Every node's curve, end to end.
@@ -501,8 +519,9 @@ def _curve(name: str, a, dtype) -> np.ndarray:
     """
     try:
         arr = np.asarray(a)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"{name} must be a (n_frames, n_features) array, got {exc}") from None
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a (n_frames, n_features) array, got a ragged "
+                             f"or non-numeric {type(a).__name__}") from None
     if arr.ndim != 2:
         raise ParameterError(
             f"{name} must be a (n_frames, n_features) array, got shape {arr.shape}")

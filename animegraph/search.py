@@ -46,7 +46,10 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import threading
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numba
@@ -666,17 +669,69 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
 
 #: Points per leaf of the k-d tree over the kept states of a layer.
 _LEAF = 16
+#: Queries of a layer below which one thread does them all.
+_PARALLEL_MIN = 2048
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _threads() -> int:
+    """Threads for the queries of a layer: the CPUs this process may use, at most 8."""
+    try:
+        return max(1, min(8, len(os.sched_getaffinity(0))))
+    except AttributeError:  # not on Linux
+        return max(1, min(8, os.cpu_count() or 1))
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="search")
+        return _POOL
 
 
 @numba.njit(cache=True, nogil=True)
-def _build_tree(x, d):  # pragma: no cover
+def _select(perm, x, dim, s, e, kth):  # pragma: no cover
+    """Reorder ``perm[s:e]`` so that ``perm[kth]`` holds the point of rank ``kth - s`` along
+    ``dim``, smaller ones before it and larger ones after (quickselect)."""
+    lo, hi = s, e - 1
+    while hi > lo:
+        mid = (lo + hi) // 2
+        # Median of three as the pivot, moved to hi.
+        a, b, c = x[perm[lo], dim], x[perm[mid], dim], x[perm[hi], dim]
+        if (a <= b <= c) or (c <= b <= a):
+            piv = mid
+        elif (b <= a <= c) or (c <= a <= b):
+            piv = lo
+        else:
+            piv = hi
+        perm[piv], perm[hi] = perm[hi], perm[piv]
+        pv = x[perm[hi], dim]
+        store = lo
+        for t in range(lo, hi):
+            if x[perm[t], dim] < pv:
+                perm[store], perm[t] = perm[t], perm[store]
+                store += 1
+        perm[store], perm[hi] = perm[hi], perm[store]
+        if store == kth:
+            return
+        if store < kth:
+            lo = store + 1
+        else:
+            hi = store - 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _build_tree(x, d, leaf):  # pragma: no cover
     """k-d tree over points ``x`` (m, k) weighted by ``d`` (m,); leaves sorted by ``d``.
 
     Returns the permutation of the points, and per tree node: [start, end) into the
-    permuted points, children (-1 at a leaf), bounding box and least weight.
+    permuted points, children (-1 at a leaf), bounding box and least weight. With
+    ``leaf >= m`` the tree is a single leaf: every point in ascending weight.
     """
     m, k = x.shape
-    size = 4 * (m // _LEAF + 1) + 1
+    size = 4 * (m // leaf + 1) + 1
     perm = np.arange(m)
     start = np.empty(size, dtype=np.int64)
     end = np.empty(size, dtype=np.int64)
@@ -709,8 +764,7 @@ def _build_tree(x, d):  # pragma: no cover
                 if v > hi[node, j]:
                     hi[node, j] = v
         mind[node] = md
-        sub = perm[s:e].copy()
-        if e - s > _LEAF:
+        if e - s > leaf:
             dim = 0
             spread = -1.0
             for j in range(k):
@@ -718,9 +772,8 @@ def _build_tree(x, d):  # pragma: no cover
                     spread = hi[node, j] - lo[node, j]
                     dim = j
             if spread > 0.0:
-                order = np.argsort(x[sub, dim])
-                perm[s:e] = sub[order]
                 mid = (s + e) // 2
+                _select(perm, x, dim, s, e, mid)
                 left[node], right[node] = nn, nn + 1
                 start[nn], end[nn] = s, mid
                 start[nn + 1], end[nn + 1] = mid, e
@@ -728,7 +781,8 @@ def _build_tree(x, d):  # pragma: no cover
                 sp += 2
                 nn += 2
                 continue
-        perm[s:e] = sub[np.argsort(d[sub], kind="mergesort")]  # a leaf: by weight
+        sub = perm[s:e].copy()  # a leaf: by ascending weight
+        perm[s:e] = sub[np.argsort(d[sub], kind="mergesort")]
     return perm, start[:nn], end[:nn], left[:nn], right[:nn], lo[:nn], hi[:nn], mind[:nn]
 
 
@@ -736,13 +790,8 @@ def _build_tree(x, d):  # pragma: no cover
 def _box_dist(lo, hi, node, y):  # pragma: no cover
     s = 0.0
     for j in range(y.shape[0]):
-        v = y[j]
-        if v < lo[node, j]:
-            t = lo[node, j] - v
-            s += t * t
-        elif v > hi[node, j]:
-            t = v - hi[node, j]
-            s += t * t
+        t = max(lo[node, j] - y[j], 0.0) + max(y[j] - hi[node, j], 0.0)  # branch-free
+        s += t * t
     return np.sqrt(s)
 
 
@@ -808,96 +857,120 @@ def _query(xs, ds, start, end, left, right, lo, hi, mind, y, w1, scale, best, th
     return best, arg, n_dist
 
 
-@numba.njit(cache=True, parallel=True)
-def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):  # pragma: no cover
-    n = len(off) - 1
-    N = len(cn)
+@numba.njit(cache=True, nogil=True)
+def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos):  # pragma: no cover
+    """The kept states of layer [lo, hi) as a k-d tree over their last frames, weighted
+    by D; ``pos[node]`` set to each kept state (for the consecutive test)."""
     npc = last.shape[1]
-    D = np.full(N, np.inf)
-    pred = np.full(N, -1, dtype=np.int64)
-    kept = 0
-    n_dist = 0
-    for q in range(off[0], off[1]):
-        if u[q] + h[q] <= ub:
-            D[q] = u[q]
-            kept += 1
-    for i in range(n - 1):
-        lo, hi = off[i], off[i + 1]
-        m = 0
-        for q in range(lo, hi):
-            if D[q] < np.inf:
-                m += 1
-        if m == 0:
-            break
-        alive = np.empty(m, dtype=np.int64)
-        k = 0
-        for q in range(lo, hi):
-            if D[q] < np.inf:
-                alive[k] = q
-                pos[cn[q]] = q
-                k += 1
-        xa = np.empty((m, npc))
-        da = np.empty(m)
-        for r in range(m):
-            da[r] = D[alive[r]]
+    m = 0
+    for q in range(lo, hi):
+        if D[q] < np.inf:
+            m += 1
+    alive = np.empty(m, dtype=np.int64)
+    xa = np.empty((m, npc))
+    da = np.empty(m)
+    k = 0
+    dmin = np.inf
+    for q in range(lo, hi):
+        if D[q] < np.inf:
+            alive[k] = q
+            pos[cn[q]] = q
+            da[k] = D[q]
+            if D[q] < dmin:
+                dmin = D[q]
             for j in range(npc):
-                xa[r, j] = last[cn[alive[r]], j]
-        perm, tstart, tend, tleft, tright, tlo, thi, tmind = _build_tree(xa, da)
-        xs = xa[perm]
-        ds = da[perm]
-        ids = alive[perm]
-        depth_cap = 2 * len(tstart) + 2
-        lo1, hi1 = off[i + 1], off[i + 2]
-        counts = np.zeros(hi1 - lo1, dtype=np.int64)
-        for t in numba.prange(hi1 - lo1):
-            q = lo1 + t
-            b = cn[q]
-            thr = ub - h[q] - u[q]
-            best = np.inf
-            arg = -1
-            c = 0
-            pb = prv[b]
-            if pb >= 0:
-                qa = pos[pb]
-                if qa >= 0:
-                    best = D[qa] + scale * _dist(last, pb, first, b)
-                    arg = qa
-                    c += 1
-            if w1 + tmind[0] < best and w1 + tmind[0] <= thr:
-                y = np.empty(npc)
-                for j in range(npc):
-                    y[j] = first[b, j]
-                stack = np.empty(min(depth_cap, 256), dtype=np.int64)
-                bounds = np.empty(min(depth_cap, 256))
-                v, r, nd = _query(xs, ds, tstart, tend, tleft, tright, tlo, thi, tmind, y,
-                                  w1, scale, best, thr, stack, bounds)
-                c += nd
-                if r >= 0:
-                    best = v
-                    arg = ids[r]
-            counts[t] = c
-            if best <= thr:
-                D[q] = best + u[q]
-                pred[q] = arg
-        for r in range(m):
-            pos[cn[alive[r]]] = -1
-        n_dist += counts.sum()
-        for q in range(lo1, hi1):
-            if D[q] < np.inf:
-                kept += 1
-    path = np.full(n, -1, dtype=np.int64)
-    best = np.inf
-    qb = -1
-    for q in range(off[n - 1], off[n]):
-        if D[q] < best:
-            best = D[q]
-            qb = q
-    if qb < 0:
-        return path, best, kept, n_dist
+                xa[k, j] = last[cn[q], j]
+            k += 1
+    n_query = 0
+    for q in range(lo1, hi1):
+        if w1 + dmin <= ub - h[q] - u[q]:
+            n_query += 1
+    # A k-d tree pays off when many states query it; else one leaf in ascending D.
+    leaf = _LEAF if n_query > 8 * np.log2(m + 1) else max(m, 1)
+    perm, start, end, left, right, tlo, thi, mind = _build_tree(xa, da, leaf)
+    return (alive, xa[perm], da[perm], alive[perm], start, end, left, right, tlo, thi, mind,
+            n_query)
+
+
+@numba.njit(cache=True, nogil=True)
+def _query_layer(cn, q_from, q_to, D, pred, u, h, prv, last, first, w1, scale, ub, pos,
+                 xs, ds, ids, start, end, left, right, tlo, thi, mind):  # pragma: no cover
+    """D and pred of the states [q_from, q_to) of the next layer; returns distances."""
+    npc = last.shape[1]
+    y = np.empty(npc)
+    stack = np.empty(256, dtype=np.int64)
+    bounds = np.empty(256)
+    n_dist = 0
+    has_tree = len(ds) > 0
+    for q in range(q_from, q_to):
+        b = cn[q]
+        thr = ub - h[q] - u[q]
+        best = np.inf
+        arg = -1
+        pb = prv[b]
+        if pb >= 0:
+            qa = pos[pb]
+            if qa >= 0:
+                best = D[qa] + scale * _dist(last, pb, first, b)
+                arg = qa
+                n_dist += 1
+        if has_tree and w1 + mind[0] < best and w1 + mind[0] <= thr:
+            for j in range(npc):
+                y[j] = first[b, j]
+            v, r, nd = _query(xs, ds, start, end, left, right, tlo, thi, mind, y, w1, scale,
+                              best, thr, stack, bounds)
+            n_dist += nd
+            if r >= 0:
+                best = v
+                arg = ids[r]
+        if best <= thr:
+            D[q] = best + u[q]
+            pred[q] = arg
+    return n_dist
+
+
+def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
+    """Pruned forward DP (see :func:`_exact_layers`): (flat path, cost, kept, distances)."""
+    n = len(off) - 1
+    D = np.full(len(cn), np.inf)
+    pred = np.full(len(cn), -1, dtype=np.int64)
+    keep0 = u[:off[1]] + h[:off[1]] <= ub
+    D[:off[1]][keep0] = u[:off[1]][keep0]
+    kept = int(keep0.sum())
+    n_dist = 0
+    for i in range(n - 1):
+        lo, hi, lo1, hi1 = off[i], off[i + 1], off[i + 1], off[i + 2]
+        (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind,
+         n_query) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos)
+        if len(alive) == 0:
+            break
+        args = (D, pred, u, h, prv, last, first, w1, scale, ub, pos, xs, ds, ids, start, end,
+                left, right, tlo, thi, mind)
+        n_dist += _run_queries(cn, lo1, hi1, n_query, args)
+        pos[cn[alive]] = -1
+        kept += int(np.count_nonzero(D[lo1:hi1] < np.inf))
+    last_layer = D[off[n - 1]:off[n]]
+    q = int(np.argmin(last_layer))
+    if not np.isfinite(last_layer[q]):
+        return np.full(n, -1, dtype=np.int64), np.inf, kept, n_dist
+    path = np.empty(n, dtype=np.int64)
+    qb = off[n - 1] + q
     for i in range(n - 1, -1, -1):
         path[i] = qb
         qb = pred[qb]
-    return path, best, kept, n_dist
+    return path, float(last_layer[q]), kept, n_dist
+
+
+def _run_queries(cn, lo1, hi1, n_query, args) -> int:
+    """The queries of one layer, split over threads when there are many (numba releases
+    the GIL)."""
+    threads = _threads()
+    if threads == 1 or n_query < _PARALLEL_MIN:
+        return _query_layer(cn, lo1, hi1, *args)
+    cuts = np.linspace(lo1, hi1, threads + 1).astype(np.int64)
+    futures = [_pool(threads).submit(_query_layer, cn, int(a), int(b), *args)
+               for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    return sum(f.result() for f in futures)
 
 
 # --------------------------------------------------------------------------------------

@@ -103,17 +103,47 @@ def synthesize(
     DataError
         If the audio holds no speech.
     """
-    timings = {}
+    timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    audio = np.asarray(audio, dtype=np.float32)
-    if audio.ndim != 1:
-        raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
     if emotion is not None and emotion not in model.graph.emotions:
         known = ", ".join(model.graph.emotions)
         raise ParameterError(f"emotion {emotion!r} is not in the database (it has {known})")
+    phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
+                                       prosody_config=prosody_config)
+    timings["segment_s"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    timings["audio_cost_s"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
+                    emotion=emotion, method=method, window=window)
+    timings["search_s"] = time.perf_counter() - t2
+
+    t3 = time.perf_counter()
+    ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
+    motion = model.to_channels(ics)
+    timings["post_s"] = time.perf_counter() - t3
+    timings["total_s"] = time.perf_counter() - t0
+    explain = _explain(model, phones, result, cands, audio_cost)
+    return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
+                     segmentation=method_used, result=result, joins=joins, explain=explain,
+                     timings=timings)
+
+
+def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None,
+                 labels: list[Segment] | None = None,
+                 prosody_config: RastaPlpConfig | None = None) -> tuple[tuple[Phone, ...], str]:
+    """The search nodes of an utterance: its phones with their prosody curves.
+
+    Returns the phones and how they were found (``labels``, ``aligned``, ``recognized``).
+    """
+    audio = np.asarray(audio, dtype=np.float32)
+    if audio.ndim != 1:
+        raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent: there is no speech to animate")
-    segments, method_used = segment(audio, sample_rate, text=text, labels=labels)
+    segments, method = segment(audio, sample_rate, text=text, labels=labels)
     if all(s.phone == "SIL" for s in segments):
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()
@@ -121,34 +151,29 @@ def synthesize(
     phones = tuple(Phone(s.phone, s.start, s.end,
                          np.ascontiguousarray(slice_frames(curve, s.start, s.end, hop_s=cfg.hop_s)))
                    for s in segments)
-    timings["segment_s"] = time.perf_counter() - t0
+    return phones, method
 
-    t1 = time.perf_counter()
+
+def score_candidates(model: Model, phones, *, emotion: str | None = None):
+    """Candidate animes of every input phone and their audio costs (Eq. 5)."""
     graph = model.graph
     cands = candidates(graph, [p.phone for p in phones], emotion=emotion)
     audio_cost = [audio_costs(p.prosody.astype(np.float32), graph.prosody_values,
                               graph.prosody_offsets, nodes)
                   for p, nodes in zip(phones, cands.nodes, strict=True)]
-    timings["audio_cost_s"] = time.perf_counter() - t1
-    t2 = time.perf_counter()
-    result = search(graph, cands, audio_cost, weights=weights or SearchWeights(),
-                    emotion=emotion, method=method, window=window)
-    timings["search_s"] = time.perf_counter() - t2
+    return cands, audio_cost
 
-    t3 = time.perf_counter()
+
+def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = None,
+                 emotion: str | None = None) -> tuple[np.ndarray, list[dict]]:
+    """Post-processed motion (independent components) of an anime sequence, §4.3."""
+    graph = model.graph
     emotion_index = graph.emotions.index(emotion) if emotion is not None else None
-    ics, joins = assemble(graph, result.nodes, phones, cutoffs=model.cutoffs, options=options,
-                          emotion=emotion_index)
-    motion = model.to_channels(ics)
-    timings["post_s"] = time.perf_counter() - t3
-    timings["total_s"] = time.perf_counter() - t0
-    explain = _explain(model, phones, result, cands, audio_cost, weights or SearchWeights())
-    return Synthesis(motion=motion, ics=ics, fps=graph.fps, phones=phones,
-                     segmentation=method_used, result=result, joins=joins, explain=explain,
-                     timings=timings)
+    return assemble(graph, nodes, phones, cutoffs=model.cutoffs, options=options,
+                    emotion=emotion_index)
 
 
-def _explain(model, phones, result, cands, audio_cost, weights) -> list[dict]:
+def _explain(model, phones, result, cands, audio_cost) -> list[dict]:
     """One row per input phone: where its motion came from and what it cost."""
     g = model.graph
     rows = []

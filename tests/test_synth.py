@@ -1,0 +1,120 @@
+"""Lip-sync synthesis end to end: speech in, motion out, against the synthetic ground truth."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from animegraph.cli import main
+from animegraph.synth import Model, synthesize
+from animegraph.synthesis import PostOptions
+from db.errors import DataError, ParameterError
+from ingest.corpus import face
+from ingest.corpus.synthetic import ClipSpec, CorpusConfig, synthesize_clip, write_clip
+from ingest.formats.c3d import read_c3d
+from ingest.formats.phones_csv import read_phones_csv
+from ingest.formats.wav import read_wav
+
+
+@pytest.fixture(scope="module")
+def model(tiny_db):
+    return Model.load(tiny_db[0])
+
+
+@pytest.fixture(scope="module")
+def held_out(tmp_path_factory):
+    """A sentence the database has never seen, spoken happily, with its true motion."""
+    config = CorpusConfig(marker_noise_mm=0.0, dropouts_per_second=0.0)
+    spec = ClipSpec(clip_id="held_out", sentence_id="x", text="Bob moved the warm vase away.",
+                    emotion="happy", variation=1, speaker="synth01", seed=99)
+    clip = synthesize_clip(spec, config)
+    folder = tmp_path_factory.mktemp("held")
+    write_clip(clip, folder)
+    return folder / "held_out", clip
+
+
+def test_synthesizes_a_held_out_sentence(model, held_out):
+    stem, clip = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    out = synthesize(model, audio, sr, labels=labels, emotion="happy")
+    assert out.segmentation == "labels"
+    assert out.motion.shape == (round(len(audio) / sr * 120), 216)
+    assert np.isfinite(out.motion).all()
+    assert [e["phone"] for e in out.explain] == [s.phone for s in labels]
+    assert all(e["anime_phone"] == e["phone"] for e in out.explain)  # same phonemes
+    # Lips follow the speech: mouth opening correlates with the truth.
+    truth = face.marker_distance(clip.markers, "ulip_in_c", "llip_in_c")
+    synth = face.marker_distance(out.motion.reshape(len(out.motion), -1, 3), "ulip_in_c",
+                                 "llip_in_c")
+    n = min(len(truth), len(synth))
+    assert np.corrcoef(truth[:n], synth[:n])[0, 1] > 0.5
+
+
+def test_a_recorded_utterance_comes_back_as_itself(model, tiny_corpus, tiny_db):
+    clip_id = model.graph.clip_ids[0]
+    audio, sr = read_wav(tiny_corpus / "clips" / f"{clip_id}.wav")
+    labels = read_phones_csv(tiny_corpus / "clips" / f"{clip_id}.phones.csv")
+    out = synthesize(model, audio, sr, labels=labels,
+                     options=PostOptions(smooth=False))
+    assert out.result.n_jumps == 0
+    assert {e["clip_id"] for e in out.explain} == {clip_id}
+    truth = read_c3d(tiny_corpus / "clips" / f"{clip_id}.c3d").points
+    motion = out.motion.reshape(len(out.motion), -1, 3)
+    n = min(len(truth), len(motion))
+    err = np.sqrt(np.nanmean((motion[:n] - truth[:n]) ** 2))
+    assert err < 1.0  # mm: PCA's loss and frame rounding only
+
+
+def test_every_search_mode_and_post_step_runs(model, held_out):
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    exact = synthesize(model, audio, sr, labels=labels)
+    for kwargs in ({"method": "window", "window": 3}, {"method": "dp"}):
+        other = synthesize(model, audio, sr, labels=labels, **kwargs)
+        assert other.result.cost >= exact.result.cost - 1e-9
+    raw = synthesize(model, audio, sr, labels=labels,
+                     options=PostOptions(time_warp=False, blend=False, smooth=False))
+    assert raw.motion.shape == exact.motion.shape
+
+
+def test_bad_input(model):
+    with pytest.raises(DataError, match="silent"):
+        synthesize(model, np.zeros(16000, np.float32), 16000)
+    with pytest.raises(ParameterError, match="emotion"):
+        synthesize(model, np.ones(16000, np.float32) * 0.1, 16000, emotion="bored")
+    with pytest.raises(ParameterError, match="mono"):
+        synthesize(model, np.zeros((100, 2), np.float32), 16000)
+
+
+def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
+    stem, _ = held_out
+    out = tmp_path / "out.c3d"
+    argv = ["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0]), "--labels",
+            f"{stem}.phones.csv", "--emotion", "happy", "-o", str(out), "--explain",
+            "--explain-json", str(tmp_path / "explain.json")]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert "jump matches" in captured.err and "clip_id" in captured.out
+    assert read_c3d(out).points.shape[1] == 72
+    record = json.loads((tmp_path / "explain.json").read_text())
+    assert len(record["phones"]) == len(read_phones_csv(f"{stem}.phones.csv"))
+    for suffix in (".csv", ".npz"):
+        assert main([*argv[:-5], "-o", str(tmp_path / f"out{suffix}")]) == 0
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--emotion", "bored"], "not in the database"),
+    (["-o", "{tmp}/out.mp3"], "must end in"),
+    (["--method", "window"], "--window"),
+])
+def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
+    stem, _ = held_out
+    argv = ["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0]), "-o",
+            str(tmp_path / "o.c3d"), *[e.format(tmp=tmp_path) for e in extra]]
+    assert main(argv) in (1, 2)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
