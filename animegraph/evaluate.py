@@ -16,7 +16,9 @@ import numpy as np
 #: Point pairs whose distance is the mouth opening, per kind of database.
 MOUTH_POINTS = {"markers": ("ulip_in_c", "llip_in_c"), "landmarks": ("lm13", "lm14")}
 #: Curve names that are the mouth opening in curve databases (first present wins).
-MOUTH_CURVES = ("jaw", "jawOpen", "jaw_open", "mouth_open", "mouthOpen")
+#: FACEGOOD's ``mouth_stretch_c`` (FACS AU27, mouth stretch) is its jaw opening.
+MOUTH_CURVES = ("jaw", "jawOpen", "jaw_open", "JawOpen", "mouth_open", "mouthOpen",
+                "mouth_stretch_c")
 
 
 def _points(motion: np.ndarray, names: Sequence[str], label: str) -> np.ndarray:
@@ -85,3 +87,84 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
     if kind == "first":
         return np.array([int(c[0]) for c in candidate_nodes], dtype=np.int64)
     raise ValueError(f"unknown baseline {kind!r}")
+
+
+#: Methods compared: exact search, the paper's look-ahead, and the two baselines.
+METHODS = ("exact", "window3", "window6", "random", "first")
+
+
+def motion_scores(pred: np.ndarray, truth: np.ndarray, names: Sequence[str],
+                  groups: Sequence[str], kind: str, active: np.ndarray) -> dict:
+    """Every measure of ``pred`` against ``truth`` (both (n_frames, n_channels)).
+
+    ``active`` selects the channels that move in the database (RMSE "all" is over them).
+    Point databases add the lip vertex error; curve databases report the jaw and mouth
+    curves on their own.
+    """
+    lips = lip_channels(names, groups)
+    out = {
+        "rmse_all": rmse(pred, truth, active),
+        "rmse_lips": rmse(pred, truth, lips) if len(lips) else float("nan"),
+    }
+    try:
+        out["mouth_r"] = pearson(mouth_opening(pred, names, kind),
+                                 mouth_opening(truth, names, kind))
+    except KeyError:
+        out["mouth_r"] = float("nan")
+    if kind in MOUTH_POINTS:
+        out["lve"] = lip_vertex_error(pred, truth, names, groups)
+    else:
+        jm = np.array([i for i, n in enumerate(names)
+                       if n.lower().startswith(("jaw", "mouth")) and i in set(active)])
+        out["rmse_jaw_mouth"] = rmse(pred, truth, jm) if len(jm) else float("nan")
+        n = min(len(pred), len(truth))
+        rs = [pearson(pred[:n, i], truth[:n, i]) for i in jm]
+        out["r_jaw_mouth"] = float(np.nanmean(rs)) if rs else float("nan")
+        rs = [pearson(pred[:n, i], truth[:n, i]) for i in active]
+        out["r_all"] = float(np.nanmean(rs)) if rs else float("nan")
+    return out
+
+
+def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
+                  rng: np.random.Generator | None = None) -> dict:
+    """Synthesize a held-out prepared clip from its audio and phones; score every method.
+
+    Parameters
+    ----------
+    model : animegraph.synth.Model
+        A database that does not contain the clip.
+    clip : ingest.prepare.PreparedClip
+        The clip (its motion, in the database's space, is the ground truth).
+    """
+    import time
+
+    from animegraph.search import search
+    from animegraph.synth import query_phones, render_nodes, score_candidates
+
+    rng = rng or np.random.default_rng(0)
+    audio = clip.audio.astype(np.float32) / 32767.0
+    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    truth = clip.motion.astype(np.float64)
+    # Channels that move: their share of the database's motion variance (from the PCA).
+    share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
+    active = np.flatnonzero(share > 1e-4 * share.max())
+    rows = {}
+    for method in methods:
+        t0 = time.perf_counter()
+        if method in ("random", "first"):
+            nodes = baseline_nodes(cands.nodes, method, rng)
+            jumps = int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
+        else:
+            window = int(method[len("window"):]) if method.startswith("window") else None
+            result = search(model.graph, cands, audio_cost, emotion=emotion,
+                            method="window" if window else "exact", window=window)
+            nodes, jumps = result.nodes, result.n_jumps
+        search_s = time.perf_counter() - t0
+        ics, _ = render_nodes(model, phones, nodes, emotion=emotion)
+        pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
+        rows[method] = {**motion_scores(pred, truth, model.names, model.groups, model.kind,
+                                        active), "jumps": jumps, "search_s": search_s}
+    return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
+            "seconds": round(clip.duration, 2), "methods": rows}

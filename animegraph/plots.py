@@ -17,7 +17,8 @@ MEASURES: tuple[tuple[str, str, str], ...] = (
 )
 
 
-def plot_clips(clips: Sequence, path: Path, *, title: str = "") -> Path:
+def plot_clips(clips: Sequence, path: Path, *, title: str = "",
+               synthesized: dict[str, tuple[np.ndarray, float]] | None = None) -> Path:
     """Plot speech, phones and facial measures of clips of one sentence.
 
     Parameters
@@ -27,6 +28,8 @@ def plot_clips(clips: Sequence, path: Path, *, title: str = "") -> Path:
         measure panels, labelled by emotion.
     path : Path
         PNG file to write.
+    synthesized : dict of str to (markers, fps), optional
+        Synthesized marker motion (n_frames, n_markers, 3) to overlay, dashed, by label.
     """
     import matplotlib
 
@@ -56,11 +59,69 @@ def plot_clips(clips: Sequence, path: Path, *, title: str = "") -> Path:
             ax.set_ylabel(name)
         pitch = clip.controls[:, face.CONTROLS.index("head_pitch")]
         axes[-1].plot(t, pitch, lw=1, color=colors[i % len(colors)])
+    for k, (label, (markers, fps)) in enumerate((synthesized or {}).items()):
+        t = np.arange(len(markers)) / fps
+        for ax, (_, a, b) in zip(axes[1:], MEASURES, strict=False):
+            ax.plot(t, face.marker_distance(markers, a, b), "--", lw=1.2,
+                    color=colors[(len(clips) + k) % len(colors)], label=label)
     axes[-1].set_ylabel("head pitch (deg)")
     axes[-1].set_xlabel("time (s)")
-    axes[1].legend(loc="upper right", fontsize=7, ncol=len(clips))
+    axes[1].legend(loc="upper right", fontsize=7, ncol=len(clips) + len(synthesized or {}))
     if title:
         fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "random")) -> Path:
+    """Mouth opening of a held-out clip: recorded against synthesized by ``methods``.
+
+    Thin vertical lines mark the exact search's jump matches; phone labels run along the
+    bottom.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from animegraph import evaluate
+    from animegraph.search import search
+    from animegraph.synth import query_phones, render_nodes, score_candidates
+
+    audio = clip.audio.astype(np.float32) / 32767.0
+    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    fig, ax = plt.subplots(figsize=(11, 3.5))
+    fps = model.graph.fps
+    truth = clip.motion.astype(np.float64)
+    ax.plot(np.arange(len(truth)) / fps, evaluate.mouth_opening(truth, model.names, model.kind),
+            "k", lw=2, label="recorded")
+    for k, method in enumerate(methods):
+        if method in ("random", "first"):
+            nodes = evaluate.baseline_nodes(cands.nodes, method, np.random.default_rng(0))
+        else:
+            window = int(method[len("window"):]) if method.startswith("window") else None
+            nodes = search(model.graph, cands, audio_cost, emotion=emotion,
+                           method="window" if window else "exact", window=window).nodes
+        ics, joins = render_nodes(model, phones, nodes, emotion=emotion)
+        pred = model.decomposer.inverse_transform(ics)
+        ax.plot(np.arange(len(pred)) / fps, evaluate.mouth_opening(pred, model.names,
+                                                                   model.kind),
+                f"C{k}" + (":" if method in ("random", "first") else ""), lw=1, label=method)
+        if method == "exact":
+            for j in joins:
+                ax.axvline(phones[j["index"] + 1].start, color="C0", lw=0.5, alpha=0.4)
+    for p in phones:
+        if p.phone != "SIL":
+            ax.text((p.start + p.end) / 2, 0.02, p.phone, fontsize=6, ha="center",
+                    transform=ax.get_xaxis_transform())
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("mouth opening")
+    ax.set_title(f"held-out {clip.clip_id} ({clip.emotion}): recorded vs synthesized")
+    ax.legend(fontsize=7, ncol=len(methods) + 1)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

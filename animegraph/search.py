@@ -31,7 +31,9 @@ Solvers (:func:`search`, ``method=``):
 ``"exact"`` (default)
     The global optimum, fast: a forward dynamic program over the chain of candidate
     layers, pruned with an admissible backward bound and an upper bound from a feasible
-    sequence (see :func:`_exact`); provably equal to the optimum of ``"dp"``.
+    sequence, with a k-d tree for the jump transitions (see :func:`_exact_layers`);
+    provably equal to the optimum of ``"dp"``. Kernels are compiled by numba (cached on
+    disk after the first call) and a large layer's queries run on several threads.
 ``"paper"``
     The paper's Priority-Queue (branch and bound) algorithm, steps (1)–(4), with an
     expansion cap.
@@ -46,6 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import os
 import threading
 from collections.abc import Sequence
@@ -79,9 +82,12 @@ class SearchWeights:
     w_jump: float = 100.0  # w1 (§4.2, the paper's value): per jump match, highest priority
     w_jumpcost: float = 1.0  # w2 (§4.2): per unit of RMS distance between joined frames
     w_audio: float = 0.01  # w3 (§4.2): per unit of audio (prosody DTW) distance, lowest
-    # Per node whose emotion differs from the input's: a tenth of a jump, so it never buys
-    # an extra jump, yet more than typical joins (RMS frame distances of a few units).
-    w_emotion: float = 10.0
+    # Per node whose emotion differs from the input's: as much as a jump match, so the
+    # search takes a jump rather than motion of the wrong emotion. Measured on held-out
+    # synthetic sentences (docs/results.md): with 10, a quarter of the nodes came from
+    # other emotions and face RMSE was 0.629 mm; with 100, none did, RMSE 0.557 mm, lip
+    # vertex error 2.31 -> 1.99 mm, mouth-opening R 0.685 -> 0.715, for ~4 more jumps.
+    w_emotion: float = 100.0
     # Per input phone matched by a class-mate of its viseme (the phone has no node).
     w_backoff: float = 50.0
     # Per input phone matched by any node (neither the phone nor its class has a node).
@@ -91,7 +97,8 @@ class SearchWeights:
         for name in ("w_jump", "w_jumpcost", "w_audio", "w_emotion", "w_backoff",
                      "w_backoff_any"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or not math.isfinite(value) or value < 0:
                 raise ParameterError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
@@ -353,9 +360,9 @@ def search(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray], *,
         ``method="window"`` only (required there): phones looked ahead of the current one
         (the paper: 3–6).
     max_expansions : int
-        ``method="paper"``: queue nodes expanded before giving up on optimality.
+        ``method="paper"``: queue nodes expanded before the search stops (capped).
     max_queue : int
-        ``method="paper"``: queue size (memory: 24 B a node) before giving up.
+        ``method="paper"``: queue size (memory: 24 B a node) before the search stops.
 
     Returns
     -------
@@ -390,7 +397,7 @@ def search(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray], *,
         optimal = True
     elif method == "window":
         idx, cost, n_exp, n_dist = _window(problem, int(window))
-        optimal = False
+        optimal = window >= len(cands) - 1  # one window spans the input: the exact search
     else:
         idx, cost, n_exp, n_dist, capped, optimal = _paper(problem, int(max_expansions),
                                                            int(max_queue))
@@ -567,20 +574,35 @@ def _exact_layers(p: _Problem, cn: np.ndarray, off: np.ndarray,
        each step taking the successor that minimises ``T + u + h`` with true distances.
        O(N) distances.
     3. **Pruned forward DP.** A state ``b`` is kept only if ``D(b) + h(b) <= UB``. For a
-       kept ``b``, the consecutive predecessor ``prev b`` costs O(1); jump predecessors
-       are scanned in ascending ``D(a)``, stopping as soon as ``w1 + D(a)`` reaches the
-       best value found or exceeds ``UB - h(b) - u(b)`` (no later ``a`` can do better or
-       keep ``b``, since distances are >= 0); each distance also stops early once its
-       partial sum exceeds what could still improve.
+       kept ``b``, the consecutive predecessor ``prev b`` costs O(1). The jump part,
+       ``w1 + min_a D(a) + s ||last(a) - first(b)||``, is an additively weighted
+       nearest-neighbour query over the kept states ``a`` of the previous layer, answered
+       by branch and bound in a k-d tree over their last frames whose nodes carry their
+       bounding box and least ``D`` (lower bound of a subtree: ``w1 + min D + s *
+       box distance``; leaves are scanned in ascending ``D``). A subtree or point is
+       skipped only when its lower bound reaches the best value found or exceeds
+       ``UB - h(b) - u(b)`` (it could neither improve ``b`` nor keep it); a distance
+       stops early once its partial sum shows the same. With few queries the tree is a
+       single leaf (a scan in ascending ``D``). Before the queries, states that can never
+       be the best source are dropped: ``a`` is dominated by ``a'`` when
+       ``D(a') + s ||x_a' - x_a|| < D(a)`` (by a 1e-9 relative margin), for then, by
+       the triangle inequality, ``a'`` beats ``a`` for every target; dominance is
+       checked among neighbours in the tree (subtrees of <= ``_DOMINANCE_RANGE``
+       states), and the tree is rebuilt when many states go. Queries of a large layer
+       run on several threads (numba releases the GIL).
 
     Exactness: let π be an optimal sequence, cost OPT <= UB. For each of its states,
     (prefix cost of π) + h <= (prefix cost) + H <= OPT <= UB. By induction over layers,
-    each state of π is kept with ``D <= its prefix cost``: its predecessor on π is kept,
-    and the scan only skips predecessors whose value is provably not below the best found
-    or above the keep threshold, which π's predecessor is not. Every computed ``D`` is the
-    cost of a real prefix, so ``min D`` over the last layer is both <= OPT and >= OPT: it
-    equals the optimum of the full Viterbi recursion (the ``"dp"`` oracle). Comparisons
-    with UB carry a relative slack of 1e-9 so that rounding never prunes π.
+    each state of π is kept with ``D <= its prefix cost``: its predecessor on π is kept
+    (or dominated by a kept state that does at least as well, following the chain of
+    dominations to a state that stays), and the search skips only sources whose lower
+    bound is not below the best value found or is above the keep threshold, which π's
+    predecessor is not. Every computed ``D`` is the cost of a real prefix, so ``min D``
+    over the last layer is both <= OPT and >= OPT: it equals the optimum of the full
+    Viterbi recursion (the ``"dp"`` oracle), up to floating-point rounding (1e-12).
+    Comparisons with UB carry a relative slack of 1e-9 so that rounding never prunes π.
+    Cost: O(N) for the bounds plus, per kept state, one tree query; in the worst case
+    (bounds that prune nothing) this is the Viterbi recursion with a spatial index.
     """
     n = len(off) - 1
     pos = np.full(p.graph.n_nodes, -1, dtype=np.int64)
@@ -669,6 +691,10 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
 
 #: Points per leaf of the k-d tree over the kept states of a layer.
 _LEAF = 16
+#: Dominated jump sources are looked for among at most this many neighbours.
+_DOMINANCE_RANGE = 64
+#: Rebuild the tree when dominance leaves fewer than this fraction of the states.
+_REBUILD = 0.7
 #: Queries of a layer below which one thread does them all.
 _PARALLEL_MIN = 2048
 _POOL: ThreadPoolExecutor | None = None
@@ -720,6 +746,43 @@ def _select(perm, x, dim, s, e, kth):  # pragma: no cover
             lo = store + 1
         else:
             hi = store - 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_by(perm, key, s, e):  # pragma: no cover
+    """Sort ``perm[s:e]`` by ``key[perm]`` ascending (insertion sort for a leaf, else heap
+    sort; numba compiles these far faster than ``np.argsort``)."""
+    n = e - s
+    if n <= 32:
+        for i in range(s + 1, e):
+            p = perm[i]
+            k = key[p]
+            j = i - 1
+            while j >= s and key[perm[j]] > k:
+                perm[j + 1] = perm[j]
+                j -= 1
+            perm[j + 1] = p
+        return
+    for root in range(n // 2 - 1, -1, -1):
+        _sift(perm, key, s, root, n)
+    for end in range(n - 1, 0, -1):
+        perm[s], perm[s + end] = perm[s + end], perm[s]
+        _sift(perm, key, s, 0, end)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sift(perm, key, s, root, n):  # pragma: no cover
+    while True:
+        child = 2 * root + 1
+        if child >= n:
+            return
+        if child + 1 < n and key[perm[s + child + 1]] > key[perm[s + child]]:
+            child += 1
+        if key[perm[s + child]] > key[perm[s + root]]:
+            perm[s + root], perm[s + child] = perm[s + child], perm[s + root]
+            root = child
+        else:
+            return
 
 
 @numba.njit(cache=True, nogil=True)
@@ -781,8 +844,7 @@ def _build_tree(x, d, leaf):  # pragma: no cover
                 sp += 2
                 nn += 2
                 continue
-        sub = perm[s:e].copy()  # a leaf: by ascending weight
-        perm[s:e] = sub[np.argsort(d[sub], kind="mergesort")]
+        _sort_by(perm, d, s, e)  # a leaf: by ascending weight
     return perm, start[:nn], end[:nn], left[:nn], right[:nn], lo[:nn], hi[:nn], mind[:nn]
 
 
@@ -858,7 +920,8 @@ def _query(xs, ds, start, end, left, right, lo, hi, mind, y, w1, scale, best, th
 
 
 @numba.njit(cache=True, nogil=True)
-def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos):  # pragma: no cover
+def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
+                   pos):  # pragma: no cover
     """The kept states of layer [lo, hi) as a k-d tree over their last frames, weighted
     by D; ``pos[node]`` set to each kept state (for the consecutive test)."""
     npc = last.shape[1]
@@ -888,8 +951,97 @@ def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos):  # pragma:
     # A k-d tree pays off when many states query it; else one leaf in ascending D.
     leaf = _LEAF if n_query > 8 * np.log2(m + 1) else max(m, 1)
     perm, start, end, left, right, tlo, thi, mind = _build_tree(xa, da, leaf)
-    return (alive, xa[perm], da[perm], alive[perm], start, end, left, right, tlo, thi, mind,
-            n_query)
+    xs, ds, ids = xa[perm], da[perm], alive[perm]
+    if leaf == _LEAF:
+        n_kept = _drop_dominated(xs, ds, ids, start, end, left, right, tlo, thi, mind, scale)
+        if n_kept < _REBUILD * m:  # a smaller tree over the states that remain
+            sel = np.empty(n_kept, dtype=np.int64)
+            k = 0
+            for node in range(len(start)):
+                if left[node] < 0:
+                    for r in range(start[node], end[node]):
+                        sel[k] = r
+                        k += 1
+            xs, ds, ids = xs[sel], ds[sel], ids[sel]
+            perm, start, end, left, right, tlo, thi, mind = _build_tree(xs, ds, leaf)
+            xs, ds, ids = xs[perm], ds[perm], ids[perm]
+    return (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query)
+
+
+@numba.njit(cache=True, nogil=True)
+def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
+                    scale):  # pragma: no cover
+    """Remove from the tree's leaves the states that cannot be the best jump source.
+
+    State r is dominated by a if ``D(a) + s ||x_a - x_r|| < D(r)`` (by a margin): by the
+    triangle inequality ``D(a) + s ||x_a - y|| < D(r) + s ||x_r - y||`` for every y, so
+    the least jump cost into any state is the same without r (a chain of dominations
+    ends at a state that is kept). Checked among near neighbours only (subtrees of at
+    most ``_DOMINANCE_RANGE`` points); leaves are compacted and bounds recomputed.
+    """
+    n_nodes = len(start)
+    npc = xs.shape[1]
+    keep = np.ones(len(ds), dtype=np.bool_)
+    stack = np.empty(n_nodes + 1, dtype=np.int64)
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        s, e = start[node], end[node]
+        if e - s > _DOMINANCE_RANGE:
+            if left[node] >= 0:
+                stack[sp] = left[node]
+                stack[sp + 1] = right[node]
+                sp += 2
+            continue
+        for r in range(s, e):
+            margin = 1e-9 * (1.0 + abs(ds[r]))
+            for a in range(s, e):
+                if a == r or not keep[a] or ds[a] >= ds[r] - margin:
+                    continue
+                room = (ds[r] - margin - ds[a]) / scale if scale > 0.0 else np.inf
+                d2 = 0.0
+                for j in range(npc):
+                    t = xs[a, j] - xs[r, j]
+                    d2 += t * t
+                if d2 < room * room:
+                    keep[r] = False
+                    break
+    for node in range(n_nodes - 1, -1, -1):
+        if left[node] < 0:
+            k = start[node]
+            for r in range(start[node], end[node]):
+                if keep[r]:
+                    if k != r:
+                        ds[k] = ds[r]
+                        ids[k] = ids[r]
+                        for j in range(npc):
+                            xs[k, j] = xs[r, j]
+                        keep[k] = True
+                    k += 1
+            end[node] = k
+            for j in range(npc):
+                lo[node, j] = np.inf
+                hi[node, j] = -np.inf
+            mind[node] = np.inf
+            for r in range(start[node], end[node]):
+                if ds[r] < mind[node]:
+                    mind[node] = ds[r]
+                for j in range(npc):
+                    lo[node, j] = min(lo[node, j], xs[r, j])
+                    hi[node, j] = max(hi[node, j], xs[r, j])
+        else:
+            l, rr = left[node], right[node]
+            mind[node] = min(mind[l], mind[rr])
+            for j in range(npc):
+                lo[node, j] = min(lo[l, j], lo[rr, j])
+                hi[node, j] = max(hi[l, j], hi[rr, j])
+    n_kept = 0
+    for node in range(n_nodes):
+        if left[node] < 0:
+            n_kept += end[node] - start[node]
+    return n_kept
 
 
 @numba.njit(cache=True, nogil=True)
@@ -941,7 +1093,8 @@ def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
     for i in range(n - 1):
         lo, hi, lo1, hi1 = off[i], off[i + 1], off[i + 1], off[i + 2]
         (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind,
-         n_query) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos)
+         n_query) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
+                                    pos)
         if len(alive) == 0:
             break
         args = (D, pred, u, h, prv, last, first, w1, scale, ub, pos, xs, ds, ids, start, end,

@@ -209,6 +209,26 @@ def ingest(
     return report
 
 
+def prepare_sources(
+    found: Sequence[ClipSource], config: IngestConfig | None = None, *, workers: int = 1,
+) -> tuple[list[PreparedClip], np.ndarray | None]:
+    """Prepare clips without a database: (the usable clips at one frame rate, head reference).
+
+    Rejected clips are logged and left out.
+    """
+    config = config or IngestConfig()
+    reference = _head_reference(list(found))
+    results = _run(list(found), {}, config.fps, config, workers, None, reference)
+    clips = [c for r, c in results if c is not None]
+    for r, _ in results:
+        if r.status == "rejected":
+            logger.warning("rejected %s: %s", r.source, r.reason)
+    if not clips:
+        raise ParameterError("no usable clips")
+    fps = config.fps or max(c.fps for c in clips)
+    return [_at_fps(c, fps) for c in clips], reference
+
+
 def _run(found, known, fps, config, workers, progress, reference):
     jobs = [(s, known, fps, config.correct_lag, reference) for s in found]
     if workers == 1 or len(jobs) == 1:
@@ -276,6 +296,31 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
            report: IngestReport, reference: np.ndarray | None) -> None:
+    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference)
+    report.written = True
+    report.version = version_dir.name
+    report.summary = summary
+
+
+def build_database(
+    db_path: str | os.PathLike, clips: Sequence[PreparedClip], config: IngestConfig | None = None,
+    *, fps: float | None = None, reference: np.ndarray | None = None,
+) -> tuple[dict, Path]:
+    """Decompose prepared clips together and write them as a new database version.
+
+    The corpus-wide half of an ingest (PCA keeping ``config.variance`` then FastICA over
+    all clips, §4.1/§5.1.2; per-component cutoffs, §4.3; anime nodes), usable on its own
+    to build databases from clips prepared once (e.g. the folds of an evaluation).
+
+    Returns
+    -------
+    (summary, version folder)
+    """
+    config = config or IngestConfig()
+    clips = list(clips)
+    if not clips:
+        raise ParameterError("no clips to build a database from")
+    fps = fps or clips[0].fps
     motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
@@ -299,10 +344,7 @@ def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: 
         "variance_target": config.variance, "energy_target": config.energy,
         "ica_converged": bool(model.ica_converged_),
     }
-    version_dir = write_version(db_path, tables, summary)
-    report.written = True
-    report.version = version_dir.name
-    report.summary = summary
+    return summary, write_version(db_path, tables, summary)
 
 
 def _save_report(db_path: Path, report: IngestReport) -> None:

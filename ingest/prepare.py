@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from db.errors import DataError
+from db.errors import DataError, ParameterError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.features import RastaPlpConfig, rasta_plp
 from ingest.formats.phones_csv import Segment
@@ -138,3 +138,25 @@ def prepare_clip(
         sentence_id=raw.sentence_id, text=raw.text, extra=extra,
     )
 
+
+
+def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> PreparedClip:
+    """The part of ``clip`` from ``start`` to ``end`` seconds, as a clip of its own.
+
+    Phones overlapping the cut are trimmed to it; the new clip's id is the old one plus
+    ``suffix``. Used to split one long recording into a database part and a test part.
+    """
+    from dataclasses import replace
+
+    if not 0 <= start < end <= clip.duration + 1e-9:
+        raise ParameterError(f"slice [{start}, {end}] is outside the clip (0-{clip.duration})")
+    f0, f1 = int(round(start * clip.fps)), int(round(end * clip.fps))
+    s0, s1 = int(round(start * clip.sample_rate)), int(round(end * clip.sample_rate))
+    phones = tuple(Segment(p.phone, max(p.start, start) - start, min(p.end, end) - start)
+                   for p in clip.phones if p.end > start and p.start < end)
+    hop = 0.01  # RASTA-PLP frames per second: 100
+    p0, p1 = int(round(start / hop)), int(round(end / hop)) + 1
+    return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
+                   missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],
+                   phones=tuple(p for p in phones if p.end > p.start),
+                   prosody=clip.prosody[p0:p1])

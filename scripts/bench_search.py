@@ -277,7 +277,7 @@ def main() -> int:
                 if res.capped:
                     note.append("hit cap")
                 if exact_cost is not None and name != "exact":
-                    note.append(f"+{res.cost - exact_cost:.2f} over optimum")
+                    note.append(f"+{max(0.0, res.cost - exact_cost):.2f} over optimum")
                 row = {"nodes": g.n_nodes, "copies": copies, "graph_mb": mb,
                        "build_s": build_s, "input": label, "method": name,
                        "median_ms": med, "runs": reps, "n_expanded": res.n_expanded,

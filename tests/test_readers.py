@@ -263,7 +263,9 @@ def test_facegood_layout_reads_legacy_object_arrays(tmp_path):
     source = _one([root])
     assert (source.layout, source.clip_id, source.corpus) == ("facegood", "c1", "fg")
     clip = load(source)
-    assert clip.fps == 30.0 and clip.schema.groups == ("lips", "upper_face", "upper_face")
+    # FACEGOOD's columns sit one after their names (see facegood_column_names).
+    assert clip.schema.names == ("unnamed_0", "jaw", "brow_raise_c")
+    assert clip.fps == 30.0 and clip.schema.groups == ("other", "lips", "upper_face")
     np.testing.assert_allclose(clip.motion, rows)
     (root / "bsname.txt").write_text("4\njaw\nbrow_raise_c\neye_blink1_l\n")
     with pytest.raises(DataError, match="says 4 names but lists 3"):
@@ -484,7 +486,7 @@ def test_facegood_clips():
         assert (source.kind, source.layout, source.corpus) == ("curves", "facegood", "facegood")
         clip = load(source)
         assert clip.fps == 30.0 and clip.motion.shape[1] == 116 == clip.schema.n_channels
-        assert list(clip.schema.names) == names
+        assert list(clip.schema.names) == ["unnamed_0", *names[:-1]]
         assert clip.sample_rate == 16000
         # frames / 30 = audio duration (measured: within 30 ms, i.e. one frame)
         assert abs(clip.n_frames / clip.fps - clip.duration) < 0.035
@@ -572,3 +574,19 @@ def test_discover_the_shared_data():
     assert Counter(s.layout for s in sources) == {"talkingface": 13, "facegood": 5}
     assert discover([root / "facegood" / "wav" / "1114_2_03.wav"]) == [
         s for s in sources if s.clip_id == "1114_2_03"]
+
+
+def test_facegood_names_line_up_with_their_columns():
+    """Left/right curve pairs move together, and the jaw curve follows the speech."""
+    root = require_shared("facegood")
+    clips = [load(s) for s in discover([root])]
+    names = list(clips[0].schema.names)
+    motion = np.concatenate([c.motion for c in clips])
+    assert names[0] == "unnamed_0" and np.ptp(motion[:, 0]) == 0
+
+    def col(name):
+        return motion[:, names.index(name)]
+
+    for left in ("mouth_lipCornerPull_l", "mouth_pucker_l", "mouth_press_l"):
+        right = left[:-1] + "r"
+        assert np.corrcoef(col(left), col(right))[0, 1] > 0.95, left

@@ -106,6 +106,25 @@ def _is_number(text: str) -> bool:
     return True
 
 
+#: Name given to FACEGOOD's first column, which carries no curve (constant 0).
+FACEGOOD_UNNAMED = "unnamed_0"
+
+
+def facegood_column_names(names: list[str]) -> list[str]:
+    """The names of FACEGOOD's ``bs_value`` columns, given its 116-name list.
+
+    Column ``i`` carries the ``i``-th token of ``bsname.txt`` *counting the leading count
+    line* ("116") as token 0: the arrays are one column off the name list as shipped.
+    The evidence, over all five clips: column 0 is constant; with names shifted by one,
+    left/right pairs move together (lip-corner pull l/r and pucker l/r correlate 1.0,
+    where the unshifted names pair unrelated columns, r = -0.01), and the curve that
+    follows the speech's loudness (r = 0.75) is ``mouth_stretch_c`` (FACS mouth stretch,
+    the jaw opening) rather than ``mouth_suck_dl``. The list's last name (``cheek_r``)
+    has no column.
+    """
+    return [FACEGOOD_UNNAMED, *names[:-1]]
+
+
 def read_curves_csv(path: Path) -> tuple[np.ndarray, list[str] | None, float | None]:
     """Read a ``.curves.csv``: motion (n_frames, n_channels), header names, rate from time.
 
@@ -213,6 +232,8 @@ def load_curves(source: ClipSource) -> RawClip:
     if names is None:
         raise DataError(f"{motion_path}: unknown channel layout (no {motion_path.stem}"
                         f".channels.txt, CSV header or 'channels' in curves.json)")
+    if source.layout == "facegood":
+        names = facegood_column_names(names)
     if len(names) != motion.shape[1]:
         raise DataError(f"{motion_path}: unknown channel layout: {motion.shape[1]} columns "
                         f"but {len(names)} channel names")
