@@ -249,6 +249,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from animegraph.synth import Model, synthesize, write_motion
     from animegraph.synthesis import PostOptions
     from ingest.formats.wav import read_wav
+    from ingest.readers.common import read_labels
 
     method = args.method or ("window" if args.window is not None else "exact")
     if method == "window" and args.window is None:
@@ -262,7 +263,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph synth: emotion {args.emotion!r} is not in the database "
                          f"(it has {', '.join(model.graph.emotions)})")
     audio, sample_rate = read_wav(args.audio)
-    labels = _read_labels(args.labels) if args.labels else None
+    labels = read_labels(args.labels) if args.labels else None
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -309,21 +310,6 @@ def _jsonable(value):
     if isinstance(value, tuple):
         return list(value)
     return str(value)
-
-
-def _read_labels(path: Path):
-    from ingest.formats.htk_lab import read_htk_lab
-    from ingest.formats.phones_csv import read_phones_csv
-    from ingest.formats.textgrid import read_textgrid
-
-    name = path.name.lower()
-    if name.endswith(".csv"):
-        return read_phones_csv(path)
-    if name.endswith(".textgrid"):
-        return read_textgrid(path)
-    if name.endswith(".lab"):
-        return read_htk_lab(path)
-    raise UsageError(f"animegraph synth: --labels must be .csv, .TextGrid or .lab, got {path}")
 
 
 def _cmd_info(args: argparse.Namespace) -> int:

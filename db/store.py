@@ -232,7 +232,11 @@ class Database:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...)."""
-        return arrays_from_table(self.table("model_arrays"))
+        try:
+            return arrays_from_table(self.table("model_arrays"))
+        except (KeyError, ValueError) as exc:
+            raise DataError(f"database {self.root} is damaged: unreadable model arrays "
+                            f"({exc})") from exc
 
 
 def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:

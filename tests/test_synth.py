@@ -118,3 +118,38 @@ def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     assert main(argv) in (1, 2)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0]
+
+
+def test_a_minute_long_utterance_at_any_rate_in_stereo(model, tmp_path):
+    """The paper's longest synthesis was 62 s; 44.1 kHz stereo input is read as mono."""
+    from scipy.signal import resample_poly
+
+    from ingest.espeak import speak
+    from ingest.formats.phones_csv import Segment
+    from ingest.formats.wav import write_wav
+
+    text = " ".join(["Bob moved the warm vase away from the window, and Pam sang."] * 16)
+    utt = speak(text)
+    assert utt.duration > 60
+    mono = resample_poly(utt.audio, 441, 160).astype(np.float32)
+    write_wav(tmp_path / "long.wav", np.stack([mono, mono], axis=1), 44100)
+    audio, sr = read_wav(tmp_path / "long.wav")
+    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    out = synthesize(model, audio, sr, labels=labels)
+    assert sr == 44100 and audio.ndim == 1
+    assert abs(len(out.motion) / 120 - utt.duration) < 0.05
+    assert np.isfinite(out.motion).all()
+
+
+def test_a_database_without_animes_is_refused(tmp_path):
+    import pyarrow as pa
+
+    from db.store import write_version
+
+    empty = {name: pa.table({"emotion": pa.array([], pa.string())})
+             for name in ("clips", "animes", "frames")}
+    empty.update({name: pa.table({"x": pa.array([], pa.int32())})
+                  for name in ("audio", "channels", "model_arrays", "components")})
+    write_version(tmp_path / "db", empty, {"fps": 120.0, "n_channels": 0})
+    with pytest.raises(DataError):
+        Model.load(tmp_path / "db")

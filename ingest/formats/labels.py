@@ -14,10 +14,8 @@ passes each label through :func:`to_arpabet`:
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 from db.errors import DataError, ParameterError
-from ingest.formats.phones_csv import Segment, _as_segment, _order_error
+from ingest.formats.phones_csv import Segment, as_segments  # noqa: F401  (re-exported)
 from ingest.phones import PHONE_SET, SILENCE
 
 #: Labels (compared in lower case, white space stripped) that mean silence or non-speech:
@@ -68,38 +66,6 @@ def to_arpabet(label: str) -> str:
     if base in ALIASES:
         return ALIASES[base]
     raise DataError(f"unknown phone label {label!r}")
-
-
-def as_segments(segments: Iterable[object]) -> list[Segment]:
-    """Check phone segments before they are written; return them as :class:`Segment`.
-
-    Parameters
-    ----------
-    segments : iterable
-        Objects with ``.phone .start .end`` (seconds) or ``(phone, start, end)`` tuples;
-        phones of :data:`ingest.phones.PHONE_SET`, sorted, not overlapping. Times are
-        rounded to a microsecond.
-
-    Returns
-    -------
-    list of Segment
-
-    Raises
-    ------
-    ParameterError
-        On an unknown phone, bad times, ``start >= end``, or a segment out of order or
-        overlapping the one before.
-    """
-    if isinstance(segments, str | bytes) or not isinstance(segments, Iterable):
-        raise ParameterError(f"segments: expected an iterable of segments, got {segments!r}")
-    rows: list[Segment] = []
-    for index, item in enumerate(segments):
-        segment = _as_segment(item, index)
-        problem = _order_error(segment, rows[-1] if rows else None)
-        if problem is not None:
-            raise ParameterError(f"segments[{index}]: {problem}")
-        rows.append(segment)
-    return rows
 
 
 def format_seconds(value: float) -> str:

@@ -89,6 +89,38 @@ def _order_error(segment: Segment, previous: Segment | None) -> str | None:
     return None
 
 
+def as_segments(segments: Iterable[object]) -> list[Segment]:
+    """Check phone segments before they are written; return them as :class:`Segment`.
+
+    Parameters
+    ----------
+    segments : iterable
+        Objects with ``.phone .start .end`` (seconds) or ``(phone, start, end)`` tuples;
+        phones of :data:`ingest.phones.PHONE_SET`, sorted, not overlapping. Times are
+        rounded to a microsecond.
+
+    Returns
+    -------
+    list of Segment
+
+    Raises
+    ------
+    ParameterError
+        On an unknown phone, bad times, ``start >= end``, or a segment out of order or
+        overlapping the one before.
+    """
+    if isinstance(segments, str | bytes) or not isinstance(segments, Iterable):
+        raise ParameterError(f"segments: expected an iterable of segments, got {segments!r}")
+    rows: list[Segment] = []
+    for index, item in enumerate(segments):
+        segment = _as_segment(item, index)
+        problem = _order_error(segment, rows[-1] if rows else None)
+        if problem is not None:
+            raise ParameterError(f"segments[{index}]: {problem}")
+        rows.append(segment)
+    return rows
+
+
 def write_phones_csv(path: str | os.PathLike[str], segments: Iterable[object]) -> None:
     """Write phone segments to a ``.phones.csv`` file, atomically.
 
@@ -109,16 +141,7 @@ def write_phones_csv(path: str | os.PathLike[str], segments: Iterable[object]) -
     DataError
         If the file cannot be written.
     """
-    if isinstance(segments, str | bytes) or not isinstance(segments, Iterable):
-        raise ParameterError(f"segments: expected an iterable of segments, got {segments!r}")
-    rows: list[Segment] = []
-    for index, item in enumerate(segments):
-        segment = _as_segment(item, index)
-        problem = _order_error(segment, rows[-1] if rows else None)
-        if problem is not None:
-            raise ParameterError(f"segments[{index}]: {problem}")
-        rows.append(segment)
-
+    rows = as_segments(segments)
     text = io.StringIO()
     out = csv.writer(text, lineterminator="\n")
     out.writerow(HEADER)

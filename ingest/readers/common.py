@@ -247,6 +247,22 @@ def check_labels(phones: list[Segment], audio_seconds: float, where: Path) -> No
         )
 
 
+def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
+                                                                  tuple[Segment, ...] | None]:
+    """The clip's transcript file and phone labels, if it has them (checked)."""
+    text = None
+    transcript_path = source.file("transcript")
+    if transcript_path is not None:
+        text = read_transcript(transcript_path)
+    phones = None
+    labels_path = source.file("labels")
+    if labels_path is not None:
+        segments = read_labels(labels_path)
+        check_labels(segments, audio_seconds, labels_path)
+        phones = tuple(segments)
+    return text, phones
+
+
 def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
     """Load a ``.npy`` array without pickles.
 

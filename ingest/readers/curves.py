@@ -33,14 +33,12 @@ from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
     check_durations,
-    check_labels,
     check_motion,
     load_npy,
     metadata_fields,
     read_fps,
     read_json_object,
-    read_labels,
-    read_transcript,
+    transcript_and_labels,
 )
 
 logger = logging.getLogger(__name__)
@@ -259,15 +257,9 @@ def load_curves(source: ClipSource) -> RawClip:
     check_durations(len(motion), fps, audio_seconds, motion_path)
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
         ("text", "emotion", "speaker", "sentence_id"))
-    transcript_path = source.file("transcript")
-    if transcript_path is not None:
-        fields["text"] = read_transcript(transcript_path)
-    phones = None
-    labels_path = source.file("labels")
-    if labels_path is not None:
-        segments = read_labels(labels_path)
-        check_labels(segments, audio_seconds, labels_path)
-        phones = tuple(segments)
+    text, phones = transcript_and_labels(source, audio_seconds)
+    if text is not None:
+        fields["text"] = text
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
         fps=fps, schema=schema, audio=audio, sample_rate=sample_rate,

@@ -29,13 +29,11 @@ from ingest.readers.common import (
     GROUPS,
     ClipSource,
     check_durations,
-    check_labels,
     check_motion,
     metadata_fields,
     read_fps,
     read_json_object,
-    read_labels,
-    read_transcript,
+    transcript_and_labels,
 )
 
 logger = logging.getLogger(__name__)
@@ -126,15 +124,9 @@ def load_markers(source: ClipSource) -> RawClip:
                            fps, motion_path.name, data.rate)
         if "variation" in meta:
             extra["variation"] = meta["variation"]
-    transcript_path = source.file("transcript")
-    if transcript_path is not None:
-        fields["text"] = read_transcript(transcript_path)
-    phones = None
-    labels_path = source.file("labels")
-    if labels_path is not None:
-        segments = read_labels(labels_path)
-        check_labels(segments, audio_seconds, labels_path)
-        phones = tuple(segments)
+    text, phones = transcript_and_labels(source, audio_seconds)
+    if text is not None:
+        fields["text"] = text
 
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
