@@ -1,0 +1,256 @@
+"""Emotion classification (Cao et al. 2005, §6): cepstrum, features, classifier, EmoDB."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import require_shared
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+
+from animegraph.emotion import (
+    EMODB_EMOTIONS,
+    EmotionClassifier,
+    emotion_features,
+    load_emodb,
+    real_cepstrum,
+    rich_features,
+)
+from db.errors import DataError, ParameterError
+
+SR = 16000
+
+
+# ----------------------------------------------------------------- real cepstrum
+def test_cepstrum_of_impulse_is_log_gain_only():
+    x = np.zeros(4096)
+    x[0] = 3.0  # flat magnitude spectrum |X| = 3
+    c = real_cepstrum(x)
+    assert c.shape == (4096,)
+    assert c[0] == pytest.approx(np.log(3.0))
+    np.testing.assert_allclose(c[1:], 0.0, atol=1e-12)
+
+
+def test_cepstrum_of_two_impulses_has_known_series():
+    # log(1 + a e^{-jwd}) = a e^{-jwd} - a^2/2 e^{-2jwd} + ... is the complex cepstrum;
+    # the real cepstrum is its even part: c[d] = a/2, c[2d] = -a^2/4, c[3d] = a^3/6.
+    a, d = 0.5, 100
+    x = np.zeros(8192)
+    x[0], x[d] = 1.0, a
+    c = real_cepstrum(x)
+    assert c[d] == pytest.approx(a / 2, abs=1e-9)
+    assert c[2 * d] == pytest.approx(-a * a / 4, abs=1e-9)
+    assert c[3 * d] == pytest.approx(a**3 / 6, abs=1e-9)
+    off = np.ones(c.size // 2, bool)
+    off[::d] = False
+    assert np.abs(c[: c.size // 2][off]).max() < 1e-9
+
+
+def test_echo_gives_cepstral_peak_at_delay(rng):
+    delay = 137  # samples at 16 kHz
+    s = rng.standard_normal(SR)
+    x = s.copy()
+    x[delay:] += 0.6 * s[:-delay]
+    f = emotion_features(x, SR, n_cepstrum=500)
+    ceps = f[3:]
+    assert 20 + np.argmax(ceps[20:]) == delay
+
+
+# ----------------------------------------------------------------- features
+def test_feature_shape_stats_and_resampling(rng):
+    x = 0.1 + 0.3 * rng.standard_normal(SR)
+    f = emotion_features(x, SR)
+    assert f.shape == (503,) and np.all(np.isfinite(f))
+    assert f[0] == pytest.approx(x.mean())
+    assert f[1] == pytest.approx(x.var())
+    assert f[2] == pytest.approx(np.sqrt(np.mean(x**2)))
+    assert emotion_features(x, SR, n_cepstrum=50).shape == (53,)
+    fr = emotion_features(x, SR, n_cepstrum=1000, cepstrum="frames")
+    assert fr.shape == (1003,) and np.all(np.isfinite(fr))
+    # Resampling: a 440 Hz tone at 44.1 kHz and at 16 kHz give nearly the same cepstrum.
+    t16, t44 = np.arange(SR) / SR, np.arange(44100) / 44100
+    a = emotion_features(np.sin(2 * np.pi * 440 * t16), SR, n_cepstrum=100, cepstrum="frames")
+    b = emotion_features(np.sin(2 * np.pi * 440 * t44), 44100, n_cepstrum=100,
+                         cepstrum="frames")
+    assert np.corrcoef(a[3:], b[3:])[0, 1] > 0.99
+
+
+def test_rich_features_shape(rng):
+    t = np.arange(SR) / SR
+    x = np.sin(2 * np.pi * 150 * t) * (1 + 0.5 * np.sin(2 * np.pi * 3 * t))
+    f = rich_features(x + 0.01 * rng.standard_normal(SR), SR)
+    assert f.shape == (121,) and np.all(np.isfinite(f))
+
+
+@pytest.mark.parametrize("func", [emotion_features, rich_features])
+def test_feature_errors(func, rng):
+    with pytest.raises(DataError, match="too short"):
+        func(rng.standard_normal(int(0.2 * SR)), SR)
+    with pytest.raises(DataError, match="silent"):
+        func(np.zeros(SR), SR)
+    with pytest.raises(DataError, match="NaN"):
+        func(np.full(SR, np.nan), SR)
+    with pytest.raises(ParameterError, match="mono"):
+        func(rng.standard_normal((SR, 2)), SR)
+    with pytest.raises(ParameterError, match="sample_rate"):
+        func(rng.standard_normal(SR), 0)
+
+
+def test_feature_parameter_errors(rng):
+    x = rng.standard_normal(SR)
+    with pytest.raises(ParameterError, match="n_cepstrum"):
+        emotion_features(x, SR, n_cepstrum=0)
+    with pytest.raises(ParameterError, match="n_cepstrum"):
+        emotion_features(x, SR, n_cepstrum=2000, cepstrum="frames")
+    with pytest.raises(ParameterError, match="cepstrum"):
+        emotion_features(x, SR, cepstrum="mel")
+
+
+# ----------------------------------------------------------------- classifier
+def _toy_corpus(rng, per_class=12):
+    """Three separable 'emotions': low voice-like buzz, high buzz, breathy noise."""
+    clips, labels = [], []
+    for label in ("low", "high", "noise"):
+        for _ in range(per_class):
+            n = int(SR * rng.uniform(0.5, 0.8))
+            t = np.arange(n) / SR
+            if label == "noise":
+                x = rng.standard_normal(n)
+            else:
+                f0 = rng.uniform(90, 130) if label == "low" else rng.uniform(260, 340)
+                x = sum(np.sin(2 * np.pi * k * f0 * t) / k for k in range(1, 8))
+                x = x + 0.05 * rng.standard_normal(n)
+            clips.append((rng.uniform(0.05, 0.5) * x / np.abs(x).max(), SR))
+            labels.append(label)
+    return clips, np.array(labels)
+
+
+@pytest.fixture(scope="module")
+def toy():
+    rng = np.random.default_rng(7)
+    train = _toy_corpus(rng)
+    test = _toy_corpus(rng, per_class=6)
+    return train, test
+
+
+def test_classifier_learns_toy_problem(toy):
+    (Xtr, ytr), (Xte, yte) = toy
+    model = EmotionClassifier(n_cepstrum=100)
+    assert model.fit(Xtr, ytr) is model
+    assert list(model.classes_) == ["high", "low", "noise"]
+    assert model.n_features_in_ == 103
+    assert model.score(Xte, yte) >= 0.9
+    proba = model.predict_proba(Xte)
+    assert proba.shape == (len(Xte), 3)
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+    assert (model.classes_[proba.argmax(1)] == yte).mean() >= 0.9
+
+
+def test_classifier_feature_matrix_and_round_trip(toy, tmp_path):
+    (Xtr, ytr), (Xte, yte) = toy
+    Ftr = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])
+    Fte = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xte])
+    for kernel in ("linear", "rbf"):
+        model = EmotionClassifier(n_cepstrum=50, kernel=kernel).fit(Ftr, ytr)
+        np.testing.assert_array_equal(model.predict(Fte), model.predict(Xte))
+        np.savez(tmp_path / "m.npz", **model.to_arrays())
+        with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
+            back = EmotionClassifier.from_arrays(z)
+        assert back.get_params() == model.get_params()
+        np.testing.assert_array_equal(back.predict(Fte), model.predict(Fte))
+        np.testing.assert_array_equal(back.decision_function(Fte), model.decision_function(Fte))
+        np.testing.assert_allclose(back.predict_proba(Fte), model.predict_proba(Fte),
+                                   rtol=0, atol=1e-12)
+
+
+def test_binary_round_trip(toy):
+    (Xtr, ytr), _ = toy
+    keep = ytr != "noise"
+    F = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])[keep]
+    model = EmotionClassifier(n_cepstrum=50).fit(F, ytr[keep])
+    back = EmotionClassifier.from_arrays(model.to_arrays())
+    np.testing.assert_array_equal(back.predict(F), model.predict(F))
+    np.testing.assert_allclose(back.predict_proba(F), model.predict_proba(F), atol=1e-12)
+    assert model.predict_proba(F).shape == (F.shape[0], 2)
+
+
+def test_rich_classifier(toy):
+    (Xtr, ytr), (Xte, yte) = toy
+    model = EmotionClassifier(features="rich", kernel="rbf").fit(Xtr, ytr)
+    assert model.n_features_in_ == 121
+    assert model.score(Xte, yte) >= 0.9
+
+
+def test_estimator_contract_and_errors(toy):
+    (Xtr, ytr), _ = toy
+    model = EmotionClassifier(n_cepstrum=50)
+    assert clone(model).get_params() == model.get_params()
+    with pytest.raises(NotFittedError):
+        model.predict(Xtr)
+    with pytest.raises(NotFittedError):
+        model.predict_proba(Xtr)
+    with pytest.raises(NotFittedError):
+        model.to_arrays()
+    with pytest.raises(ParameterError, match="kernel"):
+        EmotionClassifier(kernel="cubic").fit(Xtr, ytr)
+    with pytest.raises(ParameterError, match="features"):
+        EmotionClassifier(features="mfcc").fit(Xtr, ytr)
+    with pytest.raises(ParameterError, match="C must"):
+        EmotionClassifier(C=0).fit(Xtr, ytr)
+    with pytest.raises(ParameterError, match="two emotion classes"):
+        model.fit(Xtr[:5], ytr[:5])
+    with pytest.raises(ParameterError, match="y must have shape"):
+        model.fit(Xtr, ytr[:-1])
+    with pytest.raises(ValueError, match="Reshape your data"):
+        model.fit([1.0, 2.0], ["a", "b"])
+    with pytest.raises(ParameterError, match="Reshape your data"):
+        model.fit(np.ones(SR), ["a"])
+    with pytest.raises(DataError, match="too short"):
+        model.fit([(np.ones(100), SR), (np.ones(100), SR)], ["a", "b"])
+    model.fit(Xtr, ytr)
+    with pytest.raises(ParameterError, match="expecting 53 features"):
+        model.predict(np.zeros((2, 10)))
+    with pytest.raises(DataError, match="lacks array"):
+        EmotionClassifier.from_arrays({"kernel": np.array("linear")})
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_sklearn_common_checks():
+    from sklearn.utils.estimator_checks import check_estimator
+
+    results = check_estimator(EmotionClassifier(calibration_cv=2), on_fail=None)
+    failed = [r["check_name"] for r in results if r["status"] == "failed"]
+    assert failed == []
+
+
+# ----------------------------------------------------------------- EmoDB
+@pytest.mark.shared
+def test_emodb_smoke():
+    root = require_shared("emodb")
+    utterances, labels, speakers = load_emodb(root)
+    assert len(utterances) == labels.size == speakers.size
+    assert set(labels) <= set(EMODB_EMOTIONS.values())
+    assert np.unique(speakers).size == 10
+    # A small, deterministic subset: every 9th file (60 files).
+    sub = np.arange(0, len(utterances), 9)
+    X = [utterances[i] for i in sub]
+    y = labels[sub]
+    model = EmotionClassifier().fit(X, y)
+    assert model.score(X, y) >= 0.9  # Table I: linear kernel, 500 coefficients
+    proba = model.predict_proba(X[:5])
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+
+
+def test_speaker_normalize(rng):
+    from animegraph.emotion import speaker_normalize
+
+    F = rng.standard_normal((20, 4)) * 3 + 7
+    F[:, 3] = 1.0
+    spk = np.repeat(["a", "b"], 10)
+    Z = speaker_normalize(F, spk)
+    for s in ("a", "b"):
+        np.testing.assert_allclose(Z[spk == s, :3].mean(0), 0, atol=1e-12)
+        np.testing.assert_allclose(Z[spk == s, :3].std(0), 1)
+    np.testing.assert_array_equal(Z[:, 3], 0)
+    with pytest.raises(ParameterError, match="speakers"):
+        speaker_normalize(F, spk[:-1])
