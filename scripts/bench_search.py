@@ -4,6 +4,7 @@ Usage::
 
     python scripts/bench_search.py [--db PATH] [--sizes 10000 100000 1000000]
                                    [--repeats 5] [--methods exact window paper] [--json OUT]
+                                   [--n-random K]
 
 The base graph is a database (``--db``) or synthetic recordings with English-like phone
 frequencies and sentences repeated over takes (as in the corpus). Larger graphs are
@@ -213,6 +214,9 @@ def main() -> int:
     parser.add_argument("--methods", nargs="+", default=["exact", "window", "paper"],
                         choices=["exact", "window", "paper", "dp"])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--n-random", type=int, default=1,
+                        help="random inputs (their difficulty varies much; the extra ones "
+                             "are drawn from their own generators, so the first is unchanged)")
     parser.add_argument("--json", type=Path, help="also write the results here")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
@@ -237,6 +241,9 @@ def main() -> int:
     freq = np.bincount(base.node_phone, minlength=len(PHONES)).astype(float)
     random_phones = list(rng.choice(PHONES, size=args.length, p=freq / freq.sum()))
     inputs = {"held-out": held_phones, "random": random_phones}
+    for k in range(2, args.n_random + 1):
+        extra = np.random.default_rng([args.seed, k])
+        inputs[f"random{k}"] = list(extra.choice(PHONES, size=args.length, p=freq / freq.sum()))
 
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores; base: "
           f"{source}, {base.n_nodes} nodes after holding out {removed} recording(s) of one "

@@ -346,3 +346,54 @@ def test_dp_refuses_large_problems(monkeypatch):
     monkeypatch.setattr(S, "DP_MAX_PAIRS", 4)
     with pytest.raises(ParameterError, match="dp"):
         search(g, cands, random_audio(rng, cands), method="dp")
+
+
+def _cost_to_go(p) -> np.ndarray:
+    """The true least cost from each state to the end (backward Viterbi, brute force)."""
+    H = np.zeros(len(p.cn))
+    w1 = p.weights.w_jump
+    for i in range(p.n - 2, -1, -1):
+        a = p.cn[p.off[i]:p.off[i + 1]]
+        b = p.cn[p.off[i + 1]:p.off[i + 2]]
+        diff = p.last[a].astype(np.float64)[:, None, :] - p.first[b].astype(np.float64)[None]
+        t = w1 * (p.nxt[a][:, None] != b[None, :]) + p.scale * np.sqrt((diff ** 2).sum(-1))
+        v = p.u[p.off[i + 1]:p.off[i + 2]] + H[p.off[i + 1]:p.off[i + 2]]
+        H[p.off[i]:p.off[i + 1]] = (t + v[None, :]).min(axis=1)
+    return H
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_exact_bounds_are_admissible(seed):
+    # The exactness of method="exact" rests on h <= the true cost to go (every state) and
+    # on UB being the cost of a real sequence (>= the optimum).
+    rng = np.random.default_rng(700 + seed)
+    phones = ("AA", "B", "S", "IY", "K", "SIL")
+    g = random_graph(rng, int(rng.integers(5, 40)), phones, length=(3, 12),
+                     continuous=bool(seed % 3), scale=float(rng.choice([1.0, 30.0])))
+    cands = candidates(g, [str(x) for x in rng.choice(phones, size=int(rng.integers(2, 9)))])
+    audio = random_audio(rng, cands)
+    weights = SearchWeights() if seed % 2 else SearchWeights(w_jump=0.5, w_audio=0.2)
+    p = S._Problem.build(g, cands, audio, weights, None)
+    pos = np.full(g.n_nodes, -1, dtype=np.int64)
+    h = S._relaxed_backward(p.cn, p.off, p.u, p.nxt, p.last, p.first,
+                            float(weights.w_jump), p.scale, pos)
+    assert np.all(pos == -1)
+    H = _cost_to_go(p)
+    assert np.all(h <= H + 1e-9)
+    path, ub = S._greedy(p.cn, p.off, p.u, h, p.nxt, p.last, p.first, float(weights.w_jump),
+                         p.scale)
+    assert ub == pytest.approx(p.breakdown(path - p.off[:-1]).cost, abs=1e-9)
+    assert ub >= search(g, cands, audio, method="dp", weights=weights).cost - 1e-9
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_exact_threaded_queries_match_dp(seed, monkeypatch):
+    # Force the k-d tree and the multi-threaded query path on small layers.
+    monkeypatch.setattr(S, "_PARALLEL_MIN", 1)
+    rng = np.random.default_rng(800 + seed)
+    phones = ("AA", "B", "S", "IY")
+    g = random_graph(rng, 200, phones, length=(5, 20), n_pcs=4, scale=30.0)
+    cands = candidates(g, [str(x) for x in rng.choice(phones, size=12)])
+    audio = random_audio(rng, cands, high=30.0)
+    exact = search(g, cands, audio)
+    assert exact.cost == pytest.approx(search(g, cands, audio, method="dp").cost, abs=1e-9)
