@@ -125,6 +125,36 @@ def motion_scores(pred: np.ndarray, truth: np.ndarray, names: Sequence[str],
     return out
 
 
+def heldout_query(model, clip):
+    """The search input of a held-out prepared clip, from its audio and its phones.
+
+    Returns
+    -------
+    (phones, emotion or None, candidates, audio costs)
+    """
+    from animegraph.synth import query_phones, score_candidates
+
+    audio = clip.audio.astype(np.float32) / 32767.0
+    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    return phones, emotion, cands, audio_cost
+
+
+def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None = None,
+                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
+    """The anime sequence one of :data:`METHODS` picks, and its number of jump matches."""
+    from animegraph.search import search
+
+    if method in ("random", "first"):
+        nodes = baseline_nodes(cands.nodes, method, rng)
+        return nodes, int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
+    window = int(method[len("window"):]) if method.startswith("window") else None
+    result = search(model.graph, cands, audio_cost, emotion=emotion,
+                    method="window" if window else "exact", window=window)
+    return result.nodes, result.n_jumps
+
+
 def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
                   rng: np.random.Generator | None = None) -> dict:
     """Synthesize a held-out prepared clip from its audio and phones; score every method.
@@ -138,14 +168,10 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
     """
     import time
 
-    from animegraph.search import search
-    from animegraph.synth import query_phones, render_nodes, score_candidates
+    from animegraph.synth import render_nodes
 
     rng = rng or np.random.default_rng(0)
-    audio = clip.audio.astype(np.float32) / 32767.0
-    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
-    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
-    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    phones, emotion, cands, audio_cost = heldout_query(model, clip)
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
     share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
@@ -153,14 +179,7 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
     rows = {}
     for method in methods:
         t0 = time.perf_counter()
-        if method in ("random", "first"):
-            nodes = baseline_nodes(cands.nodes, method, rng)
-            jumps = int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
-        else:
-            window = int(method[len("window"):]) if method.startswith("window") else None
-            result = search(model.graph, cands, audio_cost, emotion=emotion,
-                            method="window" if window else "exact", window=window)
-            nodes, jumps = result.nodes, result.n_jumps
+        nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
         search_s = time.perf_counter() - t0
         ics, _ = render_nodes(model, phones, nodes, emotion=emotion)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space

@@ -87,25 +87,17 @@ def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "rando
     import matplotlib.pyplot as plt
 
     from animegraph import evaluate
-    from animegraph.search import search
-    from animegraph.synth import query_phones, render_nodes, score_candidates
+    from animegraph.synth import render_nodes
 
-    audio = clip.audio.astype(np.float32) / 32767.0
-    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
-    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
-    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    phones, emotion, cands, audio_cost = evaluate.heldout_query(model, clip)
     fig, ax = plt.subplots(figsize=(11, 3.5))
     fps = model.graph.fps
     truth = clip.motion.astype(np.float64)
     ax.plot(np.arange(len(truth)) / fps, evaluate.mouth_opening(truth, model.names, model.kind),
             "k", lw=2, label="recorded")
     for k, method in enumerate(methods):
-        if method in ("random", "first"):
-            nodes = evaluate.baseline_nodes(cands.nodes, method, np.random.default_rng(0))
-        else:
-            window = int(method[len("window"):]) if method.startswith("window") else None
-            nodes = search(model.graph, cands, audio_cost, emotion=emotion,
-                           method="window" if window else "exact", window=window).nodes
+        nodes, _ = evaluate.method_nodes(model, cands, audio_cost, method, emotion=emotion,
+                                         rng=np.random.default_rng(0))
         ics, joins = render_nodes(model, phones, nodes, emotion=emotion)
         pred = model.decomposer.inverse_transform(ics)
         ax.plot(np.arange(len(pred)) / fps, evaluate.mouth_opening(pred, model.names,

@@ -29,8 +29,6 @@ from scipy.signal import butter, sosfiltfilt
 from animegraph.dtw import dtw, warp_indices
 from animegraph.graph import AnimeGraph
 
-#: Prosody frames per second (RASTA-PLP hop of 10 ms).
-PROSODY_RATE = 100.0
 #: Order of the zero-phase Butterworth low-pass of the smoothing step.
 SMOOTHING_ORDER = 2
 

@@ -154,7 +154,7 @@ def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> 
     s0, s1 = int(round(start * clip.sample_rate)), int(round(end * clip.sample_rate))
     phones = tuple(Segment(p.phone, max(p.start, start) - start, min(p.end, end) - start)
                    for p in clip.phones if p.end > start and p.start < end)
-    hop = 0.01  # RASTA-PLP frames per second: 100
+    hop = RastaPlpConfig().hop_s  # frame period of the prosody curve (ingest uses the default)
     p0, p1 = int(round(start / hop)), int(round(end / hop)) + 1
     return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
                    missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],

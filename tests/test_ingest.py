@@ -6,6 +6,7 @@ import json
 import shutil
 
 import numpy as np
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
@@ -65,10 +66,10 @@ def test_model_keeps_95_percent_and_reconstructs_the_frames(tiny_db):
     names = db.table("channels").column("name").to_pylist()
     clip_id = db.table("clips").column("clip_id")[0].as_py()
     frames = db.table("frames").filter(
-        __import__("pyarrow.compute").compute.field("clip_id") == clip_id).sort_by("frame")
+        pc.field("clip_id") == clip_id).sort_by("frame")
     motion = np.stack([frames.column(n).to_numpy() for n in names], axis=1)
     animes = db.table("animes").filter(
-        __import__("pyarrow.compute").compute.field("clip_id") == clip_id).sort_by("node_id")
+        pc.field("clip_id") == clip_id).sort_by("node_id")
     first = animes.to_pylist()[1]
     ics = np.asarray(first["motion"]).reshape(first["n_frames"], -1)
     recon = model.inverse_transform(ics)
