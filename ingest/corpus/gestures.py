@@ -57,6 +57,20 @@ def analyze_prosody(audio: np.ndarray, sample_rate: int, times: np.ndarray) -> P
     return Prosody(f0_semitones=st[idx], energy_db=energy[idx])
 
 
+def warm_up() -> None:
+    """Compile (and cache) the numba kernels :func:`analyze_prosody` uses, in this process.
+
+    librosa's YIN runs cached numba gufuncs. When two fresh worker processes compile and
+    cache the same gufunc at once, numba can leave mismatched cache files that crash with
+    a null function pointer (numba issues #10128, #4807; seen here as a segfaulting corpus
+    worker in a new environment). Calling this once before starting workers means they
+    only ever read a complete cache.
+    """
+    rng = np.random.default_rng(0)
+    noise = (0.01 * rng.standard_normal(8000)).astype(np.float32)
+    analyze_prosody(noise, 16000, np.arange(10) / 100.0)
+
+
 def _pulse(times: np.ndarray, centre: float, width: float) -> np.ndarray:
     """A raised-cosine bump of total ``width`` seconds, peak 1 at ``centre``."""
     u = (times - centre) / (width / 2)

@@ -349,6 +349,7 @@ def generate_corpus(
             results = map(_make_and_write, jobs)
             done = list(progress(results) if progress else results)
         else:
+            gestures.warm_up()  # compile librosa's cached gufuncs once, before the workers
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
                 results = pool.map(_make_and_write, jobs, chunksize=4)
