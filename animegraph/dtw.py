@@ -38,6 +38,7 @@ function validates its arguments first.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from numbers import Integral
 
@@ -46,13 +47,15 @@ import numpy as np
 
 from db.errors import ParameterError
 
-__all__ = ["DTWResult", "audio_cost", "audio_costs", "dtw", "warp_indices", "warp_onto"]
+__all__ = ["DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw", "warp_indices",
+           "warp_onto"]
 
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
 
-#: ``audio_costs`` runs in parallel (numba ``prange``) from this many nodes on, when numba
+#: ``audio_costs_many`` runs in parallel (numba ``prange``) from this many nodes on, when numba
 #: has more than one thread. On 2 cores (OpenMP layer) parallel breaks even at ~10 nodes
 #: and is 1.6-1.8x faster from ~50 on; the margin keeps tiny batches off the thread pool.
+#: (Pairs: an utterance's phones x candidates.)
 _PARALLEL_MIN_NODES = 64
 
 
@@ -231,30 +234,39 @@ def _audio_cost_one(xt, y, band, acc, c, total):
 
 
 @_jit()
-def _audio_costs_serial(xt, values, offsets, nodes, max_len, band, out):
-    d, n = xt.shape
-    acc = np.empty((max_len, n))
-    c = np.empty(n)
+def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, lo, hi, out):
+    """Eq. 5 for the pairs [lo, hi): input ``inputs[t]`` (columns ``x_off[k]:x_off[k+1]``
+    of ``xs``, shape (d, total input frames)) against node ``nodes[t]``.
+
+    Pairs of one input are expected together: its workspace is made once per run of them.
+    """
+    d = xs.shape[0]
     total = np.empty(d)
-    for t in range(nodes.shape[0]):
+    current = -1
+    xt = np.empty((d, 1))
+    acc = np.empty((1, 1))
+    c = np.empty(1)
+    for t in range(lo, hi):
+        k = inputs[t]
+        if k != current:
+            xt = np.ascontiguousarray(xs[:, x_off[k]:x_off[k + 1]])
+            acc = np.empty((max_len, xt.shape[1]))
+            c = np.empty(xt.shape[1])
+            current = k
         a = nodes[t]
         out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, acc, c, total)
 
 
 @_jit(parallel=True)
-def _audio_costs_parallel(xt, values, offsets, nodes, max_len, band, n_chunks, out):
-    # Chunks, not nodes, in parallel: one workspace per chunk. (numba.get_num_threads()
-    # is not called in here: it would make the function uncachable.)
-    d, n = xt.shape
-    n_nodes = nodes.shape[0]
+def _costs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, n_chunks, out):
+    # Chunks of pairs, not pairs, in parallel: one workspace per chunk, and one parallel
+    # region for a whole utterance (a region per phone cost more in thread wake-ups than
+    # the work on a loaded 2-core machine). (numba.get_num_threads() is not called in
+    # here: it would make the function uncachable.)
+    n_pairs = nodes.shape[0]
     for chunk in numba.prange(n_chunks):
-        acc = np.empty((max_len, n))
-        c = np.empty(n)
-        total = np.empty(d)
-        for t in range(chunk * n_nodes // n_chunks, (chunk + 1) * n_nodes // n_chunks):
-            a = nodes[t]
-            out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, acc, c,
-                                     total)
+        _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band,
+                     chunk * n_pairs // n_chunks, (chunk + 1) * n_pairs // n_chunks, out)
 
 
 @_jit()
@@ -428,9 +440,10 @@ def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = N
     y = _curve("c_anime", c_anime, None)
     _same_width("c_anime", y, "c_input", x)
     out = np.empty(1)
-    offsets = np.array([0, len(y)], dtype=np.int64)
-    _audio_costs_serial(np.ascontiguousarray(x.T), y, offsets, np.zeros(1, dtype=np.int64),
-                        len(y), _band(band), out)
+    zero = np.zeros(1, dtype=np.int64)
+    _costs_range(np.ascontiguousarray(x.T), np.array([0, len(x)], dtype=np.int64), y,
+                 np.array([0, len(y)], dtype=np.int64), zero, zero, len(y), _band(band), 0, 1,
+                 out)
     return float(out[0])
 
 
@@ -438,19 +451,18 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
                 nodes: np.ndarray, *, band: int | None = None) -> np.ndarray:
     """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for many anime nodes at once.
 
-    The search's hot path: one compiled loop over ``nodes`` (in parallel from
-    ``_PARALLEL_MIN_NODES`` nodes on), with the curves in the graph's ragged layout
-    (:attr:`animegraph.graph.AnimeGraph.prosody_values` and ``prosody_offsets``). Only the
-    curves of ``nodes`` are read (and checked for NaN/inf). Eq. 5 depends only on the
-    input phone and the anime node, not on the rest of the sequence, so one call per
-    input phone over its candidates (``graph.by_phone[p]``) serves the whole search.
+    Eq. 5 depends only on the input phone and the anime node, not on the rest of the
+    sequence, so one call per input phone over its candidates (``graph.by_phone[p]``)
+    serves the whole search; :func:`audio_costs_many` does every phone of an utterance
+    in one call.
 
     Parameters
     ----------
     c_input : np.ndarray, shape (n, d)
         The input phone's prosody curve.
     values : np.ndarray of float32 or float64, shape (n_frames, d)
-        Every node's curve, end to end.
+        Every node's curve, end to end
+        (:attr:`animegraph.graph.AnimeGraph.prosody_values`).
     offsets : np.ndarray of int, shape (n_nodes + 1,)
         Node ``a``'s curve is ``values[offsets[a]:offsets[a + 1]]``.
     nodes : np.ndarray of int, shape (k,)
@@ -467,21 +479,84 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
     Raises
     ------
     ParameterError
-        ``c_input`` not a non-empty finite 2-D array; ``values``, ``offsets`` or ``nodes``
-        malformed; a node out of range, with an empty curve or with non-finite values;
-        different numbers of features; bad ``band``.
+        As :func:`audio_costs_many`.
     """
-    x = _curve("c_input", c_input, np.float64)
+    return audio_costs_many([c_input], values, offsets, [nodes], band=band)[0]
+
+
+def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets: np.ndarray,
+                     nodes: Sequence[np.ndarray], *,
+                     band: int | None = None) -> list[np.ndarray]:
+    """Audio costs of Eq. 5 for every input phone against its candidate nodes.
+
+    The search's hot path: one compiled loop over all (phone, node) pairs of an
+    utterance, in parallel (numba ``prange``) from ``_PARALLEL_MIN_NODES`` pairs on, with
+    the curves in the graph's ragged layout. Only the curves of ``nodes`` are read (and
+    checked for NaN/inf).
+
+    Parameters
+    ----------
+    c_inputs : sequence of np.ndarray, each shape (n_i, d)
+        The input phones' prosody curves.
+    values : np.ndarray of float32 or float64, shape (n_frames, d)
+        Every node's curve, end to end.
+    offsets : np.ndarray of int, shape (n_nodes + 1,)
+        Node ``a``'s curve is ``values[offsets[a]:offsets[a + 1]]``.
+    nodes : sequence of np.ndarray of int, each shape (k_i,)
+        ``nodes[i]``: the nodes to score against input ``i`` (may be empty).
+    band : int or None, optional
+        Sakoe-Chiba radius, as in :func:`dtw`.
+
+    Returns
+    -------
+    list of np.ndarray of float64, shapes (k_i,)
+        ``out[i][t] == audio_cost(c_inputs[i], curve of nodes[i][t])``, exactly.
+
+    Raises
+    ------
+    ParameterError
+        An input curve not a non-empty finite 2-D array; ``values``, ``offsets`` or
+        ``nodes`` malformed; a node out of range, with an empty curve or with non-finite
+        values; different numbers of features; bad ``band``; different numbers of inputs
+        and node lists.
+    """
+    if len(c_inputs) != len(nodes):
+        raise ParameterError(f"need one node list per input curve, got {len(nodes)} lists "
+                             f"for {len(c_inputs)} curves")
     values = _values(values)
-    _same_width("values", values, "c_input", x)
     band = _band(band)
     offsets = _int_vector("offsets", offsets)
     if len(offsets) < 2:
         raise ParameterError(f"offsets must have n_nodes + 1 >= 2 entries, got {len(offsets)}")
-    nodes = _int_vector("nodes", nodes)
-    out = np.empty(len(nodes))
-    if len(nodes) == 0:
-        return out
+    if len(c_inputs) == 0:
+        return []
+    xs, lists = [], []
+    for i, (c_input, node_list) in enumerate(zip(c_inputs, nodes, strict=True)):
+        x = _curve("c_input" if len(c_inputs) == 1 else f"c_inputs[{i}]", c_input, np.float64)
+        _same_width("values", values, "c_input", x)
+        xs.append(x)
+        lists.append(_int_vector("nodes", node_list))
+    sizes = np.array([len(n) for n in lists], dtype=np.int64)
+    flat = np.concatenate(lists) if lists else np.empty(0, dtype=np.int64)
+    out = np.empty(len(flat))
+    if len(flat):
+        _check_nodes(values, offsets, flat)
+        x_off = np.concatenate([[0], np.cumsum([len(x) for x in xs])]).astype(np.int64)
+        xs_all = np.ascontiguousarray(np.concatenate(xs).T)
+        inputs = np.repeat(np.arange(len(xs), dtype=np.int64), sizes)
+        max_len = int(np.diff(offsets)[flat].max())
+        if len(flat) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
+            n_chunks = min(len(flat), 8 * numba.get_num_threads())
+            _costs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
+                            n_chunks, out)
+        else:
+            _costs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, 0,
+                         len(flat), out)
+    return np.split(out, np.cumsum(sizes)[:-1])
+
+
+def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> None:
+    """Nodes in range, each with a non-empty finite curve within ``values``."""
     bad = np.flatnonzero((nodes < 0) | (nodes >= len(offsets) - 1))
     if len(bad):
         raise ParameterError(
@@ -499,14 +574,6 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
     t = _first_nonfinite(values, offsets, nodes)
     if t >= 0:
         raise ParameterError(f"values must be finite, got NaN or inf in node {nodes[t]}'s curve")
-    max_len = int((stops - starts).max())
-    xt = np.ascontiguousarray(x.T)
-    if len(nodes) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
-        n_chunks = min(len(nodes), 8 * numba.get_num_threads())
-        _audio_costs_parallel(xt, values, offsets, nodes, max_len, band, n_chunks, out)
-    else:
-        _audio_costs_serial(xt, values, offsets, nodes, max_len, band, out)
-    return out
 
 
 # --------------------------------------------------------------------------- validation

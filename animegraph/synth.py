@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph.dtw import audio_costs
+from animegraph.dtw import audio_costs_many
 from animegraph.graph import AnimeGraph
 from animegraph.search import SearchResult, SearchWeights, candidates, search
 from animegraph.synthesis import Phone, PostOptions, assemble
@@ -158,9 +158,9 @@ def score_candidates(model: Model, phones, *, emotion: str | None = None):
     """Candidate animes of every input phone and their audio costs (Eq. 5)."""
     graph = model.graph
     cands = candidates(graph, [p.phone for p in phones], emotion=emotion)
-    audio_cost = [audio_costs(p.prosody.astype(np.float32), graph.prosody_values,
-                              graph.prosody_offsets, nodes)
-                  for p, nodes in zip(phones, cands.nodes, strict=True)]
+    audio_cost = audio_costs_many([p.prosody.astype(np.float32) for p in phones],
+                                  graph.prosody_values,
+                                  graph.prosody_offsets, cands.nodes)
     return cands, audio_cost
 
 

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 import animegraph.dtw as dtw_module
-from animegraph.dtw import audio_cost, audio_costs, dtw, warp_indices, warp_onto
+from animegraph.dtw import (
+    audio_cost,
+    audio_costs,
+    audio_costs_many,
+    dtw,
+    warp_indices,
+    warp_onto,
+)
 from db.errors import ParameterError
 
 
@@ -230,6 +237,23 @@ def test_audio_costs_equal_a_loop_of_audio_cost(rng, monkeypatch, parallel):
         assert costs.dtype == np.float64 and costs.shape == (250,)
         expected = [audio_cost(c_input, curves[a]) for a in nodes]
         np.testing.assert_array_equal(costs, expected)  # bit for bit
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_audio_costs_many_equal_one_call_per_input(rng, monkeypatch, parallel):
+    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1 if parallel else 10**9)
+    curves, values, offsets = _graph_like(rng, 200)
+    inputs = [rng.standard_normal((k, 9)) for k in (12, 1, 30, 5)]
+    lists = [rng.permutation(200)[:k] for k in (150, 0, 7, 200)]
+    many = audio_costs_many(inputs, values, offsets, lists)
+    assert [m.shape for m in many] == [(150,), (0,), (7,), (200,)]
+    for x, nodes, costs in zip(inputs, lists, many, strict=True):
+        np.testing.assert_array_equal(costs, [audio_cost(x, curves[a]) for a in nodes])
+    assert audio_costs_many([], values, offsets, []) == []
+    with pytest.raises(ParameterError, match="one node list per input"):
+        audio_costs_many(inputs, values, offsets, lists[:2])
+    with pytest.raises(ParameterError, match=r"c_inputs\[1\]"):
+        audio_costs_many([inputs[0], np.full((3, 9), np.nan)], values, offsets, lists[:2])
 
 
 def test_audio_costs_float64_values_and_band(rng):
