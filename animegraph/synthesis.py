@@ -81,14 +81,39 @@ def warp_anime(graph: AnimeGraph, node: int, phone: Phone, n_out: int, *,
     u = (np.arange(n_out) + 0.5) / n_out
     anime_prosody = graph.prosody(node)
     if time_warp and len(phone.prosody) > 1 and len(anime_prosody) > 1:
-        path = dtw(phone.prosody, anime_prosody).path
-        src = warp_indices(len(phone.prosody), path)  # anime prosody index per input frame
+        src = warp_positions(phone.prosody, anime_prosody)
         v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
         frac = v / (len(anime_prosody) - 1)
     else:
         frac = u
     pos = np.clip(frac, 0.0, 1.0) * (len(motion) - 1)
     return _interp_rows(motion, pos)
+
+
+def warp_positions(c_input: np.ndarray, c_anime: np.ndarray) -> np.ndarray:
+    """Fractional anime prosody frame shown at each input prosody frame (§4.3).
+
+    The DTW alignment of the two prosody curves (:func:`animegraph.dtw.warp_indices`),
+    with its ends pinned: the first input frame shows the anime's first frame and the
+    last its last. Where DTW matches several anime frames to an end frame, the mean
+    would start the anime late (or end it early), and two consecutive animes of one
+    recording would then no longer meet where they met in the recording.
+
+    Parameters
+    ----------
+    c_input : np.ndarray, shape (n, d)
+    c_anime : np.ndarray, shape (m, d)
+
+    Returns
+    -------
+    np.ndarray of float64, shape (n,)
+        Non-decreasing, from 0 to m - 1 (for n >= 2).
+    """
+    src = warp_indices(len(c_input), dtw(c_input, c_anime).path)
+    src[0] = 0.0
+    if len(src) > 1:
+        src[-1] = len(c_anime) - 1.0
+    return src
 
 
 def _interp_rows(motion: np.ndarray, pos: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ import pytest
 
 from animegraph.cli import main
 from animegraph.synth import Model, synthesize
-from animegraph.synthesis import PostOptions
+from animegraph.synthesis import PostOptions, warp_positions
 from db.errors import DataError, ParameterError
 from ingest.corpus import face
 from ingest.corpus.synthetic import ClipSpec, CorpusConfig, synthesize_clip, write_clip
@@ -153,3 +153,15 @@ def test_a_database_without_animes_is_refused(tmp_path):
     write_version(tmp_path / "db", empty, {"fps": 120.0, "n_channels": 0})
     with pytest.raises(DataError):
         Model.load(tmp_path / "db")
+
+
+def test_warp_positions_pin_the_ends():
+    # The anime's first three frames all match the input's first frame, its last two
+    # the last: DTW's mean would start at 1.0 and end at 6.5; the warp starts at the
+    # anime's first frame and ends at its last.
+    c_input = np.array([[0.0], [1.0], [2.0]])
+    c_anime = np.array([[0.0], [0.0], [0.0], [1.0], [1.5], [2.0], [2.0], [2.0]])
+    src = warp_positions(c_input, c_anime)
+    assert src[0] == 0.0 and src[-1] == 7.0
+    assert np.all(np.diff(src) >= 0)
+    assert warp_positions(c_input[:1], c_anime).tolist() == [0.0]
