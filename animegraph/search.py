@@ -338,7 +338,7 @@ def path_cost(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
 
 def search(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray], *,
            weights: SearchWeights | None = None, emotion: str | None = None,
-           method: str = "exact", window: int | None = None,
+           method: str = "exact", window: int | None = None, tolerance: float = 0.0,
            max_expansions: int = 2_000_000, max_queue: int = 20_000_000) -> SearchResult:
     """Find the matching anime sequence of least cost (Eq. 2, §4.2).
 
@@ -359,6 +359,14 @@ def search(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray], *,
     window : int, optional
         ``method="window"`` only (required there): phones looked ahead of the current one
         (the paper: 3–6).
+    tolerance : float, optional
+        ``method="exact"`` only: accept a sequence whose cost is within this fraction of
+        the optimum (0, the default: the optimum itself). The search then keeps only
+        states that could beat the greedy upper bound by more than ``tolerance`` times
+        a lower bound of the optimum, and returns the greedy sequence when none does; the
+        result is certified: ``cost <= (1 + tolerance) * optimum``. Beyond the paper: on
+        graphs of many near-identical recordings (near-ties the bounds cannot separate)
+        it prunes most of the work.
     max_expansions : int
         ``method="paper"``: queue nodes expanded before the search stops (capped).
     max_queue : int
@@ -384,14 +392,18 @@ def search(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray], *,
     elif window is not None:
         raise ParameterError(f"window is only used by method='window', got window={window!r} "
                              f"with method={method!r}")
+    if not isinstance(tolerance, int | float | np.floating) or not 0.0 <= tolerance < 1.0:
+        raise ParameterError(f"tolerance must be a number in [0, 1), got {tolerance!r}")
+    if tolerance and method != "exact":
+        raise ParameterError(f"tolerance is only used by method='exact', got method={method!r}")
     for name, value in (("max_expansions", max_expansions), ("max_queue", max_queue)):
         if not isinstance(value, int | np.integer) or value < 1:
             raise ParameterError(f"{name} must be an int >= 1, got {value!r}")
     problem = _Problem.build(graph, cands, audio, weights, emotion)
     capped = False
     if method == "exact":
-        idx, cost, n_exp, n_dist = _exact(problem)
-        optimal = True
+        idx, cost, n_exp, n_dist = _exact(problem, float(tolerance))
+        optimal = tolerance == 0.0
     elif method == "dp":
         idx, cost, n_exp, n_dist = _dp(problem)
         optimal = True
@@ -551,12 +563,12 @@ class _Problem:
 # --------------------------------------------------------------------------------------
 
 
-def _exact(p: _Problem) -> tuple[np.ndarray, float, int, int]:
-    return _exact_layers(p, p.cn, p.off, p.u)
+def _exact(p: _Problem, tolerance: float = 0.0) -> tuple[np.ndarray, float, int, int]:
+    return _exact_layers(p, p.cn, p.off, p.u, tolerance)
 
 
-def _exact_layers(p: _Problem, cn: np.ndarray, off: np.ndarray,
-                  u: np.ndarray) -> tuple[np.ndarray, float, int, int]:
+def _exact_layers(p: _Problem, cn: np.ndarray, off: np.ndarray, u: np.ndarray,
+                  tolerance: float = 0.0) -> tuple[np.ndarray, float, int, int]:
     """Global optimum of the chain ``cn``/``off``/``u``: (indices, cost, states, distances).
 
     The problem is a shortest path through layers of candidates, with the transition
@@ -605,6 +617,11 @@ def _exact_layers(p: _Problem, cn: np.ndarray, off: np.ndarray,
     Comparisons with UB carry a relative slack of 1e-9 so that rounding never prunes π.
     Cost: O(N) for the bounds plus, per kept state, one tree query; in the worst case
     (bounds that prune nothing) this is the Viterbi recursion with a spatial index.
+
+    With ``tolerance`` t > 0 the keep threshold is ``UB - t * LB`` instead of UB, with
+    ``LB = min(u + h)`` over the first layer (<= OPT). If ``OPT <= UB - t * LB``, the
+    argument above keeps π and the result is optimal; otherwise the greedy sequence,
+    returned when nothing is kept, costs ``UB < OPT + t * LB <= (1 + t) OPT``.
     """
     n = len(off) - 1
     pos = np.full(p.graph.n_nodes, -1, dtype=np.int64)
@@ -614,10 +631,15 @@ def _exact_layers(p: _Problem, cn: np.ndarray, off: np.ndarray,
     if n == 1:
         return gpath - off[:-1], float(ub), len(cn), 0
     ub_eff = ub + 1e-9 * (1.0 + abs(ub))
+    if tolerance > 0.0:
+        ub_eff = ub - tolerance * float(np.min(u[:off[1]] + h[:off[1]]))
     path, cost, kept, n_dist = _forward(cn, off, u, h, p.nxt, p.prv, p.last, p.first, w1,
                                         p.scale, ub_eff, pos)
-    if path[0] < 0:  # cannot happen (the greedy sequence is kept); be safe all the same
-        log.warning("exact search kept no complete sequence; returning the greedy one")
+    if path[0] < 0:
+        # With a tolerance: nothing beats the greedy sequence by more than it (see
+        # above). Without one this cannot happen (the greedy sequence is kept).
+        if tolerance == 0.0:
+            log.warning("exact search kept no complete sequence; returning the greedy one")
         return gpath - off[:-1], float(ub), kept, n_dist
     return path - off[:-1], float(cost), kept, n_dist + len(cn)
 

@@ -4,7 +4,7 @@ Usage::
 
     python scripts/bench_search.py [--db PATH] [--sizes 10000 100000 1000000]
                                    [--repeats 5] [--methods exact window paper] [--json OUT]
-                                   [--n-random K]
+                                   [--n-random K] [--tolerances 0.01]
 
 The base graph is a database (``--db``) or synthetic recordings with English-like phone
 frequencies and sentences repeated over takes (as in the corpus). Larger graphs are
@@ -213,6 +213,9 @@ def main() -> int:
                         help="max_queue of method='paper'")
     parser.add_argument("--methods", nargs="+", default=["exact", "window", "paper"],
                         choices=["exact", "window", "paper", "dp"])
+    parser.add_argument("--tolerances", type=float, nargs="*", default=[0.01],
+                        help="also run the exact search with these certified tolerances "
+                             "(cost <= (1 + t) * optimum)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--n-random", type=int, default=1,
                         help="random inputs (their difficulty varies much; the extra ones "
@@ -261,6 +264,7 @@ def main() -> int:
             cands = candidates(g, phones)
             audio = [rng.uniform(0.0, 20.0, size=len(c)) for c in cands.nodes]
             runs = [("exact", {}, args.repeats)]
+            runs += [(f"exact@{t:g}", {"tolerance": t}, args.repeats) for t in args.tolerances]
             if "dp" in args.methods:
                 runs.append(("dp", {}, args.repeats))
             if "window" in args.methods:
@@ -270,7 +274,7 @@ def main() -> int:
                                        "max_queue": args.paper_queue}, 1))
             exact_cost = None
             for name, kw, reps in runs:
-                method = "window" if name.startswith("window") else name
+                method = "window" if name.startswith("window") else name.split("@")[0]
                 search(g, cands, audio, method=method, **kw) if reps > 1 else None  # warm
                 times = []
                 for _ in range(reps):

@@ -151,6 +151,40 @@ def test_exact_matches_dp_on_larger_graphs(seed):
     assert path_cost(g, cands, audio, nodes=exact.nodes).cost == pytest.approx(exact.cost, abs=1e-9)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_tolerance_is_certified(seed):
+    # cost <= (1 + t) * optimum, with fewer states kept; t = 0 is the exact search.
+    rng = np.random.default_rng(200 + seed)
+    phones = tuple(PHONES[:10])
+    g = random_graph(rng, 200, phones, length=(5, 25), n_pcs=5, scale=30.0)
+    cands = candidates(g, [str(p) for p in rng.choice(phones, size=20)])
+    audio = random_audio(rng, cands, high=30.0)
+    optimum = search(g, cands, audio, method="dp")
+    exact = search(g, cands, audio, tolerance=0.0)
+    assert exact.cost == pytest.approx(optimum.cost, abs=1e-9) and exact.optimal
+    for t in (0.001, 0.01, 0.05, 0.2):
+        r = search(g, cands, audio, tolerance=t)
+        assert r.cost <= (1 + t) * optimum.cost + 1e-9
+        assert r.cost >= optimum.cost - 1e-9 and not r.optimal
+        assert r.n_expanded <= exact.n_expanded
+        check = path_cost(g, cands, audio, nodes=r.nodes)
+        assert check.cost == pytest.approx(r.cost, abs=1e-9)
+    if seed == 0:
+        assert search(g, cands, audio, tolerance=0.99).n_expanded < exact.n_expanded
+
+
+def test_tolerance_errors():
+    rng = np.random.default_rng(7)
+    g = random_graph(rng, 5, ("AA", "B"))
+    cands = candidates(g, ["AA", "B"])
+    audio = random_audio(rng, cands)
+    for bad in (-0.1, 1.0, float("nan"), "0.1"):
+        with pytest.raises(ParameterError, match="tolerance"):
+            search(g, cands, audio, tolerance=bad)
+    with pytest.raises(ParameterError, match="only used by method='exact'"):
+        search(g, cands, audio, method="dp", tolerance=0.1)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_exact_with_duplicated_and_near_duplicated_recordings(seed):
     # Replicas (exact and perturbed copies) make ties and dominated states: the pruning
