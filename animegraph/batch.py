@@ -336,12 +336,14 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
 def render_function() -> Callable | None:
     """``animegraph.render.render_motion(motion_path, audio_path, out_path, db=...)``, or
     None when this build has no MP4 rendering."""
+    import importlib
+
     try:
-        from animegraph import render
+        render = importlib.import_module("animegraph.render")
     except ModuleNotFoundError as exc:
-        if exc.name in ("animegraph.render",):
+        if exc.name == "animegraph.render":
             return None
-        raise
+        raise  # the module is there but something it needs is not: a real error
     return getattr(render, "render_motion", None)
 
 
@@ -535,11 +537,7 @@ def _speak(line: ScriptLine, warnings: list[str]):
     from ingest.espeak import speak
     from ingest.formats.phones_csv import Segment
 
-    voice = voice_for(line, warnings)
-    try:
-        utt = speak(line.text, voice)
-    except AnimeGraphError as exc:
-        raise LineError(f"eSpeak NG cannot speak this line: {exc}") from None
+    utt = speak(line.text, voice_for(line, warnings))  # errors name the text or the voice
     labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
     return utt.audio, utt.sample_rate, labels
 
