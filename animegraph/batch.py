@@ -55,9 +55,11 @@ RENDER_MODES = ("none", "mp4")
 #: Columns of ``OUT/report.csv``.
 REPORT_COLUMNS = ("id", "status", "speaker", "speech", "duration_s", "emotion",
                   "emotion_source", "motion_emotions", "jumps", "cost", "seconds",
-                  "warnings", "error")
+                  "cpu_seconds", "warnings", "error")
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
 CONNECT_TIMEOUT_S = 5.0
+#: The worked example shipped with the package: a tutor and a student, six lines.
+EXAMPLE_SCRIPT = Path(__file__).resolve().parent / "examples" / "dialogue.csv"
 
 
 class LineError(AnimeGraphError):
@@ -455,7 +457,7 @@ def run_line(task: LineTask) -> dict:
     Errors a user can cause (an emotion the database lacks, text eSpeak cannot speak, an
     unreadable recording) become the row's ``error``; anything else propagates.
     """
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     line = task.line
     folder = Path(task.folder)
     row = _row(line, status="failed")
@@ -472,6 +474,7 @@ def run_line(task: LineTask) -> dict:
         where = f"{exc.filename}: " if exc.filename else ""
         row["error"] = f"{where}{exc.strerror or exc}"
     row["seconds"] = round(time.perf_counter() - t0, 3)
+    row["cpu_seconds"] = round(time.process_time() - cpu0, 3)
     if row["status"] == "done":
         outputs = row.pop("_outputs")
         marker = {"format": FORMAT, "key": task.key, "outputs": outputs, "row": row}

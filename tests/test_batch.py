@@ -11,6 +11,7 @@ import pytest
 
 from animegraph.batch import (
     DONE,
+    EXAMPLE_SCRIPT,
     BatchOptions,
     LineTask,
     database_identity,
@@ -87,6 +88,12 @@ def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):
     with pytest.raises(ScriptError, match=message.replace(".", r"\.").replace("(", r"\(")
                        .replace(")", r"\)")):
         read_script(path)
+
+
+def test_the_shipped_example_is_a_valid_script():
+    lines = read_script(EXAMPLE_SCRIPT)
+    assert len(lines) >= 5 and {x.speaker for x in lines} == {"tutor", "student"}
+    assert all(x.audio is None and x.emotion.source == "given" for x in lines)
 
 
 def test_emotion_cells():
