@@ -202,8 +202,11 @@ def run_batch(
         if tasks:
             def prepare() -> None:
                 say("compiling the search kernels in this process before the workers start ...")
-                warm_up(db, {(t.line.method, t.line.window) for t in tasks},
-                        align=any(t.line.audio is not None for t in tasks))
+                try:
+                    warm_up(db, {(t.line.method, t.line.window) for t in tasks},
+                            align=any(t.line.audio is not None for t in tasks))
+                except AnimeGraphError as exc:  # the lines will meet it and say so
+                    logger.warning("warming up the search kernels failed: %s", exc)
 
             with dask_client(options, prepare=prepare) as (client, n_workers):
                 result.n_workers = n_workers
