@@ -260,6 +260,8 @@ def dask_client(options: BatchOptions, *, prepare: Callable[[], object] | None =
         The scheduler cannot be reached within ``options.connect_timeout`` seconds, or
         has no worker.
     """
+    import distributed  # noqa: F401  (first: importing it sets its loggers' levels)
+
     quiet = logging.getLogger("distributed")
     level = quiet.level
     if not logger.isEnabledFor(logging.DEBUG):

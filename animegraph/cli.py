@@ -174,7 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--db", required=True, type=Path, help="database folder")
     bat.add_argument("--out", required=True, type=Path, help="output folder")
     bat.add_argument("--workers", type=_whole_number, default=2,
-                     help="worker processes of the local Dask cluster (default 2)")
+                     help="worker processes of the local Dask cluster (default 2; "
+                     "ignored with --scheduler)")
     bat.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="run on an existing Dask cluster, e.g. tcp://host:8786")
     bat.add_argument("--render", choices=("none", "mp4"), default="none",
