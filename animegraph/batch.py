@@ -559,11 +559,11 @@ def voice_for(line: ScriptLine, warnings: list[str] | None = None):
 
     spec = line.emotion
     weights = spec.weights if spec.source in ("given", "mix") else (("neutral", 1.0),)
-    unknown = [name for name, _ in weights if name not in STYLES]
+    unknown = [name for name, _ in weights if name.lower() not in STYLES]
     if unknown and warnings is not None:
         warnings.append(f"no eSpeak prosody preset for {', '.join(unknown)}: spoken with the "
                         "neutral preset")
-    presets = [(STYLES.get(name, STYLES["neutral"]).voice, w) for name, w in weights]
+    presets = [(STYLES.get(name.lower(), STYLES["neutral"]).voice, w) for name, w in weights]
     fields = ("rate", "pitch", "pitch_range", "volume", "word_gap")
     blended = {f: int(round(sum(getattr(v, f) * w for v, w in presets))) for f in fields}
     voice = replace(Voice(), **blended)

@@ -10,8 +10,9 @@ column     required meaning
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
                     transcript for forced alignment when there is
 ``audio``           a recording (WAV), relative to the script's folder
-``emotion``         a name (``happy``), ``auto`` (detected from the speech), or a mix
-                    ``happy=0.7,neutral=0.3``; empty: no emotion preference
+``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
+                    from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
+                    emotion preference
 ``speaker``         who says it (kept in the report)
 ``voice``           eSpeak NG voice for lines without audio, e.g. ``en-us+f3``
 ``window``          the paper's bounded look-ahead of K phonemes instead of the exact
@@ -43,7 +44,7 @@ REQUIRED = ("id", "text")
 RESERVED_IDS = frozenset({"report.csv"})
 
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-_EMOTION_NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
+_EMOTION_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _TRUE = frozenset({"true", "yes", "1", "y"})
 _FALSE = frozenset({"false", "no", "0", "n"})
 
@@ -87,11 +88,15 @@ class EmotionSpec:
 
 
 def parse_emotion(value: str | None) -> EmotionSpec:
-    """Parse an emotion cell; raise ``ValueError`` with the reason when it is malformed."""
-    text = (value or "").strip().lower()
+    """Parse an emotion cell; raise ``ValueError`` with the reason when it is malformed.
+
+    Names keep their spelling (they must match the database's labels); ``auto`` is
+    recognised in any case.
+    """
+    text = (value or "").strip()
     if not text:
         return EmotionSpec("default")
-    if text == "auto":
+    if text.lower() == "auto":
         return EmotionSpec("auto")
     if "=" not in text:
         if not _EMOTION_NAME.match(text):
