@@ -161,6 +161,29 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
     syn.set_defaults(func=_cmd_synth)
 
+    bat = sub.add_parser(
+        "batch", help="animate every line of a dialogue script, in parallel (Dask)",
+        description="Animate a dialogue script (CSV or JSON Lines: id, text, and optional "
+        "audio, emotion, speaker, voice, window, exact). Lines without a recording are spoken "
+        "by eSpeak NG with their emotion's prosody, phone timing from the synthesizer; lines "
+        "with one are force-aligned to their text. Each line gets OUT/<id>/ (speech.wav, "
+        "motion, phones.csv, explain.json[, preview.mp4]); OUT/report.csv lists them all. "
+        "Finished lines are skipped on a re-run unless --force.",
+    )
+    bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
+    bat.add_argument("--db", required=True, type=Path, help="database folder")
+    bat.add_argument("--out", required=True, type=Path, help="output folder")
+    bat.add_argument("--workers", type=_whole_number, default=2,
+                     help="worker processes of the local Dask cluster (default 2; "
+                     "ignored with --scheduler)")
+    bat.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="run on an existing Dask cluster, e.g. tcp://host:8786")
+    bat.add_argument("--render", choices=("none", "mp4"), default="none",
+                     help="also render an MP4 preview of each line (default none)")
+    bat.add_argument("--force", action="store_true", help="redo lines finished before")
+    bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    bat.set_defaults(func=_cmd_batch)
+
     info = sub.add_parser("info", help="summarise a database")
     info.add_argument("--db", required=True, type=Path, help="database folder")
     info.add_argument("--json", action="store_true", help="the summary as JSON")
@@ -243,10 +266,9 @@ def _cmd_sql(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    import json
     import time
 
-    from animegraph.synth import Model, synthesize, write_motion
+    from animegraph.synth import Model, backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis import PostOptions
     from ingest.formats.wav import read_wav
     from ingest.readers.common import read_labels
@@ -280,11 +302,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}; "
           f"wrote {args.output}", file=sys.stderr)
-    backoffs = sorted({f"{e['phone']}->{e['anime_phone']}" for e in out.explain
-                       if e["backoff"]})
-    if backoffs:
+    missing = backoffs(out)
+    if missing:
         print(f"animegraph: phones missing from the database, backed off: "
-              f"{', '.join(backoffs)}", file=sys.stderr)
+              f"{', '.join(missing)}", file=sys.stderr)
     if args.explain:
         import pyarrow as pa
 
@@ -293,23 +314,27 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
     if args.explain_json:
-        from db.atomic import atomic_write
-
-        record = {"phones": out.explain, "joins": out.joins, "cost": r.cost,
-                  "n_jumps": r.n_jumps, "method": r.method, "timings": t}
-        with atomic_write(args.explain_json) as handle:
-            handle.write(json.dumps(record, indent=1, default=_jsonable).encode())
+        write_explain(out, args.explain_json)
     return 0
 
 
-def _jsonable(value):
-    import numpy as np
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from animegraph.batch import BatchOptions, run_batch
 
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, tuple):
-        return list(value)
-    return str(value)
+    if args.scheduler is None and args.workers < 1:
+        raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
+    options = BatchOptions(db=args.db, out=args.out, workers=args.workers,
+                           scheduler=args.scheduler, render=args.render, force=args.force)
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(f"animegraph: {line}", file=sys.stderr)
+
+    result = run_batch(args.script, options, say=say,
+                       progress=lambda total: _progress(total, args.quiet, "line"))
+    for line in result.summary():
+        print(line)
+    return 0 if result.ok else 1
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
@@ -340,8 +365,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         _configure_logging(args.verbose)
         if args.command is None:
-            raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, sql, "
-                             "info "
+            raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
+                             "batch, sql, info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

@@ -205,6 +205,42 @@ def _phone_name(graph: AnimeGraph, node: int) -> str:
     return PHONES[int(graph.node_phone[node])]
 
 
+def explain_record(synth: Synthesis) -> dict:
+    """The ``--explain`` record of a synthesis: every phone's source and costs, the joins,
+    the search result and the timings (what ``synth --explain-json`` and ``batch`` write)."""
+    r = synth.result
+    return {"phones": synth.explain, "joins": synth.joins, "cost": r.cost,
+            "n_jumps": r.n_jumps, "method": r.method, "segmentation": synth.segmentation,
+            "timings": synth.timings}
+
+
+def backoffs(synth: Synthesis) -> list[str]:
+    """Phones the database lacks and the phone used instead, e.g. ``["ZH->SH"]``."""
+    return sorted({f"{e['phone']}->{e['anime_phone']}" for e in synth.explain if e["backoff"]})
+
+
+def write_explain(synth: Synthesis, path: Path, **extra) -> Path:
+    """Write :func:`explain_record` (plus ``extra`` keys) as JSON, atomically."""
+    import json
+
+    from db.atomic import atomic_write
+
+    record = {**extra, **explain_record(synth)}
+    with atomic_write(path) as handle:
+        handle.write(json.dumps(record, indent=1, default=_jsonable).encode())
+    return path
+
+
+def _jsonable(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    return str(value)
+
+
 def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
     """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
     from db.atomic import atomic_write

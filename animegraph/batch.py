@@ -1,0 +1,646 @@
+"""``animegraph batch``: a dialogue script in, a folder of animated lines out (issue #7).
+
+Every line of the script (:mod:`animegraph.script`) becomes a folder ``OUT/<id>/``:
+
+- ``speech.wav``: the speech used (the recording, or eSpeak NG's speech);
+- ``motion.c3d`` (marker and landmark databases) or ``motion.csv`` (curves);
+- ``phones.csv``: the phone timing the motion was made for;
+- ``explain.json``: where every phone's motion came from and what it cost (the record of
+  ``synth --explain-json``), with the line's inputs;
+- ``preview.mp4`` with ``--render mp4``;
+- ``done.json``, written last: the line's report row and the key of its inputs.
+
+Lines without a recording are spoken by eSpeak NG with the emotion's prosody preset and
+the phone timing comes straight from the synthesizer's events (no alignment); lines with
+a recording are force-aligned to their text. The lines run in parallel on Dask
+distributed: a local cluster of ``workers`` processes by default, or an existing cluster
+at ``scheduler``. Each worker process loads the Anime Graph once (:func:`worker_model`).
+
+A line whose ``done.json`` holds the same key (a hash of its inputs, the recording's
+bytes, the database version and the options that change its outputs) is skipped on a
+re-run unless ``force``. Every file is written to a temporary name and renamed; the old
+``done.json`` is removed before a line is redone, so an interrupted batch never leaves a
+line that looks finished but is not. A failing line records its reason in
+``OUT/report.csv`` and the others go on.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import logging
+import os
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from animegraph import __version__
+from animegraph.script import EmotionSpec, ScriptLine, read_script
+from db.atomic import atomic_write
+from db.errors import AnimeGraphError, DataError, ParameterError
+from db.store import Database, current_version
+
+logger = logging.getLogger(__name__)
+
+#: Version of the per-line layout and key; a change redoes every line.
+FORMAT = 1
+DONE = "done.json"
+RENDER_MODES = ("none", "mp4")
+#: Columns of ``OUT/report.csv``.
+REPORT_COLUMNS = ("id", "status", "speaker", "speech", "duration_s", "emotion",
+                  "emotion_source", "motion_emotions", "jumps", "cost", "seconds",
+                  "cpu_seconds", "warnings", "error")
+#: Seconds to wait for an existing scheduler (and for it to have a worker).
+CONNECT_TIMEOUT_S = 5.0
+#: The worked example shipped with the package: a tutor and a student, six lines.
+EXAMPLE_SCRIPT = Path(__file__).resolve().parent / "examples" / "dialogue.csv"
+
+
+class LineError(AnimeGraphError):
+    """One line cannot be made; the batch goes on."""
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """How to run a batch (see ``animegraph batch --help``)."""
+
+    db: Path
+    out: Path
+    workers: int = 2
+    scheduler: str | None = None
+    render: str = "none"
+    force: bool = False
+    connect_timeout: float = CONNECT_TIMEOUT_S
+
+
+@dataclass(frozen=True)
+class LineTask:
+    """What a worker needs to make one line (plain data: it travels to the worker)."""
+
+    line: ScriptLine
+    db: str
+    db_version: str
+    folder: str
+    render: str
+    key: str
+
+
+@dataclass
+class BatchResult:
+    """What a batch did: one report row per script line, in script order."""
+
+    rows: list[dict]
+    report: Path
+    n_workers: int = 0
+    elapsed_s: float = 0.0
+    loads: dict = field(default_factory=dict)  # worker process id -> model loads
+
+    def count(self, status: str) -> int:
+        """Rows with this status (``done``, ``skipped``, ``failed``, ``not run``)."""
+        return sum(r["status"] == status for r in self.rows)
+
+    @property
+    def ok(self) -> bool:
+        """True if no line failed or was left unrun."""
+        return self.count("failed") == 0 and self.count("not run") == 0
+
+    def summary(self) -> list[str]:
+        """A few lines for the user."""
+        done, skipped, failed = self.count("done"), self.count("skipped"), self.count("failed")
+        speech = sum(float(r["duration_s"] or 0) for r in self.rows if r["status"] == "done")
+        lines = [f"batch: {len(self.rows)} lines: {done} made, {skipped} skipped (finished "
+                 f"before), {failed} failed" + (f", {self.count('not run')} not run"
+                                                 if self.count("not run") else "")]
+        if done:
+            rate = done / self.elapsed_s * 60 if self.elapsed_s > 0 else float("nan")
+            lines.append(f"batch: {speech:.1f} s of speech animated in {self.elapsed_s:.1f} s "
+                         f"on {self.n_workers} worker{'s' * (self.n_workers != 1)} "
+                         f"({rate:.1f} lines/min)")
+        for r in self.rows:
+            if r["status"] == "failed":
+                lines.append(f"batch: failed {r['id']}: {r['error']}")
+        lines.append(f"batch: report {self.report}")
+        return lines
+
+
+# --------------------------------------------------------------------------------------
+# The batch (client side)
+# --------------------------------------------------------------------------------------
+
+
+def run_batch(
+    script: Path, options: BatchOptions, *,
+    progress: Callable[[int], Callable[[Iterable], Iterable]] | None = None,
+    say: Callable[[str], object] | None = None,
+) -> BatchResult:
+    """Run every line of ``script``; write ``options.out/report.csv``.
+
+    Parameters
+    ----------
+    script : Path
+        CSV or JSON Lines dialogue script (:func:`animegraph.script.read_script`).
+    options : BatchOptions
+    progress : callable, optional
+        ``progress(total)`` returns a wrapper of the iterable of finished lines (a bar).
+    say : callable, optional
+        Receives a line of news before long steps.
+
+    Raises
+    ------
+    ScriptError
+        The script is malformed (nothing runs).
+    AnimeGraphError
+        The database cannot be opened, rendering is unavailable, the scheduler cannot be
+        reached: nothing runs.
+    """
+    say = say or (lambda _line: None)
+    if options.render not in RENDER_MODES:
+        raise ParameterError(f"render must be one of {', '.join(RENDER_MODES)}, got "
+                             f"{options.render!r}")
+    if options.scheduler is None and options.workers < 1:
+        raise ParameterError(f"workers must be at least 1, got {options.workers}")
+    lines = read_script(script)
+    db = Path(options.db).absolute()
+    Database.open(db)  # a clear error now rather than one per line
+    version, identity = database_identity(db)
+    if options.render == "mp4" and render_function() is None:
+        raise ParameterError("mp4 rendering is not available in this build (use --render none)")
+    out = Path(options.out).absolute()
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out {out} is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"cannot create --out {out}: {exc.strerror or exc}") from None
+
+    rows: dict[str, dict] = {}
+    tasks: list[LineTask] = []
+    for line in lines:
+        folder = out / line.id
+        try:
+            key = line_key(line, identity, options.render)
+        except LineError as exc:
+            rows[line.id] = _row(line, status="failed", error=str(exc))
+            continue
+        saved = None if options.force else finished(folder, key)
+        if saved is not None:
+            rows[line.id] = {**saved, "status": "skipped"}
+            continue
+        tasks.append(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                              render=options.render, key=key))
+
+    report = out / "report.csv"
+    result = BatchResult(rows=[], report=report)
+    t0 = time.perf_counter()
+    try:
+        if tasks:
+            def prepare() -> None:
+                say("compiling the search kernels in this process before the workers start ...")
+                try:
+                    warm_up(db, {(t.line.method, t.line.window) for t in tasks},
+                            align=any(t.line.audio is not None for t in tasks))
+                except AnimeGraphError as exc:  # the lines will meet it and say so
+                    logger.warning("warming up the search kernels failed: %s", exc)
+
+            with dask_client(options, prepare=prepare) as (client, n_workers):
+                result.n_workers = n_workers
+                say(f"{len(tasks)} lines to make on {n_workers} Dask worker"
+                    f"{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} skipped or failed "
+                    f"before starting)")
+                for task, row in _run_tasks(client, tasks, progress):
+                    pid, loads = row.pop("_pid", None), row.pop("_loads", None)
+                    if pid is not None:
+                        result.loads[pid] = loads
+                    rows[task.line.id] = row
+    finally:
+        result.elapsed_s = time.perf_counter() - t0
+        result.rows = [rows.get(line.id) or _row(line, status="not run") for line in lines]
+        write_report(report, result.rows)
+    return result
+
+
+def _run_tasks(client, tasks: list[LineTask], progress) -> Iterator[tuple[LineTask, dict]]:
+    """Submit every line; yield (task, report row) as they finish."""
+    from distributed import as_completed
+
+    futures = {client.submit(run_line, task, pure=False): task for task in tasks}
+    finished_lines: Iterable = as_completed(futures, loop=client.loop)
+    if progress is not None:
+        finished_lines = progress(len(futures))(finished_lines)
+    for future in finished_lines:
+        task = futures[future]
+        try:
+            row = future.result()
+        except Exception as exc:  # a bug, or a worker that died on this line
+            logger.debug("line %s failed on its worker", task.line.id, exc_info=True)
+            row = _row(task.line, status="failed",
+                       error=f"worker error: {type(exc).__name__}: {exc}")
+        yield task, row
+        future.release()
+
+
+@contextmanager
+def dask_client(options: BatchOptions, *, prepare: Callable[[], object] | None = None
+                ) -> Iterator[tuple[object, int]]:
+    """A Dask client: of a new local cluster of ``options.workers`` processes (one thread
+    each, numba single-threaded), or of the cluster at ``options.scheduler``.
+
+    ``prepare()`` runs once the scheduler is known to be reachable and before a local
+    cluster's workers start. Yields (client, number of workers).
+
+    Raises
+    ------
+    DataError
+        The scheduler cannot be reached within ``options.connect_timeout`` seconds, or
+        has no worker.
+    """
+    import distributed  # noqa: F401  (first: importing it sets its loggers' levels)
+
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    if not logger.isEnabledFor(logging.DEBUG):
+        quiet.setLevel(logging.ERROR)  # Dask's news of its own start and stop
+    try:
+        with _client(options, prepare) as client:
+            yield client, len(client.scheduler_info()["workers"])
+    finally:
+        quiet.setLevel(level)
+
+
+@contextmanager
+def _client(options: BatchOptions, prepare: Callable[[], object] | None):
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    if options.scheduler:
+        address = options.scheduler
+        try:
+            client = Client(address, timeout=options.connect_timeout, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+    else:
+        if prepare is not None:
+            prepare()
+        cluster = LocalCluster(
+            n_workers=options.workers, threads_per_worker=1, processes=True,
+            dashboard_address=None, silence_logs=logging.ERROR,
+            # One core per worker: numba's own threads would compete with the other workers.
+            env={"NUMBA_NUM_THREADS": "1"},
+        )
+        client = Client(cluster, set_as_default=False)
+    try:
+        if cluster is None:
+            try:
+                client.wait_for_workers(1, timeout=options.connect_timeout)
+            except (OSError, TimeoutError) as exc:
+                raise DataError(f"the Dask scheduler at {options.scheduler} has no workers "
+                                f"({type(exc).__name__})") from None
+            if prepare is not None:
+                prepare()
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = False) -> None:
+    """Compile (and cache) every numba kernel a line will run, in this process.
+
+    Worker processes that compile and cache the same numba function at the same time can
+    leave mismatched cache files and crash (numba issues #10128, #4807); after this they
+    only load complete caches. One short eSpeak utterance is synthesized with each search
+    method used, force-aligned if any line has a recording, and both the serial and
+    the parallel audio-cost kernels are run.
+    """
+    import numpy as np
+
+    from animegraph.dtw import audio_costs
+    from animegraph.synth import Model, synthesize
+    from ingest.espeak import Voice, speak
+    from ingest.formats.phones_csv import Segment
+
+    model = Model.load(db)
+    utt = speak("Good morning, class.", Voice())
+    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    for method, window in sorted(methods, key=str):
+        out = synthesize(model, utt.audio, utt.sample_rate, labels=labels, method=method,
+                         window=window)
+    if align:
+        out = synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
+    g = model.graph
+    query = out.phones[len(out.phones) // 2].prosody.astype(np.float32)
+    for k in (2, min(g.n_nodes, 128)):
+        audio_costs(query, g.prosody_values, g.prosody_offsets, np.arange(k))
+
+
+def render_function() -> Callable | None:
+    """``animegraph.render.render_motion(motion_path, audio_path, out_path, db=...)``, or
+    None when this build has no MP4 rendering."""
+    import importlib
+
+    try:
+        render = importlib.import_module("animegraph.render")
+    except ModuleNotFoundError as exc:
+        if exc.name == "animegraph.render":
+            return None
+        raise  # the module is there but something it needs is not: a real error
+    return getattr(render, "render_motion", None)
+
+
+# --------------------------------------------------------------------------------------
+# Keys and markers
+# --------------------------------------------------------------------------------------
+
+
+def database_identity(db: Path) -> tuple[str, str]:
+    """(live version name, a digest of that version's manifest): a rebuilt database in
+    the same folder, even with the same version name, has another digest."""
+    version = current_version(db)
+    try:
+        manifest = (db / version / "manifest.json").read_bytes()
+    except OSError as exc:
+        raise DataError(f"database {db} is damaged: cannot read its manifest") from exc
+    return version, f"{version}:{hashlib.sha256(manifest).hexdigest()[:16]}"
+
+
+def line_key(line: ScriptLine, db_identity: str, render: str) -> str:
+    """Hash of everything a line's outputs depend on.
+
+    Raises
+    ------
+    LineError
+        The recording is missing or unreadable.
+    """
+    audio = None
+    if line.audio is not None:
+        audio = _file_digest(line.audio)
+    inputs = {
+        "format": FORMAT, "animegraph": __version__, "db": db_identity, "render": render,
+        "id": line.id, "text": line.text, "audio_sha256": audio,
+        "emotion": line.emotion.text, "voice": line.voice, "speaker": line.speaker,
+        "method": line.method, "window": line.window,
+    }
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+
+
+def _file_digest(path: Path) -> str:
+    if not path.exists():
+        raise LineError(f"audio file not found: {path}")
+    if not path.is_file():
+        raise LineError(f"audio is not a file: {path}")
+    digest = hashlib.sha256()
+    try:
+        with path.open("rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as exc:
+        raise LineError(f"cannot read audio file {path}: {exc.strerror or exc}") from None
+    return digest.hexdigest()
+
+
+def finished(folder: Path, key: str) -> dict | None:
+    """The saved report row of a line finished with this ``key`` (every output still
+    there), else None."""
+    try:
+        marker = json.loads((folder / DONE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(marker, dict) or marker.get("key") != key:
+        return None
+    outputs = marker.get("outputs", [])
+    if not all((folder / name).is_file() for name in outputs):
+        return None
+    row = marker.get("row")
+    return row if isinstance(row, dict) else None
+
+
+# --------------------------------------------------------------------------------------
+# One line (worker side)
+# --------------------------------------------------------------------------------------
+
+_MODELS: dict = {}
+_LOADS: Counter = Counter()
+_MODEL_LOCK = threading.Lock()
+
+
+def worker_model(db: str, version: str):
+    """The Anime Graph of ``db`` at ``version``, loaded once per process and kept.
+
+    Raises
+    ------
+    DataError
+        The database's live version is no longer ``version`` (it was rebuilt during the
+        batch).
+    """
+    from animegraph.synth import Model
+
+    key = (str(Path(db).resolve()), version)
+    with _MODEL_LOCK:
+        model = _MODELS.get(key)
+        if model is None:
+            model = Model.load(db)
+            live = model.db.version_dir.name
+            if live != version:
+                raise DataError(f"database {db} changed during the batch (live version {live}, "
+                                f"the batch started with {version}); run the batch again")
+            _MODELS.clear()  # one database at a time per process
+            _MODELS[key] = model
+            _LOADS[key] += 1
+        return model
+
+
+def run_line(task: LineTask) -> dict:
+    """Make one line's outputs; return its report row (status ``done`` or ``failed``).
+
+    Errors a user can cause (an emotion the database lacks, text eSpeak cannot speak, an
+    unreadable recording) become the row's ``error``; anything else propagates.
+    """
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    line = task.line
+    folder = Path(task.folder)
+    row = _row(line, status="failed")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / DONE).unlink(missing_ok=True)  # first: the line is no longer finished
+        _remove_temporaries(folder)
+        model = worker_model(task.db, task.db_version)
+        row.update(_make_line(task, model, folder))
+        row["status"] = "done"
+    except AnimeGraphError as exc:
+        row["error"] = str(exc)
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        row["error"] = f"{where}{exc.strerror or exc}"
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    row["cpu_seconds"] = round(time.process_time() - cpu0, 3)
+    if row["status"] == "done":
+        outputs = row.pop("_outputs")
+        marker = {"format": FORMAT, "key": task.key, "outputs": outputs, "row": row}
+        with atomic_write(folder / DONE) as handle:
+            handle.write(json.dumps(marker, indent=1).encode())
+    row.pop("_outputs", None)
+    row["_pid"] = os.getpid()
+    row["_loads"] = _LOADS[(str(Path(task.db).resolve()), task.db_version)]
+    return row
+
+
+def _make_line(task: LineTask, model, folder: Path) -> dict:
+    from animegraph.synth import backoffs, synthesize, write_explain, write_motion
+    from ingest.formats.phones_csv import write_phones_csv
+    from ingest.formats.wav import read_wav, write_wav
+
+    line = task.line
+    warnings: list[str] = []
+    if line.audio is not None:
+        audio, sample_rate = read_wav(line.audio)
+        text, labels, speech = line.text, None, "recording"
+    else:
+        audio, sample_rate, labels = _speak(line, warnings)
+        text, speech = None, "espeak"
+    try:
+        synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
+                           emotion=line.emotion.argument, method=line.method,
+                           window=line.window)
+    except ParameterError as exc:
+        if line.emotion.source in ("auto", "mix") and "emotion" in str(exc):
+            raise LineError(f"emotion {line.emotion.text!r} ({line.emotion.source}) is not "
+                            f"supported yet by this build's synthesis: {exc}") from None
+        raise
+    if line.audio is not None and synth.segmentation != "aligned":
+        warnings.append(f"the transcript could not be aligned; phones were "
+                        f"{synth.segmentation}")
+    missing = backoffs(synth)
+    if missing:
+        warnings.append(f"phones missing from the database, backed off: {', '.join(missing)}")
+
+    motion_name = "motion.c3d" if model.kind in ("markers", "landmarks") else "motion.csv"
+    write_wav(folder / "speech.wav", audio, sample_rate)
+    write_motion(synth, model, folder / motion_name)
+    write_phones_csv(folder / "phones.csv", synth.phones)
+    used = emotion_used(synth, line.emotion)
+    write_explain(synth, folder / "explain.json", id=line.id, text=line.text,
+                  speaker=line.speaker, speech=speech,
+                  emotion={"requested": line.emotion.text, "source": line.emotion.source,
+                           "used": used})
+    outputs = ["speech.wav", motion_name, "phones.csv", "explain.json"]
+    if task.render == "mp4":
+        _render(folder, motion_name, task.db)
+        outputs.append("preview.mp4")
+    return {
+        "speech": speech, "duration_s": round(len(audio) / sample_rate, 3),
+        "emotion": used, "motion_emotions": _motion_emotions(synth.explain),
+        "jumps": synth.result.n_jumps, "cost": round(float(synth.result.cost), 4),
+        "warnings": "; ".join(warnings), "error": "", "_outputs": outputs,
+    }
+
+
+def _speak(line: ScriptLine, warnings: list[str]):
+    from ingest.espeak import speak
+    from ingest.formats.phones_csv import Segment
+
+    utt = speak(line.text, voice_for(line, warnings))  # errors name the text or the voice
+    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    return utt.audio, utt.sample_rate, labels
+
+
+def voice_for(line: ScriptLine, warnings: list[str] | None = None):
+    """The eSpeak NG voice of a line without a recording: its emotion's prosody preset
+    (a mix blends the presets by weight; ``auto`` and no emotion speak neutrally), with
+    the line's ``voice`` name if it has one."""
+    from ingest.corpus.emotions import STYLES
+    from ingest.espeak import Voice
+
+    spec = line.emotion
+    weights = spec.weights if spec.source in ("given", "mix") else (("neutral", 1.0),)
+    unknown = [name for name, _ in weights if name.lower() not in STYLES]
+    if unknown and warnings is not None:
+        warnings.append(f"no eSpeak prosody preset for {', '.join(unknown)}: spoken with the "
+                        "neutral preset")
+    presets = [(STYLES.get(name.lower(), STYLES["neutral"]).voice, w) for name, w in weights]
+    fields = ("rate", "pitch", "pitch_range", "volume", "word_gap")
+    blended = {f: int(round(sum(getattr(v, f) * w for v, w in presets))) for f in fields}
+    voice = replace(Voice(), **blended)
+    if line.voice:
+        voice = replace(voice, name=line.voice)
+    return voice
+
+
+def emotion_used(synth, spec: EmotionSpec) -> str:
+    """The emotion a line was made in: what synthesis resolved it to when it reports one
+    (``Synthesis.emotion``, e.g. the class ``auto`` detected), else what was asked for;
+    ``none`` for no preference."""
+    resolved = getattr(synth, "emotion", None)
+    if resolved:
+        return resolved if isinstance(resolved, str) else str(resolved)
+    return spec.text or "none"
+
+
+def _motion_emotions(explain: list[dict]) -> str:
+    """Which emotions the chosen animes were recorded in, by share of speech time."""
+    time_by: Counter = Counter()
+    for e in explain:
+        if e["phone"] != "SIL":
+            time_by[e["emotion"]] += e["end"] - e["start"]
+    total = sum(time_by.values())
+    if total <= 0:
+        return ""
+    return ", ".join(f"{name} {share / total:.0%}" for name, share in time_by.most_common())
+
+
+def _render(folder: Path, motion_name: str, db: str) -> None:
+    import secrets
+
+    render_motion = render_function()
+    if render_motion is None:
+        raise LineError("mp4 rendering is not available on this worker")
+    tmp = folder / f".preview.{secrets.token_hex(6)}.tmp.mp4"
+    try:
+        render_motion(folder / motion_name, folder / "speech.wav", tmp, db=db)
+        os.replace(tmp, folder / "preview.mp4")
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _remove_temporaries(folder: Path) -> None:
+    """Temporary files a killed run left (hidden, so they never look finished)."""
+    for path in folder.glob(".*.tmp*"):
+        path.unlink(missing_ok=True)
+
+
+# --------------------------------------------------------------------------------------
+# The report
+# --------------------------------------------------------------------------------------
+
+
+def _row(line: ScriptLine, *, status: str, error: str = "") -> dict:
+    row = dict.fromkeys(REPORT_COLUMNS, "")
+    row.update(id=line.id, status=status, speaker=line.speaker,
+               speech="recording" if line.audio is not None else "espeak",
+               emotion=line.emotion.text or "none", emotion_source=line.emotion.source,
+               error=error)
+    return row
+
+
+def write_report(path: Path, rows: list[dict]) -> Path:
+    """``report.csv``: one row per script line, atomically."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=REPORT_COLUMNS, extrasaction="ignore",
+                            lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    with atomic_write(path) as handle:
+        handle.write(buffer.getvalue().encode())
+    return path
+
+
+def read_report(path: Path) -> list[dict]:
+    """The rows of a ``report.csv``."""
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))

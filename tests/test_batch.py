@@ -1,0 +1,304 @@
+"""``animegraph batch``: dialogue scripts, a real two-worker Dask cluster, resume, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from animegraph.batch import (
+    DONE,
+    EXAMPLE_SCRIPT,
+    BatchOptions,
+    LineTask,
+    database_identity,
+    finished,
+    line_key,
+    read_report,
+    render_function,
+    run_batch,
+    run_line,
+    voice_for,
+)
+from animegraph.cli import main
+from animegraph.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
+from db.errors import DataError
+from ingest.corpus.emotions import STYLES
+from ingest.espeak import Voice, speak
+from ingest.formats.c3d import read_c3d
+from ingest.formats.phones_csv import read_phones_csv
+from ingest.formats.wav import read_wav
+
+# --------------------------------------------------------------------------- the script
+
+
+def test_reads_csv_and_json_lines(tmp_path):
+    (tmp_path / "rec").mkdir()
+    csv_script = tmp_path / "lines.csv"
+    csv_script.write_text(
+        "ID, Text ,audio,emotion,speaker,voice,window,exact\n"
+        'a1,"Hello, class.",,happy,tutor,en-us+f3,,\n'
+        "\n"
+        "b-2,Fine thanks,rec/b.wav,happy=3,student,,4,\n"
+        "c.3,Again,,auto,,,,yes\n"
+        'd_4,Mixed,,"sad=1,neutral=3",,,,\n'
+    )
+    lines = read_script(csv_script)
+    assert [x.id for x in lines] == ["a1", "b-2", "c.3", "d_4"]
+    assert [x.line_no for x in lines] == [2, 4, 5, 6]
+    a, b, c, d = lines
+    assert a.text == "Hello, class." and a.voice == "en-us+f3" and a.speaker == "tutor"
+    assert a.emotion == EmotionSpec("given", (("happy", 1.0),)) and a.audio is None
+    assert b.audio == (tmp_path / "rec" / "b.wav").absolute()
+    assert b.emotion.source == "given" and b.window == 4 and b.method == "window"
+    assert c.emotion.source == "auto" and c.method == "exact"
+    assert d.emotion.text == "sad=0.25,neutral=0.75" and d.emotion.argument == d.emotion.text
+
+    jsonl = tmp_path / "lines.jsonl"
+    jsonl.write_text('{"id": "a1", "text": "Hello, class.", "emotion": "happy"}\n\n'
+                     '{"id": 7, "text": "Seven", "window": 3, "exact": false}\n')
+    lines = read_script(jsonl)
+    assert [(x.id, x.line_no, x.window) for x in lines] == [("a1", 1, None), ("7", 3, 3)]
+
+
+@pytest.mark.parametrize("name, body, message", [
+    ("s.csv", "id,text,mood\na,Hi,calm\n", "s.csv line 1: unknown column 'mood'"),
+    ("s.csv", "id,text\na,Hello\nb,Hi,extra\n", "s.csv line 3: 3 fields"),
+    ("s.csv", "id,text\na,Hello\n\nA,Again\n",
+     "s.csv line 4: duplicate id 'A' (first on line 2)"),
+    ("s.csv", "id,text,emotion\na,Hello,happy=x\n", "s.csv line 2: emotion mix"),
+    ("s.csv", "id,text,emotion\na,Hello,happy sad\n", "s.csv line 2: emotion"),
+    ("s.csv", "id,text,window,exact\na,Hello,3,true\n", "s.csv line 2: window and exact"),
+    ("s.csv", "id,text,window\na,Hello,two\n", "s.csv line 2: window must be"),
+    ("s.csv", "id,text\n../x,Hello\n", "s.csv line 2: id '../x'"),
+    ("s.csv", "id,text\na,\n", "s.csv line 2: empty text"),
+    ("s.csv", "id,speaker\na,tutor\n", "no 'text' column"),
+    ("s.csv", "id,text\n", "has no lines"),
+    ("s.jsonl", '{"id": "a", "text": "Hi"}\n{"id": "b", "text": \n', "s.jsonl line 2: not JSON"),
+    ("s.jsonl", '{"id": "a", "text": "Hi", "colour": 1}\n', "s.jsonl line 1: unknown column"),
+    ("s.jsonl", '["a", "Hi"]\n', "s.jsonl line 1: expected a JSON object"),
+    ("s.txt", "id,text\na,Hi\n", "expected a .csv or .jsonl"),
+])
+def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):
+    path = tmp_path / name
+    path.write_text(body)
+    with pytest.raises(ScriptError, match=message.replace(".", r"\.").replace("(", r"\(")
+                       .replace(")", r"\)")):
+        read_script(path)
+
+
+def test_the_shipped_example_is_a_valid_script():
+    lines = read_script(EXAMPLE_SCRIPT)
+    assert len(lines) >= 5 and {x.speaker for x in lines} == {"tutor", "student"}
+    assert all(x.audio is None and x.emotion.source == "given" for x in lines)
+
+
+def test_emotion_cells():
+    assert parse_emotion("") == EmotionSpec("default") and parse_emotion(None).argument is None
+    assert parse_emotion(" AUTO ").argument == "auto"
+    assert parse_emotion(" Calm ").argument == "Calm"  # the database's spelling
+    assert parse_emotion("happy=1, sad=0").source == "given"  # one weight left: a name
+    mix = parse_emotion("happy=0.7,neutral=0.3")
+    assert mix.source == "mix" and mix.weights == (("happy", 0.7), ("neutral", 0.3))
+    for bad in ("happy=-1,sad=1", "happy=0,sad=0", "happy=1,happy=2", "=1", "happy=nan,sad=1"):
+        with pytest.raises(ValueError):
+            parse_emotion(bad)
+
+
+def test_a_line_is_spoken_with_its_emotions_prosody():
+    def line(emotion, voice=None):
+        return ScriptLine(id="x", text="Hi", line_no=2, emotion=parse_emotion(emotion),
+                          voice=voice)
+
+    assert voice_for(line("sad")) == voice_for(line("Sad")) == STYLES["sad"].voice
+    assert voice_for(line("")) == voice_for(line("auto")) == STYLES["neutral"].voice
+    mixed = voice_for(line("happy=0.5,sad=0.5"))
+    assert mixed.rate == round((STYLES["happy"].voice.rate + STYLES["sad"].voice.rate) / 2)
+    warnings: list[str] = []
+    assert voice_for(line("bored", "en-us+m3"), warnings) == Voice(name="en-us+m3")
+    assert "no eSpeak prosody preset for bored" in warnings[0]
+
+
+def test_cli_refuses_a_bad_script_in_one_line(tmp_path, capsys):
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello\na,Again\n")
+    code = main(["batch", str(script), "--db", str(tmp_path / "db"), "--out",
+                 str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "\n" not in err and "line 3: duplicate id 'a'" in err
+    assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- markers
+
+
+def test_finished_needs_the_same_key_and_every_output(tmp_path):
+    folder = tmp_path / "a"
+    folder.mkdir()
+    (folder / "speech.wav").write_bytes(b"x")
+    marker = {"key": "k1", "outputs": ["speech.wav"], "row": {"id": "a", "status": "done"}}
+    (folder / DONE).write_text(json.dumps(marker))
+    assert finished(folder, "k1") == {"id": "a", "status": "done"}
+    assert finished(folder, "k2") is None  # other inputs, database or options
+    (folder / DONE).write_text(json.dumps(marker)[:-5])  # a truncated marker
+    assert finished(folder, "k1") is None
+    (folder / DONE).write_text(json.dumps({**marker, "outputs": ["speech.wav", "motion.c3d"]}))
+    assert finished(folder, "k1") is None  # an output went missing
+
+
+def test_the_key_follows_inputs_recording_and_database(tmp_path):
+    rec = tmp_path / "a.wav"
+    rec.write_bytes(b"one")
+    line = ScriptLine(id="a", text="Hi", line_no=2, audio=rec)
+    key = line_key(line, "v000001:abc", "none")
+    assert key == line_key(line, "v000001:abc", "none")
+    assert key != line_key(line, "v000002:def", "none")
+    assert key != line_key(line, "v000001:abc", "mp4")
+    assert key != line_key(ScriptLine(id="a", text="Hi!", line_no=2, audio=rec),
+                           "v000001:abc", "none")
+    rec.write_bytes(b"two")
+    assert key != line_key(line, "v000001:abc", "none")
+
+
+def test_run_line_in_process(tiny_db, tmp_path):
+    """A worker's job, without the cluster: a stale marker goes first, a bad emotion fails
+    the line with its reason, and the model is loaded once for both lines."""
+    from animegraph import batch
+
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    folder.mkdir(parents=True)
+    (folder / DONE).write_text("{}")
+    (folder / ".speech.wav.0123.tmp").write_bytes(b"half")
+
+    def task(emotion):
+        line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2,
+                          emotion=parse_emotion(emotion))
+        return LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                        render="none", key=line_key(line, identity, "none"))
+
+    bad = run_line(task("bored"))
+    assert bad["status"] == "failed" and "emotion 'bored' is not in the database" in bad["error"]
+    assert not (folder / DONE).exists() and not list(folder.glob(".*.tmp"))
+    good = run_line(task("angry"))
+    assert good["status"] == "done" and good["emotion"] == "angry", good
+    assert good["_loads"] == 1
+    assert finished(folder, task("angry").key)["jumps"] == good["jumps"]
+    with pytest.raises(DataError, match="changed during the batch"):
+        batch._MODELS.clear()
+        batch.worker_model(str(db), "v000999")
+
+
+# --------------------------------------------------------------------------- the cluster
+
+
+@pytest.fixture
+def dialogue(tiny_corpus, tmp_path):
+    """A script of five lines: spoken by eSpeak, recorded, mixed, and two that fail."""
+    clip = sorted((tiny_corpus / "clips").glob("*_neutral_*.json"))[0]
+    (tmp_path / "rec").mkdir()
+    shutil.copy(clip.with_suffix(".wav"), tmp_path / "rec" / "take.wav")
+    text = json.loads(clip.read_text())["text"]
+    script = tmp_path / "dialogue.csv"
+    with script.open("w", newline="") as handle:
+        csv.writer(handle).writerows([
+            ("id", "speaker", "emotion", "audio", "window", "text"),
+            ("hello", "tutor", "happy", "", "3", "Bob moved the warm vase away."),
+            ("recorded", "student", "neutral", "rec/take.wav", "", text),
+            ("mixed", "tutor", "happy=0.7,neutral=0.3", "", "", "Pam sang a tune."),
+            ("bored", "tutor", "bored", "", "", "This line has an emotion the database lacks."),
+            ("lost", "student", "", "rec/missing.wav", "", "This recording is missing."),
+            ("silent", "student", "", "", "", "..."),
+        ])
+    return script
+
+
+def test_batch_on_a_two_worker_cluster(tiny_db, dialogue, tmp_path, capsys):
+    db = tiny_db[0]
+    out = tmp_path / "out"
+    result = run_batch(dialogue, BatchOptions(db=db, out=out, workers=2))
+    rows = {r["id"]: r for r in read_report(out / "report.csv")}
+    assert list(rows) == ["hello", "recorded", "mixed", "bored", "lost", "silent"]
+    assert result.n_workers == 2
+    assert result.loads and set(result.loads.values()) == {1}  # one load per worker process
+    assert not result.ok
+
+    hello = rows["hello"]
+    assert hello["status"] == "done" and hello["speech"] == "espeak", hello
+    assert (hello["emotion"], hello["emotion_source"]) == ("happy", "given")
+    assert float(hello["duration_s"]) > 1 and int(hello["jumps"]) >= 0
+    folder = out / "hello"
+    audio, sr = read_wav(folder / "speech.wav")
+    motion = read_c3d(folder / "motion.c3d")
+    assert abs(len(motion.points) / motion.rate - len(audio) / sr) < 0.05
+    # The phone timing is eSpeak's own, not an alignment.
+    truth = speak("Bob moved the warm vase away.", STYLES["happy"].voice).phones
+    phones = read_phones_csv(folder / "phones.csv")
+    assert [p.phone for p in phones] == [p.phone for p in truth]
+    assert np.allclose([p.end for p in phones], [p.end for p in truth], atol=1e-5)
+    record = json.loads((folder / "explain.json").read_text())
+    assert record["method"] == "window" and record["segmentation"] == "labels"
+    assert record["emotion"] == {"requested": "happy", "source": "given", "used": "happy"}
+    assert len(record["phones"]) == len(phones)
+
+    recorded = rows["recorded"]
+    assert recorded["status"] == "done" and recorded["speech"] == "recording", recorded
+    assert json.loads((out / "recorded" / "explain.json").read_text())["segmentation"] \
+        == "aligned"
+
+    mixed = rows["mixed"]  # passed through to synthesis, which may not take mixes yet
+    assert mixed["emotion_source"] == "mix"
+    assert mixed["status"] == "done" or "not supported yet" in mixed["error"], mixed
+    assert rows["bored"]["status"] == "failed"
+    assert "emotion 'bored' is not in the database" in rows["bored"]["error"]
+    assert rows["lost"]["status"] == "failed"
+    assert rows["lost"]["error"].startswith("audio file not found")
+    assert "eSpeak NG produced no speech" in rows["silent"]["error"]
+    for name in ("bored", "lost", "silent"):
+        assert not (out / name / DONE).exists()
+
+    # Re-run: the finished lines are skipped (no cluster starts), the failed ones fail again.
+    done_only = tmp_path / "done.csv"
+    done_only.write_text("\n".join(dialogue.read_text().splitlines()[:3]) + "\n")
+    before = (folder / DONE).stat().st_mtime_ns
+    lost = tmp_path / "lost.jsonl"
+    lost.write_text('{"id": "lost", "text": "Missing.", "audio": "rec/missing.wav"}\n')
+    capsys.readouterr()
+    assert main(["batch", str(done_only), "--db", str(db), "--out", str(out), "--quiet"]) == 0
+    assert "0 made, 2 skipped" in capsys.readouterr().out
+    assert main(["batch", str(lost), "--db", str(db), "--out", str(out), "--quiet"]) == 1
+    assert "failed lost: audio file not found" in capsys.readouterr().out
+    assert (folder / DONE).stat().st_mtime_ns == before
+
+    # --force redoes a finished line (here on a one-worker cluster).
+    again = run_batch(done_only, BatchOptions(db=db, out=out, workers=1, force=True))
+    assert [r["status"] for r in again.rows] == ["done", "done"]
+    assert again.n_workers == 1 and (folder / DONE).stat().st_mtime_ns > before
+    assert [str(r["jumps"]) for r in again.rows] == [rows["hello"]["jumps"],
+                                                rows["recorded"]["jumps"]]
+
+
+def test_an_unreachable_scheduler_is_one_line(tiny_db, tmp_path, capsys):
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello there.\n")
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(tmp_path / "out"),
+                 "--scheduler", "tcp://127.0.0.1:9"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1, err
+    assert err[0].startswith("animegraph: error: cannot reach the Dask scheduler at "
+                              "tcp://127.0.0.1:9")
+
+
+@pytest.mark.skipif(render_function() is not None, reason="this build renders MP4")
+def test_mp4_needs_a_renderer(tiny_db, tmp_path, capsys):
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello there.\n")
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(tmp_path / "out"),
+                 "--render", "mp4"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and err == ("animegraph: error: mp4 rendering is not available in this "
+                                 "build (use --render none)")
