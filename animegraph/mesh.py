@@ -391,6 +391,12 @@ class Deformer:
             weights_used = _region_weights(mesh, markers.vertices, sources, band_mm)
             weights = np.zeros((mesh.n_vertices, len(REGIONS)))
             weights[:, used] = weights_used
+            # A marker's vertex follows its own regions only: interpolation stays exact
+            # there even where another region's marker is closer than the blend band.
+            for vertex, names in zip(markers.vertices, markers.regions, strict=True):
+                if names != (ANCHOR,):
+                    weights[vertex] = 0.0
+                    weights[vertex, [REGIONS.index(n) for n in names]] = 1.0 / len(names)
             members = [np.union1d(idx, anchors) if len(idx) else idx for idx in owned]
         operator = np.zeros((mesh.n_vertices, markers.n_markers))
         for k, idx in enumerate(members):
