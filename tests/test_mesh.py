@@ -153,3 +153,15 @@ def test_canonical_regions_split_the_lips():
     regions = canonical_regions(verts[[13, 14, 159, 386, 151]])
     assert regions == (("upper_jaw",), ("lower_jaw",), ("eyelid_r",), ("eyelid_l",),
                        ("upper_face",))
+
+
+def test_corpus_markers_csv_is_a_map_for_the_canonical_mesh(tmp_path):
+    rest = face.marker_rest()
+    lines = ["label,vertex,group,rest_x,rest_y,rest_z"] + [
+        f"{lab},{v},{g},{x},{y},{z}" for (lab, v, g), (x, y, z) in zip(face.MARKERS, rest,
+                                                                       strict=True)]
+    (tmp_path / "markers.csv").write_text("\n".join(lines) + "\n")
+    mapped = read_marker_map(tmp_path / "markers.csv", canonical_mesh())
+    expected = default_marker_map([m[0] for m in face.MARKERS])
+    assert mapped.regions == expected.regions
+    assert np.array_equal(mapped.vertices, expected.vertices)
