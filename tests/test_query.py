@@ -101,6 +101,19 @@ def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
         truth = original.points[f0:f0 + len(motion.points)]
         ok = np.isfinite(truth)
         assert np.abs(motion.points[ok] - truth[ok]).max() < 0.05
+    # A snippet renders against its database; motion of other channels is refused.
+    snippet = out / index[0]["motion"]
+    assert main(["render", str(snippet), "--db", str(tiny_db[0]), "-o",
+                 str(tmp_path / "snip.glb")]) == 0
+    from animegraph.motionio import write_channel_csv
+
+    write_channel_csv(tmp_path / "other.csv", np.zeros((3, 3)), ["foo.x", "foo.y", "foo.z"],
+                      30)
+    capsys.readouterr()
+    assert main(["render", str(tmp_path / "other.csv"), "--db", str(tiny_db[0]), "-o",
+                 str(tmp_path / "other.glb")]) == 1
+    assert "not the database's" in capsys.readouterr().err
+    assert not (tmp_path / "other.glb").exists()
     # An existing folder is refused and left alone; --force replaces it.
     stamp = (out / "index.csv").stat().st_mtime_ns
     assert main(argv) == 2
