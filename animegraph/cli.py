@@ -331,6 +331,9 @@ def _rest(motion, args: argparse.Namespace):
     """Rest-frame marker positions for the deformer, or None for the mesh's own."""
     from animegraph.mesh import default_marker_map, load_mesh, motion_points, read_marker_map
 
+    if args.mesh is not None and args.marker_map is None:
+        raise UsageError("animegraph render: --mesh needs --marker-map (which marker sits on "
+                         "which vertex)")
     index = args.rest_frame
     if index is None and args.mesh is None:
         return None

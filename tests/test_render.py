@@ -180,7 +180,7 @@ def test_bad_inputs_are_one_line_and_write_nothing(take, tmp_path, capsys):
          1, "cannot read mesh"),
         (["--mesh", str(tmp_path / "m.obj"), "--marker-map", str(tmp_path / "other.csv")],
          1, "do not match the mesh's marker map"),
-        (["--mesh", str(tmp_path / "m.obj")], 1, "--marker-map"),
+        (["--mesh", str(tmp_path / "m.obj")], 2, "--marker-map"),
         (["--size", "big"], 2, "--size"),
         (["--audio", str(tmp_path / "nope.wav")], 2, "does not exist"),
     ]
@@ -233,3 +233,14 @@ def test_plot_against_truth(take, tmp_path, capsys):
                                    str(tmp_path / "q.jpg")]), 2)
     assert ".png" in line
     assert not (tmp_path / "q.png").exists()
+
+
+def test_rest_frame_is_the_mesh_as_modelled(take, tmp_path):
+    # With frame 30 as the rest frame, that frame shows the mesh exactly as it is.
+    assert main(["render", str(take / "take.c3d"), "--rest-frame", "30", "-o",
+                 str(tmp_path / "r.glb")]) == 0
+    _, vertices, _ = read_glb_frames(tmp_path / "r.glb")
+    assert np.abs(vertices[30] - canonical_mesh().vertices).max() < 0.01
+    assert np.abs(vertices[0] - canonical_mesh().vertices).max() > 1.0
+    assert main(["render", str(take / "take.c3d"), "--rest-frame", "500", "-o",
+                 str(tmp_path / "s.glb")]) == 2
