@@ -229,7 +229,8 @@ def _add_animator_commands(sub) -> None:
                      "the mesh's own marker vertices for the canonical mesh, frame 0 for "
                      "another mesh)")
     ren.add_argument("--labels", type=Path, default=None,
-                     help="phone labels for captions (.phones.csv, .TextGrid, .lab)")
+                     help="phone labels for captions (.phones.csv, .TextGrid, .lab; default "
+                     "MOTION's <stem>.phones.csv when there is one)")
     ren.add_argument("--explain", type=Path, default=None,
                      help="'synth --explain-json' record, for phone captions")
     ren.add_argument("--fps", type=_number, default=None,
@@ -250,7 +251,8 @@ def _add_animator_commands(sub) -> None:
     plo.add_argument("-o", "--output", required=True, type=Path, help="PNG file")
     plo.add_argument("--truth", type=Path, default=None, help="ground-truth motion")
     plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
-    plo.add_argument("--labels", type=Path, default=None, help="phone labels instead")
+    plo.add_argument("--labels", type=Path, default=None,
+                     help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
     plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
     plo.add_argument("--title", default="", help="title")
     plo.set_defaults(func=_cmd_plot)
@@ -296,7 +298,11 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
 
     if args.explain is not None and args.labels is not None:
         raise UsageError(f"animegraph {args.command}: give --explain or --labels, not both")
-    return read_phone_track(labels=args.labels, explain=args.explain)
+    labels = args.labels
+    beside = args.motion.with_name(args.motion.stem + ".phones.csv")
+    if labels is None and args.explain is None and beside.is_file():
+        labels = beside  # what 'query --export' writes next to each snippet
+    return read_phone_track(labels=labels, explain=args.explain)
 
 
 def _cmd_render(args: argparse.Namespace) -> int:

@@ -66,9 +66,10 @@ def measures(values: np.ndarray, names: Sequence[str], kind: str | None = None,
     source = reference.values if reference is not None else values
     source_names = reference.names if reference is not None else names
     spread = np.nanstd(np.asarray(source, dtype=np.float64), axis=0)
+    still = 1e-6 * max(float(np.nanmax(spread)), 1e-12) if len(spread) else 0.0
     for c in np.argsort(-spread):
         name = source_names[c]
-        if name in present and name != mouth and len(out) < max_curves:
+        if name in present and name != mouth and len(out) < max_curves and spread[c] > still:
             out.append((name, values[:, list(names).index(name)]))
     return out
 

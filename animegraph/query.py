@@ -7,7 +7,8 @@ or, with ``clips=True``, whole utterances.
 
 :func:`export_hits` writes each hit as a motion snippet with context around it (C3D for
 marker databases, ``frame,time,<channel>`` CSV otherwise), its speech (WAV), a PNG
-preview, and an ``index.csv``; the folder is built aside and renamed into place.
+preview, and an ``index.csv``, and the phones over the snippet (``.phones.csv``, times from the
+snippet's start); the folder is built aside and renamed into place.
 """
 
 from __future__ import annotations
@@ -230,6 +231,7 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
 
 
 def _export_into(db: Database, hits: pa.Table, folder: Path, context: float) -> list[dict]:
+    from ingest.formats.phones_csv import write_phones_csv
     from ingest.formats.wav import write_wav
 
     cache: dict[tuple[str, str], ClipData] = {}
@@ -255,8 +257,13 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float) -> 
         s0 = int(round(f0 / clip.fps * clip.sample_rate))
         s1 = min(len(clip.audio), int(round(f1 / clip.fps * clip.sample_rate)))
         write_wav(folder / f"{stem}.wav", clip.audio[s0:s1], clip.sample_rate)
-        phones = [{**p, "start": p["start"] - f0 / clip.fps, "end": p["end"] - f0 / clip.fps}
+        span_s = (f1 - f0) / clip.fps
+        phones = [{**p, "start": max(0.0, p["start"] - f0 / clip.fps),
+                   "end": min(span_s, p["end"] - f0 / clip.fps)}
                   for p in clip.phones if p["end"] > f0 / clip.fps and p["start"] < f1 / clip.fps]
+        phones = [p for p in phones if p["end"] - p["start"] > 1e-4]
+        write_phones_csv(folder / f"{stem}.phones.csv",
+                         [(p["phone"], p["start"], p["end"]) for p in phones])
         _preview(clip, f0, f1, (a0 - f0 / clip.fps, a1 - f0 / clip.fps), phones,
                  folder / f"{stem}.png", title=f"{hit['clip_id']} ({hit['emotion']})"
                  + (f": {hit['phoneme']}" if anime_mode else ""))
@@ -266,7 +273,7 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float) -> 
             "speaker": hit["speaker"], "start_time": round(a0, 4), "end_time": round(a1, 4),
             "snippet_start": round(f0 / clip.fps, 4), "snippet_end": round(f1 / clip.fps, 4),
             "fps": clip.fps, "motion": motion_name, "audio": f"{stem}.wav",
-            "preview": f"{stem}.png",
+            "phones": f"{stem}.phones.csv", "preview": f"{stem}.png",
         })
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(index[0]), lineterminator="\n")

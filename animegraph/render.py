@@ -340,7 +340,8 @@ def curve_image(motion: Motion, phones: Sequence[dict], *, size=(960, 540),
     width, height = (int(s) - int(s) % 2 for s in size)
     values = np.asarray(motion.values, dtype=np.float64)
     spread = np.nanstd(values, axis=0)
-    chosen = np.argsort(-spread)[:max_curves]
+    moving = spread > 1e-6 * max(float(np.nanmax(spread)), 1e-12)
+    chosen = [c for c in np.argsort(-spread)[:max_curves] if moving[c]] or [0]
     t = np.arange(motion.n_frames) / motion.fps
     fig = Figure(figsize=(width / 100, height / 100), dpi=100)
     canvas = FigureCanvasAgg(fig)

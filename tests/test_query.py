@@ -13,6 +13,7 @@ from db.errors import ParameterError
 from db.sql import query as run_sql
 from db.store import Database
 from ingest.formats.c3d import read_c3d
+from ingest.formats.phones_csv import read_phones_csv
 from ingest.formats.wav import read_wav
 
 
@@ -95,6 +96,9 @@ def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
         assert end >= min(float(row["end_time"]) + 0.2 - 1e-2, end)
         assert motion.points.shape[0] == round((end - start) * motion.rate)
         assert abs(len(audio) / rate - (end - start)) < 2 / motion.rate
+        phones = read_phones_csv(out / row["phones"])
+        assert "AA" in [p.phone for p in phones]
+        assert phones[0].start >= 0 and phones[-1].end <= end - start + 1e-3
         # The snippet is the recording itself (world coordinates), frame for frame.
         original = read_c3d(tiny_corpus / "clips" / f"{row['clip_id']}.c3d")
         f0 = round(start * original.rate)
