@@ -244,3 +244,26 @@ def test_rest_frame_is_the_mesh_as_modelled(take, tmp_path):
     assert np.abs(vertices[0] - canonical_mesh().vertices).max() > 1.0
     assert main(["render", str(take / "take.c3d"), "--rest-frame", "500", "-o",
                  str(tmp_path / "s.glb")]) == 2
+
+
+@pytest.mark.shared
+def test_real_landmark_track_renders(tmp_path):
+    """A real tracked face (EDTalk sample, ../shared/data) on the canonical mesh, as MP4."""
+    from conftest import require_shared
+
+    from animegraph.motionio import write_channel_csv
+    from ingest.readers.landmarks import normalise_landmarks
+
+    folder = require_shared("talkingface", "edtalk_mouth_source")
+    meta = json.loads((folder / "meta.json").read_text())
+    raw = np.load(folder / "landmarks.npy")[:50]
+    points = normalise_landmarks(raw, meta["width"], meta["height"]).points
+    names = [f"lm{i}.{a}" for i in range(468) for a in "xyz"]
+    write_channel_csv(tmp_path / "lm.csv", points.reshape(len(points), -1), names, meta["fps"])
+    assert main(["render", str(tmp_path / "lm.csv"), "-o", str(tmp_path / "lm.mp4"),
+                 "--size", "240x270", "--quiet"]) == 0
+    assert len(_decode(tmp_path / "lm.mp4", 240, 270)) == 60  # 2 s at 30 fps
+    assert main(["render", str(tmp_path / "lm.csv"), "-o", str(tmp_path / "lm.glb")]) == 0
+    _, vertices, _ = read_glb_frames(tmp_path / "lm.glb")
+    # Every vertex is a landmark: the mesh follows the track (mouth opening included).
+    assert np.abs(vertices - points).max() < 0.02
