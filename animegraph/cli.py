@@ -270,8 +270,9 @@ def _cmd_query(args: argparse.Namespace) -> int:
         print(build_sql(spec))
         return 0
     if args.export is not None and args.export.exists() and not args.force:
-        raise UsageError(f"animegraph query: export folder {args.export} exists (use --force "
-                         "to replace it)")
+        from db.errors import DataError
+
+        raise DataError(f"export folder {args.export} exists (use --force to replace it)")
     db = Database.open(args.db)
     hits = run_query(db, spec)
     shown = hits.drop_columns([c for c in ("corpus",) if c in hits.column_names]) \

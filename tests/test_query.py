@@ -120,7 +120,7 @@ def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
     assert not (tmp_path / "other.glb").exists()
     # An existing folder is refused and left alone; --force replaces it.
     stamp = (out / "index.csv").stat().st_mtime_ns
-    assert main(argv) == 2
+    assert main(argv) == 1
     err = capsys.readouterr().err.strip()
     assert "--force" in err and len(err.splitlines()) == 1
     assert (out / "index.csv").stat().st_mtime_ns == stamp
