@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from animegraph.gltf import write_glb
 from animegraph.motionio import read_motion
-from animegraph.render import animate, deformer_for, encode, face_frames, write_glb
+from animegraph.render import animate, deformer_for, encode, face_frames
 from ingest.corpus import face
 from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.wav import write_wav

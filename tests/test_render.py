@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from animegraph.cli import main
+from animegraph.gltf import read_glb_frames
 from animegraph.mesh import canonical_mesh, default_marker_map
 from animegraph.motionio import Motion, read_motion
-from animegraph.render import animate, deformer_for, ffmpeg_exe, read_glb_frames
+from animegraph.render import animate, deformer_for, ffmpeg_exe
 from ingest.corpus import face
 from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.wav import write_wav
