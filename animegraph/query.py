@@ -100,7 +100,7 @@ def build_sql(spec: QuerySpec) -> str:
             where.append(f"c.duration >= {spec.min_dur:g}")
         select = ("SELECT c.corpus, c.clip_id, c.emotion, c.speaker, "
                   "round(c.duration, 3) AS duration, c.n_animes, c.text\nFROM clips AS c")
-        tie = "c.corpus, c.clip_id"
+        ties = ["c.corpus", "c.clip_id"]
     else:
         if spec.phoneme is not None:
             where.append(f"a.phoneme = {_literal(phone)}")
@@ -111,11 +111,14 @@ def build_sql(spec: QuerySpec) -> str:
                   "round(a.end_time - a.start_time, 4) AS duration, a.position, c.text\n"
                   "FROM animes AS a JOIN clips AS c ON c.corpus = a.corpus "
                   "AND c.clip_id = a.clip_id")
-        tie = "a.node_id"
+        ties = ["a.node_id"]
     sql = select
     if where:
         sql += "\nWHERE " + "\n  AND ".join(where)
-    sql += f"\nORDER BY {order}{' DESC' if spec.descending else ''}, {tie}"
+    # Ties break in recording order, so the result is the same on every run.
+    keys = [f"{order}{' DESC' if spec.descending else ''}"]
+    keys += [t for t in ties if t.split(".")[1] != order]
+    sql += f"\nORDER BY {', '.join(keys)}"
     if spec.limit is not None:
         sql += f"\nLIMIT {int(spec.limit)}"
     return sql
