@@ -169,8 +169,6 @@ def run_batch(
     db = Path(options.db).absolute()
     Database.open(db)  # a clear error now rather than one per line
     version, identity = database_identity(db)
-    if options.render == "mp4" and render_function() is None:
-        raise ParameterError("mp4 rendering is not available in this build (use --render none)")
     out = Path(options.out).absolute()
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {out} is a file, not a folder")
@@ -338,20 +336,6 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
     query = out.phones[len(out.phones) // 2].prosody.astype(np.float32)
     for k in (2, min(g.n_nodes, 128)):
         audio_costs(query, g.prosody_values, g.prosody_offsets, np.arange(k))
-
-
-def render_function() -> Callable | None:
-    """``animegraph.render.render_motion(motion_path, audio_path, out_path, db=...)``, or
-    None when this build has no MP4 rendering."""
-    import importlib
-
-    try:
-        render = importlib.import_module("animegraph.render")
-    except ModuleNotFoundError as exc:
-        if exc.name == "animegraph.render":
-            return None
-        raise  # the module is there but something it needs is not: a real error
-    return getattr(render, "render_motion", None)
 
 
 # --------------------------------------------------------------------------------------
@@ -531,7 +515,7 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
                            "used": used})
     outputs = ["speech.wav", motion_name, "phones.csv", "explain.json"]
     if task.render == "mp4":
-        _render(folder, motion_name, task.db)
+        _render(folder, motion_name, synth.phones)
         outputs.append("preview.mp4")
     return {
         "speech": speech, "duration_s": round(len(audio) / sample_rate, 3),
@@ -594,15 +578,20 @@ def _motion_emotions(explain: list[dict]) -> str:
     return ", ".join(f"{name} {share / total:.0%}" for name, share in time_by.most_common())
 
 
-def _render(folder: Path, motion_name: str, db: str) -> None:
+def _render(folder: Path, motion_name: str, phones) -> None:
+    """``preview.mp4``: the line's motion on the face mesh (§7), its speech muxed in, its
+    phones as captions."""
     import secrets
 
-    render_motion = render_function()
-    if render_motion is None:
-        raise LineError("mp4 rendering is not available on this worker")
+    from animegraph.motionio import read_motion
+    from animegraph.render import deformer_for, render_motion
+
+    motion = read_motion(folder / motion_name)
+    track = [{"phone": p.phone, "start": p.start, "end": p.end} for p in phones]
     tmp = folder / f".preview.{secrets.token_hex(6)}.tmp.mp4"
     try:
-        render_motion(folder / motion_name, folder / "speech.wav", tmp, db=db)
+        render_motion(motion, tmp, deformer=deformer_for(motion.names),
+                      audio=folder / "speech.wav", phones=track)
         os.replace(tmp, folder / "preview.mp4")
     finally:
         tmp.unlink(missing_ok=True)

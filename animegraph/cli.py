@@ -183,12 +183,227 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--force", action="store_true", help="redo lines finished before")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
     bat.set_defaults(func=_cmd_batch)
+    _add_animator_commands(sub)
 
     info = sub.add_parser("info", help="summarise a database")
     info.add_argument("--db", required=True, type=Path, help="database folder")
     info.add_argument("--json", action="store_true", help="the summary as JSON")
     info.set_defaults(func=_cmd_info)
     return parser
+
+
+def _add_animator_commands(sub) -> None:
+    """``query``, ``render`` and ``plot``: the animator's commands (issue #6)."""
+    from animegraph.query import ANIME_FIELDS, CLIP_FIELDS
+
+    qry = sub.add_parser(
+        "query", help="find anime nodes or clips; export them for other tools",
+        description="List the anime nodes (phoneme instances) or, with --clips, the "
+        "utterances that match, as a table. The query is SQL over the database's views "
+        "(--show-sql prints it; 'animegraph sql' runs it as it is). --export writes each hit "
+        "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
+        "(WAV), a PNG preview, and index.csv.",
+    )
+    qry.add_argument("--db", required=True, type=Path, help="database folder")
+    qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
+    qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
+    qry.add_argument("--text", default=None, metavar="WORDS",
+                     help="the utterance's transcript contains every one of these words")
+    qry.add_argument("--speaker", default=None, help="speaker id")
+    qry.add_argument("--min-dur", type=_number, default=None, metavar="SEC",
+                     help="at least this long (the anime, or the clip with --clips)")
+    qry.add_argument("--order-by", default=None, metavar="FIELD",
+                     help=f"animes: {', '.join(ANIME_FIELDS)} (default node_id); clips: "
+                     f"{', '.join(CLIP_FIELDS)} (default clip_id)")
+    qry.add_argument("--desc", action="store_true", help="descending order")
+    qry.add_argument("--limit", type=_whole_number, default=20, help="most hits (default 20)")
+    qry.add_argument("--clips", action="store_true", help="whole utterances, not animes")
+    qry.add_argument("--format", choices=("table", "csv", "json"), default="table")
+    qry.add_argument("--show-sql", action="store_true",
+                     help="print the SQL instead of running it")
+    qry.add_argument("--export", type=Path, default=None, metavar="DIR",
+                     help="write every hit into this new folder")
+    qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
+                     help="seconds of motion and speech kept around each anime (0.25)")
+    qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
+    qry.set_defaults(func=_cmd_query)
+
+    ren = sub.add_parser(
+        "render", help="render motion: MP4/GIF of a shaded face, glTF, OBJ frames",
+        description="Carry marker or landmark motion onto a face mesh by RBF scattered-data "
+        "interpolation with independent face regions (Cao et al. 2005, section 7) and write "
+        "an MP4 (speech muxed in with --audio), a GIF, a PNG still, a glTF 2.0 binary (.glb, "
+        "morph targets + head motion) or a folder of OBJ frames (-o without extension). "
+        "Curve motion (blendshape weights) is drawn as curves over time with the phones.",
+    )
+    ren.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
+    ren.add_argument("-o", "--output", required=True, type=Path,
+                     help=".mp4, .gif, .png, .glb, or a folder name for OBJ frames")
+    ren.add_argument("--audio", type=Path, default=None, help="speech to mux into an MP4")
+    ren.add_argument("--db", type=Path, default=None,
+                     help="database the motion came from (checks its channels match)")
+    ren.add_argument("--mesh", type=Path, default=None,
+                     help="another face mesh (any format trimesh reads; mm, x left, y up)")
+    ren.add_argument("--marker-map", type=Path, default=None,
+                     help="CSV label,vertex[,region][,group]: where each marker sits")
+    ren.add_argument("--rest-frame", type=_whole_number, default=None,
+                     help="frame of the motion that matches the mesh's expression (default: "
+                     "the mesh's own marker vertices for the canonical mesh, frame 0 for "
+                     "another mesh)")
+    ren.add_argument("--labels", type=Path, default=None,
+                     help="phone labels for captions (.phones.csv, .TextGrid, .lab; default "
+                     "MOTION's <stem>.phones.csv when there is one)")
+    ren.add_argument("--explain", type=Path, default=None,
+                     help="'synth --explain-json' record, for phone captions")
+    ren.add_argument("--fps", type=_number, default=None,
+                     help="frame rate (video: 30, GIF: 20; glb/OBJ: the motion's)")
+    ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
+    ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
+    ren.add_argument("--quiet", action="store_true", help="no progress bar")
+    ren.set_defaults(func=_cmd_render)
+
+    plo = sub.add_parser(
+        "plot", help="plot motion against ground truth, with phones and jump matches",
+        description="Plot facial measures (mouth opening, width, brow; or the busiest "
+        "curves) of MOTION, against --truth when given, over the speech and the phone "
+        "timeline; with --explain (from 'synth --explain-json') the jump matches are "
+        "marked and each phone is coloured by its source recording.",
+    )
+    plo.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
+    plo.add_argument("-o", "--output", required=True, type=Path, help="PNG file")
+    plo.add_argument("--truth", type=Path, default=None, help="ground-truth motion")
+    plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
+    plo.add_argument("--labels", type=Path, default=None,
+                     help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
+    plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
+    plo.add_argument("--title", default="", help="title")
+    plo.set_defaults(func=_cmd_plot)
+
+
+def _cmd_query(args: argparse.Namespace) -> int:
+    from animegraph.query import QuerySpec, build_sql, export_hits, run_query
+    from animegraph.tabular import format_table
+    from db.store import Database
+
+    spec = QuerySpec(phoneme=args.phoneme, emotion=args.emotion, text=args.text,
+                     speaker=args.speaker, min_dur=args.min_dur, order_by=args.order_by,
+                     descending=args.desc, limit=args.limit, clips=args.clips)
+    if args.show_sql:
+        print(build_sql(spec))
+        return 0
+    if args.export is not None and args.export.exists() and not args.force:
+        from db.errors import DataError
+
+        raise DataError(f"export folder {args.export} exists (use --force to replace it)")
+    db = Database.open(args.db)
+    hits = run_query(db, spec)
+    shown = hits.drop_columns([c for c in ("corpus",) if c in hits.column_names]) \
+        if args.format == "table" else hits
+    sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
+    if args.export is not None:
+        rows = export_hits(db, hits, args.export, context=args.context, force=args.force)
+        print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
+              file=sys.stderr)
+    return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise UsageError(f"animegraph render: --size must be WxH, e.g. 480x540; got "
+                         f"{text!r}") from None
+    return width, height
+
+
+def _phone_track(args: argparse.Namespace) -> list[dict]:
+    from animegraph.motionio import read_phone_track
+
+    if args.explain is not None and args.labels is not None:
+        raise UsageError(f"animegraph {args.command}: give --explain or --labels, not both")
+    labels = args.labels
+    beside = args.motion.with_name(args.motion.stem + ".phones.csv")
+    if labels is None and args.explain is None and beside.is_file():
+        labels = beside  # what 'query --export' writes next to each snippet
+    return read_phone_track(labels=labels, explain=args.explain)
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    import time
+
+    from animegraph.motionio import read_motion
+    from animegraph.render import deformer_for, render_motion
+
+    size = _size(args.size)
+    if args.fps is not None and not args.fps > 0:
+        raise UsageError(f"animegraph render: --fps must be > 0, got {args.fps}")
+    if args.audio is not None and not args.audio.is_file():
+        raise UsageError(f"animegraph render: --audio {args.audio} does not exist")
+    phones = _phone_track(args)
+    t0 = time.perf_counter()
+    motion = read_motion(args.motion)
+    if args.db is not None:
+        _check_db_channels(args.db, motion)
+    deformer = deformer_for(motion.names, mesh_path=args.mesh, map_path=args.marker_map,
+                            rest_frame=_rest(motion, args))
+    out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
+                        fps=args.fps, phones=phones, size=size, force=args.force,
+                        progress=lambda total: _progress(total, args.quiet, "frame"))
+    what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
+        f"{deformer.markers.n_markers} markers"
+    print(f"animegraph: rendered {motion.duration:.2f} s of motion ({what}) in "
+          f"{time.perf_counter() - t0:.1f} s: {out}", file=sys.stderr)
+    return 0
+
+
+def _rest(motion, args: argparse.Namespace):
+    """Rest-frame marker positions for the deformer, or None for the mesh's own."""
+    from animegraph.mesh import default_marker_map, load_mesh, motion_points, read_marker_map
+
+    if args.mesh is not None and args.marker_map is None:
+        raise UsageError("animegraph render: --mesh needs --marker-map (which marker sits on "
+                         "which vertex)")
+    index = args.rest_frame
+    if index is None and args.mesh is None:
+        return None
+    index = 0 if index is None else index
+    if not 0 <= index < motion.n_frames:
+        raise UsageError(f"animegraph render: --rest-frame must be in 0-{motion.n_frames - 1}, "
+                         f"got {index}")
+    from animegraph.mesh import canonical_mesh, point_labels
+
+    mesh = load_mesh(args.mesh) if args.mesh is not None else canonical_mesh()
+    markers = (read_marker_map(args.marker_map, mesh) if args.marker_map is not None
+               else default_marker_map(point_labels(motion.names)))
+    return motion_points(motion.names, motion.values[index:index + 1], markers.labels)[0]
+
+
+def _check_db_channels(db_path: Path, motion) -> None:
+    from db.errors import DataError
+    from db.store import Database
+
+    names = set(Database.open(db_path).table("channels").column("name").to_pylist())
+    extra = [n for n in motion.names if n not in names]
+    if extra:
+        raise DataError(f"the motion's channels are not the database's: {len(extra)} of "
+                        f"{len(motion.names)} are not in it ({', '.join(extra[:3])} ...)")
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from animegraph.motionio import read_motion
+    from animegraph.plot_motion import plot_motion
+    from ingest.formats.wav import read_wav
+
+    if args.output.suffix.lower() != ".png":
+        raise UsageError(f"animegraph plot: -o must end in .png, got {args.output.name!r}")
+    phones = _phone_track(args)
+    motion = read_motion(args.motion)
+    truth = read_motion(args.truth) if args.truth is not None else None
+    audio = read_wav(args.audio) if args.audio is not None else None
+    plot_motion(motion, args.output, truth=truth, phones=phones, audio=audio,
+                title=args.title or args.motion.name)
+    print(f"animegraph: wrote {args.output}", file=sys.stderr)
+    return 0
 
 
 def _progress(total: int, quiet: bool, unit: str):
@@ -366,7 +581,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _configure_logging(args.verbose)
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
-                             "batch, sql, info "
+                             "batch, sql, query, render, plot, info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

@@ -33,7 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from animegraph.batch import BatchOptions, render_function, run_batch
+from animegraph.batch import BatchOptions, run_batch
 from ingest.corpus.emotions import EMOTIONS
 from ingest.corpus.sentences import generate_sentences
 from ingest.espeak import Voice, speak
@@ -116,9 +116,6 @@ def main(argv: list[str] | None = None) -> int:
         corpus, _, _ = ensure_default_corpus()
         args.db, _ = ensure_default_db(corpus)
     renders = list(args.render)
-    if "mp4" in renders and render_function() is None:
-        print("note: mp4 rendering is not available in this build; timing --render none only")
-        renders.remove("mp4")
     work = args.out or Path(tempfile.mkdtemp(prefix="bench-batch-"))
     work.mkdir(parents=True, exist_ok=True)
     script = work / "script.csv"

@@ -18,7 +18,6 @@ from animegraph.batch import (
     finished,
     line_key,
     read_report,
-    render_function,
     run_batch,
     run_line,
     voice_for,
@@ -293,12 +292,20 @@ def test_an_unreachable_scheduler_is_one_line(tiny_db, tmp_path, capsys):
                               "tcp://127.0.0.1:9")
 
 
-@pytest.mark.skipif(render_function() is not None, reason="this build renders MP4")
-def test_mp4_needs_a_renderer(tiny_db, tmp_path, capsys):
-    script = tmp_path / "s.csv"
-    script.write_text("id,text\na,Hello there.\n")
-    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(tmp_path / "out"),
-                 "--render", "mp4"])
-    err = capsys.readouterr().err.strip()
-    assert code == 1 and err == ("animegraph: error: mp4 rendering is not available in this "
-                                 "build (use --render none)")
+def test_run_line_renders_an_mp4_preview(tiny_db, tmp_path):
+    import imageio_ffmpeg
+
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    folder.mkdir(parents=True)
+    line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2,
+                      emotion=parse_emotion("happy"))
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="mp4", key=line_key(line, identity, "mp4")))
+    assert row["status"] == "done", row
+    preview = folder / "preview.mp4"
+    assert "preview.mp4" in json.loads((folder / DONE).read_text())["outputs"]
+    n_frames, seconds = imageio_ffmpeg.count_frames_and_secs(str(preview))
+    assert n_frames > 10 and abs(seconds - row["duration_s"]) < 0.5
+    assert not list(folder.glob(".*.tmp*"))

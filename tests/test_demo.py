@@ -35,6 +35,8 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
 
     png = out / "demo.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    video = out / "demo_happy_synthesized.mp4"
+    assert video.read_bytes()[4:8] == b"ftyp" and str(video) in first
     motion = read_c3d(out / "demo_happy.c3d")
     assert motion.points.shape[1] >= 60 and np.isfinite(motion.points).mean() > 0.98
 

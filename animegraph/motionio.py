@@ -1,0 +1,169 @@
+"""Motion files an animator hands the tool: C3D, channel CSV, NPZ; and phone tracks.
+
+Motion crosses this boundary as :class:`Motion`: ``(n_frames, n_channels)`` values
+with channel names (``<marker>.x/.y/.z`` for points, curve names for curves) and a
+frame rate — the layout of the database's ``frames`` table and of what
+``animegraph synth`` writes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from db.errors import DataError
+from ingest.formats.phones_csv import Segment
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Motion of one take.
+
+    Attributes
+    ----------
+    values : np.ndarray, shape (n_frames, n_channels)
+    names : tuple of str, length n_channels
+    fps : float
+    """
+
+    values: np.ndarray
+    names: tuple[str, ...]
+    fps: float
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.values)
+
+    @property
+    def duration(self) -> float:
+        return self.n_frames / self.fps
+
+    @property
+    def has_points(self) -> bool:
+        """True if the channels hold 3-D points (markers or landmarks)."""
+        from animegraph.mesh import point_labels
+
+        return bool(point_labels(self.names))
+
+
+def read_motion(path: str | os.PathLike) -> Motion:
+    """Read a motion file by its extension.
+
+    ``.c3d`` (markers), ``.csv`` (``frame,time,<channel>...``: what ``synth``, ``query
+    --export`` and the corpus write), ``.npz`` (``motion``, ``fps``, ``channels``, as
+    ``synth`` writes).
+
+    Raises
+    ------
+    DataError
+        If the file is missing, of another kind, or malformed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"motion file {path} does not exist")
+    suffix = path.suffix.lower()
+    if suffix == ".c3d":
+        from ingest.formats.c3d import read_c3d
+
+        data = read_c3d(path)
+        names = tuple(f"{lab}.{a}" for lab in data.labels for a in "xyz")
+        return Motion(values=data.points.reshape(data.n_frames, -1), names=names,
+                      fps=float(data.rate))
+    if suffix == ".csv":
+        return _read_channel_csv(path)
+    if suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                values, fps, names = z["motion"], float(z["fps"]), tuple(z["channels"].tolist())
+        except (OSError, ValueError, KeyError) as exc:
+            raise DataError(f"cannot read motion {path}: needs arrays motion, fps, channels "
+                            f"({exc})") from None
+        return _checked(Motion(values=np.asarray(values, dtype=np.float64), names=names,
+                               fps=fps), path)
+    raise DataError(f"motion file {path} must be .c3d, .csv or .npz")
+
+
+def _read_channel_csv(path: Path) -> Motion:
+    try:
+        with open(path, encoding="utf-8-sig") as handle:
+            header = handle.readline().strip().split(",")
+            values = np.loadtxt(handle, delimiter=",", ndmin=2)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise DataError(f"cannot read motion {path}: {exc}") from None
+    if header[:2] != ["frame", "time"] or len(header) < 3:
+        raise DataError(f"{path}:1: motion CSV must start 'frame,time,' then channel names")
+    if values.shape[1] != len(header) or len(values) < 1:
+        raise DataError(f"{path}: rows have {values.shape[1]} cells, the header "
+                        f"{len(header)}")
+    times = values[:, 1]
+    if len(times) > 1:
+        step = np.median(np.diff(times))
+        if not step > 0:
+            raise DataError(f"{path}: times do not increase")
+        fps = 1.0 / step
+        if abs(fps - round(fps)) < 0.01:
+            fps = float(round(fps))
+    else:
+        fps = 30.0
+    return _checked(Motion(values=values[:, 2:], names=tuple(header[2:]), fps=fps), path)
+
+
+def _checked(motion: Motion, path: Path) -> Motion:
+    if motion.values.ndim != 2 or motion.values.shape[1] != len(motion.names):
+        raise DataError(f"{path}: {motion.values.shape} values for {len(motion.names)} "
+                        "channels")
+    if not (np.isfinite(motion.fps) and motion.fps > 0):
+        raise DataError(f"{path}: frame rate must be > 0, got {motion.fps}")
+    if len(motion.values) < 1:
+        raise DataError(f"{path}: no frames")
+    return motion
+
+
+def write_channel_csv(path: str | os.PathLike, values: np.ndarray, names, fps: float,
+                      *, start_frame: int = 0) -> None:
+    """Write ``frame,time,<channel>...`` (atomically); frames numbered from ``start_frame``."""
+    from db.atomic import atomic_write
+
+    n = len(values)
+    frames = np.arange(start_frame, start_frame + n)
+    table = np.column_stack([frames, frames / fps, values])
+    with atomic_write(path) as handle:
+        np.savetxt(handle, table, delimiter=",", header="frame,time," + ",".join(names),
+                   comments="", fmt=["%d", "%.6f"] + ["%.6g"] * len(names))
+
+
+def read_phone_track(*, labels: str | os.PathLike | None = None,
+                     explain: str | os.PathLike | None = None) -> list[dict]:
+    """Phones over time, from a label file or ``synth --explain-json``.
+
+    Returns
+    -------
+    list of dict
+        ``phone``, ``start``, ``end`` (s), and from an explanation ``clip_id`` and
+        ``jump`` (a jump match into this phone).
+    """
+    if explain is not None:
+        path = Path(explain)
+        try:
+            record = json.loads(path.read_text())
+            rows = record["phones"]
+            return [{"phone": str(r["phone"]), "start": float(r["start"]),
+                     "end": float(r["end"]), "clip_id": r.get("clip_id"),
+                     "jump": bool(r.get("jump", False)),
+                     "emotion": r.get("emotion")} for r in rows]
+        except OSError as exc:
+            raise DataError(f"cannot read {path}: {exc.strerror or exc}") from None
+        except (ValueError, KeyError, TypeError) as exc:
+            raise DataError(f"{path} is not an explanation written by 'animegraph synth "
+                            f"--explain-json' ({exc})") from None
+    if labels is not None:
+        from ingest.readers.common import read_labels
+
+        segments: list[Segment] = read_labels(Path(labels))
+        return [{"phone": s.phone, "start": float(s.start), "end": float(s.end),
+                 "clip_id": None, "jump": False} for s in segments]
+    return []

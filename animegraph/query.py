@@ -1,0 +1,368 @@
+"""Finding expressive pieces in a database and exporting them for other tools.
+
+A query is SQL over the database's DuckDB views (:mod:`db.sql`), written out by
+:func:`build_sql` so that ``animegraph sql`` runs exactly the same thing
+(``animegraph query --show-sql`` prints it). Hits are anime nodes (phoneme instances)
+or, with ``clips=True``, whole utterances.
+
+:func:`export_hits` writes each hit as a motion snippet with context around it (C3D for
+marker databases, ``frame,time,<channel>`` CSV otherwise), its speech (WAV), a PNG
+preview, and an ``index.csv``, and the phones over the snippet (``.phones.csv``, times from the
+snippet's start); the folder is built aside and renamed into place.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+import secrets
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from db.errors import DataError, ParameterError
+from db.sql import query as run_sql
+from db.store import Database
+
+#: Fields a query may be ordered by, per mode.
+ANIME_FIELDS = ("node_id", "clip_id", "phoneme", "emotion", "speaker", "start_time",
+                "duration")
+CLIP_FIELDS = ("clip_id", "emotion", "speaker", "duration", "n_animes")
+_WORD = re.compile(r"^[A-Za-z0-9']+$")
+
+
+@dataclass(frozen=True)
+class QuerySpec:
+    """What to look for. Every field left None matches everything."""
+
+    phoneme: str | None = None
+    emotion: str | None = None
+    text: str | None = None
+    speaker: str | None = None
+    min_dur: float | None = None
+    order_by: str | None = None
+    descending: bool = False
+    limit: int | None = 20
+    clips: bool = False
+
+
+def _literal(value: str) -> str:
+    return "'" + value.replace("'", "''") + "'"
+
+
+def build_sql(spec: QuerySpec) -> str:
+    """The SELECT that answers ``spec`` (runs as it is under ``animegraph sql``).
+
+    Raises
+    ------
+    ParameterError
+        On an unknown phoneme or order field, a bad word, a negative duration or limit.
+    """
+    from ingest.phones import PHONE_SET
+
+    where = []
+    if spec.phoneme is not None:
+        phone = spec.phoneme.strip().upper()
+        if phone not in PHONE_SET:
+            raise ParameterError(f"--phoneme {spec.phoneme!r} is not an ARPAbet phone "
+                                 "(e.g. AA, B, CH, SIL)")
+    if spec.min_dur is not None and not spec.min_dur >= 0:
+        raise ParameterError(f"--min-dur must be >= 0 seconds, got {spec.min_dur}")
+    if spec.limit is not None and spec.limit < 1:
+        raise ParameterError(f"--limit must be >= 1, got {spec.limit}")
+    words = (spec.text or "").split()
+    for word in words:
+        if not _WORD.match(word):
+            raise ParameterError(f"--text: words are letters, digits and apostrophes; got "
+                                 f"{word!r}")
+    fields = CLIP_FIELDS if spec.clips else ANIME_FIELDS
+    order = spec.order_by or ("clip_id" if spec.clips else "node_id")
+    if order not in fields:
+        raise ParameterError(f"--order-by must be one of {', '.join(fields)}; got {order!r}")
+    c = "c." if spec.clips else "a."
+    if spec.emotion is not None:
+        where.append(f"{c}emotion = {_literal(spec.emotion)}")
+    if spec.speaker is not None:
+        where.append(f"{c}speaker = {_literal(spec.speaker)}")
+    for word in words:
+        pattern = _literal(r"(?i)\b" + word + r"\b")
+        where.append(f"regexp_matches(c.text, {pattern})")
+    if spec.clips:
+        if spec.phoneme is not None:
+            where.append("EXISTS (SELECT 1 FROM animes AS a WHERE a.corpus = c.corpus AND "
+                         f"a.clip_id = c.clip_id AND a.phoneme = {_literal(phone)})")
+        if spec.min_dur is not None:
+            where.append(f"c.duration >= {spec.min_dur:g}")
+        select = ("SELECT c.corpus, c.clip_id, c.emotion, c.speaker, "
+                  "round(c.duration, 3) AS duration, c.n_animes, c.text\nFROM clips AS c")
+        ties = ["c.corpus", "c.clip_id"]
+    else:
+        if spec.phoneme is not None:
+            where.append(f"a.phoneme = {_literal(phone)}")
+        if spec.min_dur is not None:
+            where.append(f"a.end_time - a.start_time >= {spec.min_dur:g}")
+        select = ("SELECT a.node_id, a.corpus, a.clip_id, a.phoneme, a.emotion, a.speaker, "
+                  "round(a.start_time, 4) AS start_time, round(a.end_time, 4) AS end_time, "
+                  "round(a.end_time - a.start_time, 4) AS duration, a.position, c.text\n"
+                  "FROM animes AS a JOIN clips AS c ON c.corpus = a.corpus "
+                  "AND c.clip_id = a.clip_id")
+        ties = ["a.node_id"]
+    sql = select
+    if where:
+        sql += "\nWHERE " + "\n  AND ".join(where)
+    # Ties break in recording order, so the result is the same on every run.
+    keys = [f"{order}{' DESC' if spec.descending else ''}"]
+    keys += [t for t in ties if t.split(".")[1] != order]
+    sql += f"\nORDER BY {', '.join(keys)}"
+    if spec.limit is not None:
+        sql += f"\nLIMIT {int(spec.limit)}"
+    return sql
+
+
+def run_query(db: Database, spec: QuerySpec) -> pa.Table:
+    """Run :func:`build_sql` on ``db``.
+
+    Raises
+    ------
+    ParameterError
+        Also for an emotion the database does not have (naming the ones it has).
+    """
+    if spec.emotion is not None:
+        known = sorted(set(db.table("clips", columns=["emotion"]).column("emotion")
+                           .to_pylist()))
+        if spec.emotion not in known:
+            raise ParameterError(f"emotion {spec.emotion!r} is not in the database (it has "
+                                 f"{', '.join(known)})")
+    return run_sql(db, build_sql(spec))
+
+
+@dataclass(frozen=True)
+class ClipData:
+    """A clip's motion (world coordinates for a head group) and speech, from the database."""
+
+    motion: np.ndarray  # (n_frames, n_channels)
+    names: tuple[str, ...]
+    groups: tuple[str, ...]
+    kind: str
+    fps: float
+    audio: np.ndarray  # (n_samples,) int16
+    sample_rate: int
+    phones: list[dict]
+
+
+def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
+    """Read one clip back from the database.
+
+    Raises
+    ------
+    DataError
+        If the clip is not in the database.
+    """
+    from ingest.motion import head_points, unstabilize_points
+
+    channels = db.table("channels").to_pylist()
+    names = tuple(ch["name"] for ch in channels)
+    groups = tuple(ch["group"] for ch in channels)
+    mask = (pc.field("corpus") == corpus) & (pc.field("clip_id") == clip_id)
+    clip = db.table("clips", filter=mask).to_pylist()
+    if not clip:
+        raise DataError(f"clip {clip_id!r} of corpus {corpus!r} is not in the database")
+    clip = clip[0]
+    frames = db.table("frames", columns=["frame", *names], filter=mask).sort_by("frame")
+    motion = np.stack([frames.column(n).to_numpy() for n in names], axis=1).astype(np.float64)
+    reference = db.arrays().get("head_reference")
+    if reference is not None and head_points(groups) >= 3:
+        motion = unstabilize_points(motion, groups, reference)
+    sound = db.table("audio", filter=mask).to_pylist()[0]
+    phones = [{"phone": p, "start": s, "end": e, "clip_id": clip_id, "jump": False}
+              for p, s, e in zip(clip["phones"].split(), clip["phone_starts"],
+                                 clip["phone_ends"], strict=True)]
+    return ClipData(motion=motion, names=names, groups=groups, kind=channels[0]["kind"],
+                    fps=float(clip["fps"]), audio=np.frombuffer(sound["pcm16"], dtype=np.int16),
+                    sample_rate=int(sound["sample_rate"]), phones=phones)
+
+
+def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,
+                force: bool = False) -> list[dict]:
+    """Write every hit as motion + speech + preview, and ``index.csv``, into ``out``.
+
+    Parameters
+    ----------
+    hits : pyarrow.Table
+        Rows of :func:`run_query` (anime or clip mode).
+    out : Path
+        A folder to create; an existing one is replaced only with ``force``.
+    context : float
+        Seconds kept before and after each anime (clipped to its recording).
+
+    Returns
+    -------
+    list of dict
+        The index rows.
+
+    Raises
+    ------
+    DataError
+        If ``out`` exists (without ``force``) or is a file, or nothing matched.
+    """
+    from db.atomic import replace_dir
+
+    out = Path(out)
+    if not context >= 0:
+        raise ParameterError(f"--context must be >= 0 seconds, got {context}")
+    if out.exists() and (not force or not out.is_dir()):
+        raise DataError(f"export folder {out} exists (use --force to replace it)"
+                        if out.is_dir() else f"{out} exists and is not a folder")
+    if not out.parent.is_dir():
+        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+    if hits.num_rows == 0:
+        raise DataError("nothing matched the query: no export written")
+    staging = out.parent / f".{out.name}.partial-{secrets.token_hex(4)}"
+    staging.mkdir()
+    try:
+        rows = _export_into(db, hits, staging, context)
+        replace_dir(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return rows
+
+
+def _export_into(db: Database, hits: pa.Table, folder: Path, context: float) -> list[dict]:
+    from ingest.formats.phones_csv import write_phones_csv
+    from ingest.formats.wav import write_wav
+
+    cache: dict[tuple[str, str], ClipData] = {}
+    index = []
+    anime_mode = "node_id" in hits.column_names
+    for n, hit in enumerate(hits.to_pylist()):
+        key = (hit["corpus"], hit["clip_id"])
+        if key not in cache:
+            cache[key] = load_clip(db, *key)
+        clip = cache[key]
+        duration = len(clip.motion) / clip.fps
+        if anime_mode:
+            a0, a1 = float(hit["start_time"]), float(hit["end_time"])
+            t0, t1 = max(0.0, a0 - context), min(duration, a1 + context)
+            stem = f"{n:03d}_{_safe(hit['clip_id'])}_{hit['phoneme']}_{hit['node_id']}"
+        else:
+            a0, a1 = 0.0, duration
+            t0, t1 = 0.0, duration
+            stem = f"{n:03d}_{_safe(hit['clip_id'])}"
+        f0 = int(np.floor(t0 * clip.fps + 1e-9))
+        f1 = max(f0 + 1, min(len(clip.motion), int(np.ceil(t1 * clip.fps - 1e-9))))
+        motion_name = _write_snippet(clip, f0, f1, folder / stem)
+        s0 = int(round(f0 / clip.fps * clip.sample_rate))
+        s1 = min(len(clip.audio), int(round(f1 / clip.fps * clip.sample_rate)))
+        write_wav(folder / f"{stem}.wav", clip.audio[s0:s1], clip.sample_rate)
+        span_s = (f1 - f0) / clip.fps
+        phones = [{**p, "start": max(0.0, p["start"] - f0 / clip.fps),
+                   "end": min(span_s, p["end"] - f0 / clip.fps)}
+                  for p in clip.phones if p["end"] > f0 / clip.fps and p["start"] < f1 / clip.fps]
+        phones = [p for p in phones if p["end"] - p["start"] > 1e-4]
+        write_phones_csv(folder / f"{stem}.phones.csv",
+                         [(p["phone"], p["start"], p["end"]) for p in phones])
+        _preview(clip, f0, f1, (a0 - f0 / clip.fps, a1 - f0 / clip.fps), phones,
+                 folder / f"{stem}.png", title=f"{hit['clip_id']} ({hit['emotion']})"
+                 + (f": {hit['phoneme']}" if anime_mode else ""))
+        index.append({
+            "n": n, "node_id": hit.get("node_id"), "corpus": hit["corpus"],
+            "clip_id": hit["clip_id"], "phoneme": hit.get("phoneme"), "emotion": hit["emotion"],
+            "speaker": hit["speaker"], "start_time": round(a0, 4), "end_time": round(a1, 4),
+            "snippet_start": round(f0 / clip.fps, 4), "snippet_end": round(f1 / clip.fps, 4),
+            "fps": clip.fps, "motion": motion_name, "audio": f"{stem}.wav",
+            "phones": f"{stem}.phones.csv", "preview": f"{stem}.png",
+        })
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(index[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(index)
+    (folder / "index.csv").write_text(buffer.getvalue())
+    return index
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+
+
+def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
+    """C3D for marker databases (at most 255 points), else channel CSV; the file name."""
+    from animegraph.mesh import point_labels
+    from animegraph.motionio import write_channel_csv
+    from ingest.formats.c3d import MAX_MARKERS, MarkerData, write_c3d
+
+    part = clip.motion[f0:f1]
+    labels = point_labels(clip.names)
+    if clip.kind == "markers" and labels and 3 * len(labels) == len(clip.names) \
+            and len(labels) <= MAX_MARKERS:
+        path = stem.with_suffix(".c3d")
+        write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3), labels=labels,
+                                   rate=clip.fps))
+    else:
+        path = stem.with_suffix(".csv")
+        write_channel_csv(path, part, clip.names, clip.fps, start_frame=0)
+    return path.name
+
+
+def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones, path: Path,
+             *, title: str) -> None:
+    """PNG: the face at the anime's middle (point databases) and its main measure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from animegraph.plot_motion import measure
+
+    part = clip.motion[f0:f1]
+    t = np.arange(len(part)) / clip.fps
+    face = _face_image(clip, part, int(round(0.5 * (span[0] + span[1]) * clip.fps)))
+    fig = plt.figure(figsize=(9, 3.2))
+    if face is not None:
+        ax_img = fig.add_axes((0.0, 0.0, 0.28, 1.0))
+        ax_img.imshow(face)
+        ax_img.set_axis_off()
+        ax = fig.add_axes((0.36, 0.17, 0.6, 0.7))
+    else:
+        ax = fig.add_axes((0.08, 0.17, 0.88, 0.7))
+    label, values = measure(part, clip.names, clip.kind)
+    if values.ndim == 1:
+        ax.plot(t, values, "k", lw=1.5)
+    else:
+        ax.plot(t, values, lw=1)
+    ax.set_ylabel(label)
+    ax.set_xlabel("time in snippet (s)")
+    ax.axvspan(*span, color="C1", alpha=0.18, lw=0)
+    for k, p in enumerate(phones):
+        mid = 0.5 * (p["start"] + p["end"])
+        if p["phone"] != "SIL" and 0 <= mid <= t[-1]:
+            ax.text(mid, 0.02 if k % 2 else 0.08, p["phone"],
+                    ha="center", fontsize=7, transform=ax.get_xaxis_transform())
+    ax.set_xlim(0, max(t[-1], 1e-3))
+    ax.set_title(title, fontsize=9)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
+    from animegraph.motionio import Motion
+    from animegraph.render import FaceRenderer, animate, animation_bounds, deformer_for
+
+    try:
+        deformer = deformer_for(clip.names)
+    except DataError:
+        return None
+    if deformer is None:
+        return None
+    animation = animate(Motion(values=part, names=clip.names, fps=clip.fps), deformer)
+    frame = min(max(frame, 0), animation.n_frames - 1)
+    renderer = FaceRenderer(deformer.mesh, animation_bounds(animation), (240, 270))
+    try:
+        return renderer.frame(animation.vertices[frame])
+    finally:
+        renderer.close()

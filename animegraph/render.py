@@ -1,0 +1,490 @@
+"""Rendering motion for an animator: MP4, GIF, PNG, glTF 2.0 (.glb, :mod:`animegraph.gltf`)
+or OBJ frames.
+
+Point motion (markers, landmarks) is carried onto a face mesh (:mod:`animegraph.mesh`,
+Cao et al. §7) and drawn as a flat-shaded face (matplotlib's Agg rasteriser, triangles
+in depth order), the frames piped as raw RGB into the ffmpeg binary that
+``imageio-ffmpeg`` ships, with the speech muxed in. Curve motion (blendshape weights:
+no rig here) is drawn as curves over time with the phones and a moving cursor.
+
+Every output appears complete or not at all: files are written beside the target under
+a temporary name and renamed; OBJ frames go to a hidden folder renamed into place.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+import shutil
+import subprocess
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from animegraph.mesh import Deformer, MarkerMap, Mesh, motion_points
+from animegraph.motionio import Motion
+from db.errors import DataError, ParameterError
+
+logger = logging.getLogger(__name__)
+
+#: Output kinds by extension ("" is a folder of OBJ frames).
+FORMATS = (".mp4", ".gif", ".glb", ".png", "")
+_SKIN = np.array([0.86, 0.68, 0.58])
+_MOUTH = np.array([0.30, 0.06, 0.07])
+_LIGHT = np.array([-0.35, 0.45, 0.82])
+_LIGHT = _LIGHT / np.linalg.norm(_LIGHT)
+
+
+def ffmpeg_exe() -> str:
+    """The ffmpeg binary shipped by ``imageio-ffmpeg``."""
+    import imageio_ffmpeg
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+@dataclass(frozen=True, eq=False)
+class FaceAnimation:
+    """Vertex trajectories of a mesh, sampled at the render rate.
+
+    Attributes
+    ----------
+    vertices : np.ndarray, shape (n_frames, n_vertices, 3)
+        World positions (motion units, mm).
+    local : np.ndarray, shape (n_frames, n_vertices, 3)
+        The same in the head's frame (rigid head motion removed).
+    rotation : np.ndarray, shape (n_frames, 3, 3)
+    translation : np.ndarray, shape (n_frames, 3)
+        ``vertices = rotation @ local + translation`` frame by frame.
+    displacement : np.ndarray, shape (n_frames, n_markers, 3)
+        Marker displacements from the rest frame, in the head's frame.
+    operator : np.ndarray, shape (n_vertices, n_markers)
+        ``local = mesh.vertices + operator @ displacement``.
+    fps : float
+    """
+
+    mesh: Mesh
+    vertices: np.ndarray
+    local: np.ndarray
+    displacement: np.ndarray
+    operator: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    fps: float
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.vertices)
+
+
+def resample(values: np.ndarray, fps: float, target_fps: float) -> np.ndarray:
+    """Values (n_frames, ...) at ``target_fps``, linearly interpolated, same duration."""
+    n_out = max(1, int(np.floor(len(values) * target_fps / fps + 1e-9)))
+    t = np.arange(n_out) / target_fps * fps
+    i0 = np.clip(np.floor(t).astype(int), 0, len(values) - 1)
+    i1 = np.minimum(i0 + 1, len(values) - 1)
+    frac = (t - i0).reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[i0] * (1 - frac) + values[i1] * frac
+
+
+def animate(motion: Motion, deformer: Deformer, *, fps: float | None = None,
+            rigid: bool = True) -> FaceAnimation:
+    """Carry point motion onto the deformer's mesh, at ``fps`` (default the motion's).
+
+    Raises
+    ------
+    DataError
+        If the motion lacks markers of the map (one line naming them).
+    """
+    points = motion_points(motion.names, motion.values, deformer.markers.labels)
+    if np.isnan(points).any():
+        from ingest.motion import fill_gaps
+
+        filled, _ = fill_gaps(points.reshape(len(points), -1))
+        points = filled.reshape(points.shape)
+    fps = motion.fps if fps is None else float(fps)
+    points = resample(points, motion.fps, fps)
+    local, rotation, translation = deformer.local_frames(points, rigid=rigid)
+    n = len(points)
+    if rotation is None:
+        rotation = np.tile(np.eye(3), (n, 1, 1))
+        translation = np.zeros((n, 3))
+    displacement = local - deformer.rest[None]
+    verts_local = deformer.mesh.vertices[None] + np.matmul(deformer.operator, displacement)
+    world = np.matmul(verts_local, np.transpose(rotation, (0, 2, 1))) + translation[:, None]
+    return FaceAnimation(mesh=deformer.mesh, vertices=world, local=verts_local,
+                         displacement=displacement, operator=deformer.operator,
+                         rotation=rotation, translation=translation, fps=fps)
+
+
+class FaceRenderer:
+    """Draws a mesh, front view, flat-shaded, into RGB frames of a fixed size.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    bounds : np.ndarray, shape (2, 3)
+        Lowest and highest x, y, z the animation reaches (sets the framing).
+    size : (width, height)
+        Pixels; even numbers (H.264 needs them).
+    """
+
+    def __init__(self, mesh: Mesh, bounds: np.ndarray, size: tuple[int, int] = (480, 540)):
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.collections import PolyCollection
+        from matplotlib.figure import Figure
+
+        width, height = (int(s) - int(s) % 2 for s in size)
+        if width < 16 or height < 16:
+            raise ParameterError(f"frame size must be at least 16x16, got {size}")
+        self.size = (width, height)
+        self.mesh = mesh
+        self.is_mouth = np.zeros(len(mesh.faces), dtype=bool)
+        self.is_mouth[mesh.mouth] = True
+        dpi = 100
+        self.fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor="0.13")
+        self.canvas = FigureCanvasAgg(self.fig)
+        ax = self.fig.add_axes((0, 0, 1, 1))
+        ax.set_axis_off()
+        ax.set_facecolor("0.13")
+        lo, hi = np.asarray(bounds)[0], np.asarray(bounds)[1]
+        centre = 0.5 * (lo + hi)
+        half = 0.55 * max(hi[0] - lo[0], (hi[1] - lo[1]) * width / height)
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        half_y = half * height / width
+        ax.set_ylim(centre[1] - half_y, centre[1] + half_y)
+        self.coll = PolyCollection(np.zeros((0, 3, 2)), edgecolors="face", linewidths=0.4,
+                                   antialiaseds=True)
+        ax.add_collection(self.coll)
+        self.caption = ax.text(0.5, 0.03, "", transform=ax.transAxes, ha="center",
+                               va="bottom", color="0.92", fontsize=13, family="monospace")
+
+    def frame(self, vertices: np.ndarray, caption: str = "") -> np.ndarray:
+        """RGB image, shape (height, width, 3), uint8, of the mesh at ``vertices``."""
+        tri = vertices[self.mesh.faces]  # (n_faces, 3, 3)
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(normal, axis=1)
+        normal = normal / np.maximum(norm, 1e-12)[:, None]
+        facing = normal[:, 2] > -0.05
+        order = np.flatnonzero(facing)[np.argsort(tri[facing, :, 2].mean(axis=1))]
+        lambert = np.clip(normal[order] @ _LIGHT, 0.0, 1.0)
+        half = _LIGHT + np.array([0.0, 0.0, 1.0])
+        spec = np.clip(normal[order] @ (half / np.linalg.norm(half)), 0, 1) ** 24
+        base = np.where(self.is_mouth[order, None], _MOUTH, _SKIN)
+        colour = np.clip(base * (0.28 + 0.72 * lambert[:, None]) + 0.12 * spec[:, None], 0, 1)
+        self.coll.set_verts(tri[order, :, :2])
+        self.coll.set_facecolor(colour)
+        self.coll.set_edgecolor(colour)
+        self.caption.set_text(caption)
+        self.canvas.draw()
+        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self) -> None:
+        import matplotlib.pyplot as plt
+
+        plt.close(self.fig)
+
+
+def animation_bounds(animation: FaceAnimation) -> np.ndarray:
+    """(2, 3) lowest and highest coordinates over the animation."""
+    v = animation.vertices
+    return np.stack([v.min(axis=(0, 1)), v.max(axis=(0, 1))])
+
+
+def captions(phones: Sequence[dict], n_frames: int, fps: float) -> list[str]:
+    """The phone under each frame ("" where none)."""
+    out = [""] * n_frames
+    for p in phones:
+        first = max(0, int(np.ceil(p["start"] * fps - 1e-9)))
+        stop = min(n_frames, int(np.ceil(p["end"] * fps - 1e-9)))
+        label = "" if p["phone"] == "SIL" else p["phone"]
+        for k in range(first, stop):
+            out[k] = label
+    return out
+
+
+def face_frames(animation: FaceAnimation, *, size=(480, 540),
+                phones: Sequence[dict] = ()) -> Iterable[np.ndarray]:
+    """RGB frames of an animation (a generator; one renderer for all of them)."""
+    renderer = FaceRenderer(animation.mesh, animation_bounds(animation), size)
+    text = captions(phones, animation.n_frames, animation.fps)
+    try:
+        for k in range(animation.n_frames):
+            yield renderer.frame(animation.vertices[k], text[k])
+    finally:
+        renderer.close()
+
+
+def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
+           audio: Path | None = None, audio_offset: float = 0.0) -> Path:
+    """Pipe RGB frames into ffmpeg: ``.mp4`` (H.264 + AAC) or ``.gif``; atomic.
+
+    Parameters
+    ----------
+    frames : iterable of np.ndarray, each (height, width, 3) uint8
+    path : Path
+        Target; written as a hidden temporary file beside it, then renamed.
+    fps : float
+    audio : Path, optional
+        Speech to mux in (MP4 only), starting at ``audio_offset`` seconds.
+
+    Raises
+    ------
+    DataError
+        If ffmpeg fails (its last message line), or no frame came.
+    """
+    path = Path(path)
+    kind = path.suffix.lower()
+    if kind not in (".mp4", ".gif"):
+        raise ParameterError(f"video output must end in .mp4 or .gif, got {path.name!r}")
+    if not path.parent.is_dir():
+        raise DataError(f"cannot write {path}: folder {path.parent} does not exist")
+    frames = iter(frames)
+    try:
+        first = next(frames)
+    except StopIteration:
+        raise DataError("nothing to render: the motion has no frames") from None
+    height, width = first.shape[:2]
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{kind}"
+    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-f", "rawvideo",
+           "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", f"{fps:.6g}", "-i", "-"]
+    if kind == ".mp4":
+        if audio is not None:
+            cmd += ["-ss", f"{audio_offset:.6f}", "-i", str(audio), "-map", "0:v", "-map", "1:a",
+                    "-c:a", "aac", "-b:a", "128k"]
+        cmd += ["-c:v", "libx264", "-preset", "veryfast", "-crf", "20", "-pix_fmt", "yuv420p",
+                "-movflags", "+faststart", "-f", "mp4", str(tmp)]
+    else:
+        cmd += ["-vf", "split[a][b];[a]palettegen=max_colors=128[p];[b][p]paletteuse"
+                "=dither=bayer", "-f", "gif", str(tmp)]
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        try:
+            proc.stdin.write(np.ascontiguousarray(first).tobytes())
+            for image in frames:
+                if image.shape[:2] != (height, width):
+                    raise ParameterError("frames of different sizes")
+                proc.stdin.write(np.ascontiguousarray(image).tobytes())
+            proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        err = proc.stderr.read().decode(errors="replace")
+        code = proc.wait()
+        if code != 0 or not tmp.exists():
+            lines = [line for line in err.splitlines() if line.strip()]
+            raise DataError(f"ffmpeg could not write {path.name}: "
+                            f"{lines[-1] if lines else f'exit status {code}'}")
+        os.replace(tmp, path)
+    except BaseException:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_obj_frames(animation: FaceAnimation, folder: Path, *, force: bool = False) -> Path:
+    """One OBJ per frame (``frame_00000.obj`` ...) in a new folder, built aside and renamed."""
+    from db.atomic import replace_dir
+
+    folder = Path(folder)
+    if folder.exists() and not force:
+        raise DataError(f"{folder} exists (use --force to replace it)")
+    if not folder.parent.is_dir():
+        raise DataError(f"cannot write {folder}: folder {folder.parent} does not exist")
+    staging = folder.parent / f".{folder.name}.partial-{secrets.token_hex(4)}"
+    staging.mkdir()
+    try:
+        faces = "".join(f"f {a} {b} {c}\n" for a, b, c in (animation.mesh.faces + 1).tolist())
+        for k, verts in enumerate(animation.vertices):
+            lines = "".join(f"v {x:.4f} {y:.4f} {z:.4f}\n" for x, y, z in verts.tolist())
+            (staging / f"frame_{k:05d}.obj").write_text(
+                f"# animegraph frame {k}, t = {k / animation.fps:.4f} s, units mm\n"
+                + lines + faces)
+        replace_dir(staging, folder)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return folder
+
+
+def curve_frames(motion: Motion, phones: Sequence[dict], *, fps: float = 30.0,
+                 size=(960, 540), max_curves: int = 8) -> Iterable[np.ndarray]:
+    """Frames of curve motion: the busiest curves over time, phones, a moving cursor.
+
+    The plot is drawn once; each frame only paints the cursor column.
+    """
+    image, x_of_time = curve_image(motion, phones, size=size, max_curves=max_curves)
+    n = max(1, int(np.floor(motion.duration * fps + 1e-9)))
+    for k in range(n):
+        frame = image.copy()
+        x = int(round(x_of_time(k / fps)))
+        frame[:, max(0, x - 1):x + 1] = (220, 40, 40)
+        yield frame
+
+
+def curve_image(motion: Motion, phones: Sequence[dict], *, size=(960, 540),
+                max_curves: int = 8, path: Path | None = None):
+    """Plot the busiest curves with phone labels; the RGB image and a time-to-column map."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    width, height = (int(s) - int(s) % 2 for s in size)
+    values = np.asarray(motion.values, dtype=np.float64)
+    spread = np.nanstd(values, axis=0)
+    moving = spread > 1e-6 * max(float(np.nanmax(spread)), 1e-12)
+    chosen = [c for c in np.argsort(-spread)[:max_curves] if moving[c]] or [0]
+    t = np.arange(motion.n_frames) / motion.fps
+    fig = Figure(figsize=(width / 100, height / 100), dpi=100)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.07, 0.12, 0.74, 0.8))
+    for c in chosen:
+        ax.plot(t, values[:, c], lw=1.2, label=motion.names[c])
+    ax.set_xlim(0, motion.duration)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("curve value")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
+    for k, p in enumerate(phones):
+        ax.axvline(p["start"], color="0.85", lw=0.5, zorder=0)
+        if p["phone"] != "SIL":
+            ax.text(0.5 * (p["start"] + p["end"]), 1.01 if k % 2 else 1.045, p["phone"],
+                    ha="center", fontsize=6, transform=ax.get_xaxis_transform())
+    canvas.draw()
+    image = np.asarray(canvas.buffer_rgba())[..., :3].copy()
+    if path is not None:
+        from db.atomic import atomic_write
+
+        with atomic_write(path) as handle:
+            fig.savefig(handle, format="png", dpi=100)
+    bbox = ax.get_window_extent()
+    x0, x1 = bbox.x0, bbox.x1
+
+    def x_of_time(seconds: float) -> float:
+        return x0 + (x1 - x0) * seconds / max(motion.duration, 1e-9)
+
+    return image, x_of_time
+
+
+def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None,
+                  audio: Path | None = None, fps: float | None = None,
+                  phones: Sequence[dict] = (), size=(480, 540), force: bool = False,
+                  progress: Callable[[int], Callable] | None = None) -> Path:
+    """Render ``motion`` to ``out`` by its extension (see :data:`FORMATS`).
+
+    Parameters
+    ----------
+    deformer : Deformer, optional
+        Mesh and marker map for point motion; None renders the channels as curves.
+    audio : Path, optional
+        Speech muxed into an MP4.
+    fps : float, optional
+        Frame rate of the video (default 30; 20 for a GIF) or of the glTF / OBJ frames
+        (default the motion's).
+    phones : sequence of dict
+        ``phone``, ``start``, ``end``: captions, or labels on a curve plot.
+    """
+    out = Path(out)
+    kind = out.suffix.lower()
+    if kind not in FORMATS:
+        raise ParameterError(f"output must end in .mp4, .gif, .glb or .png, or be a folder "
+                             f"for OBJ frames; got {out.name!r}")
+    if kind == "" and out.exists() and not force:
+        raise DataError(f"{out} exists (use --force to replace it)")
+    if kind != "" and out.is_dir():
+        raise DataError(f"{out} is a folder")
+    video_fps = fps or (20.0 if kind == ".gif" else 30.0)
+    if deformer is None:
+        if kind in (".glb", ""):
+            raise ParameterError("curve motion (no marker geometry) cannot become a mesh "
+                                 "animation: render .mp4, .gif or .png")
+        if kind == ".png":
+            curve_image(motion, phones, path=out)
+            return out
+        frames = curve_frames(motion, phones, fps=video_fps,
+                              size=(960, 540) if kind == ".mp4" else (640, 360))
+        return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
+    if kind in (".mp4", ".gif", ".png"):
+        animation = animate(motion, deformer, fps=video_fps)
+        if kind == ".png":
+            return _still(animation, out, phones, size)
+        gif_size = (240, 270) if kind == ".gif" else size
+        frames = face_frames(animation, size=gif_size, phones=phones)
+        if progress is not None:
+            frames = progress(animation.n_frames)(frames)
+        return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
+    animation = animate(motion, deformer, fps=fps)
+    if kind == ".glb":
+        from animegraph.gltf import write_glb
+
+        return write_glb(animation, out)
+    return write_obj_frames(animation, out, force=force)
+
+
+def _still(animation: FaceAnimation, out: Path, phones, size) -> Path:
+    """A PNG of the frame where the mouth is widest open (the face's extremes show)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from db.atomic import atomic_write
+
+    spread = np.linalg.norm(animation.local - animation.mesh.vertices[None], axis=2).sum(1)
+    k = int(np.argmax(spread))
+    renderer = FaceRenderer(animation.mesh, animation_bounds(animation), size)
+    try:
+        image = renderer.frame(animation.vertices[k], captions(phones, animation.n_frames,
+                                                               animation.fps)[k])
+    finally:
+        renderer.close()
+    with atomic_write(out) as handle:
+        plt.imsave(handle, image, format="png")
+    return out
+
+
+def deformer_for(names: Sequence[str], *, mesh_path: Path | None = None,
+                 map_path: Path | None = None, rest_frame: np.ndarray | None = None
+                 ) -> Deformer | None:
+    """The deformer for motion with channels ``names`` (None for curve motion).
+
+    Default: the canonical mesh, with the corpus' markers or ``lm<i>`` landmarks mapped
+    on its vertices; a custom ``mesh_path`` needs a ``map_path``.
+
+    Raises
+    ------
+    DataError
+        On an unreadable mesh or map, or a map naming markers the motion lacks.
+    """
+    from animegraph.mesh import (
+        canonical_mesh,
+        default_marker_map,
+        load_mesh,
+        point_labels,
+        read_marker_map,
+    )
+
+    labels = point_labels(names)
+    if not labels:
+        if mesh_path is not None or map_path is not None:
+            raise DataError("the motion has no x/y/z point channels to put on a mesh")
+        return None
+    if mesh_path is not None and map_path is None:
+        raise ParameterError("--mesh needs --marker-map (which marker sits on which vertex)")
+    mesh = load_mesh(mesh_path) if mesh_path is not None else canonical_mesh()
+    markers: MarkerMap = (read_marker_map(map_path, mesh) if map_path is not None
+                          else default_marker_map(labels))
+    missing = [lab for lab in markers.labels if lab not in set(labels)]
+    if missing:
+        raise DataError(f"the motion's channels do not match the mesh's marker map: "
+                        f"{len(missing)} of its {markers.n_markers} markers are missing "
+                        f"({', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''})")
+    return Deformer.build(mesh, markers, rest=rest_frame)

@@ -1,0 +1,155 @@
+"""``animegraph query``: SQL-expressible search of a real database, and export."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from animegraph.cli import main
+from animegraph.query import ClipData, QuerySpec, _write_snippet, build_sql, run_query
+from db.errors import ParameterError
+from db.sql import query as run_sql
+from db.store import Database
+from ingest.formats.c3d import read_c3d
+from ingest.formats.phones_csv import read_phones_csv
+from ingest.formats.wav import read_wav
+
+
+@pytest.fixture(scope="module")
+def db(tiny_db):
+    return Database.open(tiny_db[0])
+
+
+def test_query_is_the_same_as_its_sql(db, tiny_db, capsys):
+    spec = QuerySpec(phoneme="aa", emotion="angry", order_by="duration", descending=True,
+                     limit=5)
+    hits = run_query(db, spec)
+    assert 0 < hits.num_rows <= 5
+    rows = hits.to_pylist()
+    assert all(r["phoneme"] == "AA" and r["emotion"] == "angry" for r in rows)
+    durations = [r["duration"] for r in rows]
+    assert durations == sorted(durations, reverse=True)
+    # The same SQL through `animegraph sql` gives the same table.
+    sql = build_sql(spec)
+    assert run_sql(db, sql).equals(hits)
+    assert main(["sql", "--db", str(tiny_db[0]), "--format", "csv", sql]) == 0
+    via_sql = capsys.readouterr().out
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--emotion", "angry",
+                 "--order-by", "duration", "--desc", "--limit", "5", "--format", "csv"]) == 0
+    assert capsys.readouterr().out == via_sql
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--emotion", "angry",
+                 "--order-by", "duration", "--desc", "--limit", "5", "--show-sql"]) == 0
+    assert capsys.readouterr().out.strip() == sql
+
+
+def test_every_filter(db):
+    text_hits = run_query(db, QuerySpec(text="the young", limit=None)).to_pylist()
+    assert text_hits and all("young" in r["text"].lower().split() for r in text_hits)
+    long = run_query(db, QuerySpec(min_dur=0.15, limit=None)).to_pylist()
+    assert long and all(r["duration"] >= 0.15 - 1e-4 for r in long)
+    speaker = run_query(db, QuerySpec(speaker="synth01", limit=3))
+    assert speaker.num_rows == 3
+    assert run_query(db, QuerySpec(speaker="nobody")).num_rows == 0
+    clips = run_query(db, QuerySpec(clips=True, phoneme="ZH", min_dur=2.0, emotion="sad",
+                                    order_by="duration", limit=None)).to_pylist()
+    for row in clips:
+        assert row["emotion"] == "sad" and row["duration"] >= 2.0
+        phones = db.table("clips").filter(
+            __import__("pyarrow.compute").compute.field("clip_id") == row["clip_id"]
+        ).column("phones")[0].as_py().split()
+        assert "ZH" in phones
+
+
+@pytest.mark.parametrize("spec, needle", [
+    (QuerySpec(phoneme="XX"), "ARPAbet"),
+    (QuerySpec(order_by="loudness"), "--order-by"),
+    (QuerySpec(limit=0), "--limit"),
+    (QuerySpec(text="drop; table"), "--text"),
+    (QuerySpec(min_dur=-1), "--min-dur"),
+    (QuerySpec(emotion="bored"), "not in the database"),
+])
+def test_bad_queries(db, spec, needle):
+    with pytest.raises(ParameterError, match=needle):
+        run_query(db, spec)
+
+
+def test_quotes_cannot_escape_the_sql(db):
+    assert run_query(db, QuerySpec(speaker="x' OR '1'='1")).num_rows == 0
+
+
+def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
+    out = tmp_path / "export"
+    argv = ["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--emotion", "happy",
+            "--limit", "2", "--context", "0.2", "--export", str(out)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    index = list(csv.DictReader((out / "index.csv").open()))
+    assert len(index) == 2
+    for row in index:
+        assert (out / row["preview"]).read_bytes()[:4] == b"\x89PNG"
+        motion = read_c3d(out / row["motion"])
+        audio, rate = read_wav(out / row["audio"])
+        start, end = float(row["snippet_start"]), float(row["snippet_end"])
+        assert start <= float(row["start_time"]) - 0.2 + 1e-2
+        assert end >= min(float(row["end_time"]) + 0.2 - 1e-2, end)
+        assert motion.points.shape[0] == round((end - start) * motion.rate)
+        assert abs(len(audio) / rate - (end - start)) < 2 / motion.rate
+        phones = read_phones_csv(out / row["phones"])
+        assert "AA" in [p.phone for p in phones]
+        assert phones[0].start >= 0 and phones[-1].end <= end - start + 1e-3
+        # The snippet is the recording itself (world coordinates), frame for frame.
+        original = read_c3d(tiny_corpus / "clips" / f"{row['clip_id']}.c3d")
+        f0 = round(start * original.rate)
+        truth = original.points[f0:f0 + len(motion.points)]
+        ok = np.isfinite(truth)
+        assert np.abs(motion.points[ok] - truth[ok]).max() < 0.05
+    # A snippet renders against its database; motion of other channels is refused.
+    snippet = out / index[0]["motion"]
+    assert main(["render", str(snippet), "--db", str(tiny_db[0]), "-o",
+                 str(tmp_path / "snip.glb")]) == 0
+    from animegraph.motionio import write_channel_csv
+
+    write_channel_csv(tmp_path / "other.csv", np.zeros((3, 3)), ["foo.x", "foo.y", "foo.z"],
+                      30)
+    capsys.readouterr()
+    assert main(["render", str(tmp_path / "other.csv"), "--db", str(tiny_db[0]), "-o",
+                 str(tmp_path / "other.glb")]) == 1
+    assert "not the database's" in capsys.readouterr().err
+    assert not (tmp_path / "other.glb").exists()
+    # An existing folder is refused and left alone; --force replaces it.
+    stamp = (out / "index.csv").stat().st_mtime_ns
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert "--force" in err and len(err.splitlines()) == 1
+    assert (out / "index.csv").stat().st_mtime_ns == stamp
+    assert main([*argv[:-2], "--limit", "1", "--export", str(out), "--force"]) == 0
+    assert len(list(csv.DictReader((out / "index.csv").open()))) == 1
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_export_of_clips_and_nothing_matched(tiny_db, tmp_path, capsys):
+    out = tmp_path / "clips"
+    assert main(["query", "--db", str(tiny_db[0]), "--clips", "--emotion", "sad", "--limit",
+                 "1", "--export", str(out)]) == 0
+    index = list(csv.DictReader((out / "index.csv").open()))
+    assert len(index) == 1 and index[0]["snippet_start"] == "0.0"
+    capsys.readouterr()
+    assert main(["query", "--db", str(tiny_db[0]), "--speaker", "nobody", "--export",
+                 str(tmp_path / "none")]) == 1
+    assert "nothing matched" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
+
+
+def test_curve_snippets_are_csv(tmp_path):
+    from animegraph.motionio import read_motion
+
+    clip = ClipData(motion=np.arange(20.0).reshape(10, 2), names=("jawOpen", "smile"),
+                    groups=("lips", "lips"), kind="curves", fps=30.0,
+                    audio=np.zeros(100, np.int16), sample_rate=16000, phones=[])
+    name = _write_snippet(clip, 2, 6, tmp_path / "snip")
+    assert name == "snip.csv"
+    motion = read_motion(tmp_path / name)
+    assert motion.names == ("jawOpen", "smile") and motion.fps == 30.0
+    assert np.array_equal(motion.values, clip.motion[2:6])

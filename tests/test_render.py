@@ -1,0 +1,270 @@
+"""``animegraph render`` and ``plot``: real files through the real ffmpeg, read back."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from animegraph.cli import main
+from animegraph.gltf import read_glb_frames
+from animegraph.mesh import canonical_mesh, default_marker_map
+from animegraph.motionio import Motion, read_motion
+from animegraph.render import animate, deformer_for, ffmpeg_exe
+from ingest.corpus import face
+from ingest.formats.c3d import MarkerData, write_c3d
+from ingest.formats.wav import write_wav
+
+FPS = 120.0
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory):
+    """One second of rig motion (jaw, smile, blink, a head turn) as C3D, with a WAV."""
+    folder = tmp_path_factory.mktemp("take")
+    n = int(FPS)
+    t = np.arange(n) / FPS
+    controls = np.zeros((n, len(face.CONTROLS)))
+    col = face.CONTROLS.index
+    controls[:, col("jaw_open")] = 0.5 + 0.5 * np.sin(2 * np.pi * 2 * t)
+    controls[:, col("smile")] = t
+    controls[:, col("blink")] = np.exp(-((t - 0.5) / 0.05) ** 2)
+    controls[:, col("head_yaw")] = 12 * np.sin(2 * np.pi * t)
+    points = face.FaceRig.for_points(face.marker_rest()).pose(controls)
+    labels = tuple(m[0] for m in face.MARKERS)
+    write_c3d(folder / "take.c3d", MarkerData(points=points, labels=labels, rate=FPS))
+    write_wav(folder / "take.wav", 0.3 * np.sin(2 * np.pi * 220 * np.arange(16000) / 16000),
+              16000)
+    phones = [{"phone": "SIL", "start": 0.0, "end": 0.2}, {"phone": "AA", "start": 0.2,
+                                                            "end": 0.6},
+              {"phone": "M", "start": 0.6, "end": 1.0, "jump": True, "clip_id": "x"}]
+    (folder / "take.json").write_text(json.dumps({"phones": phones}))
+    return folder
+
+
+def _streams(path):
+    out = subprocess.run([ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
+                         text=True)
+    return [line.strip() for line in out.stderr.splitlines() if "Stream #" in line]
+
+
+def _decode(path, width, height):
+    raw = subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-i", str(path), "-f",
+                          "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True,
+                         check=True).stdout
+    return np.frombuffer(raw, np.uint8).reshape(-1, height, width, 3)
+
+
+def _no_leftovers(folder):
+    return [p.name for p in folder.iterdir() if p.name.startswith(".")]
+
+
+def test_mp4_with_audio(take, capsys):
+    out = take / "face.mp4"
+    assert main(["render", str(take / "take.c3d"), "--audio", str(take / "take.wav"),
+                 "--explain", str(take / "take.json"), "-o", str(out), "--quiet",
+                 "--size", "240x270"]) == 0
+    streams = _streams(out)
+    assert any("Video: h264" in s and "240x270" in s for s in streams)
+    assert any("Audio: aac" in s for s in streams)
+    frames = _decode(out, 240, 270)
+    assert len(frames) == 30  # one second at 30 fps
+    # A face is drawn (skin-coloured pixels in the middle) and the jaw moves it.
+    assert frames[0][115:155, 100:140].mean() > 80 and frames[0][:10, :10].mean() < 45
+    assert np.abs(frames[7].astype(int) - frames[0].astype(int)).mean() > 1.0
+    assert not _no_leftovers(take)
+
+
+def test_gif_and_png(take):
+    assert main(["render", str(take / "take.c3d"), "-o", str(take / "face.gif"),
+                 "--quiet"]) == 0
+    assert (take / "face.gif").read_bytes()[:6] == b"GIF89a"
+    assert main(["render", str(take / "take.c3d"), "-o", str(take / "face.png")]) == 0
+    assert (take / "face.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_glb_round_trip(take):
+    import pygltflib
+    import trimesh
+
+    out = take / "face.glb"
+    assert main(["render", str(take / "take.c3d"), "-o", str(out)]) == 0
+    motion = read_motion(take / "take.c3d")
+    expected = animate(motion, deformer_for(motion.names)).vertices
+    times, vertices, faces = read_glb_frames(out)
+    assert vertices.shape == expected.shape == (120, 468, 3)
+    assert np.allclose(times, np.arange(120) / FPS, atol=1e-5)
+    assert np.abs(vertices - expected).max() < 0.02  # mm, float32 in metres
+    assert np.array_equal(faces, canonical_mesh().faces)
+    gltf = pygltflib.GLTF2().load(str(out))
+    assert {c.target.path for c in gltf.animations[0].channels} == {"weights", "rotation",
+                                                                     "translation"}
+    scene = trimesh.load(out)
+    geometry = next(iter(scene.geometry.values()))
+    assert len(geometry.vertices) == 468 and len(geometry.faces) == len(faces)
+
+
+def test_obj_frames_and_force(take, capsys):
+    import trimesh
+
+    out = take / "frames"
+    argv = ["render", str(take / "take.c3d"), "-o", str(out), "--fps", "10"]
+    assert main(argv) == 0
+    files = sorted(out.glob("*.obj"))
+    assert len(files) == 10
+    mesh = trimesh.load(files[3], process=False)
+    assert len(mesh.vertices) == 468
+    assert main(argv) == 1
+    assert "--force" in capsys.readouterr().err
+    assert main([*argv, "--fps", "5", "--force"]) == 0
+    assert len(list(out.glob("*.obj"))) == 5
+    assert not _no_leftovers(take)
+
+
+def test_landmark_motion_renders(tmp_path):
+    from animegraph.motionio import write_channel_csv
+
+    verts = canonical_mesh().vertices
+    values = np.repeat(verts.reshape(1, -1), 6, axis=0)
+    values[:, 14 * 3 + 1] -= np.linspace(0, 8, 6)  # the lower lip drops
+    names = [f"lm{i}.{a}" for i in range(468) for a in "xyz"] + ["pose.rx"]
+    write_channel_csv(tmp_path / "lm.csv", np.column_stack([values, np.zeros(6)]), names, 30)
+    assert main(["render", str(tmp_path / "lm.csv"), "-o", str(tmp_path / "lm.glb")]) == 0
+    _, vertices, _ = read_glb_frames(tmp_path / "lm.glb")
+    assert abs(vertices[5, 14, 1] - (verts[14, 1] - 8)) < 0.01
+
+
+def test_curves_render_as_curves(tmp_path, capsys):
+    from animegraph.motionio import write_channel_csv
+
+    t = np.arange(60) / 30
+    values = np.column_stack([np.sin(t * 6) ** 2, 0.5 * t, np.zeros_like(t)])
+    write_channel_csv(tmp_path / "c.csv", values, ["jawOpen", "smile_l", "brow"], 30)
+    assert main(["render", str(tmp_path / "c.csv"), "-o", str(tmp_path / "c.mp4")]) == 0
+    assert len(_decode(tmp_path / "c.mp4", 960, 540)) == 60
+    capsys.readouterr()
+    line = _one_line(capsys, main(["render", str(tmp_path / "c.csv"), "-o",
+                                   str(tmp_path / "c.glb")]), 1)
+    assert "cannot become a mesh animation" in line
+    assert not (tmp_path / "c.glb").exists()
+
+
+def _one_line(capsys, code, expected):
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == expected, err
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_bad_inputs_are_one_line_and_write_nothing(take, tmp_path, capsys):
+    import trimesh
+
+    mesh = canonical_mesh()
+    trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(tmp_path / "m.obj")
+    markers = default_marker_map([m[0] for m in face.MARKERS])
+    (tmp_path / "bad_vertex.csv").write_text("label,vertex,region\nlip_corner_r,5000,"
+                                            "lower_jaw\n")
+    (tmp_path / "other.csv").write_text("label,vertex,region\n" + "".join(
+        f"{lab}_x,{v},{r[0]}\n" for lab, v, r in zip(markers.labels, markers.vertices,
+                                                      markers.regions, strict=True)))
+    (tmp_path / "junk.obj").write_bytes(b"\x00\xff\x00 junk")
+    out = tmp_path / "out"
+    out.mkdir()
+    motion = str(take / "take.c3d")
+    cases = [
+        (["--mesh", str(tmp_path / "m.obj"), "--marker-map", str(tmp_path / "bad_vertex.csv")],
+         1, "names vertex 5000"),
+        (["--mesh", str(tmp_path / "junk.obj"), "--marker-map", str(tmp_path / "other.csv")],
+         1, "cannot read mesh"),
+        (["--mesh", str(tmp_path / "m.obj"), "--marker-map", str(tmp_path / "other.csv")],
+         1, "do not match the mesh's marker map"),
+        (["--mesh", str(tmp_path / "m.obj")], 2, "--marker-map"),
+        (["--size", "big"], 2, "--size"),
+        (["--audio", str(tmp_path / "nope.wav")], 2, "does not exist"),
+    ]
+    for extra, code, needle in cases:
+        line = _one_line(capsys, main(["render", motion, "-o", str(out / "x.mp4"), *extra]),
+                         code)
+        assert needle in line, line
+    line = _one_line(capsys, main(["render", str(tmp_path / "none.c3d"), "-o",
+                                   str(out / "x.mp4")]), 1)
+    assert "does not exist" in line
+    line = _one_line(capsys, main(["render", motion, "-o", str(out / "x.avi")]), 1)
+    assert ".mp4" in line
+    assert list(out.iterdir()) == []
+
+
+def test_custom_mesh_renders(take, tmp_path):
+    import trimesh
+
+    mesh = canonical_mesh()
+    keep = np.setdiff1d(np.arange(len(mesh.faces)), mesh.mouth)
+    trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=False).export(tmp_path / "m.ply")
+    markers = default_marker_map([m[0] for m in face.MARKERS])
+    (tmp_path / "map.csv").write_text("label,vertex,region\n" + "".join(
+        f"{lab},{v},{'|'.join(r)}\n" for lab, v, r in zip(markers.labels, markers.vertices,
+                                                           markers.regions, strict=True)))
+    assert main(["render", str(take / "take.c3d"), "--mesh", str(tmp_path / "m.ply"),
+                 "--marker-map", str(tmp_path / "map.csv"), "-o", str(tmp_path / "m.glb")]) == 0
+    _, vertices, faces = read_glb_frames(tmp_path / "m.glb")
+    assert vertices.shape == (120, 468, 3) and len(faces) == len(keep)
+
+
+def test_plot_against_truth(take, tmp_path, capsys):
+    motion = read_motion(take / "take.c3d")
+    noisy = Motion(values=motion.values + 0.3, names=motion.names, fps=motion.fps)
+    from animegraph.motionio import write_channel_csv
+
+    write_channel_csv(tmp_path / "syn.csv", noisy.values, noisy.names, noisy.fps)
+    out = tmp_path / "p.png"
+    assert main(["plot", str(tmp_path / "syn.csv"), "--truth", str(take / "take.c3d"),
+                 "--explain", str(take / "take.json"), "--audio", str(take / "take.wav"),
+                 "-o", str(out)]) == 0
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    capsys.readouterr()
+    (tmp_path / "bad.json").write_text("{\"nope\": 1}")
+    line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
+                                   str(tmp_path / "bad.json"), "-o", str(tmp_path / "q.png")]),
+                     1)
+    assert "--explain-json" in line
+    line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "-o",
+                                   str(tmp_path / "q.jpg")]), 2)
+    assert ".png" in line
+    assert not (tmp_path / "q.png").exists()
+
+
+def test_rest_frame_is_the_mesh_as_modelled(take, tmp_path):
+    # With frame 30 as the rest frame, that frame shows the mesh exactly as it is.
+    assert main(["render", str(take / "take.c3d"), "--rest-frame", "30", "-o",
+                 str(tmp_path / "r.glb")]) == 0
+    _, vertices, _ = read_glb_frames(tmp_path / "r.glb")
+    assert np.abs(vertices[30] - canonical_mesh().vertices).max() < 0.01
+    assert np.abs(vertices[0] - canonical_mesh().vertices).max() > 1.0
+    assert main(["render", str(take / "take.c3d"), "--rest-frame", "500", "-o",
+                 str(tmp_path / "s.glb")]) == 2
+
+
+@pytest.mark.shared
+def test_real_landmark_track_renders(tmp_path):
+    """A real tracked face (EDTalk sample, ../shared/data) on the canonical mesh, as MP4."""
+    from conftest import require_shared
+
+    from animegraph.motionio import write_channel_csv
+    from ingest.readers.landmarks import normalise_landmarks
+
+    folder = require_shared("talkingface", "edtalk_mouth_source")
+    meta = json.loads((folder / "meta.json").read_text())
+    raw = np.load(folder / "landmarks.npy")[:50]
+    points = normalise_landmarks(raw, meta["width"], meta["height"]).points
+    names = [f"lm{i}.{a}" for i in range(468) for a in "xyz"]
+    write_channel_csv(tmp_path / "lm.csv", points.reshape(len(points), -1), names, meta["fps"])
+    assert main(["render", str(tmp_path / "lm.csv"), "-o", str(tmp_path / "lm.mp4"),
+                 "--size", "240x270", "--quiet"]) == 0
+    assert len(_decode(tmp_path / "lm.mp4", 240, 270)) == 60  # 2 s at 30 fps
+    assert main(["render", str(tmp_path / "lm.csv"), "-o", str(tmp_path / "lm.glb")]) == 0
+    _, vertices, _ = read_glb_frames(tmp_path / "lm.glb")
+    # Every vertex is a landmark: the mesh follows the track (mouth opening included).
+    assert np.abs(vertices - points).max() < 0.02
