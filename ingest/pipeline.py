@@ -7,8 +7,10 @@
 3. If anything was added or changed: the clips already in the database and the new ones
    are decomposed together (PCA keeping 95 % of the variance, then FastICA over the
    whole corpus, Cao et al. §4.1 and §5.1.2), the per-component low-pass cutoffs are
-   learned (§4.3), the anime nodes are built, and a new database version is written
-   atomically (:func:`db.store.write_version`).
+   learned (§4.3), the emotion model is learned (speech/emotion components, emotion
+   mappings and the speech emotion classifier, §5-6, :mod:`ingest.emotion.model`), the
+   anime nodes are built, and a new database version is written atomically
+   (:func:`db.store.write_version`).
 4. A report (one row per clip: added, replaced, unchanged or rejected, with the reason)
    is returned, and saved beside the database.
 """
@@ -32,6 +34,7 @@ from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
+from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
@@ -328,7 +331,14 @@ def build_database(
     sources = [model.transform(c.motion) for c in clips]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
-    tables = build_tables(clips, model, cutoffs, arrays=extra_arrays)
+    emotion = fit_emotion_model(
+        sources, [c.motion for c in clips], [c.emotion for c in clips],
+        [c.sentence_id for c in clips], [(c.audio, c.sample_rate) for c in clips],
+        model.mixing_.T @ model.components_, clips[0].schema.groups, fps,
+        random_state=config.random_state)
+    emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
+    tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},
+                          component_columns=emotion_columns)
     emotions: dict[str, int] = {}
     for c in clips:
         emotions[c.emotion] = emotions.get(c.emotion, 0) + 1
@@ -343,6 +353,7 @@ def build_database(
         "n_pcs": model.n_pcs_, "variance_kept": float(model.explained_variance_ratio_.sum()),
         "variance_target": config.variance, "energy_target": config.energy,
         "ica_converged": bool(model.ica_converged_),
+        "emotion": emotion_entry,
     }
     return summary, write_version(db_path, tables, summary)
 
