@@ -122,8 +122,8 @@ class EmotionModel:
     def check_emotion(self, name: str) -> str:
         """``name`` if the database has this emotion, else a ParameterError naming them."""
         if name not in self.emotions:
-            raise ParameterError(f"unknown emotion {name!r}: the database has "
-                                 f"{', '.join(self.emotions) or 'no labelled emotions'}")
+            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
+                                 f"has {', '.join(self.emotions) or 'no labelled emotions'})")
         return name
 
     def mapping(self, src: str, dst: str) -> EmotionMapping | None:
