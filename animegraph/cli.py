@@ -315,9 +315,13 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in out.emotion.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {out.emotion.target} ({probs})",
               file=sys.stderr)
-    if out.emotion.target is not None and out.emotion.search != out.emotion.target:
-        print(f"animegraph: emotion {out.emotion.describe()}: animes preferred from "
-              f"{out.emotion.search}, mapped into it", file=sys.stderr)
+    if isinstance(out.emotion.target, dict):
+        print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
+              f"{out.emotion.search}, emotion components blended from their mappings",
+              file=sys.stderr)
+    elif out.emotion.target is not None and out.emotion.search != out.emotion.target:
+        print(f"animegraph: the database has no {out.emotion.target} animes: preferred "
+              f"{out.emotion.search}, mapped into {out.emotion.target}", file=sys.stderr)
     for note in out.notes:
         print(f"animegraph: {note}", file=sys.stderr)
     r = out.result

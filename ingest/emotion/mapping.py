@@ -20,6 +20,10 @@ Choices where the paper is silent
 * d is the distance between the two closest *centres* (the samples of the linear system).
 * ``x^2 / d`` is taken literally (d is a length, so the Gaussian's width is sqrt(d) in
   component units; the components have unit variance over the corpus).
+* ``offset=True`` (not in the paper, off by default) adds the mean offset of the samples,
+  e_j = e_i + b + sum_r c_r phi(.), b = mean(e_j - e_i), the constant term RBF
+  interpolation is often augmented with: far from every centre the paper's form falls back
+  to the identity, this one to the mean offset.
 """
 
 from __future__ import annotations
@@ -62,6 +66,8 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
         phi(x) = exp(-x/d) or exp(-x^2/d) (Eq. 11).
     random_state : int, optional
         Seed of K-means.
+    offset : bool, optional
+        Add the samples' mean offset as a constant term (not in the paper).
 
     Attributes
     ----------
@@ -73,14 +79,18 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
         Coefficients c_r of Eq. 10.
     d_ : float
         Distance between the two closest centres.
+    offset_ : np.ndarray, shape (n_emotion_components,)
+        The constant term (zeros unless ``offset``).
     n_samples_fit_ : int
         Correspondences the mapping was learned from.
     """
 
-    def __init__(self, n_centres: int = N_CENTRES, kernel: str = KERNEL, random_state: int = 0):
+    def __init__(self, n_centres: int = N_CENTRES, kernel: str = KERNEL, random_state: int = 0,
+                 offset: bool = False):
         self.n_centres = n_centres
         self.kernel = kernel
         self.random_state = random_state
+        self.offset = offset
 
     def fit(self, X, y):
         """Learn F from corresponding emotion components.
@@ -123,7 +133,8 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
         if not d > 0:
             raise DataError("two K-means centres coincide: cannot set the RBF width")
         phi = rbf(cdist(centres, centres), d, self.kernel)
-        self.coef_ = lu_solve(lu_factor(phi), targets - centres)
+        self.offset_ = (y - X).mean(axis=0) if self.offset else np.zeros(X.shape[1])
+        self.coef_ = lu_solve(lu_factor(phi), targets - centres - self.offset_)
         self.centres_ = centres
         self.targets_ = targets
         self.d_ = d
@@ -147,13 +158,14 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
         if X.shape[1] != self.centres_.shape[1]:
             raise ParameterError(f"X has {X.shape[1]} emotion components, the mapping "
                                  f"{self.centres_.shape[1]}")
-        return X + rbf(cdist(X, self.centres_), self.d_, self.kernel) @ self.coef_
+        return X + self.offset_ + rbf(cdist(X, self.centres_), self.d_, self.kernel) @ self.coef_
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """The fitted mapping as float arrays (for the database)."""
         check_is_fitted(self, "coef_")
         return {
             "centres": self.centres_, "targets": self.targets_, "coef": self.coef_,
+            "offset": self.offset_,
             "params": np.array([self.d_, KERNELS.index(self.kernel), self.n_centres,
                                 self.random_state, self.n_samples_fit_], dtype=np.float64),
         }
@@ -162,13 +174,15 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> EmotionMapping:
         """Rebuild a fitted mapping from :meth:`to_arrays`."""
         d, kernel, n_centres, seed, n_samples = arrays["params"]
+        offset = np.asarray(arrays.get("offset", [0.0]), dtype=np.float64).ravel()
         self = cls(n_centres=int(n_centres), kernel=KERNELS[int(kernel)],
-                   random_state=int(seed))
-        width = np.asarray(arrays["centres"]).shape[-1] if np.ndim(arrays["centres"]) > 1 else 1
+                   random_state=int(seed), offset=bool(np.any(offset != 0)))
+        width = np.asarray(arrays["centres"]).shape[-1]
         self.centres_ = np.asarray(arrays["centres"], dtype=np.float64).reshape(-1, width)
         self.targets_ = np.asarray(arrays["targets"], dtype=np.float64).reshape(-1, width)
         self.coef_ = np.asarray(arrays["coef"], dtype=np.float64).reshape(-1, width)
         self.d_ = float(d)
+        self.offset_ = offset if offset.size == width else np.zeros(width)
         self.n_samples_fit_ = int(n_samples)
         self.n_features_in_ = width
         return self

@@ -271,10 +271,12 @@ class EmotionModel:
 
 def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
                 split: ComponentSplit, *, n_centres: int = N_CENTRES, kernel: str = KERNEL,
-                random_state: int = 0) -> tuple[EmotionMapping, np.ndarray]:
+                random_state: int = 0, offset: bool = False
+                ) -> tuple[EmotionMapping, np.ndarray]:
     """F_src,dst and the mean offset from the parallel ``sentences`` (§5.2)."""
     x, y = correspondences(data, src, dst, sentences, split)
-    f = EmotionMapping(n_centres=n_centres, kernel=kernel, random_state=random_state).fit(x, y)
+    f = EmotionMapping(n_centres=n_centres, kernel=kernel, random_state=random_state,
+                       offset=offset).fit(x, y)
     return f, (y - x).mean(axis=0)
 
 
