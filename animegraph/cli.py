@@ -281,7 +281,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     import json
     import time
 
-    from animegraph.emotion.control import parse_emotion
+    import numpy as np
+
+    from animegraph.emotion.control import check_names, parse_emotion, resolve_emotion
     from animegraph.synth import Model, synthesize, write_motion
     from animegraph.synthesis import PostOptions
     from ingest.formats.wav import read_wav
@@ -300,21 +302,26 @@ def _cmd_synth(args: argparse.Namespace) -> int:
             args.emotion_mix:
         raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
                          "happy=0.7,neutral=0.3")
+    check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
     labels = read_labels(args.labels) if args.labels else None
+    # Classify ("auto") before any progress line, so that a failure is one line.
+    choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
+                             audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
+                             sample_rate)
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
                           smooth=not args.no_smooth)
+    if choice.probabilities is not None:
+        probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
+        print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
+              file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
-                     emotion=emotion, method=method, window=args.window,
+                     emotion=choice.target, method=method, window=args.window,
                      options=options)
     write_motion(out, model, args.output)
-    if out.emotion.probabilities is not None:
-        probs = ", ".join(f"{k} {v:.2f}" for k, v in out.emotion.probabilities.items())
-        print(f"animegraph: emotion auto: the speech sounds {out.emotion.target} ({probs})",
-              file=sys.stderr)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
               f"{out.emotion.search}, emotion components blended from their mappings",

@@ -130,6 +130,17 @@ class EmotionChoice:
         return self.target
 
 
+def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str]) -> None:
+    """Raise ParameterError if a parsed request names an emotion the database lacks."""
+    if spec is None or spec == AUTO:
+        return
+    known = set(graph_emotions) | set(model.emotions if model is not None else ())
+    for name in [spec] if isinstance(spec, str) else list(spec):
+        if name not in known:
+            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
+                                 f"has {', '.join(sorted(known)) or 'no labelled emotions'})")
+
+
 def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[str],
                     audio: np.ndarray | None = None, sample_rate: int | None = None
                     ) -> EmotionChoice:
@@ -143,7 +154,7 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
         ``"auto"`` without a classifier or with unusable audio.
     """
     spec = parse_emotion(spec)
-    known = set(graph_emotions) | set(model.emotions if model is not None else ())
+    check_names(spec, model, graph_emotions)
     if spec is None:
         return EmotionChoice(None, None)
     probabilities = None
@@ -155,11 +166,8 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
             raise ParameterError("emotion 'auto' needs the speech to classify")
         probabilities = classify_speech(model, audio, sample_rate)
         spec = next(iter(probabilities))
+    check_names(spec, model, graph_emotions)
     names = [spec] if isinstance(spec, str) else list(spec)
-    for name in names:
-        if name not in known:
-            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
-                                 f"has {', '.join(sorted(known)) or 'no labelled emotions'})")
     heaviest = spec if isinstance(spec, str) else max(spec, key=spec.get)
     search = heaviest
     if heaviest not in graph_emotions and model is not None:
