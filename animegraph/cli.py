@@ -418,9 +418,10 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         raise DataError(f"database {args.db} has no emotion model (it was built by an older "
                         "animegraph): ingest its clips again")
     for name in [target] if isinstance(target, str) else list(target):
-        emotions.check_emotion(name)
+        emotions.mapping(name, name)  # a single-emotion database, an unknown name: say so
     if source != "auto":
-        emotions.check_emotion(source)
+        for name in [target] if isinstance(target, str) else list(target):
+            emotions.mapping(source, name)  # too few parallel sentences: say so now
     motion, fps = read_motion(args.motion, model)
     how = "given"
     if source == "auto" and args.audio is not None:

@@ -94,18 +94,6 @@ def test_cross_validation_beats_no_mapping(data):
         assert s["mapped"] < s["none"]
 
 
-def test_cross_validation_needs_three_parallel_sentences(tiny_db, tmp_path):
-    from ingest.pipeline import build_database
-    from ingest.tables import prepared_from_database
-
-    clips = [c for c in prepared_from_database(Database.open(tiny_db[0]))
-             if c.sentence_id in ("s0001", "s0002")]
-    build_database(tmp_path / "db", clips)
-    two = EmotionData.load(Database.open(tmp_path / "db"))
-    with pytest.raises(DataError, match="needs 3"):
-        cross_validate(two)
-
-
 def test_plots(data, tmp_path):
     plot_split(data.model.split, tmp_path / "split.png")
     parallel = data.parallel()

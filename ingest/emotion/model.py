@@ -136,13 +136,14 @@ class EmotionModel:
         DataError
             The database has a single emotion, or too few sentences in both to map.
         """
+        if len(self.emotions) < 2:
+            raise DataError(f"the database has a single emotion "
+                            f"({', '.join(self.emotions) or 'none labelled'}): there is "
+                            "nothing to map between")
         self.check_emotion(src)
         self.check_emotion(dst)
         if src == dst:
             return None
-        if len(self.emotions) < 2:
-            raise DataError(f"the database has a single emotion ({self.emotions[0]}): there "
-                            "is nothing to map between")
         if (src, dst) not in self.mappings:
             n = self.parallel.get("/".join(sorted((src, dst))), 0)
             why = ("it has no emotion components" if self.split.emotion_components.size == 0
