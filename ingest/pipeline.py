@@ -97,6 +97,14 @@ class IngestReport:
                        f"{s['n_animes']} animes, {s['duration_s'] / 60:.1f} min, "
                        f"{s['n_pcs']} principal / independent components "
                        f"({100 * s['variance_kept']:.1f} % of the variance)")
+            e = s.get("emotion")
+            if e:
+                clf = e["classifier"]
+                ids = " ".join(map(str, e["emotion_components"])) or "none"
+                out.append(f"emotion: components {ids} carry emotion, "
+                           f"{len(e['mappings'])} emotion mappings, "
+                           + (f"classifier over {len(clf['classes'])} emotions" if clf
+                              else "no classifier"))
         else:
             out.append(f"database {self.db} unchanged")
         return out
