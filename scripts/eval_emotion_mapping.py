@@ -131,7 +131,7 @@ def main() -> int:
                    "none": unit_cube_rms(h.source, h.recorded, data.names),
                    "offset": unit_cube_rms(h.offset, h.recorded, data.names)}
             case[name] = {"sentence": sentences[-1], "clips": [h.clip_src, h.clip_dst], **rms}
-            if name == "paper-exp" or len(case) == 1:
+            if name == "paper-gauss" or len(case) == 1:  # the default kernel
                 plot_mapping(h, data.names, args.out / "emotion_mapping_fig7.png", rms=rms)
         record["paper_case"] = case
         print(f"\n# The paper's case: neutral -> happy, sentence {sentences[-1]} held out "
