@@ -416,7 +416,8 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         from db.errors import DataError
 
         raise DataError(f"database {args.db} has no emotion model (it was built by an older "
-                        "animegraph): ingest its clips again")
+                        f"animegraph): run 'animegraph ingest SRC --db {args.db}' once to "
+                        "learn it")
     for name in [target] if isinstance(target, str) else list(target):
         emotions.mapping(name, name)  # a single-emotion database, an unknown name: say so
     if source != "auto":

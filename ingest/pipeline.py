@@ -11,6 +11,8 @@
    mappings and the speech emotion classifier, §5-6, :mod:`ingest.emotion.model`), the
    anime nodes are built, and a new database version is written atomically
    (:func:`db.store.write_version`).
+   A database written before emotion models existed is rebuilt from its own clips even
+   when nothing changed, so that it gets one.
 4. A report (one row per clip: added, replaced, unchanged or rejected, with the reason)
    is returned, and saved beside the database.
 """
@@ -212,6 +214,9 @@ def ingest(
         everything = _consistent(kept, new, report)
         if everything:
             _write(db_path, everything, config, target_fps, report, reference)
+    elif existing is not None and "emotion" not in existing.manifest:
+        # Written before emotion models existed: learn it now from the stored clips.
+        _write(db_path, prepared_from_database(existing), config, fps, report, reference)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):

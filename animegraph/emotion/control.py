@@ -233,7 +233,7 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target) -> np.ndarr
     model = synth_model.emotion_model
     if model is None:
         raise DataError("the database has no emotion model (built by an older animegraph): "
-                        "ingest its clips again")
+                        "run 'animegraph ingest SRC --db DB' once to learn it")
     filled, _ = fill_gaps(np.asarray(motion, dtype=np.float64), synth_model.names)
     groups = synth_model.groups
     rigid = synth_model.head_reference is not None and head_points(groups) >= 3

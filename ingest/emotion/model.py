@@ -242,7 +242,8 @@ class EmotionModel:
         rows = db.table("components").to_pylist()
         if entry is None or not rows or "label" not in rows[0]:
             raise DataError(f"database {db.root} has no emotion model (it was built by an "
-                            "older animegraph): ingest its clips again")
+                            f"older animegraph): run 'animegraph ingest SRC --db {db.root}' "
+                            "once to learn it")
         arrays = db.arrays()
         split = ComponentSplit.from_columns(rows)
         mappings, offsets, centroids = {}, {}, {}
