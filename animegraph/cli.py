@@ -433,7 +433,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         source = emotions.guess_emotion(model.decomposer.transform(
             _local(model, motion)))
         how = "nearest mean emotion components"
-    mapped = map_motion(model, motion, source, target)
+    mapped = map_motion(model, motion, source, target, fps=fps)
     write_motion_array(mapped, fps, model, args.output)
     name = target if isinstance(target, str) else ",".join(f"{k}={v:.2f}"
                                                             for k, v in target.items())

@@ -211,13 +211,16 @@ def map_frames(model: EmotionModel, ics: np.ndarray, frame_emotions: Sequence[st
     return out, notes
 
 
-def map_motion(synth_model, motion: np.ndarray, source: str, target) -> np.ndarray:
+def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
+               fps: float | None = None) -> np.ndarray:
     """A recorded or synthesized motion with its emotion changed (Fig. 6).
 
     The motion (in the database's channels, world coordinates) is brought into the
     database's head frame, decomposed, its emotion components mapped from ``source`` to
-    ``target`` (a name or a mix), and the change is added back on the input's own head
-    motion; the rigid head group is left as it was.
+    ``target`` (a name or a mix) and low-passed at the database's per-component cutoffs
+    (§4.3; the interpolant is not smooth between its centres) when ``fps`` is given, and
+    the change is added back on the input's own head motion; the rigid head group is left
+    as it was.
 
     Parameters
     ----------
@@ -225,6 +228,8 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target) -> np.ndarr
     motion : np.ndarray, shape (n_frames, n_channels)
     source : str
     target : str or dict of str to float
+    fps : float, optional
+        Frame rate of ``motion`` (for the smoothing; None: no smoothing).
 
     Returns
     -------
@@ -241,6 +246,11 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target) -> np.ndarr
     dec = synth_model.decomposer
     ics = dec.transform(local)
     mapped = model.map_components(ics, source, target)
+    e = model.split.emotion_components
+    if fps is not None and e.size and not np.array_equal(mapped, ics):
+        from animegraph.synthesis import smooth
+
+        mapped[:, e] = smooth(mapped[:, e], synth_model.cutoffs[e], fps)
     delta = dec.inverse_transform(mapped) - dec.inverse_transform(ics)
     if rigid:
         delta[:, np.asarray(groups) == "head"] = 0.0
