@@ -488,15 +488,9 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     else:
         audio, sample_rate, labels = _speak(line, warnings)
         text, speech = None, "espeak"
-    try:
-        synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
-                           emotion=line.emotion.argument, method=line.method,
-                           window=line.window)
-    except ParameterError as exc:
-        if line.emotion.source in ("auto", "mix") and "emotion" in str(exc):
-            raise LineError(f"emotion {line.emotion.text!r} ({line.emotion.source}) is not "
-                            f"supported yet by this build's synthesis: {exc}") from None
-        raise
+    synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
+                       emotion=line.emotion.argument, method=line.method, window=line.window)
+    warnings.extend(synth.notes)  # e.g. emotion components that could not be mapped
     if line.audio is not None and synth.segmentation != "aligned":
         warnings.append(f"the transcript could not be aligned; phones were "
                         f"{synth.segmentation}")
@@ -557,12 +551,12 @@ def voice_for(line: ScriptLine, warnings: list[str] | None = None):
 
 
 def emotion_used(synth, spec: EmotionSpec) -> str:
-    """The emotion a line was made in: what synthesis resolved it to when it reports one
-    (``Synthesis.emotion``, e.g. the class ``auto`` detected), else what was asked for;
-    ``none`` for no preference."""
-    resolved = getattr(synth, "emotion", None)
-    if resolved:
-        return resolved if isinstance(resolved, str) else str(resolved)
+    """The emotion a line was made in: what synthesis resolved it to (``Synthesis.emotion``,
+    e.g. the class ``auto`` detected, or a mix), else what was asked for; ``none`` for no
+    preference."""
+    resolved = synth.emotion  # animegraph.emotion.control.EmotionChoice
+    if resolved is not None and resolved.target is not None:
+        return resolved.describe()
     return spec.text or "none"
 
 

@@ -142,7 +142,12 @@ def build_parser() -> argparse.ArgumentParser:
     given.add_argument("--text", default=None, help="transcript (forced alignment)")
     given.add_argument("--labels", type=Path, default=None,
                        help="phone labels (.phones.csv, .TextGrid or HTK .lab)")
-    syn.add_argument("--emotion", default=None, help="prefer animes of this emotion")
+    feel = syn.add_mutually_exclusive_group()
+    feel.add_argument("--emotion", default=None, metavar="E|auto",
+                      help="the face's emotion: prefer animes of E and map the others into "
+                      "it (Cao et al. §5); 'auto': the emotion classified from the speech (§6)")
+    feel.add_argument("--emotion-mix", default=None, metavar="E=W,...",
+                      help="blend mapped emotions, e.g. happy=0.7,neutral=0.3")
     mode = syn.add_mutually_exclusive_group()
     mode.add_argument("--exact", action="store_true",
                       help="the global optimum (default)")
@@ -184,6 +189,35 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
     bat.set_defaults(func=_cmd_batch)
     _add_animator_commands(sub)
+    cls = sub.add_parser(
+        "classify", help="the emotion of speech, by the database's classifier",
+        description="Print the probability of each of the database's emotions for the "
+        "speech (Cao et al. 2005 §6: SVM on the signal's mean, variance, RMS and first 500 "
+        "real-cepstrum coefficients, trained on the database's clips at ingest).",
+    )
+    cls.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
+    cls.add_argument("--db", required=True, type=Path, help="database folder")
+    cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
+    cls.set_defaults(func=_cmd_classify)
+
+    mp = sub.add_parser(
+        "map-emotion", help="change the emotion of a facial motion",
+        description="Map the emotion components of a motion (as written by 'synth': .c3d, "
+        ".csv or .npz, in the database's channels) from one emotion to another with the "
+        "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
+    )
+    mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
+    mp.add_argument("--db", required=True, type=Path, help="database folder")
+    mp.add_argument("--to", required=True, metavar="E|E=W,...",
+                    help="target emotion, or a mix such as happy=0.7,neutral=0.3")
+    mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
+                    help="emotion of IN; 'auto' (default): classify --audio if given, else "
+                    "the emotion whose mean emotion components are nearest IN's")
+    mp.add_argument("--audio", type=Path, default=None,
+                    help="the speech of IN, for --from auto")
+    mp.add_argument("-o", "--output", required=True, type=Path,
+                    help="motion file to write (.c3d, .csv or .npz)")
+    mp.set_defaults(func=_cmd_map_emotion)
 
     info = sub.add_parser("info", help="summarise a database")
     info.add_argument("--db", required=True, type=Path, help="database folder")
@@ -483,6 +517,9 @@ def _cmd_sql(args: argparse.Namespace) -> int:
 def _cmd_synth(args: argparse.Namespace) -> int:
     import time
 
+    import numpy as np
+
+    from animegraph.emotion.control import check_names, parse_emotion, resolve_emotion
     from animegraph.synth import Model, backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis import PostOptions
     from ingest.formats.wav import read_wav
@@ -496,20 +533,40 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          f"{args.output.name!r}")
     t0 = time.perf_counter()
     model = Model.load(args.db)
-    if args.emotion is not None and args.emotion not in model.graph.emotions:
-        raise UsageError(f"animegraph synth: emotion {args.emotion!r} is not in the database "
-                         f"(it has {', '.join(model.graph.emotions)})")
+    emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
+    if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
+            args.emotion_mix:
+        raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
+                         "happy=0.7,neutral=0.3")
+    check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
     labels = read_labels(args.labels) if args.labels else None
+    # Classify ("auto") before any progress line, so that a failure is one line.
+    choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
+                             audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
+                             sample_rate)
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
                           smooth=not args.no_smooth)
+    if choice.probabilities is not None:
+        probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
+        print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
+              file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
-                     emotion=args.emotion, method=method, window=args.window,
+                     emotion=choice.target, method=method, window=args.window,
                      options=options)
     write_motion(out, model, args.output)
+    if isinstance(out.emotion.target, dict):
+        print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
+              f"{out.emotion.search}, emotion components blended from their mappings",
+              file=sys.stderr)
+    elif out.emotion.target is not None and out.emotion.search != out.emotion.target:
+        print(f"animegraph: the database has no {out.emotion.target} animes: preferred "
+              f"{out.emotion.search}, mapped into {out.emotion.target}", file=sys.stderr)
+    for note in out.notes:
+        print(f"animegraph: {note}", file=sys.stderr)
     r = out.result
     t = out.timings
     print(f"animegraph: {len(out.phones)} phones ({out.segmentation}), {r.n_jumps} jump "
@@ -552,6 +609,87 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
+def _cmd_classify(args: argparse.Namespace) -> int:
+    import json
+
+    from animegraph.emotion.control import classify_speech
+    from db.errors import DataError
+    from db.store import Database
+    from ingest.emotion.model import EmotionModel
+    from ingest.formats.wav import read_wav
+
+    db = Database.open(args.db)
+    model = EmotionModel.from_database(db)
+    audio, sample_rate = read_wav(args.audio)
+    if audio.ndim != 1:
+        raise DataError(f"{args.audio}: expected mono speech")
+    probabilities = classify_speech(model, audio, sample_rate)
+    if args.json:
+        print(json.dumps(probabilities, indent=1))
+    else:
+        for name, p in probabilities.items():
+            print(f"{name:<12s} {p:6.3f}")
+    return 0
+
+
+def _cmd_map_emotion(args: argparse.Namespace) -> int:
+    import time
+
+    from animegraph.emotion.control import classify_speech, map_motion, parse_emotion
+    from animegraph.synth import Model, read_motion, write_motion_array
+    from ingest.formats.wav import read_wav
+
+    if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
+        raise UsageError(f"animegraph map-emotion: -o must end in .c3d, .csv or .npz, got "
+                         f"{args.output.name!r}")
+    target = parse_emotion(args.to)
+    if target == "auto":
+        raise UsageError("animegraph map-emotion: --to needs an emotion (or a mix), not auto")
+    source = parse_emotion(args.source)
+    if isinstance(source, dict):
+        raise UsageError("animegraph map-emotion: --from takes one emotion or auto")
+    t0 = time.perf_counter()
+    model = Model.load(args.db)
+    emotions = model.emotion_model
+    if emotions is None:
+        from db.errors import DataError
+
+        raise DataError(f"database {args.db} has no emotion model (it was built by an older "
+                        f"animegraph): run 'animegraph ingest SRC --db {args.db}' once to "
+                        "learn it")
+    for name in [target] if isinstance(target, str) else list(target):
+        emotions.mapping(name, name)  # a single-emotion database, an unknown name: say so
+    if source != "auto":
+        for name in [target] if isinstance(target, str) else list(target):
+            emotions.mapping(source, name)  # too few parallel sentences: say so now
+    motion, fps = read_motion(args.motion, model)
+    how = "given"
+    if source == "auto" and args.audio is not None:
+        audio, sample_rate = read_wav(args.audio)
+        source = next(iter(classify_speech(emotions, audio, sample_rate)))
+        how = f"classified from {args.audio.name}"
+    elif source == "auto":
+        source = emotions.guess_emotion(model.decomposer.transform(
+            _local(model, motion)))
+        how = "nearest mean emotion components"
+    mapped = map_motion(model, motion, source, target, fps=fps)
+    write_motion_array(mapped, fps, model, args.output)
+    name = target if isinstance(target, str) else ",".join(f"{k}={v:.2f}"
+                                                            for k, v in target.items())
+    print(f"animegraph: mapped {len(motion)} frames from {source} ({how}) to {name} in "
+          f"{time.perf_counter() - t0:.2f} s; wrote {args.output}", file=sys.stderr)
+    return 0
+
+
+def _local(model, motion):
+    from ingest.motion import fill_gaps, head_points, stabilize_points
+
+    filled, _ = fill_gaps(motion, model.names)
+    if model.head_reference is not None and head_points(model.groups) >= 3:
+        return stabilize_points(filled, model.groups, model.head_reference)
+    return filled
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     import json
 
@@ -581,7 +719,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _configure_logging(args.verbose)
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
-                             "batch, sql, query, render, plot, info "
+                             "batch, sql, query, render, plot, classify, map-emotion, info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

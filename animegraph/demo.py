@@ -209,8 +209,9 @@ def ensure_default_db(
     from ingest.pipeline import ingest
 
     path = default_db_dir()
-    if is_database(path):
+    if is_database(path) and "emotion" in Database.open(path).manifest:
         return path, False
+    # (A database from before emotion models is brought up to date by ingest.)
     if say:
         say(f"building the default database in {path} (once) ...")
     ingest([corpus], path, workers=workers or os.cpu_count() or 1, progress=progress)

@@ -13,7 +13,8 @@ def database_info(db: Database) -> dict:
     m = db.manifest
     animes = db.table("animes", columns=["phoneme"]).column("phoneme").to_pylist()
     clips = db.table("clips", columns=["segmentation", "speaker"]).to_pylist()
-    components = db.table("components").to_pylist()
+    components = [{k: (None if isinstance(v, float) and v != v else v) for k, v in c.items()}
+                  for c in db.table("components").to_pylist()]
     phones = Counter(animes)
     return {
         "path": str(db.root), "version": db.version_dir.name,
@@ -29,6 +30,7 @@ def database_info(db: Database) -> dict:
         "n_pcs": m["n_pcs"], "variance_kept": m["variance_kept"],
         "variance_target": m["variance_target"], "ica_converged": m["ica_converged"],
         "components": components,
+        "emotion": m.get("emotion"),
     }
 
 
@@ -51,9 +53,43 @@ def info_lines(info: dict) -> list[str]:
         f"{100 * info['variance_kept']:.1f} % of the variance (target "
         f"{100 * info['variance_target']:.0f} %), as many independent components; FastICA "
         + ("converged" if info["ica_converged"] else "did NOT converge"),
-        "components: #   motion share   low-pass cutoff",
     ]
+    split = bool(info["components"]) and "label" in info["components"][0]
+    if split:
+        lines.append("components: #   motion share   low-pass cutoff   label     speech  "
+                     "emotion (same-emotion baseline; pair)")
+    else:
+        lines.append("components: #   motion share   low-pass cutoff")
     for c in info["components"]:
-        lines.append(f"            {c['component']:<3d} {100 * c['motion_share']:6.1f} %"
-                     f"       {c['cutoff_hz']:6.2f} Hz")
+        line = (f"            {c['component']:<3d} {100 * c['motion_share']:6.1f} %"
+                f"       {c['cutoff_hz']:6.2f} Hz")
+        if split:
+            line += (f"      {c['label']:<8s} {_num(c['speech_score'], 3):>6s}  "
+                     f"{_num(c['emotion_score'], 2):>6s} ({_num(c['emotion_baseline'], 2)}; "
+                     f"{c['emotion_pair'] or '-'})")
+        lines.append(line)
+    emotion = info.get("emotion")
+    if emotion:
+        lines.append(f"emotion:    components {_ids(emotion['emotion_components'])} carry "
+                     f"emotion, {_ids(emotion['speech_components'])} speech (Cao et al. "
+                     "§5.1.3: emotion = differs between emotions after DTW alignment; "
+                     "speech = its Eq. 9 reconstruction captures mouth motion)")
+        lines.append(f"mappings:   {len(emotion['mappings'])} (F_ij, §5.2)"
+                     + (": " + ", ".join(emotion["mappings"]) if emotion["mappings"] else ""))
+        clf = emotion.get("classifier")
+        lines.append("classifier: " + (f"SVM ({clf['kernel']} kernel, {clf['features']} "
+                                       f"features) over {', '.join(clf['classes'])}"
+                                       if clf else "none"))
+        for note in emotion.get("notes", []):
+            lines.append(f"note:       {note}")
     return lines
+
+
+def _num(value, digits: int) -> str:
+    if value is None or value != value:  # NaN: not measurable on this database
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+def _ids(ids) -> str:
+    return " ".join(str(i) for i in ids) if ids else "none"

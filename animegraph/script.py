@@ -30,12 +30,11 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from db.errors import AnimeGraphError
+from db.errors import AnimeGraphError, ParameterError
 
 #: Every column a script may have.
 COLUMNS = ("id", "text", "audio", "emotion", "speaker", "voice", "window", "exact")
@@ -44,7 +43,6 @@ REQUIRED = ("id", "text")
 RESERVED_IDS = frozenset({"report.csv"})
 
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-_EMOTION_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _TRUE = frozenset({"true", "yes", "1", "y"})
 _FALSE = frozenset({"false", "no", "0", "n"})
 
@@ -90,41 +88,26 @@ class EmotionSpec:
 def parse_emotion(value: str | None) -> EmotionSpec:
     """Parse an emotion cell; raise ``ValueError`` with the reason when it is malformed.
 
-    Names keep their spelling (they must match the database's labels); ``auto`` is
-    recognised in any case.
+    The syntax is synthesis' (:func:`animegraph.emotion.control.parse_emotion`): a name
+    (kept in its spelling: it must match the database's labels), ``auto`` in any case, or
+    a mix ``happy=0.7,neutral=0.3`` (weights normalised; a one-emotion mix is a name).
     """
+    from animegraph.emotion.control import AUTO
+    from animegraph.emotion.control import parse_emotion as parse
+
     text = (value or "").strip()
     if not text:
         return EmotionSpec("default")
-    if text.lower() == "auto":
+    try:
+        parsed = parse(text)
+    except ParameterError as exc:
+        what = "emotion mix" if "=" in text or "," in text else "emotion"
+        raise ValueError(f"{what} {value!r}: {exc}") from None
+    if parsed == AUTO:
         return EmotionSpec("auto")
-    if "=" not in text:
-        if not _EMOTION_NAME.match(text):
-            raise ValueError(f"emotion {value!r} is not a name, 'auto' or a mix such as "
-                             "'happy=0.7,neutral=0.3'")
-        return EmotionSpec("given", ((text, 1.0),))
-    weights: dict[str, float] = {}
-    for part in text.split(","):
-        name, sep, number = (x.strip() for x in part.partition("="))
-        if not sep or not _EMOTION_NAME.match(name):
-            raise ValueError(f"emotion mix {value!r}: {part.strip()!r} is not name=weight")
-        try:
-            weight = float(number)
-        except ValueError:
-            raise ValueError(f"emotion mix {value!r}: weight {number!r} is not a number") from None
-        if not math.isfinite(weight) or weight < 0:
-            raise ValueError(f"emotion mix {value!r}: weight of {name} must be >= 0, got "
-                             f"{number}")
-        if name in weights:
-            raise ValueError(f"emotion mix {value!r}: {name} appears twice")
-        weights[name] = weight
-    total = sum(weights.values())
-    if total <= 0:
-        raise ValueError(f"emotion mix {value!r}: the weights sum to zero")
-    kept = tuple((n, w / total) for n, w in weights.items() if w > 0)
-    if len(kept) == 1:
-        return EmotionSpec("given", ((kept[0][0], 1.0),))
-    return EmotionSpec("mix", kept)
+    if isinstance(parsed, str):
+        return EmotionSpec("given", ((parsed, 1.0),))
+    return EmotionSpec("mix", tuple(parsed.items()))
 
 
 @dataclass(frozen=True)

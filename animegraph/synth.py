@@ -9,6 +9,9 @@
    (Eq. 2): exactly by default, or with the paper's bounded look-ahead.
 3. The chosen animes are time-warped, blended at jumps and smoothed (§4.3), and brought
    back from independent components to the database's channels.
+4. With an emotion asked for (a name, ``"auto"`` to classify the speech (§6), or a mix),
+   the frames that came from animes of another emotion get their emotion components
+   mapped into it (§5.2, Fig. 6; :mod:`animegraph.emotion.control`).
 """
 
 from __future__ import annotations
@@ -20,12 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from animegraph.dtw import audio_costs_many
+from animegraph.emotion.control import EmotionChoice, map_frames, resolve_emotion
 from animegraph.graph import AnimeGraph
 from animegraph.search import SearchResult, SearchWeights, candidates, search
-from animegraph.synthesis import Phone, PostOptions, assemble
+from animegraph.synthesis import Phone, PostOptions, assemble, output_frames, smooth
 from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.decompose import MotionDecomposer
+from ingest.emotion.model import EmotionModel
 from ingest.features import RastaPlpConfig, rasta_plp, slice_frames
 from ingest.formats.phones_csv import Segment
 from ingest.motion import head_points, unstabilize_points
@@ -44,17 +49,23 @@ class Model:
     groups: tuple[str, ...]
     kind: str
     head_reference: np.ndarray | None
+    emotion_model: EmotionModel | None = None  # None: a database built before emotion models
 
     @classmethod
     def load(cls, path) -> Model:
         db = Database.open(path)
         arrays = db.arrays()
         channels = db.table("channels").to_pylist()
+        try:
+            emotion_model = EmotionModel.from_database(db)
+        except DataError:
+            emotion_model = None
         return cls(
             db=db, graph=AnimeGraph.from_database(db),
             decomposer=MotionDecomposer.from_arrays(arrays), cutoffs=arrays["ic_cutoff_hz"],
             names=tuple(c["name"] for c in channels), groups=tuple(c["group"] for c in channels),
             kind=channels[0]["kind"], head_reference=arrays.get("head_reference"),
+            emotion_model=emotion_model,
         )
 
     def to_channels(self, ics: np.ndarray) -> np.ndarray:
@@ -86,28 +97,53 @@ class Synthesis:
     joins: list[dict]
     explain: list[dict]
     timings: dict = field(default_factory=dict)
+    emotion: EmotionChoice = field(default_factory=lambda: EmotionChoice(None, None))
+    notes: tuple[str, ...] = ()
 
 
 def synthesize(
     model: Model, audio: np.ndarray, sample_rate: int, *, text: str | None = None,
-    labels: list[Segment] | None = None, emotion: str | None = None, method: str = "exact",
-    window: int | None = None, weights: SearchWeights | None = None,
+    labels: list[Segment] | None = None, emotion: str | dict | None = None,
+    method: str = "exact", window: int | None = None, weights: SearchWeights | None = None,
     options: PostOptions | None = None, prosody_config: RastaPlpConfig | None = None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
+    Parameters
+    ----------
+    emotion : None, str or dict of str to float
+        ``None``: no preference (the search's emotion cost is off, nothing is mapped).
+        An emotion name (``"happy"``): the search prefers its animes (§4.2) and the frames
+        that came from animes of other emotions get their emotion components mapped into
+        it (§5.2, Fig. 6). ``"auto"``: the emotion the database's classifier finds in the
+        speech (§6; ``result.emotion.probabilities`` holds its output). A mix, as a dict
+        ``{"happy": 0.7, "neutral": 0.3}`` or the text ``"happy=0.7,neutral=0.3"``
+        (:func:`animegraph.emotion.control.parse_emotion`): the search prefers the
+        heaviest emotion's animes and every frame's emotion components are the weighted
+        blend of their mappings into each emotion (beyond the paper). When the database
+        has no animes of the wanted emotion, the search prefers the nearest emotion it has
+        and the motion is mapped from there. Databases without an emotion model (built by
+        an older animegraph) only steer the search.
+
+    Returns
+    -------
+    Synthesis
+        ``emotion`` says what was chosen; ``notes`` what could not be mapped.
+
     Raises
     ------
     ParameterError
-        On an unknown emotion or search method.
+        On an unknown emotion, a malformed mix, or an unknown search method.
     DataError
-        If the audio holds no speech.
+        If the audio holds no speech; for ``"auto"``, if the database has no classifier or
+        the audio is too short to classify (< 0.25 s); for a mix, if the database cannot
+        map into one of its emotions.
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if emotion is not None and emotion not in model.graph.emotions:
-        known = ", ".join(model.graph.emotions)
-        raise ParameterError(f"emotion {emotion!r} is not in the database (it has {known})")
+    choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
+                             sample_rate)
+    emotion = choice.search
     phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
                                        prosody_config=prosody_config)
     timings["segment_s"] = time.perf_counter() - t0
@@ -122,13 +158,38 @@ def synthesize(
 
     t3 = time.perf_counter()
     ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
+    notes: list[str] = []
+    if choice.target is not None and model.emotion_model is not None:
+        ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
+                                 options=options)
     motion = model.to_channels(ics)
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
     explain = _explain(model, phones, result, cands, audio_cost)
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
-                     timings=timings)
+                     timings=timings, emotion=choice, notes=tuple(notes))
+
+
+def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
+                options: PostOptions | None = None) -> tuple[np.ndarray, list[str]]:
+    """Map the frames of each anime whose emotion is not ``target`` into it (Fig. 6).
+
+    ``ics`` (n_frames, n_ics) is the rendered motion of ``nodes`` over ``phones``. The
+    mapped emotion components are low-passed again (with the learned cutoffs, when
+    smoothing is on) so that animes mapped from different emotions join smoothly.
+    Returns the components and notes on frames left unmapped.
+    """
+    graph = model.graph
+    n, ranges = output_frames(phones, graph.fps)
+    frame_emotion = np.empty(len(ics), dtype=object)
+    for node, (a, b) in zip(nodes, ranges, strict=True):
+        frame_emotion[a:b] = graph.emotions[graph.node_emotion[int(node)]]
+    mapped, notes = map_frames(model.emotion_model, ics, frame_emotion.astype(str), target)
+    e = model.emotion_model.split.emotion_components
+    if (options is None or options.smooth) and e.size and not np.array_equal(mapped, ics):
+        mapped[:, e] = smooth(mapped[:, e], model.cutoffs[e], graph.fps)
+    return mapped, notes
 
 
 def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None,
@@ -243,8 +304,20 @@ def _jsonable(value):
 
 def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
     """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
+    return write_motion_array(synth.motion, synth.fps, model, path, ics=synth.ics,
+                              nodes=synth.result.nodes)
+
+
+def write_motion_array(motion: np.ndarray, fps: float, model: Model, path: Path, *,
+                       ics: np.ndarray | None = None, nodes: np.ndarray | None = None) -> Path:
+    """Write ``motion`` (n_frames, n_channels) in ``model``'s channels: .c3d, .csv or .npz.
+
+    The NPZ holds ``motion``, ``fps``, ``channels`` and, when given, ``ics`` and ``nodes``.
+    """
     from db.atomic import atomic_write
 
+    path = Path(path)
+    motion = np.asarray(motion, dtype=np.float64)
     suffix = path.suffix.lower()
     if suffix == ".c3d":
         if model.kind not in ("markers", "landmarks"):
@@ -252,21 +325,83 @@ def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
                                  "(write .csv or .npz)")
         from ingest.formats.c3d import MarkerData, write_c3d
 
-        point_cols = [i for i, n in enumerate(model.names) if n.endswith((".x", ".y", ".z"))]
+        point_cols = _point_columns(model)
         labels = tuple(model.names[i][:-2] for i in point_cols[::3])
-        points = synth.motion[:, point_cols].reshape(len(synth.motion), -1, 3)
-        write_c3d(path, MarkerData(points=points, labels=labels, rate=synth.fps))
+        points = motion[:, point_cols].reshape(len(motion), -1, 3)
+        write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
         header = "frame,time," + ",".join(model.names)
-        n = len(synth.motion)
-        table = np.column_stack([np.arange(n), np.arange(n) / synth.fps, synth.motion])
+        n = len(motion)
+        table = np.column_stack([np.arange(n), np.arange(n) / fps, motion])
         with atomic_write(path) as handle:
             np.savetxt(handle, table, delimiter=",", header=header, comments="",
                        fmt=["%d", "%.5f"] + ["%.6g"] * len(model.names))
     elif suffix == ".npz":
+        extra = {k: v for k, v in (("ics", ics), ("nodes", nodes)) if v is not None}
         with atomic_write(path) as handle:
-            np.savez(handle, motion=synth.motion, ics=synth.ics, fps=synth.fps,
-                     channels=np.array(model.names), nodes=synth.result.nodes)
+            np.savez(handle, motion=motion, fps=fps, channels=np.array(model.names), **extra)
     else:
         raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
     return path
+
+
+def _point_columns(model: Model) -> list[int]:
+    return [i for i, n in enumerate(model.names) if n.endswith((".x", ".y", ".z"))]
+
+
+def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
+    """Read a motion written by :func:`write_motion` (.c3d, .csv, .npz) in ``model``'s
+    channels: (motion of shape (n_frames, n_channels), frames per second).
+
+    A C3D holds the point channels only: any other channel of the database is set to its
+    mean over the database.
+
+    Raises
+    ------
+    DataError
+        Unreadable file, or channels that are not the database's.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"motion file {path} does not exist")
+    suffix = path.suffix.lower()
+    names = list(model.names)
+    try:
+        if suffix == ".npz":
+            with np.load(path, allow_pickle=False) as data:
+                motion, fps = np.asarray(data["motion"], dtype=np.float64), float(data["fps"])
+                channels = [str(c) for c in data["channels"]] if "channels" in data else names
+        elif suffix == ".csv":
+            with open(path) as handle:
+                header = handle.readline().strip().split(",")
+            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+            if header[:2] != ["frame", "time"]:
+                raise DataError(f"{path.name}: expected a header frame,time,<channels>")
+            channels, motion = header[2:], table[:, 2:]
+            times = table[:, 1]
+            fps = float(1.0 / np.median(np.diff(times))) if len(times) > 1 else model.graph.fps
+        elif suffix == ".c3d":
+            from ingest.formats.c3d import read_c3d
+
+            data = read_c3d(path)
+            fps = float(data.rate)
+            channels = [f"{label}.{axis}" for label in data.labels for axis in "xyz"]
+            motion = data.points.reshape(len(data.points), -1)
+        else:
+            raise DataError(f"motion file must end in .c3d, .csv or .npz, got {path.name!r}")
+    except (OSError, ValueError, KeyError) as exc:
+        raise DataError(f"cannot read motion file {path}: {exc}") from None
+    if motion.ndim != 2 or len(motion) == 0:
+        raise DataError(f"{path.name} holds no motion frames")
+    index = {c: i for i, c in enumerate(channels)}
+    wanted = names if suffix != ".c3d" else [names[i] for i in _point_columns(model)]
+    missing = [c for c in wanted if c not in index]
+    if missing:
+        raise DataError(f"{path.name} lacks {len(missing)} of the database's channels "
+                        f"(first: {missing[0]}): it is not motion of this database")
+    if suffix == ".c3d":
+        out = np.tile(model.decomposer.mean_, (len(motion), 1))
+        for i in _point_columns(model):
+            out[:, i] = motion[:, index[names[i]]]
+        return out, fps
+    return motion[:, [index[c] for c in names]], fps

@@ -7,8 +7,12 @@
 3. If anything was added or changed: the clips already in the database and the new ones
    are decomposed together (PCA keeping 95 % of the variance, then FastICA over the
    whole corpus, Cao et al. §4.1 and §5.1.2), the per-component low-pass cutoffs are
-   learned (§4.3), the anime nodes are built, and a new database version is written
-   atomically (:func:`db.store.write_version`).
+   learned (§4.3), the emotion model is learned (speech/emotion components, emotion
+   mappings and the speech emotion classifier, §5-6, :mod:`ingest.emotion.model`), the
+   anime nodes are built, and a new database version is written atomically
+   (:func:`db.store.write_version`).
+   A database written before emotion models existed is rebuilt from its own clips even
+   when nothing changed, so that it gets one.
 4. A report (one row per clip: added, replaced, unchanged or rejected, with the reason)
    is returned, and saved beside the database.
 """
@@ -32,6 +36,7 @@ from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
+from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
@@ -94,6 +99,14 @@ class IngestReport:
                        f"{s['n_animes']} animes, {s['duration_s'] / 60:.1f} min, "
                        f"{s['n_pcs']} principal / independent components "
                        f"({100 * s['variance_kept']:.1f} % of the variance)")
+            e = s.get("emotion")
+            if e:
+                clf = e["classifier"]
+                ids = " ".join(map(str, e["emotion_components"])) or "none"
+                out.append(f"emotion: components {ids} carry emotion, "
+                           f"{len(e['mappings'])} emotion mappings, "
+                           + (f"classifier over {len(clf['classes'])} emotions" if clf
+                              else "no classifier"))
         else:
             out.append(f"database {self.db} unchanged")
         return out
@@ -201,6 +214,9 @@ def ingest(
         everything = _consistent(kept, new, report)
         if everything:
             _write(db_path, everything, config, target_fps, report, reference)
+    elif existing is not None and "emotion" not in existing.manifest:
+        # Written before emotion models existed: learn it now from the stored clips.
+        _write(db_path, prepared_from_database(existing), config, fps, report, reference)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
@@ -328,7 +344,14 @@ def build_database(
     sources = [model.transform(c.motion) for c in clips]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
-    tables = build_tables(clips, model, cutoffs, arrays=extra_arrays)
+    emotion = fit_emotion_model(
+        sources, [c.motion for c in clips], [c.emotion for c in clips],
+        [c.sentence_id for c in clips], [(c.audio, c.sample_rate) for c in clips],
+        model.mixing_.T @ model.components_, clips[0].schema.groups, fps,
+        random_state=config.random_state)
+    emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
+    tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},
+                          component_columns=emotion_columns)
     emotions: dict[str, int] = {}
     for c in clips:
         emotions[c.emotion] = emotions.get(c.emotion, 0) + 1
@@ -343,6 +366,7 @@ def build_database(
         "n_pcs": model.n_pcs_, "variance_kept": float(model.explained_variance_ratio_.sum()),
         "variance_target": config.variance, "energy_target": config.energy,
         "ica_converged": bool(model.ica_converged_),
+        "emotion": emotion_entry,
     }
     return summary, write_version(db_path, tables, summary)
 

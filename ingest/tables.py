@@ -53,10 +53,13 @@ def build_tables(
     *,
     prosody_config: RastaPlpConfig | None = None,
     arrays: dict[str, np.ndarray] | None = None,
+    component_columns: dict[str, list] | None = None,
 ) -> dict[str, pa.Table]:
     """Every table of the database for ``clips`` (sorted by corpus and clip id).
 
-    ``arrays`` are stored with the model's (e.g. the head reference).
+    ``arrays`` are stored with the model's (e.g. the head reference); ``component_columns``
+    (one value per independent component) are added to the ``components`` table (e.g. the
+    speech/emotion split, :mod:`ingest.emotion`).
     """
     cfg = prosody_config or RastaPlpConfig()
     clips = sorted(clips, key=lambda c: c.key)
@@ -128,7 +131,7 @@ def build_tables(
         "audio": audio,
         "channels": channels,
         "model_arrays": arrays_to_table(arrays),
-        "components": _components(model, sources_all, cutoffs),
+        "components": _components(model, sources_all, cutoffs, component_columns),
     }
 
 
@@ -177,8 +180,8 @@ def _frames(clip: PreparedClip) -> pa.Table:
 
 
 def _components(model: MotionDecomposer, sources: list[np.ndarray],
-                cutoffs: np.ndarray) -> pa.Table:
-    """One row per independent component: its share of the motion and its cutoff."""
+                cutoffs: np.ndarray, extra: dict[str, list] | None = None) -> pa.Table:
+    """One row per independent component: its share of the motion, its cutoff, ``extra``."""
     u = np.concatenate(sources).astype(np.float64)
     u = u - u.mean(axis=0)
     # Eq. 9: the motion one component alone reconstructs, in principal-component space
@@ -189,6 +192,7 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
         "component": pa.array(np.arange(len(cutoffs)), pa.int32()),
         "cutoff_hz": pa.array(cutoffs, pa.float64()),
         "motion_share": pa.array(share, pa.float64()),
+        **{name: pa.array(values) for name, values in (extra or {}).items()},
     })
 
 

@@ -1,0 +1,258 @@
+"""Emotion under control in synthesis (Cao et al. 2005, §5.2 Fig. 6, and §6).
+
+* :func:`parse_emotion` -- an emotion request: ``None``, ``"auto"`` (classify the speech,
+  §6), a name (``"happy"``) or a mix (``"happy=0.7,neutral=0.3"`` or a dict; beyond the
+  paper);
+* :func:`classify_speech` -- class probabilities of an utterance from the database's
+  classifier;
+* :func:`resolve_emotion` -- the request made concrete for one database and utterance;
+* :func:`map_frames` -- the motion found by the search moved into the wanted emotion: the
+  frames that came from animes of another emotion X get their emotion components mapped
+  by F_X,E (Fig. 6); a mix blends the mapped emotion components with its weights;
+* :func:`map_motion` -- a whole motion file's emotion changed (``animegraph map-emotion``).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from db.errors import DataError, ParameterError
+from ingest.emotion.model import EmotionModel
+from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
+
+AUTO = "auto"
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+
+
+def parse_emotion(spec) -> str | dict[str, float] | None:
+    """Normalise an emotion request.
+
+    Parameters
+    ----------
+    spec : None, str or mapping of str to float
+        ``None`` (no preference), ``"auto"``, an emotion name, ``"happy=0.7,neutral=0.3"``
+        or ``{"happy": 0.7, "neutral": 0.3}``.
+
+    Returns
+    -------
+    None, str or dict of str to float
+        A mix comes back as a dict whose weights sum to 1; a one-emotion mix as its name.
+
+    Raises
+    ------
+    ParameterError
+        Malformed text, a negative or non-numeric weight, weights summing to 0.
+    """
+    if spec is None:
+        return None
+    if isinstance(spec, Mapping):
+        items = [(str(k), v) for k, v in spec.items()]
+    elif isinstance(spec, str):
+        text = spec.strip()
+        if not text:
+            raise ParameterError("emotion must not be empty")
+        if "=" not in text and "," not in text:
+            if not _NAME.match(text):
+                raise ParameterError(f"not an emotion name: {text!r}")
+            return text.lower() if text.lower() == AUTO else text
+        items = []
+        for part in text.split(","):
+            name, sep, weight = part.partition("=")
+            if not sep:
+                raise ParameterError(f"emotion mix {text!r}: write name=weight, e.g. "
+                                     "happy=0.7,neutral=0.3")
+            items.append((name.strip(), weight.strip()))
+    else:
+        raise ParameterError(f"emotion must be a name, 'auto' or a mix, got {spec!r}")
+    mix: dict[str, float] = {}
+    for name, weight in items:
+        if not _NAME.match(name) or name == AUTO:
+            raise ParameterError(f"not an emotion name in the mix: {name!r}")
+        try:
+            w = float(weight)
+        except (TypeError, ValueError):
+            raise ParameterError(f"emotion weight of {name} is not a number: {weight!r}") from None
+        if not np.isfinite(w) or w < 0:
+            raise ParameterError(f"emotion weight of {name} must be >= 0, got {weight}")
+        mix[name] = mix.get(name, 0.0) + w
+    total = sum(mix.values())
+    if not total > 0:
+        raise ParameterError("emotion mix weights sum to 0")
+    mix = {k: v / total for k, v in mix.items() if v > 0}
+    return next(iter(mix)) if len(mix) == 1 else mix
+
+
+def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int) -> dict[str, float]:
+    """Probabilities of the database's emotions for an utterance (§6), most likely first.
+
+    Raises
+    ------
+    DataError
+        No classifier in the database; audio too short (< 0.25 s), silent or non-finite.
+    """
+    if model.classifier is None:
+        raise DataError("the database has no emotion classifier (it needs two emotions with "
+                        "two clips each): give the emotion instead of 'auto'")
+    audio = np.asarray(audio, dtype=np.float32)
+    proba = model.classifier.predict_proba([(audio, int(sample_rate))])[0]
+    order = np.argsort(-proba)
+    return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
+
+
+@dataclass(frozen=True)
+class EmotionChoice:
+    """An emotion request made concrete.
+
+    Attributes
+    ----------
+    target : str or dict of str to float or None
+        The emotion (or mix) the motion should show; None: whatever the search finds.
+    search : str or None
+        Emotion whose animes the search prefers (the mix's heaviest, or the nearest one
+        the database has animes of).
+    probabilities : dict of str to float or None
+        The classifier's output for ``"auto"``.
+    """
+
+    target: str | dict | None
+    search: str | None
+    probabilities: dict | None = None
+
+    def describe(self) -> str:
+        if self.target is None:
+            return "none"
+        if isinstance(self.target, dict):
+            return ",".join(f"{k}={v:.2f}" for k, v in self.target.items())
+        return self.target
+
+
+def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str]) -> None:
+    """Raise ParameterError if a parsed request names an emotion the database lacks."""
+    if spec is None or spec == AUTO:
+        return
+    known = set(graph_emotions) | set(model.emotions if model is not None else ())
+    for name in [spec] if isinstance(spec, str) else list(spec):
+        if name not in known:
+            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
+                                 f"has {', '.join(sorted(known)) or 'no labelled emotions'})")
+
+
+def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[str],
+                    audio: np.ndarray | None = None, sample_rate: int | None = None
+                    ) -> EmotionChoice:
+    """Make an emotion request concrete for a database (and the speech, for ``"auto"``).
+
+    Raises
+    ------
+    ParameterError
+        An emotion the database does not know.
+    DataError
+        ``"auto"`` without a classifier or with unusable audio.
+    """
+    spec = parse_emotion(spec)
+    check_names(spec, model, graph_emotions)
+    if spec is None:
+        return EmotionChoice(None, None)
+    probabilities = None
+    if spec == AUTO:
+        if model is None:
+            raise DataError("the database has no emotion model: give the emotion instead "
+                            "of 'auto'")
+        if audio is None or sample_rate is None:
+            raise ParameterError("emotion 'auto' needs the speech to classify")
+        probabilities = classify_speech(model, audio, sample_rate)
+        spec = next(iter(probabilities))
+    check_names(spec, model, graph_emotions)
+    names = [spec] if isinstance(spec, str) else list(spec)
+    heaviest = spec if isinstance(spec, str) else max(spec, key=spec.get)
+    search = heaviest
+    if heaviest not in graph_emotions and model is not None:
+        search = model.nearest(heaviest, list(graph_emotions))
+    if isinstance(spec, dict) and model is not None:
+        for name in names:  # every part of a mix must be reachable from the search's emotion
+            model.mapping(search, name)
+    return EmotionChoice(spec, search, probabilities)
+
+
+def map_frames(model: EmotionModel, ics: np.ndarray, frame_emotions: Sequence[str],
+               target) -> tuple[np.ndarray, list[str]]:
+    """Move every frame's emotion components from its own emotion into ``target``.
+
+    Parameters
+    ----------
+    model : EmotionModel
+    ics : np.ndarray, shape (n_frames, n_ics)
+    frame_emotions : sequence of str, length n_frames
+        Emotion of the anime each frame came from.
+    target : str or dict of str to float
+        Emotion or mix.
+
+    Returns
+    -------
+    (ics, notes)
+        Mapped components; notes on frames that could not be mapped (left as found).
+    """
+    out = np.array(ics, dtype=np.float64, copy=True)
+    frame_emotions = np.asarray(frame_emotions)
+    notes = []
+    weights = {target: 1.0} if isinstance(target, str) else dict(target)
+    for source in dict.fromkeys(frame_emotions.tolist()):
+        rows = frame_emotions == source
+        if list(weights) == [source]:
+            continue
+        try:
+            out[rows] = model.map_components(out[rows], source, weights)
+        except (DataError, ParameterError) as exc:
+            notes.append(f"{int(rows.sum())} frames of {source} animes kept as found: {exc}")
+    return out, notes
+
+
+def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
+               fps: float | None = None) -> np.ndarray:
+    """A recorded or synthesized motion with its emotion changed (Fig. 6).
+
+    The motion (in the database's channels, world coordinates) is brought into the
+    database's head frame, decomposed, its emotion components mapped from ``source`` to
+    ``target`` (a name or a mix) and low-passed at the database's per-component cutoffs
+    (§4.3; the interpolant is not smooth between its centres) when ``fps`` is given, and
+    the change is added back on the input's own head motion; the rigid head group is left
+    as it was.
+
+    Parameters
+    ----------
+    synth_model : animegraph.synth.Model
+    motion : np.ndarray, shape (n_frames, n_channels)
+    source : str
+    target : str or dict of str to float
+    fps : float, optional
+        Frame rate of ``motion`` (for the smoothing; None: no smoothing).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, n_channels)
+    """
+    model = synth_model.emotion_model
+    if model is None:
+        raise DataError("the database has no emotion model (built by an older animegraph): "
+                        "run 'animegraph ingest SRC --db DB' once to learn it")
+    filled, _ = fill_gaps(np.asarray(motion, dtype=np.float64), synth_model.names)
+    groups = synth_model.groups
+    rigid = synth_model.head_reference is not None and head_points(groups) >= 3
+    local = stabilize_points(filled, groups, synth_model.head_reference) if rigid else filled
+    dec = synth_model.decomposer
+    ics = dec.transform(local)
+    mapped = model.map_components(ics, source, target)
+    e = model.split.emotion_components
+    if fps is not None and e.size and not np.array_equal(mapped, ics):
+        from animegraph.synthesis import smooth
+
+        mapped[:, e] = smooth(mapped[:, e], synth_model.cutoffs[e], fps)
+    delta = dec.inverse_transform(mapped) - dec.inverse_transform(ics)
+    if rigid:
+        delta[:, np.asarray(groups) == "head"] = 0.0
+        return unstabilize_points(local + delta, groups, synth_model.head_reference)
+    return filled + delta

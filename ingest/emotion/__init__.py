@@ -1,0 +1,8 @@
+"""Emotion models learned at ingest (Cao et al. 2005, §5 and §6).
+
+* :mod:`ingest.emotion.classifier` -- the SVM emotion classifier of speech (§6);
+* :mod:`ingest.emotion.components` -- which independent components carry speech and which
+  emotion (§5.1.3);
+* :mod:`ingest.emotion.mapping` -- the RBF mapping F_ij between emotion spaces (§5.2);
+* :mod:`ingest.emotion.model` -- all three fitted on a database's clips and stored in it.
+"""

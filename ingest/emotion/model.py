@@ -1,0 +1,391 @@
+"""The emotion model of a database, learned at ingest (Cao et al. 2005, §5 and §6).
+
+:func:`fit_emotion_model` learns, from the clips of a database and their independent
+components:
+
+1. the speech / emotion split of the components (§5.1.3, :mod:`ingest.emotion.components`);
+2. for every ordered pair (i, j) of emotions with at least :data:`MIN_PARALLEL` sentences
+   recorded in both, the mapping F_ij (§5.2, :class:`ingest.emotion.mapping.EmotionMapping`)
+   from the correspondences of their emotion components, time-aligned by DTW on the speech
+   components (:func:`correspondences`), and the mean offset e_j - e_i (a baseline);
+3. the emotion classifier of speech (§6) on the clips' audio, if at least two emotions have
+   two clips each;
+4. each emotion's mean emotion components (to guess the emotion of a motion).
+
+:meth:`EmotionModel.to_database` turns it into model arrays (``emotion/...``), columns of the
+``components`` table and a manifest entry; :meth:`EmotionModel.from_database` reads it back.
+What could not be learned is said in ``notes`` (and in the manifest), never an error at
+ingest: the errors come when a user asks for what is missing (:meth:`EmotionModel.mapping`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from itertools import permutations
+
+import numpy as np
+
+from db.errors import AnimeGraphError, DataError, ParameterError
+from ingest.emotion.align import sample_at
+from ingest.emotion.classifier import MIN_DURATION, EmotionClassifier
+from ingest.emotion.components import (
+    Aligner,
+    ComponentSplit,
+    parallel_groups,
+    split_components,
+    take_pairs,
+)
+from ingest.emotion.mapping import KERNEL, N_CENTRES, EmotionMapping
+
+logger = logging.getLogger(__name__)
+
+#: Fewest sentences recorded in both emotions to learn a mapping between them (one
+#: sentence's correspondences say nothing about other sentences; the paper has m = 10).
+MIN_PARALLEL = 2
+#: Prefix of the emotion model's arrays in the database.
+PREFIX = "emotion/"
+_CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "classes")
+
+
+@dataclass(frozen=True)
+class ParallelData:
+    """What mappings are learned from: clips, their components and their sentences."""
+
+    sources: Sequence[np.ndarray]
+    emotions: Sequence[str]
+    sentence_ids: Sequence[str | None]
+    aligner: Aligner
+
+    def sentences(self, src: str, dst: str) -> list[str]:
+        """Sentences recorded in both ``src`` and ``dst``."""
+        return [s for s, g in parallel_groups(self.emotions, self.sentence_ids).items()
+                if src in g and dst in g]
+
+
+def correspondences(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
+                    split: ComponentSplit) -> tuple[np.ndarray, np.ndarray]:
+    """Time-aligned emotion components of ``sentences`` in ``src`` and ``dst`` (§5.2).
+
+    Each take in ``src`` is aligned to the matching take in ``dst`` by DTW on the speech
+    components; the target's emotion components are resampled onto the source's frames.
+
+    Returns
+    -------
+    (e_src, e_dst) : np.ndarray, each (T, n_emotion_components)
+    """
+    groups = parallel_groups(data.emotions, data.sentence_ids)
+    e, s = split.emotion_components, split.speech_components
+    xs, ys = [], []
+    for sentence in sentences:
+        g = groups[sentence]
+        for a, b in take_pairs(g[src], g[dst]):
+            where = data.aligner.positions(a, b, s)
+            xs.append(np.asarray(data.sources[a], dtype=np.float64)[:, e])
+            ys.append(sample_at(np.asarray(data.sources[b], dtype=np.float64)[:, e], where))
+    return np.concatenate(xs), np.concatenate(ys)
+
+
+@dataclass(frozen=True, eq=False)
+class EmotionModel:
+    """Everything a database knows about emotion.
+
+    Attributes
+    ----------
+    emotions : tuple of str
+        Emotions of the database's clips (``unknown`` left out).
+    split : ComponentSplit
+    mappings : dict of (str, str) to EmotionMapping
+        F_ij by (i, j).
+    offsets : dict of (str, str) to np.ndarray, shape (n_emotion_components,)
+        Mean e_j - e_i over the correspondences (the offset baseline).
+    centroids : dict of str to np.ndarray, shape (n_emotion_components,)
+        Mean emotion components of each emotion's clips.
+    parallel : dict of str to int
+        Sentences recorded in both emotions, by "a/b" (sorted names).
+    classifier : EmotionClassifier or None
+    notes : tuple of str
+        What could not be learned and why.
+    """
+
+    emotions: tuple[str, ...]
+    split: ComponentSplit
+    mappings: dict = field(default_factory=dict)
+    offsets: dict = field(default_factory=dict)
+    centroids: dict = field(default_factory=dict)
+    parallel: dict = field(default_factory=dict)
+    classifier: EmotionClassifier | None = None
+    notes: tuple[str, ...] = ()
+
+    # ------------------------------------------------------------------ use
+    def check_emotion(self, name: str) -> str:
+        """``name`` if the database has this emotion, else a ParameterError naming them."""
+        if name not in self.emotions:
+            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
+                                 f"has {', '.join(self.emotions) or 'no labelled emotions'})")
+        return name
+
+    def mapping(self, src: str, dst: str) -> EmotionMapping | None:
+        """F_src,dst (None when src == dst: the identity).
+
+        Raises
+        ------
+        ParameterError
+            Unknown emotion.
+        DataError
+            The database has a single emotion, or too few sentences in both to map.
+        """
+        if len(self.emotions) < 2:
+            raise DataError(f"the database has a single emotion "
+                            f"({', '.join(self.emotions) or 'none labelled'}): there is "
+                            "nothing to map between")
+        self.check_emotion(src)
+        self.check_emotion(dst)
+        if src == dst:
+            return None
+        if (src, dst) not in self.mappings:
+            n = self.parallel.get("/".join(sorted((src, dst))), 0)
+            why = ("it has no emotion components" if self.split.emotion_components.size == 0
+                   else f"it has {n} sentence{'s' if n != 1 else ''} recorded in both, "
+                   f"a mapping needs {MIN_PARALLEL}")
+            raise DataError(f"the database cannot map {src} to {dst}: {why}")
+        return self.mappings[(src, dst)]
+
+    def map_components(self, ics: np.ndarray, src: str, dst) -> np.ndarray:
+        """Independent components ``ics`` (n_frames, n_ics) of a motion in emotion ``src``
+        with their emotion components mapped into ``dst``.
+
+        ``dst`` is an emotion name or a dict of weights ({"happy": 0.7, "neutral": 0.3}):
+        the mapped emotion components are blended with the weights (normalised to sum 1).
+        Speech and other components are unchanged.
+        """
+        weights = {dst: 1.0} if isinstance(dst, str) else dict(dst)
+        total = sum(weights.values())
+        out = np.array(ics, dtype=np.float64, copy=True)
+        e = self.split.emotion_components
+        if e.size == 0:
+            for name in weights:
+                self.mapping(src, name)  # raises why
+            return out
+        source = out[:, e]
+        mixed = np.zeros_like(source)
+        for name, w in weights.items():
+            f = self.mapping(src, name)
+            mixed += (w / total) * (source if f is None else f.transform(source))
+        out[:, e] = mixed
+        return out
+
+    def nearest(self, target: str, available: Sequence[str]) -> str:
+        """The emotion of ``available`` whose mean emotion components are closest to
+        ``target``'s (``target`` itself if available)."""
+        if target in available:
+            return target
+        mappable = [a for a in available if (a, target) in self.mappings]
+        pool = mappable or list(available)
+        if target not in self.centroids:
+            return pool[0]
+        c = self.centroids[target]
+        return min(pool, key=lambda a: float(np.linalg.norm(self.centroids[a] - c))
+                   if a in self.centroids else np.inf)
+
+    def guess_emotion(self, ics: np.ndarray) -> str:
+        """The emotion whose mean emotion components are nearest to those of ``ics``."""
+        e = self.split.emotion_components
+        if e.size == 0 or not self.centroids:
+            raise DataError("the database has no emotion components to tell a motion's "
+                            "emotion by: give it (--from E)")
+        mean = np.asarray(ics, dtype=np.float64)[:, e].mean(axis=0)
+        return min(self.centroids, key=lambda k: float(np.linalg.norm(self.centroids[k] - mean)))
+
+    # ------------------------------------------------------------------ storage
+    def to_database(self) -> tuple[dict[str, np.ndarray], dict, dict[str, list]]:
+        """(model arrays, manifest entry, ``components`` table columns)."""
+        arrays: dict[str, np.ndarray] = {
+            PREFIX + "emotion_components": self.split.emotion_components.astype(float),
+        }
+        for (src, dst), f in self.mappings.items():
+            for key, value in f.to_arrays().items():
+                arrays[f"{PREFIX}map/{src}/{dst}/{key}"] = value
+            arrays[f"{PREFIX}offset/{src}/{dst}"] = self.offsets[(src, dst)]
+        for name, c in self.centroids.items():
+            arrays[f"{PREFIX}centroid/{name}"] = c
+        classifier = None
+        if self.classifier is not None:
+            raw = self.classifier.to_arrays()
+            classifier = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS}
+            for key, value in raw.items():
+                if key not in _CLASSIFIER_STRINGS:
+                    arrays[f"{PREFIX}classifier/{key}"] = np.asarray(value, dtype=np.float64)
+        manifest = {
+            "emotions": list(self.emotions),
+            "emotion_components": self.split.emotion_components.tolist(),
+            "speech_components": [k for k, lab in enumerate(self.split.labels)
+                                  if lab == "speech"],
+            "parallel_sentences": dict(self.parallel),
+            "mappings": [f"{s}->{d}" for s, d in sorted(self.mappings)],
+            "classifier": classifier,
+            "notes": list(self.notes),
+        }
+        return arrays, manifest, self.split.columns()
+
+    @classmethod
+    def from_database(cls, db) -> EmotionModel:
+        """Read the emotion model of ``db`` (a :class:`db.store.Database`).
+
+        Raises
+        ------
+        DataError
+            If the database was built before emotion models existed.
+        """
+        entry = db.manifest.get("emotion")
+        rows = db.table("components").to_pylist()
+        if entry is None or not rows or "label" not in rows[0]:
+            raise DataError(f"database {db.root} has no emotion model (it was built by an "
+                            f"older animegraph): run 'animegraph ingest SRC --db {db.root}' "
+                            "once to learn it")
+        arrays = db.arrays()
+        split = ComponentSplit.from_columns(rows)
+        mappings, offsets, centroids = {}, {}, {}
+        for pair in entry["mappings"]:
+            src, dst = pair.split("->")
+            prefix = f"{PREFIX}map/{src}/{dst}/"
+            mappings[(src, dst)] = EmotionMapping.from_arrays(
+                {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)})
+            offsets[(src, dst)] = arrays[f"{PREFIX}offset/{src}/{dst}"]
+        for name in entry["emotions"]:
+            key = f"{PREFIX}centroid/{name}"
+            if key in arrays:
+                centroids[name] = arrays[key]
+        classifier = None
+        if entry.get("classifier"):
+            prefix = PREFIX + "classifier/"
+            stored = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+            stored.update({k: np.array(v) for k, v in entry["classifier"].items()})
+            for key in ("support", "n_support"):
+                stored[key] = stored[key].astype(np.int64)
+            classifier = EmotionClassifier.from_arrays(stored)
+        return cls(emotions=tuple(entry["emotions"]), split=split, mappings=mappings,
+                   offsets=offsets, centroids=centroids,
+                   parallel=dict(entry["parallel_sentences"]), classifier=classifier,
+                   notes=tuple(entry.get("notes", ())))
+
+
+def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
+                split: ComponentSplit, *, n_centres: int = N_CENTRES, kernel: str = KERNEL,
+                random_state: int = 0, offset: bool = False
+                ) -> tuple[EmotionMapping, np.ndarray]:
+    """F_src,dst and the mean offset from the parallel ``sentences`` (§5.2)."""
+    x, y = correspondences(data, src, dst, sentences, split)
+    f = EmotionMapping(n_centres=n_centres, kernel=kernel, random_state=random_state,
+                       offset=offset).fit(x, y)
+    return f, (y - x).mean(axis=0)
+
+
+def fit_emotion_model(
+    sources: Sequence[np.ndarray],
+    motions: Sequence[np.ndarray],
+    emotions: Sequence[str],
+    sentence_ids: Sequence[str | None],
+    audio: Sequence[tuple[np.ndarray, int]] | None,
+    loadings: np.ndarray,
+    groups: Sequence[str],
+    fps: float,
+    *,
+    n_centres: int = N_CENTRES,
+    kernel: str = KERNEL,
+    random_state: int = 0,
+) -> EmotionModel:
+    """Learn a database's emotion model (see the module docstring).
+
+    Parameters
+    ----------
+    sources : sequence of np.ndarray, each (n_frames_k, n_ics)
+        Independent components of every clip.
+    motions : sequence of np.ndarray, each (n_frames_k, n_channels)
+        The clips' motion in the database's channels.
+    emotions, sentence_ids : sequence of str
+        Per clip.
+    audio : sequence of (np.ndarray, int), optional
+        Each clip's speech (samples, rate), for the classifier (None: no classifier).
+    loadings : np.ndarray, shape (n_ics, n_channels)
+        Channel motion of one unit of each independent component.
+    groups : sequence of str, length n_channels
+        Channel groups; ``lips`` are the mouth (every channel if no group is).
+    fps : float
+    n_centres, kernel, random_state
+        Of the mappings (:class:`EmotionMapping`).
+    """
+    mouth = np.array([g == "lips" for g in groups])
+    if not mouth.any():
+        mouth[:] = True
+    aligner = Aligner(sources, fps)
+    split = split_components(sources, motions, emotions, sentence_ids, loadings, mouth,
+                             fps=fps, aligner=aligner)
+    present = tuple(sorted({e for e in emotions if e != "unknown"}))
+    notes = []
+    groups_ = parallel_groups(emotions, sentence_ids)
+    parallel: dict[str, int] = {}
+    for g in groups_.values():
+        names = sorted(g)
+        for i, a in enumerate(names):
+            for b in names[i + 1:]:
+                parallel[f"{a}/{b}"] = parallel.get(f"{a}/{b}", 0) + 1
+    e = split.emotion_components
+    centroids = {}
+    if e.size:
+        for name in present:
+            rows = [np.asarray(s)[:, e] for s, em in zip(sources, emotions, strict=True)
+                    if em == name]
+            centroids[name] = np.concatenate(rows).mean(axis=0)
+    if len(present) < 2:
+        notes.append(f"a single emotion ({', '.join(present) or 'none labelled'}): "
+                     "no emotion mappings")
+    elif not groups_:
+        notes.append("no sentence is recorded in two emotions: no emotion components, "
+                     "no mappings")
+    elif e.size == 0:
+        notes.append("no component differs between emotions: no mappings")
+    data = ParallelData(sources, emotions, sentence_ids, aligner)
+    mappings, offsets = {}, {}
+    if e.size:
+        for src, dst in permutations(present, 2):
+            sentences = data.sentences(src, dst)
+            if len(sentences) < MIN_PARALLEL:
+                notes.append(f"{src}->{dst}: {len(sentences)} parallel sentence(s), a mapping "
+                             f"needs {MIN_PARALLEL}")
+                continue
+            mappings[(src, dst)], offsets[(src, dst)] = fit_mapping(
+                data, src, dst, sentences, split, n_centres=n_centres, kernel=kernel,
+                random_state=random_state)
+    classifier = None
+    if audio is not None:
+        classifier = _fit_classifier(audio, emotions, notes)
+    return EmotionModel(emotions=present, split=split, mappings=mappings, offsets=offsets,
+                        centroids=centroids, parallel=parallel, classifier=classifier,
+                        notes=tuple(notes))
+
+
+def _fit_classifier(audio, emotions, notes) -> EmotionClassifier | None:
+    keep = [i for i, (a, sr) in enumerate(audio)
+            if emotions[i] != "unknown" and len(a) >= MIN_DURATION * sr]
+    labels = np.array([emotions[i] for i in keep])
+    names, counts = np.unique(labels, return_counts=True)
+    usable = set(names[counts >= 2])
+    keep = [i for i in keep if emotions[i] in usable]
+    if len(usable) < 2:
+        notes.append("the emotion classifier needs two emotions with two clips each: none")
+        return None
+    pairs = [(_float_audio(audio[i][0]), int(audio[i][1])) for i in keep]
+    try:
+        return EmotionClassifier().fit(pairs, [emotions[i] for i in keep])
+    except AnimeGraphError as exc:  # e.g. clips too short for the paper's 500 coefficients
+        notes.append(f"the emotion classifier could not be trained: {exc}")
+        return None
+
+
+def _float_audio(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a)
+    if a.dtype == np.int16:
+        return a.astype(np.float32) / 32768.0
+    return a.astype(np.float32)

@@ -1,0 +1,192 @@
+"""The emotion commands (classify, map-emotion, synth --emotion auto/--emotion-mix) and their
+bad input: one clear error line, a non-zero exit, nothing written."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from animegraph.cli import main
+from animegraph.emotion.control import parse_emotion
+from animegraph.emotion.evaluate import EmotionData, cross_validate
+from animegraph.synth import Model, read_motion, synthesize
+from db.errors import DataError, ParameterError
+from db.store import Database
+from ingest.formats.phones_csv import read_phones_csv
+from ingest.formats.wav import read_wav, write_wav
+
+
+def _subset_db(tiny_db, path, keep):
+    from ingest.pipeline import build_database
+    from ingest.tables import prepared_from_database
+
+    clips = [c for c in prepared_from_database(Database.open(tiny_db[0])) if keep(c)]
+    build_database(path, clips)
+    return path
+
+
+@pytest.fixture(scope="module")
+def one_parallel_db(tiny_db, tmp_path_factory):
+    """One sentence in all five emotions, two in one emotion: too few to learn mappings."""
+    return _subset_db(tiny_db, tmp_path_factory.mktemp("one") / "db",
+                      lambda c: c.sentence_id in ("s0001", "s0004", "s0005"))
+
+
+@pytest.fixture(scope="module")
+def neutral_db(tiny_db, tmp_path_factory):
+    """A single-emotion database."""
+    return _subset_db(tiny_db, tmp_path_factory.mktemp("neutral") / "db",
+                      lambda c: c.emotion == "neutral")
+
+
+def _clip(tiny_corpus, emotion="sad", sentence="s0002"):
+    return tiny_corpus / "clips" / f"{sentence}_{emotion}_1"
+
+
+def _one_error_line(capsys, needle):
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1, err
+    assert needle in err[0], err[0]
+
+
+def test_parse_emotion():
+    assert parse_emotion(None) is None
+    assert parse_emotion("auto") == "auto"
+    assert parse_emotion("happy") == "happy"
+    assert parse_emotion("happy=0.7, neutral=0.3") == pytest.approx({"happy": 0.7,
+                                                                     "neutral": 0.3})
+    assert parse_emotion({"happy": 2, "sad": 2}) == {"happy": 0.5, "sad": 0.5}
+    assert parse_emotion("happy=1") == "happy"
+    for bad in ("", "happy=x", "happy=-1,sad=1", "happy=0", "happy,sad", "auto=1", "1x"):
+        with pytest.raises(ParameterError):
+            parse_emotion(bad)
+
+
+def test_classify_prints_probabilities(tiny_db, tiny_corpus, capsys):
+    stem = _clip(tiny_corpus, "happy")
+    assert main(["classify", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0])]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    probs = {line.split()[0]: float(line.split()[1]) for line in lines}
+    assert set(probs) == {"angry", "frustrated", "happy", "neutral", "sad"}
+    assert sum(probs.values()) == pytest.approx(1.0, abs=0.01)
+    assert max(probs, key=probs.get) == "happy"  # a training clip
+
+
+def test_classify_audio_too_short(tiny_db, tmp_path, capsys):
+    write_wav(tmp_path / "short.wav", 0.1 * np.sin(np.arange(1600) / 5.0).astype(np.float32),
+              16000)
+    assert main(["classify", str(tmp_path / "short.wav"), "--db", str(tiny_db[0])]) == 1
+    _one_error_line(capsys, "too short")
+
+
+def test_map_emotion_changes_emotion_keeps_speech(tiny_db, tiny_corpus, tmp_path, capsys):
+    stem = _clip(tiny_corpus, "neutral")
+    out = tmp_path / "happy.csv"
+    assert main(["map-emotion", str(stem.with_suffix(".c3d")), "--db", str(tiny_db[0]),
+                 "--to", "happy", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "from neutral (nearest mean emotion components) to happy" in err
+    model = Model.load(tiny_db[0])
+    source, _ = read_motion(stem.with_suffix(".c3d"), model)
+    mapped, fps = read_motion(out, model)
+    assert mapped.shape == source.shape and fps == pytest.approx(120.0, rel=1e-3)
+    # The smile the mapping adds lifts the lip corners relative to the eyes.
+    pts_s, pts_m = source.reshape(len(source), -1, 3), mapped.reshape(len(mapped), -1, 3)
+    names = [n[:-2] for n in model.names[::3]]
+    corner = names.index("lip_corner_r")
+    assert np.nanmean(pts_m[:, corner, 1] - pts_s[:, corner, 1]) > 0.5  # mm up
+    # The mapped motion is the neutral one with its emotion components changed, so a
+    # round trip back to neutral lands near where it started.
+    back = tmp_path / "back.npz"
+    assert main(["map-emotion", str(out), "--db", str(tiny_db[0]), "--to", "neutral",
+                 "--from", "happy", "-o", str(back)]) == 0
+    again, _ = read_motion(back, model)
+    assert np.nanmean(np.abs(again - source)) < np.nanmean(np.abs(mapped - source))
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--to", "bored"], "unknown emotion 'bored'"),
+    (["--to", "happy", "--from", "bored"], "unknown emotion 'bored'"),
+    (["--to", "auto"], "not auto"),
+    (["--to", "happy", "-o", "{tmp}/x.mp4"], "must end in"),
+])
+def test_map_emotion_bad_input(tiny_db, tiny_corpus, tmp_path, capsys, args, needle):
+    argv = ["map-emotion", str(_clip(tiny_corpus).with_suffix(".c3d")), "--db",
+            str(tiny_db[0]), "-o", str(tmp_path / "out.csv"),
+            *[a.format(tmp=tmp_path) for a in args]]
+    assert main(argv) in (1, 2)
+    _one_error_line(capsys, needle)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_map_emotion_single_emotion_database(neutral_db, tiny_corpus, tmp_path, capsys):
+    for target in ("happy", "neutral"):
+        argv = ["map-emotion", str(_clip(tiny_corpus, "neutral").with_suffix(".c3d")), "--db",
+                str(neutral_db), "--to", target, "-o", str(tmp_path / "o.csv")]
+        assert main(argv) == 1
+        _one_error_line(capsys, "single emotion (neutral): there is nothing to map between")
+    assert list(tmp_path.iterdir()) == []
+    assert Model.load(neutral_db).emotion_model.classifier is None
+
+
+def test_too_few_parallel_sentences(one_parallel_db, tiny_corpus, tmp_path, capsys):
+    model = Model.load(one_parallel_db).emotion_model
+    assert model.split.emotion_components.size > 0  # the split still works
+    assert model.mappings == {}
+    argv = ["map-emotion", str(_clip(tiny_corpus, "neutral", "s0001").with_suffix(".c3d")),
+            "--db", str(one_parallel_db), "--from", "neutral", "--to", "happy", "-o",
+            str(tmp_path / "o.csv")]
+    assert main(argv) == 1
+    _one_error_line(capsys, "1 sentence recorded in both, a mapping needs 2")
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(DataError, match="needs 3"):
+        cross_validate(EmotionData.load(Database.open(one_parallel_db)))
+
+
+def test_synth_emotion_auto_and_mix(tiny_db, tiny_corpus, tmp_path, capsys):
+    stem = _clip(tiny_corpus, "sad")
+    base = ["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0]), "--labels",
+            f"{stem}.phones.csv"]
+    assert main([*base, "--emotion", "auto", "-o", str(tmp_path / "auto.npz")]) == 0
+    assert "emotion auto: the speech sounds sad" in capsys.readouterr().err
+    assert main([*base, "--emotion-mix", "happy=0.7,neutral=0.3", "-o",
+                 str(tmp_path / "mix.npz")]) == 0
+    assert "emotion mix happy=0.70,neutral=0.30" in capsys.readouterr().err
+    assert main([*base, "--emotion-mix", "happy", "-o", str(tmp_path / "x.npz")]) == 2
+    _one_error_line(capsys, "name=weight")
+    assert main([*base, "--emotion-mix", "happy=0.5,bored=0.5", "-o",
+                 str(tmp_path / "x.npz")]) == 1
+    _one_error_line(capsys, "unknown emotion 'bored'")
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_synth_auto_on_audio_too_short(tiny_db, tmp_path, capsys):
+    write_wav(tmp_path / "short.wav", 0.1 * np.sin(np.arange(2400) / 5.0).astype(np.float32),
+              16000)
+    assert main(["synth", str(tmp_path / "short.wav"), "--db", str(tiny_db[0]), "--emotion",
+                 "auto", "-o", str(tmp_path / "o.npz")]) == 1
+    _one_error_line(capsys, "too short")
+    assert not (tmp_path / "o.npz").exists()
+
+
+def test_synthesize_api_emotion_forms(tiny_db, tiny_corpus):
+    model = Model.load(tiny_db[0])
+    stem = _clip(tiny_corpus, "angry", "s0003")
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    plain = synthesize(model, audio, sr, labels=labels, emotion="happy")
+    assert plain.emotion.target == "happy" and plain.emotion.search == "happy"
+    auto = synthesize(model, audio, sr, labels=labels, emotion="auto")
+    assert auto.emotion.probabilities is not None
+    assert auto.emotion.target == next(iter(auto.emotion.probabilities))
+    mix = synthesize(model, audio, sr, labels=labels, emotion={"happy": 1, "sad": 1})
+    same = synthesize(model, audio, sr, labels=labels, emotion="happy=0.5,sad=0.5")
+    np.testing.assert_allclose(mix.motion, same.motion)
+    assert mix.emotion.search in ("happy", "sad")
+    none = synthesize(model, audio, sr, labels=labels)
+    assert none.emotion.target is None
+    # The emotion components differ between happy and sad, the speech ones do not need to.
+    e = model.emotion_model.split.emotion_components
+    sad = synthesize(model, audio, sr, labels=labels, emotion="sad")
+    assert np.abs(plain.ics[:, e] - sad.ics[:, e]).mean() > 0.5
