@@ -187,3 +187,66 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
                                         active), "jumps": jumps, "search_s": search_s}
     return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
             "seconds": round(clip.duration, 2), "methods": rows}
+
+
+def _paired(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    pred = np.asarray(pred, dtype=np.float64)
+    truth = np.asarray(truth, dtype=np.float64)
+    if pred.ndim == 1:
+        pred, truth = pred[:, None], truth[:, None]
+    if pred.ndim != 2 or truth.ndim != 2 or pred.shape[1] != truth.shape[1]:
+        raise ValueError(f"pred {pred.shape} and truth {truth.shape} must be (n_frames, "
+                         "n_params) with the same n_params")
+    n = min(len(pred), len(truth))
+    return pred[:n], truth[:n]
+
+
+def amse(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Average mean square error, Terissi et al. (2013) Eq. 11.
+
+    ``ε = 1/(R T) Σ_r (1/σ²_r) Σ_t (õ_rt - o_rt)²``: the squared error of each visual
+    parameter normalised by the variance ``σ²_r`` of its true values over the
+    interval, averaged over parameters and frames (0 is perfect; predicting the true
+    mean gives 1).
+
+    Parameters
+    ----------
+    pred, truth : np.ndarray, shape (n_frames, n_params) or (n_frames,)
+        Estimated and true parameters over their common frames. Parameters whose truth
+        is constant (σ_r = 0) are left out; NaN values are ignored.
+
+    Returns
+    -------
+    float
+        NaN when no parameter varies.
+    """
+    p, t = _paired(pred, truth)
+    var = np.nanvar(t, axis=0)
+    keep = var > 0
+    if not keep.any():
+        return float("nan")
+    return float(np.nanmean(np.nanmean((p[:, keep] - t[:, keep]) ** 2, axis=0) / var[keep]))
+
+
+def acc(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Average correlation coefficient, Terissi et al. (2013) Eq. 12.
+
+    ``ρ = 1/(R T) Σ_r Σ_t (o_rt - μ_r)(õ_rt - μ̃_r) / (σ_r σ̃_r)``: the Pearson
+    correlation of each estimated parameter with its true values, averaged over
+    parameters.
+
+    Parameters
+    ----------
+    pred, truth : np.ndarray, shape (n_frames, n_params) or (n_frames,)
+        Over their common frames; parameters where either series is constant are left
+        out (see :func:`pearson`).
+
+    Returns
+    -------
+    float
+        NaN when no parameter has a defined correlation.
+    """
+    p, t = _paired(pred, truth)
+    rs = [pearson(p[:, r], t[:, r]) for r in range(p.shape[1])]
+    rs = [r for r in rs if np.isfinite(r)]
+    return float(np.mean(rs)) if rs else float("nan")

@@ -1,0 +1,523 @@
+"""``av-hmm``: a joint audio-visual HMM inverted to estimate visual features from speech.
+
+After Terissi, Cerda, Gómez, Hitschfeld-Kahler & Girau, "A comprehensive system for facial
+animation of generic 3D head models driven by speech", EURASIP J. Audio Speech Music
+Process. 2013:5 (``../shared/papers/terissi2013-*.txt``).
+
+* §3: the audio is framed at the video rate; the audio vector of frame ``t`` stacks the
+  Mel-cepstra of frames ``t - tc .. t + tc`` (:data:`CONTEXT_FRAMES`, tc = 3); the visual
+  vector holds a few mouth parameters (four Candide-3 animation units; here the first
+  :data:`N_VISUAL` principal components of the motion).
+* §4, §4.1: ONE ergodic HMM over the joint vector ``[o_a; o_v]``, N states with a mixture
+  of M full-covariance Gaussians each (Eq. 1), trained by Baum–Welch (``hmmlearn``).
+* §4.2: audio-to-visual conversion by HMM inversion: the visual sequence that maximises
+  ``P(O_a, O_v | λ)`` (Eq. 2) is found by an EM iteration on the auxiliary function
+  (Eq. 3-4) whose update is Eq. 7 — per frame, the precision-weighted combination of every
+  (state, mixture) component's conditional visual mean, weighted by the posterior
+  occupancies computed with the current estimate — repeated until it converges (Fig. 4).
+* §6, Eq. 11-12: AMSE and ACC (:func:`animegraph.evaluate.amse`, :func:`~.acc`).
+
+:class:`AVHMM` is the model on plain arrays; the estimator that takes prepared clips and
+audio is :class:`AVHMMBaseline`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import linalg
+from scipy.special import logsumexp
+
+from db.errors import DataError, ParameterError
+
+# --- the paper's constants -------------------------------------------------------------
+#: Mel-cepstral coefficients per audio frame: "the first eleven non-DC" (§6.1).
+N_MFCC = 11
+#: Co-articulation context tc, frames each side (§3; optimal value in §6.1.1 and §6.1.2).
+CONTEXT_FRAMES = 3
+#: Frame rate of the audio-visual features: the video rate, 30 fps (§3, §6.1).
+FEATURE_FPS = 30.0
+#: Visual parameters per frame: four mouth animation units of Candide-3 (§3, §6.1).
+N_VISUAL = 4
+#: States and mixtures of the sentence model shown in §6.1.2 / Fig. 8 (N = 28, M = 5).
+N_STATES = 28
+N_MIX = 5
+#: The (N, M) grids of §6.1.1 (digits: N 2..19, M 3..20) and §6.1.2 (sentences:
+#: N 8..40, M 2..7) — the sweep of ``scripts/sweep_av_hmm.py`` samples them.
+SWEEP_DIGITS = {"n_states": (2, 19), "n_mix": (3, 20)}
+SWEEP_SENTENCES = {"n_states": (8, 40), "n_mix": (2, 7)}
+
+# --- ours (the paper gives none) ------------------------------------------------------
+#: Baum–Welch iterations and log-likelihood tolerance (hmmlearn's ``n_iter``, ``tol``).
+N_ITER = 20
+TOL = 1e-2
+#: Added to the diagonal of every (standardised) covariance after each M-step, so that a
+#: component with fewer frames than dimensions stays positive definite.
+REG_COVAR = 1e-3
+#: HMM inversion: at most this many Eq. 7 updates; stop when no visual value moves more
+#: than ``INVERSION_TOL`` standard deviations.
+INVERSION_MAX_ITER = 50
+INVERSION_TOL = 1e-3
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+def n_free_parameters(n_states: int, n_mix: int, n_features: int) -> int:
+    """Free scalars of an ergodic GMM-HMM with full covariances (hmmlearn's count).
+
+    ``N - 1`` start, ``N(N - 1)`` transition, ``N(M - 1)`` mixture weights, ``NMd`` means
+    and ``NMd(d + 1)/2`` covariances.
+    """
+    n, m, d = n_states, n_mix, n_features
+    return (n - 1) + n * (n - 1) + n * (m - 1) + n * m * d + n * m * d * (d + 1) // 2
+
+
+def _check_int(name: str, value: object, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+        raise ParameterError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _check_real(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating) or not (
+        math.isfinite(value) and value > 0
+    ):
+        raise ParameterError(f"{name} must be a positive number, got {value!r}")
+    return float(value)
+
+
+def _hmm_class():
+    """``hmmlearn.hmm.GMMHMM`` with a memory-lean full-covariance M-step (built lazily)."""
+    from hmmlearn import hmm
+    from hmmlearn.base import BaseHMM
+
+    class _FullGMMHMM(hmm.GMMHMM):
+        """GMMHMM whose covariance statistics are accumulated per component.
+
+        hmmlearn 0.3 forms the (n_samples, N, M, d, d) outer products of every sequence
+        at once (gigabytes for N = 28, M = 5, d = 81); here the second moments are
+        summed per component with one matrix product, and the covariance M-step is the
+        exact EM update ``Σ = E[x xᵀ] - μ μᵀ`` (plus ``reg_covar`` on the diagonal).
+        """
+
+        reg_covar = REG_COVAR
+
+        def _initialize_sufficient_statistics(self):
+            stats = super()._initialize_sufficient_statistics()
+            stats["xx"] = np.zeros((self.n_components, self.n_mix, self.n_features,
+                                    self.n_features))
+            return stats
+
+        def _accumulate_sufficient_statistics(self, stats, X, lattice, post_comp,
+                                              fwdlattice, bwdlattice):
+            BaseHMM._accumulate_sufficient_statistics(self, stats, X, lattice, post_comp,
+                                                      fwdlattice, bwdlattice)
+            post_mix = np.empty((len(X), self.n_components, self.n_mix))
+            for p in range(self.n_components):
+                dens = self._compute_log_weighted_gaussian_densities(X, p)
+                post_mix[:, p] = np.exp(dens - logsumexp(dens, axis=1, keepdims=True))
+            w = post_comp[:, :, None] * post_mix
+            stats["post_mix_sum"] += w.sum(axis=0)
+            stats["post_sum"] += post_comp.sum(axis=0)
+            if "m" in self.params:
+                stats["m_n"] += np.einsum("ijk,il->jkl", w, X)
+            if "c" in self.params:
+                for j in range(self.n_components):
+                    for k in range(self.n_mix):
+                        stats["xx"][j, k] += (X * w[:, j, k, None]).T @ X
+
+        def _do_mstep(self, stats):
+            params = self.params
+            self.params = params.replace("c", "")
+            try:
+                super()._do_mstep(stats)
+            finally:
+                self.params = params
+            if "c" not in params:
+                return
+            n = stats["post_mix_sum"]
+            eye = np.eye(self.n_features)
+            for j in range(self.n_components):
+                for k in range(self.n_mix):
+                    if n[j, k] < 1e-8:  # an unused component keeps its covariance
+                        continue
+                    mu = self.means_[j, k]
+                    cov = stats["xx"][j, k] / n[j, k] - np.outer(mu, mu)
+                    self.covars_[j, k] = 0.5 * (cov + cov.T) + self.reg_covar * eye
+
+    return _FullGMMHMM
+
+
+def forward_backward(log_b: np.ndarray, startprob: np.ndarray,
+                     transmat: np.ndarray) -> tuple[np.ndarray, float]:
+    """State posteriors of one sequence (scaled forward-backward, Rabiner 1989 §V.A).
+
+    Parameters
+    ----------
+    log_b : np.ndarray, shape (T, N)
+        Log emission densities ``log b_j(o_t)``.
+    startprob : np.ndarray, shape (N,)
+    transmat : np.ndarray, shape (N, N)
+
+    Returns
+    -------
+    gamma : np.ndarray, shape (T, N)
+        ``P(q_t = S_j | O, λ)``.
+    log_likelihood : float
+        ``log P(O | λ)``.
+    """
+    n_t, n = log_b.shape
+    shift = log_b.max(axis=1, keepdims=True)
+    # Floor at e^-700 (relative to the frame's best state): no frame can lose every state.
+    b = np.exp(np.maximum(log_b - shift, -700.0))
+    alpha = np.empty((n_t, n))
+    scale = np.empty(n_t)
+    a = startprob * b[0]
+    scale[0] = a.sum()
+    alpha[0] = a / scale[0]
+    for t in range(1, n_t):
+        a = (alpha[t - 1] @ transmat) * b[t]
+        scale[t] = a.sum()
+        alpha[t] = a / scale[t]
+    beta = np.empty((n_t, n))
+    beta[-1] = 1.0
+    for t in range(n_t - 2, -1, -1):
+        beta[t] = transmat @ (b[t + 1] * beta[t + 1]) / scale[t + 1]
+    gamma = alpha * beta
+    gamma /= gamma.sum(axis=1, keepdims=True)
+    return gamma, float(np.log(scale).sum() + shift.sum())
+
+
+class AVHMM:
+    """A joint audio-visual HMM and its inversion (Terissi et al. 2013, §4).
+
+    Parameters
+    ----------
+    n_states, n_mix : int, optional
+        N ergodic states, M full-covariance Gaussians per state (§4; N = 28, M = 5 of
+        §6.1.2).
+    n_iter, tol : optional
+        Baum–Welch iterations and log-likelihood tolerance (hmmlearn's).
+    reg_covar : float, optional
+        Added to the diagonal of every covariance of the standardised features.
+    max_iter, inversion_tol : optional
+        Inversion stopping rule: at most ``max_iter`` Eq. 7 updates, stop when no visual
+        value changes by more than ``inversion_tol`` standard deviations.
+    init : {"audio", "random"}, optional
+        Starting point of the inversion. ``"random"`` is the paper's (§4.2, "initializing
+        the visual observation randomly"): a draw from the training visual distribution.
+        ``"audio"`` (default) replaces the first E-step's occupancies by those of the
+        audio part alone (each Gaussian's audio marginal: the audio block of its mean and
+        covariance), which is deterministic and needs no visual guess.
+    random_state : int, optional
+        Seeds the k-means initialisation of training and the ``"random"`` start.
+
+    Attributes
+    ----------
+    startprob_ : np.ndarray, shape (N,)
+    transmat_ : np.ndarray, shape (N, N)
+    weights_ : np.ndarray, shape (N, M)
+        Mixture coefficients ``c_jk`` (Eq. 1).
+    means_ : np.ndarray, shape (N, M, Da + Dv)
+    covars_ : np.ndarray, shape (N, M, Da + Dv, Da + Dv)
+        Of the standardised joint vector (see ``feature_mean_``, ``feature_scale_``).
+    n_audio_, n_visual_ : int
+        Da and Dv.
+    feature_mean_, feature_scale_ : np.ndarray, shape (Da + Dv,)
+        The standardisation applied before training and undone after inversion.
+    n_iter_ : int
+        Eq. 7 updates made by the last :meth:`invert`.
+    history_ : list of float
+        ``log P(O_a, Õ_v | λ)`` after each update of the last :meth:`invert`.
+    """
+
+    def __init__(self, n_states: int = N_STATES, n_mix: int = N_MIX, *, n_iter: int = N_ITER,
+                 tol: float = TOL, reg_covar: float = REG_COVAR,
+                 max_iter: int = INVERSION_MAX_ITER, inversion_tol: float = INVERSION_TOL,
+                 init: str = "audio", random_state: int = 0):
+        self.n_states = n_states
+        self.n_mix = n_mix
+        self.n_iter = n_iter
+        self.tol = tol
+        self.reg_covar = reg_covar
+        self.max_iter = max_iter
+        self.inversion_tol = inversion_tol
+        self.init = init
+        self.random_state = random_state
+
+    # ----------------------------------------------------------------------- training
+    def _validate(self) -> None:
+        _check_int("n_states", self.n_states, 1)
+        _check_int("n_mix", self.n_mix, 1)
+        _check_int("n_iter", self.n_iter, 1)
+        _check_int("max_iter", self.max_iter, 1)
+        _check_int("random_state", self.random_state, 0)
+        for name in ("tol", "reg_covar", "inversion_tol"):
+            _check_real(name, getattr(self, name))
+        if self.init not in ("audio", "random"):
+            raise ParameterError(f"init must be 'audio' or 'random', got {self.init!r}")
+
+    def fit(self, sequences: Sequence[tuple[np.ndarray, np.ndarray]]) -> AVHMM:
+        """Baum–Welch training on joint audio-visual sequences (§4.1).
+
+        Parameters
+        ----------
+        sequences : sequence of (audio, visual)
+            ``audio`` of shape (T_i, Da), ``visual`` of shape (T_i, Dv), frame-aligned.
+
+        Raises
+        ------
+        ParameterError
+            Bad hyper-parameters, shapes or dimensions that differ between sequences.
+        DataError
+            Non-finite values, or fewer observed values than free parameters
+            (:func:`n_free_parameters`; hmmlearn's own degeneracy criterion).
+        """
+        self._validate()
+        audio, visual, lengths = _stack(sequences)
+        x = np.hstack([audio, visual])
+        n_params = n_free_parameters(self.n_states, self.n_mix, x.shape[1])
+        if x.size < n_params:
+            raise DataError(
+                f"av-hmm: {len(x)} frames x {x.shape[1]} features = {x.size} values, fewer "
+                f"than the {n_params} free parameters of an AV-HMM with N={self.n_states} "
+                f"states and M={self.n_mix} full-covariance mixtures; use more data or a "
+                f"smaller model"
+            )
+        mean = x.mean(axis=0)
+        scale = x.std(axis=0)
+        scale[scale < 1e-12] = 1.0
+        z = (x - mean) / scale
+        model = _hmm_class()(
+            n_components=self.n_states, n_mix=self.n_mix, covariance_type="full",
+            n_iter=self.n_iter, tol=self.tol, min_covar=self.reg_covar,
+            random_state=self.random_state,
+        )
+        model.reg_covar = self.reg_covar
+        model.fit(z, lengths)
+        self.n_audio_ = audio.shape[1]
+        self.n_visual_ = visual.shape[1]
+        self.feature_mean_ = mean
+        self.feature_scale_ = scale
+        self.startprob_ = np.asarray(model.startprob_, dtype=np.float64)
+        self.transmat_ = np.asarray(model.transmat_, dtype=np.float64)
+        self.weights_ = np.asarray(model.weights_, dtype=np.float64)
+        self.means_ = np.asarray(model.means_, dtype=np.float64)
+        self.covars_ = np.asarray(model.covars_, dtype=np.float64)
+        self.train_log_likelihood_ = float(model.monitor_.history[-1])
+        self.train_iter_ = int(model.monitor_.iter)
+        self._prepare()
+        return self
+
+    def _prepare(self) -> None:
+        """Pre-compute what inversion needs from each component (§6.3.2).
+
+        With the precision ``Λ = Σ⁻¹`` partitioned into audio/visual blocks (Eq. 6), the
+        audio marginal is ``N(o_a; μ^a, Σ^a)`` and the visual conditional has precision
+        ``Λ^v`` and mean ``m(o_a) = μ^v - (Λ^v)⁻¹ Λ^va (o_a - μ^a)``.
+        """
+        da, dv = self.n_audio_, self.n_visual_
+        c = self.n_states * self.n_mix
+        cov = self.covars_.reshape(c, da + dv, da + dv)
+        mu = self.means_.reshape(c, da + dv)
+        self._mu_a = mu[:, :da]
+        self._mu_v = mu[:, da:]
+        self._chol_inv_a = np.empty((c, da, da))
+        self._logdet_a = np.empty(c)
+        self._prec_v = np.empty((c, dv, dv))
+        self._prec_va = np.empty((c, dv, da))
+        self._logdet_prec_v = np.empty(c)
+        for i in range(c):
+            chol = linalg.cholesky(cov[i, :da, :da], lower=True)
+            self._chol_inv_a[i] = linalg.solve_triangular(chol, np.eye(da), lower=True)
+            self._logdet_a[i] = 2.0 * np.log(np.diag(chol)).sum()
+            prec = linalg.inv(cov[i])
+            prec = 0.5 * (prec + prec.T)
+            self._prec_v[i] = prec[da:, da:]
+            self._prec_va[i] = prec[da:, :da]
+            self._logdet_prec_v[i] = np.linalg.slogdet(self._prec_v[i])[1]
+        self._log_weights = np.log(np.maximum(self.weights_, 1e-300)).reshape(c)
+
+    # ---------------------------------------------------------------------- inversion
+    def _audio_terms(self, audio_z: np.ndarray):
+        """Audio log marginals (T, C), conditional means (T, C, Dv) and Eq. 7's numerator
+        terms ``Λ^v μ^v - Λ^va (o_a - μ^a)`` (T, C, Dv) of one sequence."""
+        da = self.n_audio_
+        diff = audio_z[:, None, :] - self._mu_a[None]  # (T, C, Da)
+        white = np.einsum("cij,tcj->tci", self._chol_inv_a, diff)
+        log_a = -0.5 * (np.einsum("tci,tci->tc", white, white) + self._logdet_a
+                        + da * _LOG_2PI)
+        rhs = (np.einsum("cij,cj->ci", self._prec_v, self._mu_v)[None]
+               - np.einsum("cij,tcj->tci", self._prec_va, diff))
+        cond = np.linalg.solve(self._prec_v[None], rhs[..., None])[..., 0]
+        return log_a, cond, rhs
+
+    def _component_log(self, log_a: np.ndarray, cond: np.ndarray,
+                       visual_z: np.ndarray | None) -> np.ndarray:
+        """``log c_jk + log N([o_a; o_v]; μ_jk, Σ_jk)``, shape (T, N, M); the audio
+        marginal alone when ``visual_z`` is None."""
+        out = log_a + self._log_weights
+        if visual_z is not None:
+            d = visual_z[:, None, :] - cond
+            q = np.einsum("tci,cij,tcj->tc", d, self._prec_v, d)
+            out = out - 0.5 * (q - self._logdet_prec_v + self.n_visual_ * _LOG_2PI)
+        return out.reshape(len(out), self.n_states, self.n_mix)
+
+    def _occupancy(self, comp_log: np.ndarray) -> tuple[np.ndarray, float]:
+        """``P(q_t = j, k_t = k | O, λ)`` (T, N·M) and ``log P(O | λ)``."""
+        state_log = logsumexp(comp_log, axis=2)
+        gamma, loglik = forward_backward(state_log, self.startprob_, self.transmat_)
+        within = np.exp(comp_log - state_log[:, :, None])
+        return (gamma[:, :, None] * within).reshape(len(gamma), -1), loglik
+
+    def _update(self, occ: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Eq. 7: ``[Σ_jk γ Λ^v_jk]⁻¹ Σ_jk γ (Λ^v_jk μ^v_jk - Λ^va_jk (o_a - μ^a_jk))``."""
+        lhs = np.einsum("tc,cij->tij", occ, self._prec_v)
+        num = np.einsum("tc,tci->ti", occ, rhs)
+        return np.linalg.solve(lhs, num[..., None])[..., 0]
+
+    def _check_audio(self, audio: np.ndarray) -> np.ndarray:
+        if not hasattr(self, "means_"):
+            raise ParameterError("the AV-HMM is not fitted")
+        audio = np.asarray(audio, dtype=np.float64)
+        if audio.ndim != 2 or audio.shape[1] != self.n_audio_ or len(audio) == 0:
+            raise ParameterError(
+                f"audio must have shape (n_frames >= 1, {self.n_audio_}), got {audio.shape}")
+        if not np.isfinite(audio).all():
+            raise DataError("audio features hold NaN or infinite values")
+        da = self.n_audio_
+        return (audio - self.feature_mean_[:da]) / self.feature_scale_[:da]
+
+    def invert(self, audio: np.ndarray) -> np.ndarray:
+        """Visual features from audio features by HMM inversion (§4.2, Eq. 7, Fig. 4).
+
+        Parameters
+        ----------
+        audio : np.ndarray, shape (T, Da)
+
+        Returns
+        -------
+        np.ndarray, shape (T, Dv)
+            ``Õ_v``, a (local) maximiser of ``P(O_a, O_v | λ)``. Each update is an exact
+            maximisation of the auxiliary function (Eq. 3) in ``Õ_v``, so
+            ``log P(O_a, Õ_v | λ)`` never decreases (``history_``).
+        """
+        self._validate()
+        az = self._check_audio(audio)
+        log_a, cond, rhs = self._audio_terms(az)
+        if self.init == "random":
+            rng = np.random.default_rng(self.random_state)
+            vz = rng.standard_normal((len(az), self.n_visual_))
+            occ, _ = self._occupancy(self._component_log(log_a, cond, vz))
+        else:
+            occ, _ = self._occupancy(self._component_log(log_a, cond, None))
+        vz = self._update(occ, rhs)
+        self.history_ = []
+        self.n_iter_ = 1
+        for _ in range(self.max_iter - 1):
+            occ, loglik = self._occupancy(self._component_log(log_a, cond, vz))
+            self.history_.append(loglik)
+            new = self._update(occ, rhs)
+            self.n_iter_ += 1
+            moved = float(np.max(np.abs(new - vz)))
+            vz = new
+            if moved < self.inversion_tol:
+                break
+        self.history_.append(self._score_z(log_a, cond, vz))
+        dv = slice(self.n_audio_, None)
+        return vz * self.feature_scale_[dv] + self.feature_mean_[dv]
+
+    def _score_z(self, log_a, cond, vz) -> float:
+        return self._occupancy(self._component_log(log_a, cond, vz))[1]
+
+    def score(self, audio: np.ndarray, visual: np.ndarray | None = None) -> float:
+        """``log P(O_a, O_v | λ)``, or ``log P(O_a | λ)`` when ``visual`` is None.
+
+        Of the standardised features (the standardisation adds a constant).
+        """
+        az = self._check_audio(audio)
+        log_a, cond, _ = self._audio_terms(az)
+        if visual is None:
+            return self._occupancy(self._component_log(log_a, cond, None))[1]
+        visual = np.asarray(visual, dtype=np.float64)
+        if visual.shape != (len(az), self.n_visual_):
+            raise ParameterError(f"visual must have shape {(len(az), self.n_visual_)}, "
+                                 f"got {visual.shape}")
+        dv = slice(self.n_audio_, None)
+        vz = (visual - self.feature_mean_[dv]) / self.feature_scale_[dv]
+        return self._score_z(log_a, cond, vz)
+
+    # ------------------------------------------------------------------------ storage
+    _ARRAYS = ("startprob_", "transmat_", "weights_", "means_", "covars_", "feature_mean_",
+               "feature_scale_")
+    _PARAMS = ("n_states", "n_mix", "n_iter", "tol", "reg_covar", "max_iter",
+               "inversion_tol", "random_state")
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model as named arrays (for ``np.savez``; no pickles)."""
+        if not hasattr(self, "means_"):
+            raise ParameterError("the AV-HMM is not fitted")
+        out = {name: np.asarray(getattr(self, name)) for name in self._ARRAYS}
+        out.update({name: np.asarray(getattr(self, name)) for name in self._PARAMS})
+        out["init"] = np.asarray(self.init)
+        out["n_audio"] = np.asarray(self.n_audio_)
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays) -> AVHMM:
+        """Rebuild a model saved by :meth:`to_arrays`.
+
+        Raises
+        ------
+        DataError
+            Arrays missing or of inconsistent shapes.
+        """
+        try:
+            kwargs = {name: arrays[name].item() for name in cls._PARAMS}
+            kwargs["init"] = str(arrays["init"])
+            self = cls(**kwargs)
+            for name in cls._ARRAYS:
+                setattr(self, name, np.asarray(arrays[name], dtype=np.float64))
+            self.n_audio_ = int(arrays["n_audio"])
+        except KeyError as exc:
+            raise DataError(f"av-hmm arrays lack {exc}") from None
+        n, m = self.n_states, self.n_mix
+        d = self.means_.shape[-1] if self.means_.ndim == 3 else -1
+        self.n_visual_ = d - self.n_audio_
+        shapes = {"startprob_": (n,), "transmat_": (n, n), "weights_": (n, m),
+                  "means_": (n, m, d), "covars_": (n, m, d, d), "feature_mean_": (d,),
+                  "feature_scale_": (d,)}
+        bad = [k for k, s in shapes.items() if getattr(self, k).shape != s]
+        if bad or self.n_visual_ < 1:
+            raise DataError(f"av-hmm arrays have inconsistent shapes: {bad}")
+        self._prepare()
+        return self
+
+
+def _stack(sequences) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenate (audio, visual) pairs: (audio (T, Da), visual (T, Dv), lengths)."""
+    if isinstance(sequences, tuple) and len(sequences) == 2 and isinstance(
+            sequences[0], np.ndarray):
+        raise ParameterError("sequences must be a list of (audio, visual) pairs")
+    audio, visual, lengths = [], [], []
+    for i, pair in enumerate(sequences):
+        try:
+            a, v = (np.asarray(x, dtype=np.float64) for x in pair)
+        except (TypeError, ValueError):
+            raise ParameterError(f"sequence {i} is not an (audio, visual) pair") from None
+        if a.ndim != 2 or v.ndim != 2 or len(a) != len(v) or len(a) == 0:
+            raise ParameterError(
+                f"sequence {i}: audio {a.shape} and visual {v.shape} must be 2-D with the "
+                f"same number (>= 1) of frames")
+        if audio and (a.shape[1] != audio[0].shape[1] or v.shape[1] != visual[0].shape[1]):
+            raise ParameterError(f"sequence {i}: dimensions {a.shape[1]}, {v.shape[1]} differ "
+                                 f"from the first sequence's")
+        if not (np.isfinite(a).all() and np.isfinite(v).all()):
+            raise DataError(f"sequence {i} holds NaN or infinite values")
+        audio.append(a)
+        visual.append(v)
+        lengths.append(len(a))
+    if not audio:
+        raise DataError("av-hmm: no training sequences")
+    return np.vstack(audio), np.vstack(visual), np.asarray(lengths)
