@@ -138,11 +138,11 @@ def test_arrays_round_trip(data, fitted):
     back = AVHMM.from_arrays(arrays)
     np.testing.assert_array_equal(back.invert(data[10][0]), fitted.invert(data[10][0]))
     broken = dict(arrays)
-    del broken["covars_"]
-    with pytest.raises(DataError, match="covars_"):
+    del broken["covars"]
+    with pytest.raises(DataError, match="covars"):
         AVHMM.from_arrays(broken)
-    broken = {**arrays, "transmat_": arrays["transmat_"][:2]}
-    with pytest.raises(DataError, match="transmat_"):
+    broken = {**arrays, "transmat": arrays["transmat"][:2]}
+    with pytest.raises(DataError, match="transmat"):
         AVHMM.from_arrays(broken)
 
 
@@ -164,3 +164,76 @@ def test_bad_input(rng, fitted):
         fitted.invert(np.full((5, 3), np.nan))
     with pytest.raises(ParameterError, match="not fitted"):
         AVHMM().invert(np.zeros((5, 3)))
+
+
+# --- the estimator on a motion database -----------------------------------------------
+@pytest.fixture(scope="module")
+def small_baseline(tiny_db):
+    from animegraph.baselines.av_hmm import AVHMMBaseline
+
+    path, _ = tiny_db
+    return AVHMMBaseline(n_states=3, n_mix=2, n_iter=5).fit(path), path
+
+
+def test_baseline_predicts_motion(small_baseline):
+    from animegraph.baselines.data import training_set
+
+    model, path = small_baseline
+    clip = training_set(path).clips[0]
+    pred = model.predict(clip.audio, clip.sample_rate, n_frames=clip.n_frames)
+    assert pred.shape == clip.motion.shape and np.isfinite(pred).all()
+    # The visual vector is 4 PCA components; the audio 11 non-DC MFCCs x 7 frames.
+    assert model.components_.shape == (4, len(model.channels_))
+    assert model.hmm_.n_audio_ == 77 and model.hmm_.n_visual_ == 4
+    audio = model.audio_vectors(clip.audio, clip.sample_rate, np.arange(10) / 30.0)
+    from animegraph.baselines.data import audio_features_at
+
+    full = audio_features_at(clip.audio, clip.sample_rate, np.arange(10) / 30.0, n_mfcc=12,
+                             context=3, context_hop_s=1 / 30.0)
+    np.testing.assert_array_equal(audio[:, :11], full[:, 1:12])  # c0 dropped
+    np.testing.assert_array_equal(audio[:, 33:44], full[:, 37:48])  # the centre frame
+
+
+def test_baseline_beats_the_mean_pose_on_training_audio(small_baseline):
+    from animegraph.baselines.data import training_set
+    from animegraph.evaluate import acc
+
+    model, path = small_baseline
+    rs = []
+    for clip in training_set(path).clips[:6]:
+        pred = model.predict(clip.audio, clip.sample_rate, n_frames=clip.n_frames)
+        rs.append(acc((pred - model.motion_mean_) @ model.components_[:1].T,
+                      (clip.motion - model.motion_mean_) @ model.components_[:1].T))
+    assert np.mean(rs) > 0.3, rs
+
+
+def test_baseline_stored_as_arrays(small_baseline, tmp_path):
+    from animegraph.baselines.av_hmm import AVHMMBaseline
+    from animegraph.baselines.base import read_model, save_model
+    from animegraph.baselines.data import training_set
+
+    model, path = small_baseline
+    arrays = model.to_arrays()
+    assert all(v.dtype == np.float64 for v in arrays.values())
+    back = AVHMMBaseline.from_arrays(arrays, model.describe())
+    clip = training_set(path).clips[1]
+    np.testing.assert_allclose(back.predict(clip.audio, clip.sample_rate),
+                               model.predict(clip.audio, clip.sample_rate))
+    stored = read_model(save_model(model, path))
+    assert isinstance(stored, AVHMMBaseline) and stored.get_params() == model.get_params()
+    bad = {**arrays, "components": arrays["components"][:, :-1]}
+    with pytest.raises(DataError, match="PCA and channels"):
+        AVHMMBaseline.from_arrays(bad, model.describe())
+    with pytest.raises(DataError, match="channels"):
+        model.check_channels(model.channels_[:-1])
+
+
+def test_baseline_too_little_data(tiny_db):
+    from animegraph.baselines.av_hmm import AVHMMBaseline
+    from animegraph.baselines.data import training_set
+
+    data = training_set(tiny_db[0])
+    one = type(data)(clips=data.clips[:1], names=data.names, groups=data.groups,
+                     kind=data.kind, fps=data.fps)
+    with pytest.raises(DataError, match="free parameters"):
+        AVHMMBaseline().fit(one)

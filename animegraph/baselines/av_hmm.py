@@ -30,6 +30,8 @@ import numpy as np
 from scipy import linalg
 from scipy.special import logsumexp
 
+from animegraph.baselines.base import BaselineModel, sample_times
+from animegraph.baselines.data import audio_features_at, resample_to
 from db.errors import DataError, ParameterError
 
 # --- the paper's constants -------------------------------------------------------------
@@ -449,19 +451,53 @@ class AVHMM:
         return self._score_z(log_a, cond, vz)
 
     # ------------------------------------------------------------------------ storage
-    _ARRAYS = ("startprob_", "transmat_", "weights_", "means_", "covars_", "feature_mean_",
-               "feature_scale_")
+    #: The fitted state: arrays of :meth:`to_arrays` besides the hyper-parameters.
+    STATE = ("startprob_", "transmat_", "weights_", "means_", "covars_", "feature_mean_",
+             "feature_scale_", "n_audio_")
     _PARAMS = ("n_states", "n_mix", "n_iter", "tol", "reg_covar", "max_iter",
                "inversion_tol", "random_state")
 
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """The fitted model as named arrays (for ``np.savez``; no pickles)."""
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted state (:data:`STATE`) as float arrays, names without the ``_``."""
         if not hasattr(self, "means_"):
             raise ParameterError("the AV-HMM is not fitted")
-        out = {name: np.asarray(getattr(self, name)) for name in self._ARRAYS}
+        return {name.rstrip("_"): np.asarray(getattr(self, name), dtype=np.float64)
+                for name in self.STATE}
+
+    def set_state(self, arrays) -> AVHMM:
+        """Set the fitted state from :meth:`state_arrays` (hyper-parameters as constructed).
+
+        Raises
+        ------
+        DataError
+            Arrays missing or of shapes inconsistent with ``n_states`` and ``n_mix``.
+        """
+        try:
+            for name in self.STATE[:-1]:
+                setattr(self, name, np.asarray(arrays[name.rstrip("_")], dtype=np.float64))
+            self.n_audio_ = int(np.asarray(arrays["n_audio"]))
+        except KeyError as exc:
+            raise DataError(f"av-hmm arrays lack {exc}") from None
+        n, m = self.n_states, self.n_mix
+        d = self.means_.shape[-1] if self.means_.ndim == 3 else -1
+        self.n_visual_ = d - self.n_audio_
+        shapes = {"startprob_": (n,), "transmat_": (n, n), "weights_": (n, m),
+                  "means_": (n, m, d), "covars_": (n, m, d, d), "feature_mean_": (d,),
+                  "feature_scale_": (d,)}
+        bad = [k.rstrip("_") for k, s in shapes.items() if getattr(self, k).shape != s]
+        if bad or self.n_visual_ < 1 or self.n_audio_ < 1:
+            raise DataError(f"av-hmm arrays have inconsistent shapes: {bad}")
+        try:
+            self._prepare()
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise DataError(f"av-hmm covariances are not positive definite ({exc})") from None
+        return self
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model with its hyper-parameters as named arrays (no pickles)."""
+        out = self.state_arrays()
         out.update({name: np.asarray(getattr(self, name)) for name in self._PARAMS})
         out["init"] = np.asarray(self.init)
-        out["n_audio"] = np.asarray(self.n_audio_)
         return out
 
     @classmethod
@@ -474,25 +510,11 @@ class AVHMM:
             Arrays missing or of inconsistent shapes.
         """
         try:
-            kwargs = {name: arrays[name].item() for name in cls._PARAMS}
+            kwargs = {name: np.asarray(arrays[name]).item() for name in cls._PARAMS}
             kwargs["init"] = str(arrays["init"])
-            self = cls(**kwargs)
-            for name in cls._ARRAYS:
-                setattr(self, name, np.asarray(arrays[name], dtype=np.float64))
-            self.n_audio_ = int(arrays["n_audio"])
         except KeyError as exc:
             raise DataError(f"av-hmm arrays lack {exc}") from None
-        n, m = self.n_states, self.n_mix
-        d = self.means_.shape[-1] if self.means_.ndim == 3 else -1
-        self.n_visual_ = d - self.n_audio_
-        shapes = {"startprob_": (n,), "transmat_": (n, n), "weights_": (n, m),
-                  "means_": (n, m, d), "covars_": (n, m, d, d), "feature_mean_": (d,),
-                  "feature_scale_": (d,)}
-        bad = [k for k, s in shapes.items() if getattr(self, k).shape != s]
-        if bad or self.n_visual_ < 1:
-            raise DataError(f"av-hmm arrays have inconsistent shapes: {bad}")
-        self._prepare()
-        return self
+        return cls(**kwargs).set_state(arrays)
 
 
 def _stack(sequences) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -521,3 +543,139 @@ def _stack(sequences) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not audio:
         raise DataError("av-hmm: no training sequences")
     return np.vstack(audio), np.vstack(visual), np.asarray(lengths)
+
+
+# ---------------------------------------------------------------------------------------
+# The estimator on motion databases
+# ---------------------------------------------------------------------------------------
+class AVHMMBaseline(BaselineModel):
+    """``av-hmm``: motion from speech by inverting one joint audio-visual HMM.
+
+    Training (§3, §4.1): every clip is framed at ``feature_fps`` (the paper's video rate,
+    30 fps); the audio vector of a frame stacks ``n_mfcc`` non-DC MFCCs of the frame and
+    of ``context`` frames each side (:func:`.data.audio_features_at`, c0 dropped); the
+    visual vector is the first ``n_visual`` principal components of the motion (the
+    paper's four mouth parameters become the database's main motion modes). One
+    :class:`AVHMM` is trained on all clips. Synthesis (§4.2): the visual components are
+    estimated by HMM inversion, mapped back through the PCA and resampled to the motion
+    frame rate. The method has no expression model; ``emotion`` is ignored.
+
+    Parameters
+    ----------
+    n_states, n_mix : int, optional
+        N and M (§6.1.2: N = 28, M = 5).
+    n_mfcc, context : int, optional
+        Cepstra per frame and tc (§6.1: 11, 3).
+    feature_fps : float, optional
+        Frame rate of the audio-visual features (§6.1: 30).
+    n_visual : int, optional
+        Visual parameters (§6.1: 4), here principal components of the motion.
+    n_iter, tol, reg_covar, max_iter, inversion_tol, init, random_state : optional
+        As for :class:`AVHMM`.
+
+    Notes
+    -----
+    Fitting cost is dominated by the full covariances of d = 11·7 + 4 = 81 dimensions:
+    each Baum–Welch iteration is O(T·N·M·d²). See ``docs/results.md`` for timings.
+    """
+
+    method = "av-hmm"
+
+    def __init__(self, n_states: int = N_STATES, n_mix: int = N_MIX, *, n_mfcc: int = N_MFCC,
+                 context: int = CONTEXT_FRAMES, feature_fps: float = FEATURE_FPS,
+                 n_visual: int = N_VISUAL, n_iter: int = N_ITER, tol: float = TOL,
+                 reg_covar: float = REG_COVAR, max_iter: int = INVERSION_MAX_ITER,
+                 inversion_tol: float = INVERSION_TOL, init: str = "audio",
+                 random_state: int = 0):
+        self.n_states = n_states
+        self.n_mix = n_mix
+        self.n_mfcc = n_mfcc
+        self.context = context
+        self.feature_fps = feature_fps
+        self.n_visual = n_visual
+        self.n_iter = n_iter
+        self.tol = tol
+        self.reg_covar = reg_covar
+        self.max_iter = max_iter
+        self.inversion_tol = inversion_tol
+        self.init = init
+        self.random_state = random_state
+
+    def _hmm(self) -> AVHMM:
+        return AVHMM(self.n_states, self.n_mix, n_iter=self.n_iter, tol=self.tol,
+                     reg_covar=self.reg_covar, max_iter=self.max_iter,
+                     inversion_tol=self.inversion_tol, init=self.init,
+                     random_state=self.random_state)
+
+    def _validate_features(self) -> None:
+        _check_int("n_mfcc", self.n_mfcc, 1)
+        if self.n_mfcc > 39:
+            raise ParameterError(f"n_mfcc must be <= 39 (40 mel bands less c0), got "
+                                 f"{self.n_mfcc}")
+        _check_int("context", self.context, 0)
+        _check_int("n_visual", self.n_visual, 1)
+        _check_real("feature_fps", self.feature_fps)
+
+    def audio_vectors(self, audio: np.ndarray, sample_rate: int,
+                      times: np.ndarray) -> np.ndarray:
+        """The audio observation ``o_a`` at ``times`` (§3).
+
+        Returns
+        -------
+        np.ndarray, shape (len(times), n_mfcc * (2 * context + 1))
+            Blocks of ``n_mfcc`` non-DC cepstra at offsets -tc .. tc frames.
+        """
+        width = self.n_mfcc + 1
+        feats = audio_features_at(audio, sample_rate, times, n_mfcc=width,
+                                  context=self.context,
+                                  context_hop_s=1.0 / float(self.feature_fps))
+        keep = np.arange(feats.shape[1]) % width != 0  # drop c0 of every block
+        return feats[:, keep]
+
+    def _fit(self, data) -> None:
+        self._validate_features()
+        self._hmm()._validate()
+        rate = float(self.feature_fps)
+        audio, motion = [], []
+        for clip, times, values in sample_times(data.clips, rate):
+            audio.append(self.audio_vectors(clip.audio, clip.sample_rate, times))
+            motion.append(values)
+        n_frames = sum(len(m) for m in motion)
+        if n_frames <= self.n_visual:
+            raise DataError(f"too little data for av-hmm: {n_frames} frames at {rate:g} fps "
+                            f"for {self.n_visual} visual components")
+        stacked = np.vstack(motion)
+        self.motion_mean_ = stacked.mean(axis=0)
+        _, sing, vt = np.linalg.svd(stacked - self.motion_mean_, full_matrices=False)
+        n_vis = min(self.n_visual, len(sing))
+        self.components_ = vt[:n_vis]
+        self.explained_variance_ratio_ = sing[:n_vis] ** 2 / max((sing**2).sum(), 1e-300)
+        visual = [(m - self.motion_mean_) @ self.components_.T for m in motion]
+        self.hmm_ = self._hmm().fit(list(zip(audio, visual, strict=True)))
+
+    def _predict(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
+                 emotion: str | None) -> np.ndarray:
+        rate = float(self.feature_fps)
+        grid = np.arange(0.0, float(times[-1]) + 1.0 / rate, 1.0 / rate)
+        visual = self.hmm_.invert(self.audio_vectors(audio, sample_rate, grid))
+        motion = visual @ self.components_ + self.motion_mean_
+        return resample_to(motion, rate, times)
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        return {**{f"hmm_{k}": v for k, v in self.hmm_.state_arrays().items()},
+                "motion_mean": self.motion_mean_, "components": self.components_,
+                "explained_variance_ratio": self.explained_variance_ratio_}
+
+    def _restore(self, arrays: dict[str, np.ndarray]) -> None:
+        try:
+            self.motion_mean_ = np.asarray(arrays["motion_mean"], dtype=np.float64)
+            self.components_ = np.asarray(arrays["components"], dtype=np.float64)
+            self.explained_variance_ratio_ = np.asarray(arrays["explained_variance_ratio"])
+        except KeyError as exc:
+            raise DataError(f"stored av-hmm model lacks {exc}") from None
+        self.hmm_ = self._hmm().set_state(
+            {k[len("hmm_"):]: v for k, v in arrays.items() if k.startswith("hmm_")})
+        if (self.components_.ndim != 2 or self.components_.shape[1] != len(self.channels_)
+                or self.motion_mean_.shape != (len(self.channels_),)
+                or self.components_.shape[0] != self.hmm_.n_visual_):
+            raise DataError("stored av-hmm model: PCA and channels do not match")
