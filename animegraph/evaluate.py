@@ -250,3 +250,54 @@ def acc(pred: np.ndarray, truth: np.ndarray) -> float:
     rs = [pearson(p[:, r], t[:, r]) for r in range(p.shape[1])]
     rs = [r for r in rs if np.isfinite(r)]
     return float(np.mean(rs)) if rs else float("nan")
+
+
+def hong_normalise(motion: np.ndarray, center: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Displacements normalised as in Hong, Wen & Huang (2002) §VII-A.
+
+    Each channel's displacement from ``center`` (the neutral or mean face) is divided by
+    ``scale``, its largest absolute displacement in the training database, so that the
+    database spans [-1, 1].
+
+    Parameters
+    ----------
+    motion : np.ndarray, shape (n_frames, n_channels)
+    center, scale : np.ndarray, shape (n_channels,)
+        ``scale`` must be positive (leave constant channels out beforehand).
+    """
+    return (np.asarray(motion, dtype=np.float64) - center) / scale
+
+
+def displacement_scale(train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(center, scale)`` of :func:`hong_normalise` from training motion.
+
+    ``center`` is the mean frame; ``scale`` each channel's largest absolute deviation
+    from it (1 where a channel does not move).
+    """
+    train = np.asarray(train, dtype=np.float64)
+    center = np.nanmean(train, axis=0)
+    scale = np.nanmax(np.abs(train - center), axis=0)
+    return center, np.where(scale > 0, scale, 1.0)
+
+
+def hong_r(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Pearson product-moment correlation of Hong et al. (2002), Eq. 6.
+
+    ``R = tr(Cov(d, d')) / sqrt(tr(Cov(d, d)) tr(Cov(d', d')))`` over frames, with ``d``
+    the normalised ground truth and ``d'`` the normalised estimate, shape
+    (n_frames, n_channels) (their common frames; rows with NaN are dropped).
+    """
+    n = min(len(pred), len(truth))
+    p, t = np.asarray(pred[:n], np.float64), np.asarray(truth[:n], np.float64)
+    ok = np.isfinite(p).all(axis=1) & np.isfinite(t).all(axis=1)
+    p, t = p[ok] - p[ok].mean(axis=0), t[ok] - t[ok].mean(axis=0)
+    den = np.sqrt(np.sum(t * t) * np.sum(p * p))
+    return float(np.sum(t * p) / den) if den > 0 else float("nan")
+
+
+def hong_nmse(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Mean square error of Hong et al. (2002), Eq. 8: ``E[||d - d'||^2 / gamma]`` on
+    normalised data (gamma = number of channels), over the common frames."""
+    n = min(len(pred), len(truth))
+    d = np.asarray(pred[:n], np.float64) - np.asarray(truth[:n], np.float64)
+    return float(np.nanmean(np.nanmean(d**2, axis=1)))

@@ -43,7 +43,7 @@ METHODS = ("anime-graph", "mu-mlp", "hier-pca", "av-hmm")
 ESTIMATORS = {
     "mu-mlp": "animegraph.baselines.mu_mlp:MuMlp",
     "hier-pca": "animegraph.baselines.hier_pca:HierPca",
-    "av-hmm": "animegraph.baselines.av_hmm:AvHmm",
+    "av-hmm": "animegraph.baselines.av_hmm:AVHMMBaseline",
 }
 BASELINES = tuple(ESTIMATORS)
 

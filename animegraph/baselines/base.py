@@ -163,14 +163,14 @@ def check_enough(n_samples: int, n_params: int, what: str) -> None:
                         "parameters")
 
 
-def sample_times(data: TrainingSet, rate: float):
-    """Each clip's frames resampled at ``rate`` frames/s, with their times.
+def sample_times(clips, rate: float):
+    """Frames of each of ``clips`` (TrainingClip) resampled at ``rate`` frames/s.
 
     Yields
     ------
     (clip, times (n,), motion (n, n_channels))
     """
-    for clip in data.clips:
+    for clip in clips:
         duration = (clip.n_frames - 1) / clip.fps
         times = np.arange(0.0, duration + 1e-9, 1.0 / rate)
         yield clip, times, resample_to(clip.motion, clip.fps, times)
