@@ -104,6 +104,36 @@ def _hmm_class():
         """
 
         reg_covar = REG_COVAR
+        _version = 0  # bumped whenever the parameters change
+        _factors = None  # (version, whitening factors, log-determinants)
+        _last = None  # (X, its component log densities) of the latest E-step sequence
+
+        def _init(self, X, lengths=None):
+            super()._init(X, lengths)
+            self._version += 1
+
+        def _component_log(self, X):
+            """``log c_jk + log N(x_t; μ_jk, Σ_jk)``, shape (T, N, M); the Cholesky
+            factors are computed once per parameter update, not once per sequence."""
+            nc, nm, nf = self.n_components, self.n_mix, self.n_features
+            if self._factors is None or self._factors[0] != self._version:
+                cov = self.covars_.reshape(nc * nm, nf, nf)
+                chol = np.linalg.cholesky(cov)
+                inv = np.linalg.inv(chol)  # lower-triangular whitening factors
+                logdet = 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+                self._factors = (self._version, inv, logdet)
+            _, inv, logdet = self._factors
+            diff = X[None] - self.means_.reshape(nc * nm, 1, nf)  # (C, T, d)
+            white = diff @ inv.transpose(0, 2, 1)
+            quad = np.einsum("ctd,ctd->tc", white, white)
+            out = (-0.5 * (quad + logdet + nf * _LOG_2PI)
+                   + np.log(np.maximum(self.weights_, 1e-300)).reshape(-1))
+            return out.reshape(len(X), nc, nm)
+
+        def _compute_log_likelihood(self, X):
+            comp = self._component_log(X)
+            self._last = (X, comp)
+            return logsumexp(comp, axis=2)
 
         def _initialize_sufficient_statistics(self):
             stats = super()._initialize_sufficient_statistics()
@@ -115,19 +145,18 @@ def _hmm_class():
                                               fwdlattice, bwdlattice):
             BaseHMM._accumulate_sufficient_statistics(self, stats, X, lattice, post_comp,
                                                       fwdlattice, bwdlattice)
-            post_mix = np.empty((len(X), self.n_components, self.n_mix))
-            for p in range(self.n_components):
-                dens = self._compute_log_weighted_gaussian_densities(X, p)
-                post_mix[:, p] = np.exp(dens - logsumexp(dens, axis=1, keepdims=True))
+            comp = self._last[1] if self._last and self._last[0] is X else (
+                self._component_log(X))
+            post_mix = np.exp(comp - logsumexp(comp, axis=2, keepdims=True))
             w = post_comp[:, :, None] * post_mix
             stats["post_mix_sum"] += w.sum(axis=0)
             stats["post_sum"] += post_comp.sum(axis=0)
             if "m" in self.params:
                 stats["m_n"] += np.einsum("ijk,il->jkl", w, X)
             if "c" in self.params:
-                for j in range(self.n_components):
-                    for k in range(self.n_mix):
-                        stats["xx"][j, k] += (X * w[:, j, k, None]).T @ X
+                flat = w.reshape(len(X), -1)
+                xx = stats["xx"].reshape(-1, self.n_features, self.n_features)
+                xx += np.einsum("tc,ti,tj->cij", flat, X, X, optimize=True)
 
         def _do_mstep(self, stats):
             params = self.params
@@ -136,6 +165,7 @@ def _hmm_class():
                 super()._do_mstep(stats)
             finally:
                 self.params = params
+            self._version += 1
             if "c" not in params:
                 return
             n = stats["post_mix_sum"]
@@ -147,6 +177,7 @@ def _hmm_class():
                     mu = self.means_[j, k]
                     cov = stats["xx"][j, k] / n[j, k] - np.outer(mu, mu)
                     self.covars_[j, k] = 0.5 * (cov + cov.T) + self.reg_covar * eye
+            self._version += 1
 
     return _FullGMMHMM
 
@@ -346,14 +377,14 @@ class AVHMM:
         """Audio log marginals (T, C), conditional means (T, C, Dv) and Eq. 7's numerator
         terms ``Λ^v μ^v - Λ^va (o_a - μ^a)`` (T, C, Dv) of one sequence."""
         da = self.n_audio_
-        diff = audio_z[:, None, :] - self._mu_a[None]  # (T, C, Da)
-        white = np.einsum("cij,tcj->tci", self._chol_inv_a, diff)
-        log_a = -0.5 * (np.einsum("tci,tci->tc", white, white) + self._logdet_a
+        diff = audio_z[None] - self._mu_a[:, None, :]  # (C, T, Da)
+        white = diff @ self._chol_inv_a.transpose(0, 2, 1)
+        log_a = -0.5 * (np.einsum("ctd,ctd->tc", white, white) + self._logdet_a
                         + da * _LOG_2PI)
-        rhs = (np.einsum("cij,cj->ci", self._prec_v, self._mu_v)[None]
-               - np.einsum("cij,tcj->tci", self._prec_va, diff))
-        cond = np.linalg.solve(self._prec_v[None], rhs[..., None])[..., 0]
-        return log_a, cond, rhs
+        rhs = (np.einsum("cij,cj->ci", self._prec_v, self._mu_v)[:, None, :]
+               - diff @ self._prec_va.transpose(0, 2, 1))  # (C, T, Dv)
+        cond = np.linalg.solve(self._prec_v[:, None], rhs[..., None])[..., 0]
+        return log_a, cond.transpose(1, 0, 2), rhs.transpose(1, 0, 2)
 
     def _component_log(self, log_a: np.ndarray, cond: np.ndarray,
                        visual_z: np.ndarray | None) -> np.ndarray:
