@@ -155,8 +155,32 @@ def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None =
     return result.nodes, result.n_jumps
 
 
+def paper_scores(pred: np.ndarray, truth: np.ndarray, active: np.ndarray, lips: np.ndarray,
+                 norm: tuple[np.ndarray, np.ndarray]) -> dict:
+    """The baselines' own measures of ``pred`` against ``truth`` (n_frames, n_channels).
+
+    ``hong_r``, ``hong_nmse``: Hong et al. (2002) Eq. 6 and 8 over the ``active`` channels,
+    normalised by ``norm`` = :func:`displacement_scale` of the training motion.
+    ``amse``, ``acc``: Terissi et al. (2013) Eq. 11-12 over the active lip channels (the
+    paper's visual parameters are mouth parameters; all active channels if none are lips).
+    """
+    n = min(len(pred), len(truth))
+    pred, truth = pred[:n], truth[:n]
+    center, scale = norm
+    hp = hong_normalise(pred[:, active], center[active], scale[active])
+    ht = hong_normalise(truth[:, active], center[active], scale[active])
+    mouth = np.intersect1d(lips, active)
+    mouth = mouth if len(mouth) else active
+    return {"hong_r": hong_r(hp, ht), "hong_nmse": hong_nmse(hp, ht),
+            "amse": amse(pred[:, mouth], truth[:, mouth]),
+            "acc": acc(pred[:, mouth], truth[:, mouth])}
+
+
 def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
-                  rng: np.random.Generator | None = None) -> dict:
+                  estimators: dict | None = None,
+                  norm: tuple[np.ndarray, np.ndarray] | None = None,
+                  rng: np.random.Generator | None = None,
+                  predictions: dict | None = None) -> dict:
     """Synthesize a held-out prepared clip from its audio and phones; score every method.
 
     Parameters
@@ -165,26 +189,58 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
         A database that does not contain the clip.
     clip : ingest.prepare.PreparedClip
         The clip (its motion, in the database's space, is the ground truth).
+    methods : sequence of str
+        Anime Graph search methods (:data:`METHODS`) to score.
+    estimators : dict of str to BaselineModel, optional
+        Fitted baselines (:mod:`animegraph.baselines`), scored on the clip's audio alone.
+    norm : (center, scale), optional
+        :func:`displacement_scale` of the training motion; with it every row also has
+        :func:`paper_scores`.
+    predictions : dict, optional
+        Filled with each method's motion, shape (n_frames, n_channels).
+
+    Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
+    and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
+    and ``rtf`` (``synth_s`` over the clip's duration).
     """
     import time
 
     from animegraph.synth import render_nodes
 
     rng = rng or np.random.default_rng(0)
+    t0 = time.perf_counter()
     phones, emotion, cands, audio_cost = heldout_query(model, clip)
+    query_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
     share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
     active = np.flatnonzero(share > 1e-4 * share.max())
+    lips = lip_channels(model.names, model.groups)
     rows = {}
+
+    def record(name, pred, extra):
+        row = {**motion_scores(pred, truth, model.names, model.groups, model.kind, active),
+               **extra}
+        if norm is not None:
+            row |= paper_scores(pred, truth, active, lips, norm)
+        row["rtf"] = row["synth_s"] / clip.duration
+        rows[name] = row
+        if predictions is not None:
+            predictions[name] = pred
+
     for method in methods:
         t0 = time.perf_counter()
         nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
         search_s = time.perf_counter() - t0
         ics, _ = render_nodes(model, phones, nodes, emotion=emotion)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
-        rows[method] = {**motion_scores(pred, truth, model.names, model.groups, model.kind,
-                                        active), "jumps": jumps, "search_s": search_s}
+        record(method, pred, {"jumps": jumps, "search_s": search_s,
+                              "synth_s": query_s + time.perf_counter() - t0})
+    for name, est in (estimators or {}).items():
+        t0 = time.perf_counter()
+        pred = est.predict(clip.audio, clip.sample_rate, n_frames=len(truth),
+                           emotion=clip.emotion if clip.emotion in est.emotions_ else None)
+        record(name, pred, {"synth_s": time.perf_counter() - t0})
     return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
             "seconds": round(clip.duration, 2), "methods": rows}
 

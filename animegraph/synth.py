@@ -59,10 +59,16 @@ class Model:
 
     def to_channels(self, ics: np.ndarray) -> np.ndarray:
         """Motion in the database's channels (world coordinates for a head group)."""
-        motion = self.decomposer.inverse_transform(ics)
-        if self.head_reference is not None and head_points(self.groups) >= 3:
-            motion = unstabilize_points(motion, self.groups, self.head_reference)
-        return motion
+        return to_world(self.decomposer.inverse_transform(ics), self.groups,
+                        self.head_reference)
+
+
+def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:
+    """Motion (n_frames, n_channels) in the database's stored, head-stabilised space back
+    in world coordinates (unchanged when the database has no rigid head group)."""
+    if head_reference is not None and head_points(groups) >= 3:
+        motion = unstabilize_points(motion, groups, head_reference)
+    return motion
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,30 +213,41 @@ def _phone_name(graph: AnimeGraph, node: int) -> str:
 
 def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
     """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
+    return write_channels(synth.motion, synth.fps, model.names, model.kind, path,
+                          extra={"ics": synth.ics, "nodes": synth.result.nodes})
+
+
+def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
+                   extra: dict | None = None) -> Path:
+    """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
+
+    ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and ``channels``.
+    """
     from db.atomic import atomic_write
 
+    names = tuple(names)
     suffix = path.suffix.lower()
     if suffix == ".c3d":
-        if model.kind not in ("markers", "landmarks"):
-            raise ParameterError(f"C3D holds 3D points; this database has {model.kind} "
+        if kind not in ("markers", "landmarks"):
+            raise ParameterError(f"C3D holds 3D points; this database has {kind} "
                                  "(write .csv or .npz)")
         from ingest.formats.c3d import MarkerData, write_c3d
 
-        point_cols = [i for i, n in enumerate(model.names) if n.endswith((".x", ".y", ".z"))]
-        labels = tuple(model.names[i][:-2] for i in point_cols[::3])
-        points = synth.motion[:, point_cols].reshape(len(synth.motion), -1, 3)
-        write_c3d(path, MarkerData(points=points, labels=labels, rate=synth.fps))
+        point_cols = [i for i, n in enumerate(names) if n.endswith((".x", ".y", ".z"))]
+        labels = tuple(names[i][:-2] for i in point_cols[::3])
+        points = motion[:, point_cols].reshape(len(motion), -1, 3)
+        write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
-        header = "frame,time," + ",".join(model.names)
-        n = len(synth.motion)
-        table = np.column_stack([np.arange(n), np.arange(n) / synth.fps, synth.motion])
+        header = "frame,time," + ",".join(names)
+        n = len(motion)
+        table = np.column_stack([np.arange(n), np.arange(n) / fps, motion])
         with atomic_write(path) as handle:
             np.savetxt(handle, table, delimiter=",", header=header, comments="",
-                       fmt=["%d", "%.5f"] + ["%.6g"] * len(model.names))
+                       fmt=["%d", "%.5f"] + ["%.6g"] * len(names))
     elif suffix == ".npz":
         with atomic_write(path) as handle:
-            np.savez(handle, motion=synth.motion, ics=synth.ics, fps=synth.fps,
-                     channels=np.array(model.names), nodes=synth.result.nodes)
+            np.savez(handle, motion=motion, fps=fps, channels=np.array(names),
+                     **(extra or {}))
     else:
         raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
     return path

@@ -109,7 +109,9 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
 @pytest.mark.parametrize("extra, needle", [
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),
-    (["--method", "window"], "--window"),
+    (["--search", "window"], "--window"),
+    (["--method", "mu-mlp", "--window", "3"], "only apply"),
+    (["--method", "hmm"], "invalid choice"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out

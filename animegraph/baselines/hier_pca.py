@@ -19,9 +19,12 @@ model for video-realistic facial animation" (``../shared/papers/cosker-*.txt``).
   eigen-variances, Eq. 6) of each cluster's frames gets its own PCA (Eq. 7).
 * §4.4: at synthesis the cluster whose mean speech parameter is nearest in Mahalanobis
   distance (Eq. 8, the covariance of the speech training set) is chosen; the speech part
-  of its eigenvectors gives the speech-appearance parameter ``d`` (least squares), the
-  appearance part gives ``c`` (Eq. 9), clamped to ±3 s.d. of the cluster
-  (:data:`CLAMP_SD`).
+  of its eigenvectors gives the speech-appearance parameter ``d``, the appearance part
+  gives ``c`` (Eq. 9), clamped to ±3 s.d. of the cluster (:data:`CLAMP_SD`). The
+  equation for ``d`` is lost in our copy of the paper; we take the most probable ``d``
+  given the speech under the cluster's joint model (:func:`_speech_to_d`), which a plain
+  pseudo-inverse of the speech part matches only when every joint mode has the same
+  variance.
 * §4.5: local averaging of the synthesised frames (:data:`AVERAGE_FRAMES`).
 
 Choices the paper leaves open, and fallbacks (ours): the number of Mel-cepstra (12) and
@@ -73,6 +76,18 @@ def _pca(x: np.ndarray, variance: float) -> tuple[np.ndarray, np.ndarray, np.nda
     k = int(np.searchsorted(np.cumsum(var) / var.sum(), variance - 1e-12) + 1)
     k = min(k, len(var))
     return mean, vt[:k].T, np.sqrt(np.maximum(var[:k], 1e-12))
+
+
+def _speech_to_d(rs: np.ndarray, d_var: np.ndarray, ds: np.ndarray) -> np.ndarray:
+    """Speech-appearance parameters ``d`` (n, k) from scaled speech offsets ``ds`` (n, n_s).
+
+    The most probable ``d`` under the cluster's joint model given its speech part
+    ``rs @ d = ds``: ``d = Λ Rs^T (Rs Λ Rs^T)^+ ds`` with ``Λ`` the joint modes' variances
+    (a plain pseudo-inverse of ``Rs`` weighs every mode alike and extrapolates along the
+    weak ones).
+    """
+    lam_rt = d_var[:, None] * rs.T  # (k, n_s)
+    return ds @ np.linalg.pinv(rs @ lam_rt, rcond=1e-6).T @ lam_rt.T
 
 
 class HierPca(BaselineModel):
@@ -150,10 +165,11 @@ class HierPca(BaselineModel):
             if sel.sum() < MIN_CLUSTER_FRAMES:
                 continue  # documented fallback: too few frames for a joint model
             m = np.hstack([c[sel], w * s[sel]])
-            m_mean, r, _ = _pca(m, JOINT_VARIANCE)
+            m_mean, r, sd_d = _pca(m, JOINT_VARIANCE)
             nc = c.shape[1]
             node["clusters"].append({
                 "c_mean": m_mean[:nc], "s_mean": m_mean[nc:] / w, "rc": r[:nc], "rs": r[nc:],
+                "d_var": sd_d**2,
                 "c_sd": c[sel].std(axis=0) + 1e-9,
             })
         if not node["clusters"]:
@@ -171,8 +187,8 @@ class HierPca(BaselineModel):
         c = np.empty((len(s), node["p"].shape[1]))
         for i in np.unique(choice):
             cl, sel = clusters[i], choice == i
-            d, *_ = np.linalg.lstsq(cl["rs"], (w * (s[sel] - cl["s_mean"])).T, rcond=None)
-            ci = cl["c_mean"] + (cl["rc"] @ d).T  # Eq. 9
+            d = _speech_to_d(cl["rs"], cl["d_var"], w * (s[sel] - cl["s_mean"]))
+            ci = cl["c_mean"] + d @ cl["rc"].T  # Eq. 9
             lim = self.clamp_sd * cl["c_sd"]
             c[sel] = np.clip(ci, cl["c_mean"] - lim, cl["c_mean"] + lim)
         return node["mean"] + c @ node["p"].T
@@ -209,6 +225,6 @@ class HierPca(BaselineModel):
             prefix = f"{name}/cluster/"
             ids = sorted({k[len(prefix):].split("/")[0] for k in arrays if k.startswith(prefix)})
             node["clusters"] = [{k: arrays[f"{prefix}{i}/{k}"]
-                                 for k in ("c_mean", "s_mean", "rc", "rs", "c_sd")}
+                                 for k in ("c_mean", "s_mean", "rc", "rs", "d_var", "c_sd")}
                                 for i in ids]
             self.nodes_[name] = node
