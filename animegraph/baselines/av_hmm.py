@@ -52,9 +52,10 @@ SWEEP_DIGITS = {"n_states": (2, 19), "n_mix": (3, 20)}
 SWEEP_SENTENCES = {"n_states": (8, 40), "n_mix": (2, 7)}
 
 # --- ours (the paper gives none) ------------------------------------------------------
-#: Baum–Welch iterations and log-likelihood tolerance (hmmlearn's ``n_iter``, ``tol``).
+#: Baum–Welch: at most ``N_ITER`` iterations; stop when the training log-likelihood
+#: gains less than ``TOL`` nats per frame (hmmlearn's ``tol`` is this times the frames).
 N_ITER = 20
-TOL = 1e-2
+TOL = 1e-3
 #: Added to the diagonal of every (standardised) covariance after each M-step, so that a
 #: component with fewer frames than dimensions stays positive definite.
 REG_COVAR = 1e-3
@@ -121,11 +122,13 @@ def _hmm_class():
                 chol = np.linalg.cholesky(cov)
                 inv = np.linalg.inv(chol)  # lower-triangular whitening factors
                 logdet = 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-                self._factors = (self._version, inv, logdet)
-            _, inv, logdet = self._factors
-            diff = X[None] - self.means_.reshape(nc * nm, 1, nf)  # (C, T, d)
-            white = diff @ inv.transpose(0, 2, 1)
-            quad = np.einsum("ctd,ctd->tc", white, white)
+                # whitened (x - μ_c) = x L_c⁻ᵀ - μ_c L_c⁻ᵀ: one (T, d) x (d, C·d) product
+                stacked = inv.transpose(2, 0, 1).reshape(nf, -1)
+                offset = np.einsum("cij,cj->ci", inv, self.means_.reshape(nc * nm, nf))
+                self._factors = (self._version, stacked, offset, logdet)
+            _, stacked, offset, logdet = self._factors
+            white = (X @ stacked).reshape(len(X), nc * nm, nf) - offset
+            quad = np.einsum("tcd,tcd->tc", white, white)
             out = (-0.5 * (quad + logdet + nf * _LOG_2PI)
                    + np.log(np.maximum(self.weights_, 1e-300)).reshape(-1))
             return out.reshape(len(X), nc, nm)
@@ -154,9 +157,8 @@ def _hmm_class():
             if "m" in self.params:
                 stats["m_n"] += np.einsum("ijk,il->jkl", w, X)
             if "c" in self.params:
-                flat = w.reshape(len(X), -1)
-                xx = stats["xx"].reshape(-1, self.n_features, self.n_features)
-                xx += np.einsum("tc,ti,tj->cij", flat, X, X, optimize=True)
+                outer = (X[:, :, None] * X[:, None, :]).reshape(len(X), -1)  # (T, d²)
+                stats["xx"] += (w.reshape(len(X), -1).T @ outer).reshape(stats["xx"].shape)
 
         def _do_mstep(self, stats):
             params = self.params
@@ -231,7 +233,8 @@ class AVHMM:
         N ergodic states, M full-covariance Gaussians per state (§4; N = 28, M = 5 of
         §6.1.2).
     n_iter, tol : optional
-        Baum–Welch iterations and log-likelihood tolerance (hmmlearn's).
+        Baum–Welch iterations at most; stop when the log-likelihood gains less than
+        ``tol`` nats per training frame.
     reg_covar : float, optional
         Added to the diagonal of every covariance of the standardised features.
     max_iter, inversion_tol : optional
@@ -324,7 +327,7 @@ class AVHMM:
         z = (x - mean) / scale
         model = _hmm_class()(
             n_components=self.n_states, n_mix=self.n_mix, covariance_type="full",
-            n_iter=self.n_iter, tol=self.tol, min_covar=self.reg_covar,
+            n_iter=self.n_iter, tol=self.tol * len(z), min_covar=self.reg_covar,
             random_state=self.random_state,
         )
         model.reg_covar = self.reg_covar
@@ -377,9 +380,12 @@ class AVHMM:
         """Audio log marginals (T, C), conditional means (T, C, Dv) and Eq. 7's numerator
         terms ``Λ^v μ^v - Λ^va (o_a - μ^a)`` (T, C, Dv) of one sequence."""
         da = self.n_audio_
+        n_c = len(self._mu_a)
         diff = audio_z[None] - self._mu_a[:, None, :]  # (C, T, Da)
-        white = diff @ self._chol_inv_a.transpose(0, 2, 1)
-        log_a = -0.5 * (np.einsum("ctd,ctd->tc", white, white) + self._logdet_a
+        # whitened (o_a - μ^a) as one (T, Da) x (Da, C·Da) product
+        white = (audio_z @ self._chol_inv_a.transpose(2, 0, 1).reshape(da, -1)).reshape(
+            len(audio_z), n_c, da) - np.einsum("cij,cj->ci", self._chol_inv_a, self._mu_a)
+        log_a = -0.5 * (np.einsum("tcd,tcd->tc", white, white) + self._logdet_a
                         + da * _LOG_2PI)
         rhs = (np.einsum("cij,cj->ci", self._prec_v, self._mu_v)[:, None, :]
                - diff @ self._prec_va.transpose(0, 2, 1))  # (C, T, Dv)
