@@ -12,6 +12,8 @@ held-out frames pooled (the paper's "testing audio-visual database"):
 
 * AMSE and ACC (Eq. 11-12) of the visual parameters — the model's principal components
   of the motion, the truth projected on the same components;
+* the same two after the first Eq. 7 update alone (AMSE1, ACC1: occupancies from the
+  audio part only, no iteration);
 * RMSE of the reconstructed motion over all channels (the database's units);
 * training time (s) and synthesis real-time factor (synthesis seconds per audio second).
 
@@ -64,20 +66,31 @@ def facegood_splits(workers: int, all_folds: bool):
 
 
 def evaluate_model(model: AVHMMBaseline, test) -> dict:
+    """Scores of the converged inversion, and of its first Eq. 7 update alone (``_1``)."""
     data = training_set(test)
-    est, truth, motion_err = [], [], []
+    est, first, truth, motion_err = [], [], [], []
     synth_s = audio_s = 0.0
+    iters = []
     for clip in data.clips:
         t0 = time.perf_counter()
         pred = model.predict(clip.audio, clip.sample_rate, n_frames=clip.n_frames)
         synth_s += time.perf_counter() - t0
+        iters.append(model.hmm_.n_iter_)
         audio_s += len(clip.audio) / clip.sample_rate
         est.append((pred - model.motion_mean_) @ model.components_.T)
         truth.append((clip.motion - model.motion_mean_) @ model.components_.T)
         motion_err.append((pred - clip.motion) ** 2)
-    est, truth = np.vstack(est), np.vstack(truth)
+        model.hmm_.max_iter, keep = 1, model.hmm_.max_iter
+        one = model.predict(clip.audio, clip.sample_rate, n_frames=clip.n_frames)
+        model.hmm_.max_iter = keep
+        first.append((one - model.motion_mean_) @ model.components_.T)
+    est, first, truth = np.vstack(est), np.vstack(first), np.vstack(truth)
     return {"amse": evaluate.amse(est, truth), "acc": evaluate.acc(est, truth),
+            "acc_per_param": [evaluate.acc(est[:, r], truth[:, r])
+                              for r in range(truth.shape[1])],
+            "amse_1": evaluate.amse(first, truth), "acc_1": evaluate.acc(first, truth),
             "rmse": float(np.sqrt(np.mean(np.vstack(motion_err)))),
+            "inversion_iters": float(np.mean(iters)),
             "rtf": synth_s / audio_s, "test_frames": len(truth)}
 
 
@@ -116,8 +129,9 @@ def main() -> int:
             for split, train, test in splits:
                 print(f"# {split}: {len(train)} training clips, {len(test)} held out",
                       flush=True)
-                print(f"{'N':>3s} {'M':>2s} {'AMSE':>7s} {'ACC':>6s} {'RMSE':>8s} "
-                      f"{'fit s':>7s} {'cpu s':>7s} {'iters':>5s} {'RTF':>6s}", flush=True)
+                print(f"{'N':>3s} {'M':>2s} {'AMSE':>7s} {'ACC':>6s} {'AMSE1':>7s} "
+                      f"{'ACC1':>6s} {'RMSE':>8s} {'fit s':>7s} {'cpu s':>7s} {'iters':>5s} "
+                      f"{'RTF':>6s}", flush=True)
                 for n in args.states:
                     for m in args.mixtures:
                         t0, c0 = time.perf_counter(), time.process_time()
@@ -131,6 +145,7 @@ def main() -> int:
                                **evaluate_model(model, test)}
                         rows.append(row)
                         print(f"{n:3d} {m:2d} {row['amse']:7.3f} {row['acc']:6.3f} "
+                              f"{row['amse_1']:7.3f} {row['acc_1']:6.3f} "
                               f"{row['rmse']:8.4f} {fit_s:7.1f} {cpu_s:7.1f} "
                               f"{row['bw_iters']:5d} "
                               f"{row['rtf']:6.3f}", flush=True)
