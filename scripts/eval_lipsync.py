@@ -196,8 +196,8 @@ def main() -> int:
                 for split in ("within-speaker", "leave-one-clip-out"):
                     part = [r for r in rows if r.get("split") == split]
                     results[name][split] = summarise(f"{name} {split}", part)
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=1))
+            if args.json:  # after every dataset, so a long run keeps what it finished
+                args.json.write_text(json.dumps(results, indent=1))
     return 0
 
 
