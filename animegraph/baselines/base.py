@@ -34,7 +34,8 @@ META_KEY = b"animegraph.baseline"
 MODELS_DIR = "baselines"
 #: BLAS threads while fitting and predicting. The baselines' matrices are small (tens to
 #: hundreds of columns); extra BLAS threads only contend: on a loaded two-core machine a
-#: small mu-mlp fit took 66 s with the default thread pool and 5 s with one thread.
+#: small mu-mlp fit spent over a minute in BLAS calls with the default thread pool and took
+#: 14 s in all with one thread.
 BLAS_THREADS = 1
 
 
