@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from animegraph import __version__
+from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
 
 
@@ -148,13 +149,23 @@ def build_parser() -> argparse.ArgumentParser:
                       "it (Cao et al. §5); 'auto': the emotion classified from the speech (§6)")
     feel.add_argument("--emotion-mix", default=None, metavar="E=W,...",
                       help="blend mapped emotions, e.g. happy=0.7,neutral=0.3")
+    syn.add_argument("--method", choices=METHODS, default="anime-graph",
+                     help="synthesis system: anime-graph (default, Cao et al.), or a baseline "
+                     "fitted on the database on first use and stored in it: mu-mlp (Hong et "
+                     "al. 2002), hier-pca (Cosker et al.), av-hmm (Terissi et al. 2013)")
+    syn.add_argument("--refit", action="store_true",
+                     help="refit a baseline even if the database has it stored")
     mode = syn.add_mutually_exclusive_group()
     mode.add_argument("--exact", action="store_true",
                       help="the global optimum (default)")
     mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
                       help="the paper's bounded look-ahead of K phonemes (3-6)")
-    mode.add_argument("--method", choices=("exact", "paper", "window", "dp"), default=None,
-                      help="search algorithm (paper: the published priority queue)")
+    mode.add_argument("--search", choices=("exact", "paper", "window", "dp"), default=None,
+                      help="Anime Graph search algorithm (paper: the published priority "
+                      "queue)")
+    syn.add_argument("--tolerance", type=_number, default=None, metavar="T",
+                     help="exact search only: accept a sequence certified within (1 + T) of "
+                     "the optimum's cost, e.g. 0.01 (much faster on huge databases)")
     syn.add_argument("-o", "--output", required=True, type=Path,
                      help="motion file: .c3d (marker databases), .csv or .npz")
     syn.add_argument("--explain", action="store_true",
@@ -218,6 +229,15 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("-o", "--output", required=True, type=Path,
                     help="motion file to write (.c3d, .csv or .npz)")
     mp.set_defaults(func=_cmd_map_emotion)
+    fit = sub.add_parser(
+        "fit", help="fit a baseline method on a database and store it there",
+        description="Fit a baseline (issue #8) on every clip of a database and store the "
+        "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
+        "--method' uses it (and fits it on first use if absent).",
+    )
+    fit.add_argument("--db", required=True, type=Path, help="database folder")
+    fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
+    fit.set_defaults(func=_cmd_fit)
 
     info = sub.add_parser("info", help="summarise a database")
     info.add_argument("--db", required=True, type=Path, help="database folder")
@@ -525,12 +545,21 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from ingest.formats.wav import read_wav
     from ingest.readers.common import read_labels
 
-    method = args.method or ("window" if args.window is not None else "exact")
-    if method == "window" and args.window is None:
-        raise UsageError("animegraph synth: --method window needs --window K")
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
         raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
                          f"{args.output.name!r}")
+    if args.method != "anime-graph":
+        return _synth_baseline(args)
+    method = args.search or ("window" if args.window is not None else "exact")
+    if method == "window" and args.window is None:
+        raise UsageError("animegraph synth: --search window needs --window K")
+    if args.tolerance is not None:
+        if not 0.0 <= args.tolerance < 1.0:
+            raise UsageError(f"animegraph synth: --tolerance must be a number in [0, 1), got "
+                             f"{args.tolerance}")
+        if method != "exact":
+            raise UsageError(f"animegraph synth: --tolerance is only used by method='exact' "
+                             f"(the exact search), not {method}")
     t0 = time.perf_counter()
     model = Model.load(args.db)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
@@ -556,7 +585,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
               file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
-                     options=options)
+                     tolerance=args.tolerance or 0.0, options=options)
     write_motion(out, model, args.output)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -587,6 +616,61 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                            max_rows=len(out.explain)), end="")
     if args.explain_json:
         write_explain(out, args.explain_json)
+    return 0
+
+
+def _synth_baseline(args: argparse.Namespace) -> int:
+    """``synth --method <baseline>``: motion from the audio alone by a fitted baseline."""
+    import time
+
+    import numpy as np
+
+    from animegraph.baselines.base import fitted_model
+    from animegraph.synth import to_world, write_channels
+    from db.store import Database
+    from ingest.formats.wav import read_wav
+
+    search_only = [flag for flag, on in (
+        ("--text", args.text is not None), ("--labels", args.labels is not None),
+        ("--exact", args.exact), ("--window", args.window is not None),
+        ("--search", args.search is not None), ("--explain", args.explain),
+        ("--emotion-mix", args.emotion_mix is not None),
+        ("--tolerance", args.tolerance is not None),
+        ("--explain-json", args.explain_json is not None),
+        ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
+        ("--no-smooth", args.no_smooth)) if on]
+    if search_only:
+        raise UsageError(f"animegraph synth: {', '.join(search_only)} only apply to "
+                         f"--method anime-graph, not {args.method}")
+    db = Database.open(args.db)
+    emotions = sorted(set(db.table("clips", columns=["emotion"]).column("emotion").to_pylist()))
+    if args.emotion is not None and args.emotion not in emotions:
+        raise UsageError(f"animegraph synth: emotion {args.emotion!r} is not in the database "
+                         f"(it has {', '.join(emotions)})")
+    audio, sample_rate = read_wav(args.audio)
+    t0 = time.perf_counter()
+    model = fitted_model(args.db, args.method, refit=args.refit)
+    t1 = time.perf_counter()
+    motion = model.predict(audio, sample_rate, emotion=args.emotion)
+    t2 = time.perf_counter()
+    head = db.arrays().get("head_reference")
+    write_channels(to_world(motion, model.groups_, head), model.fps_, model.channels_,
+                   model.kind_, args.output, extra={"method": np.array(args.method)})
+    print(f"animegraph: {args.method} model ready in {t1 - t0:.2f} s; synthesized "
+          f"{len(audio) / sample_rate:.1f} s of speech in {t2 - t1:.2f} s; wrote "
+          f"{args.output}", file=sys.stderr)
+    return 0
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    import time
+
+    from animegraph.baselines.base import fitted_model, model_path
+
+    t0 = time.perf_counter()
+    fitted_model(args.db, args.method, refit=True)
+    print(f"fitted {args.method} on {args.db} in {time.perf_counter() - t0:.1f} s; stored "
+          f"{model_path(args.db, args.method)}")
     return 0
 
 
@@ -636,7 +720,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     import time
 
     from animegraph.emotion.control import classify_speech, map_motion, parse_emotion
-    from animegraph.synth import Model, read_motion, write_motion_array
+    from animegraph.synth import Model, read_motion, write_channels
     from ingest.formats.wav import read_wav
 
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
@@ -673,7 +757,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
             _local(model, motion)))
         how = "nearest mean emotion components"
     mapped = map_motion(model, motion, source, target, fps=fps)
-    write_motion_array(mapped, fps, model, args.output)
+    write_channels(mapped, fps, model.names, model.kind, args.output)
     name = target if isinstance(target, str) else ",".join(f"{k}={v:.2f}"
                                                             for k, v in target.items())
     print(f"animegraph: mapped {len(motion)} frames from {source} ({how}) to {name} in "
@@ -719,7 +803,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _configure_logging(args.verbose)
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
-                             "batch, sql, query, render, plot, classify, map-emotion, info "
+                             "batch, fit, sql, query, render, plot, classify, map-emotion, "
+                             "info "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

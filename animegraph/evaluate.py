@@ -155,8 +155,32 @@ def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None =
     return result.nodes, result.n_jumps
 
 
+def paper_scores(pred: np.ndarray, truth: np.ndarray, active: np.ndarray, lips: np.ndarray,
+                 norm: tuple[np.ndarray, np.ndarray]) -> dict:
+    """The baselines' own measures of ``pred`` against ``truth`` (n_frames, n_channels).
+
+    ``hong_r``, ``hong_nmse``: Hong et al. (2002) Eq. 6 and 8 over the ``active`` channels,
+    normalised by ``norm`` = :func:`displacement_scale` of the training motion.
+    ``amse``, ``acc``: Terissi et al. (2013) Eq. 11-12 over the active lip channels (the
+    paper's visual parameters are mouth parameters; all active channels if none are lips).
+    """
+    n = min(len(pred), len(truth))
+    pred, truth = pred[:n], truth[:n]
+    center, scale = norm
+    hp = hong_normalise(pred[:, active], center[active], scale[active])
+    ht = hong_normalise(truth[:, active], center[active], scale[active])
+    mouth = np.intersect1d(lips, active)
+    mouth = mouth if len(mouth) else active
+    return {"hong_r": hong_r(hp, ht), "hong_nmse": hong_nmse(hp, ht),
+            "amse": amse(pred[:, mouth], truth[:, mouth]),
+            "acc": acc(pred[:, mouth], truth[:, mouth])}
+
+
 def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
-                  rng: np.random.Generator | None = None) -> dict:
+                  estimators: dict | None = None,
+                  norm: tuple[np.ndarray, np.ndarray] | None = None,
+                  rng: np.random.Generator | None = None,
+                  predictions: dict | None = None) -> dict:
     """Synthesize a held-out prepared clip from its audio and phones; score every method.
 
     Parameters
@@ -165,25 +189,171 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
         A database that does not contain the clip.
     clip : ingest.prepare.PreparedClip
         The clip (its motion, in the database's space, is the ground truth).
+    methods : sequence of str
+        Anime Graph search methods (:data:`METHODS`) to score.
+    estimators : dict of str to BaselineModel, optional
+        Fitted baselines (:mod:`animegraph.baselines`), scored on the clip's audio alone.
+    norm : (center, scale), optional
+        :func:`displacement_scale` of the training motion; with it every row also has
+        :func:`paper_scores`.
+    predictions : dict, optional
+        Filled with each method's motion, shape (n_frames, n_channels).
+
+    Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
+    and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
+    and ``rtf`` (``synth_s`` over the clip's duration).
     """
     import time
 
     from animegraph.synth import render_nodes
 
     rng = rng or np.random.default_rng(0)
+    t0 = time.perf_counter()
     phones, emotion, cands, audio_cost = heldout_query(model, clip)
+    query_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
     share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
     active = np.flatnonzero(share > 1e-4 * share.max())
+    lips = lip_channels(model.names, model.groups)
     rows = {}
+
+    def record(name, pred, extra):
+        row = {**motion_scores(pred, truth, model.names, model.groups, model.kind, active),
+               **extra}
+        if norm is not None:
+            row |= paper_scores(pred, truth, active, lips, norm)
+        row["rtf"] = row["synth_s"] / clip.duration
+        rows[name] = row
+        if predictions is not None:
+            predictions[name] = pred
+
     for method in methods:
         t0 = time.perf_counter()
         nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
         search_s = time.perf_counter() - t0
         ics, _ = render_nodes(model, phones, nodes, emotion=emotion)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
-        rows[method] = {**motion_scores(pred, truth, model.names, model.groups, model.kind,
-                                        active), "jumps": jumps, "search_s": search_s}
+        record(method, pred, {"jumps": jumps, "search_s": search_s,
+                              "synth_s": query_s + time.perf_counter() - t0})
+    for name, est in (estimators or {}).items():
+        t0 = time.perf_counter()
+        pred = est.predict(clip.audio, clip.sample_rate, n_frames=len(truth),
+                           emotion=clip.emotion if clip.emotion in est.emotions_ else None)
+        record(name, pred, {"synth_s": time.perf_counter() - t0})
     return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
             "seconds": round(clip.duration, 2), "methods": rows}
+
+
+def _paired(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    pred = np.asarray(pred, dtype=np.float64)
+    truth = np.asarray(truth, dtype=np.float64)
+    if pred.ndim == 1:
+        pred, truth = pred[:, None], truth[:, None]
+    if pred.ndim != 2 or truth.ndim != 2 or pred.shape[1] != truth.shape[1]:
+        raise ValueError(f"pred {pred.shape} and truth {truth.shape} must be (n_frames, "
+                         "n_params) with the same n_params")
+    n = min(len(pred), len(truth))
+    return pred[:n], truth[:n]
+
+
+def amse(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Average mean square error, Terissi et al. (2013) Eq. 11.
+
+    ``ε = 1/(R T) Σ_r (1/σ²_r) Σ_t (õ_rt - o_rt)²``: the squared error of each visual
+    parameter normalised by the variance ``σ²_r`` of its true values over the
+    interval, averaged over parameters and frames (0 is perfect; predicting the true
+    mean gives 1).
+
+    Parameters
+    ----------
+    pred, truth : np.ndarray, shape (n_frames, n_params) or (n_frames,)
+        Estimated and true parameters over their common frames. Parameters whose truth
+        is constant (σ_r = 0) are left out; NaN values are ignored.
+
+    Returns
+    -------
+    float
+        NaN when no parameter varies.
+    """
+    p, t = _paired(pred, truth)
+    var = np.nanvar(t, axis=0)
+    keep = var > 0
+    if not keep.any():
+        return float("nan")
+    return float(np.nanmean(np.nanmean((p[:, keep] - t[:, keep]) ** 2, axis=0) / var[keep]))
+
+
+def acc(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Average correlation coefficient, Terissi et al. (2013) Eq. 12.
+
+    ``ρ = 1/(R T) Σ_r Σ_t (o_rt - μ_r)(õ_rt - μ̃_r) / (σ_r σ̃_r)``: the Pearson
+    correlation of each estimated parameter with its true values, averaged over
+    parameters.
+
+    Parameters
+    ----------
+    pred, truth : np.ndarray, shape (n_frames, n_params) or (n_frames,)
+        Over their common frames; parameters where either series is constant are left
+        out (see :func:`pearson`).
+
+    Returns
+    -------
+    float
+        NaN when no parameter has a defined correlation.
+    """
+    p, t = _paired(pred, truth)
+    rs = [pearson(p[:, r], t[:, r]) for r in range(p.shape[1])]
+    rs = [r for r in rs if np.isfinite(r)]
+    return float(np.mean(rs)) if rs else float("nan")
+
+
+def hong_normalise(motion: np.ndarray, center: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Displacements normalised as in Hong, Wen & Huang (2002) §VII-A.
+
+    Each channel's displacement from ``center`` (the neutral or mean face) is divided by
+    ``scale``, its largest absolute displacement in the training database, so that the
+    database spans [-1, 1].
+
+    Parameters
+    ----------
+    motion : np.ndarray, shape (n_frames, n_channels)
+    center, scale : np.ndarray, shape (n_channels,)
+        ``scale`` must be positive (leave constant channels out beforehand).
+    """
+    return (np.asarray(motion, dtype=np.float64) - center) / scale
+
+
+def displacement_scale(train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(center, scale)`` of :func:`hong_normalise` from training motion.
+
+    ``center`` is the mean frame; ``scale`` each channel's largest absolute deviation
+    from it (1 where a channel does not move).
+    """
+    train = np.asarray(train, dtype=np.float64)
+    center = np.nanmean(train, axis=0)
+    scale = np.nanmax(np.abs(train - center), axis=0)
+    return center, np.where(scale > 0, scale, 1.0)
+
+
+def hong_r(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Pearson product-moment correlation of Hong et al. (2002), Eq. 6.
+
+    ``R = tr(Cov(d, d')) / sqrt(tr(Cov(d, d)) tr(Cov(d', d')))`` over frames, with ``d``
+    the normalised ground truth and ``d'`` the normalised estimate, shape
+    (n_frames, n_channels) (their common frames; rows with NaN are dropped).
+    """
+    n = min(len(pred), len(truth))
+    p, t = np.asarray(pred[:n], np.float64), np.asarray(truth[:n], np.float64)
+    ok = np.isfinite(p).all(axis=1) & np.isfinite(t).all(axis=1)
+    p, t = p[ok] - p[ok].mean(axis=0), t[ok] - t[ok].mean(axis=0)
+    den = np.sqrt(np.sum(t * t) * np.sum(p * p))
+    return float(np.sum(t * p) / den) if den > 0 else float("nan")
+
+
+def hong_nmse(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Mean square error of Hong et al. (2002), Eq. 8: ``E[||d - d'||^2 / gamma]`` on
+    normalised data (gamma = number of channels), over the common frames."""
+    n = min(len(pred), len(truth))
+    d = np.asarray(pred[:n], np.float64) - np.asarray(truth[:n], np.float64)
+    return float(np.nanmean(np.nanmean(d**2, axis=1)))

@@ -118,3 +118,43 @@ def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "rando
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str], kind: str,
+                 path: Path) -> Path:
+    """Mouth opening of a held-out clip: recorded against every system's synthesis.
+
+    Parameters
+    ----------
+    clip : ingest.prepare.PreparedClip
+        The held-out clip (its motion is the ground truth).
+    predictions : dict of str to np.ndarray, shape (n_frames, n_channels)
+        Motion of each system (e.g. ``exact`` for the Anime Graph, ``mu-mlp`` ...), in the
+        database's channels at the clip's frame rate.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from animegraph import evaluate
+
+    fig, ax = plt.subplots(figsize=(11, 3.5))
+    truth = clip.motion.astype(np.float64)
+    t = np.arange(len(truth)) / clip.fps
+    ax.plot(t, evaluate.mouth_opening(truth, names, kind), "k", lw=2, label="recorded")
+    for k, (label, pred) in enumerate(predictions.items()):
+        ax.plot(np.arange(len(pred)) / clip.fps, evaluate.mouth_opening(pred, names, kind),
+                f"C{k}", lw=1, label=label)
+    for p in clip.phones:
+        if p.phone != "SIL":
+            ax.text((p.start + p.end) / 2, 0.02, p.phone, fontsize=6, ha="center",
+                    transform=ax.get_xaxis_transform())
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("mouth opening")
+    ax.set_title(f"held-out {clip.clip_id} ({clip.emotion}): recorded vs every system")
+    ax.legend(fontsize=7, ncol=len(predictions) + 1)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -70,10 +70,16 @@ class Model:
 
     def to_channels(self, ics: np.ndarray) -> np.ndarray:
         """Motion in the database's channels (world coordinates for a head group)."""
-        motion = self.decomposer.inverse_transform(ics)
-        if self.head_reference is not None and head_points(self.groups) >= 3:
-            motion = unstabilize_points(motion, self.groups, self.head_reference)
-        return motion
+        return to_world(self.decomposer.inverse_transform(ics), self.groups,
+                        self.head_reference)
+
+
+def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:
+    """Motion (n_frames, n_channels) in the database's stored, head-stabilised space back
+    in world coordinates (unchanged when the database has no rigid head group)."""
+    if head_reference is not None and head_points(groups) >= 3:
+        motion = unstabilize_points(motion, groups, head_reference)
+    return motion
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,8 +110,9 @@ class Synthesis:
 def synthesize(
     model: Model, audio: np.ndarray, sample_rate: int, *, text: str | None = None,
     labels: list[Segment] | None = None, emotion: str | dict | None = None,
-    method: str = "exact", window: int | None = None, weights: SearchWeights | None = None,
-    options: PostOptions | None = None, prosody_config: RastaPlpConfig | None = None,
+    method: str = "exact", window: int | None = None, tolerance: float = 0.0,
+    weights: SearchWeights | None = None, options: PostOptions | None = None,
+    prosody_config: RastaPlpConfig | None = None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -124,6 +131,11 @@ def synthesize(
         has no animes of the wanted emotion, the search prefers the nearest emotion it has
         and the motion is mapped from there. Databases without an emotion model (built by
         an older animegraph) only steer the search.
+    method, window, tolerance
+        The search (:func:`animegraph.search.search`): ``"exact"`` (default), ``"window"``
+        with ``window`` K (the paper's look-ahead), ``"paper"`` or ``"dp"``; ``tolerance``
+        t > 0 lets the exact search stop at a sequence certified within (1 + t) × the
+        optimum's cost.
 
     Returns
     -------
@@ -153,7 +165,7 @@ def synthesize(
     timings["audio_cost_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
-                    emotion=emotion, method=method, window=window)
+                    emotion=emotion, method=method, window=window, tolerance=tolerance)
     timings["search_s"] = time.perf_counter() - t2
 
     t3 = time.perf_counter()
@@ -304,49 +316,50 @@ def _jsonable(value):
 
 def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
     """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
-    return write_motion_array(synth.motion, synth.fps, model, path, ics=synth.ics,
-                              nodes=synth.result.nodes)
+    return write_channels(synth.motion, synth.fps, model.names, model.kind, path,
+                          extra={"ics": synth.ics, "nodes": synth.result.nodes})
 
 
-def write_motion_array(motion: np.ndarray, fps: float, model: Model, path: Path, *,
-                       ics: np.ndarray | None = None, nodes: np.ndarray | None = None) -> Path:
-    """Write ``motion`` (n_frames, n_channels) in ``model``'s channels: .c3d, .csv or .npz.
+def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
+                   extra: dict | None = None) -> Path:
+    """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
 
-    The NPZ holds ``motion``, ``fps``, ``channels`` and, when given, ``ics`` and ``nodes``.
+    ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and ``channels``.
     """
     from db.atomic import atomic_write
 
     path = Path(path)
     motion = np.asarray(motion, dtype=np.float64)
+    names = tuple(names)
     suffix = path.suffix.lower()
     if suffix == ".c3d":
-        if model.kind not in ("markers", "landmarks"):
-            raise ParameterError(f"C3D holds 3D points; this database has {model.kind} "
+        if kind not in ("markers", "landmarks"):
+            raise ParameterError(f"C3D holds 3D points; this database has {kind} "
                                  "(write .csv or .npz)")
         from ingest.formats.c3d import MarkerData, write_c3d
 
-        point_cols = _point_columns(model)
-        labels = tuple(model.names[i][:-2] for i in point_cols[::3])
+        point_cols = _point_columns(names)
+        labels = tuple(names[i][:-2] for i in point_cols[::3])
         points = motion[:, point_cols].reshape(len(motion), -1, 3)
         write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
-        header = "frame,time," + ",".join(model.names)
+        header = "frame,time," + ",".join(names)
         n = len(motion)
         table = np.column_stack([np.arange(n), np.arange(n) / fps, motion])
         with atomic_write(path) as handle:
             np.savetxt(handle, table, delimiter=",", header=header, comments="",
-                       fmt=["%d", "%.5f"] + ["%.6g"] * len(model.names))
+                       fmt=["%d", "%.5f"] + ["%.6g"] * len(names))
     elif suffix == ".npz":
-        extra = {k: v for k, v in (("ics", ics), ("nodes", nodes)) if v is not None}
         with atomic_write(path) as handle:
-            np.savez(handle, motion=motion, fps=fps, channels=np.array(model.names), **extra)
+            np.savez(handle, motion=motion, fps=fps, channels=np.array(names),
+                     **(extra or {}))
     else:
         raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
     return path
 
 
-def _point_columns(model: Model) -> list[int]:
-    return [i for i, n in enumerate(model.names) if n.endswith((".x", ".y", ".z"))]
+def _point_columns(names) -> list[int]:
+    return [i for i, n in enumerate(names) if n.endswith((".x", ".y", ".z"))]
 
 
 def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
@@ -394,14 +407,14 @@ def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
     if motion.ndim != 2 or len(motion) == 0:
         raise DataError(f"{path.name} holds no motion frames")
     index = {c: i for i, c in enumerate(channels)}
-    wanted = names if suffix != ".c3d" else [names[i] for i in _point_columns(model)]
+    wanted = names if suffix != ".c3d" else [names[i] for i in _point_columns(model.names)]
     missing = [c for c in wanted if c not in index]
     if missing:
         raise DataError(f"{path.name} lacks {len(missing)} of the database's channels "
                         f"(first: {missing[0]}): it is not motion of this database")
     if suffix == ".c3d":
         out = np.tile(model.decomposer.mean_, (len(motion), 1))
-        for i in _point_columns(model):
+        for i in _point_columns(model.names):
             out[:, i] = motion[:, index[names[i]]]
         return out, fps
     return motion[:, [index[c] for c in names]], fps

@@ -33,7 +33,7 @@ from sklearn.model_selection import (
     train_test_split,
 )
 
-from animegraph.emotion.classifier import (
+from ingest.emotion.classifier import (
     EmotionClassifier,
     emotion_features,
     load_emodb,

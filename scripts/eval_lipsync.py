@@ -1,9 +1,19 @@
-"""Lip-sync evaluation on held-out data: exact and windowed search against naive baselines.
+"""Lip-sync evaluation on held-out data: the Anime Graph against naive and published baselines.
 
 Usage::
 
     python scripts/eval_lipsync.py [--datasets synthetic facegood talkingface]
+                                   [--systems anime-graph mu-mlp hier-pca av-hmm]
                                    [--corpus DIR] [--json OUT] [--plots DIR]
+
+Systems (issue #8): ``anime-graph`` (exact and windowed search, and the naive random /
+first-anime baselines), ``mu-mlp`` (Hong et al. 2002), ``hier-pca`` (Cosker et al.) and
+``av-hmm`` (Terissi et al. 2013). Every fold fits each baseline on the same training clips
+the fold's database is built from and scores all systems on the same held-out clips,
+with the same measures plus Hong's R and MSE (Eq. 6, 8) and Terissi's AMSE and ACC
+(Eq. 11-12), the training time (database build for the Anime Graph, ``fit`` for a
+baseline) and the synthesis real-time factor. A baseline that cannot be fitted on a
+fold (too little data) is reported and left out of that fold.
 
 * synthetic: whole sentences held out of the database (two of those spoken in all five
   emotions and six single-emotion ones), each held-out clip synthesized from its audio
@@ -25,13 +35,17 @@ import argparse
 import json
 import sys
 import tempfile
+import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from animegraph import evaluate
-from animegraph.plots import plot_heldout
+from animegraph.baselines import BASELINES, METHODS, make_estimator
+from animegraph.plots import plot_heldout, plot_systems
 from animegraph.synth import Model
+from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.pipeline import build_database, prepare_sources
 from ingest.prepare import slice_clip
@@ -41,17 +55,47 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
 PLOTS: dict[str, Path] = {}
+SYSTEMS: list[str] = list(METHODS)
 
 
 def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
     db = tmp / f"db-{name}"
+    t0 = time.perf_counter()
     build_database(db, train, reference=reference)
+    train_s = {m: time.perf_counter() - t0 for m in evaluate.METHODS}
     model = Model.load(db)
     rng = np.random.default_rng(0)
+    estimators = {}
+    for method in (m for m in SYSTEMS if m in BASELINES):
+        t0 = time.perf_counter()
+        try:
+            estimators[method] = make_estimator(method).fit(train)
+        except AnimeGraphError as exc:
+            print(f"# {name}: {method} not fitted: {exc}", flush=True)
+            continue
+        train_s[method] = time.perf_counter() - t0
+        print(f"# {name}: {method} fitted in {train_s[method]:.1f} s", flush=True)
+    norm = evaluate.displacement_scale(np.concatenate([c.motion for c in train]))
+    methods = evaluate.METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
-    if dataset in PLOTS and not PLOTS[dataset].exists():
-        plot_heldout(model, test[0], PLOTS[dataset])
-    return [evaluate.score_heldout(model, clip, rng=rng) for clip in test]
+    rows = []
+    for k, clip in enumerate(test):
+        preds = {} if k == 0 else None
+        row = evaluate.score_heldout(model, clip, methods=methods, estimators=estimators,
+                                     norm=norm, rng=rng, predictions=preds)
+        for method, scores in row["methods"].items():
+            scores["train_s"] = train_s[method]
+        rows.append(row)
+        if preds is None or dataset not in PLOTS:
+            continue
+        if "anime-graph" in SYSTEMS and not PLOTS[dataset].exists():
+            plot_heldout(model, clip, PLOTS[dataset])
+        both = PLOTS[dataset].with_name(PLOTS[dataset].stem + "_systems.png")
+        if not both.exists():
+            shown = {("anime-graph" if m == "exact" else m): p for m, p in preds.items()
+                     if m == "exact" or m in BASELINES}
+            plot_systems(clip, shown, model.names, model.kind, both)
+    return rows
 
 
 def synthetic(tmp: Path, corpus: Path | None, workers: int) -> list[dict]:
@@ -101,14 +145,18 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
 
 
 def summarise(name: str, rows: list[dict]) -> dict:
-    keys = sorted({k for r in rows for k in r["methods"]["exact"]})
+    methods = list(dict.fromkeys(m for r in rows for m in r["methods"]))
+    keys = sorted({k for r in rows for m in r["methods"].values() for k in m})
     print(f"\n## {name}: {len(rows)} held-out clips (means)")
-    print(f"{'method':8s} " + " ".join(f"{k:>14s}" for k in keys))
+    print(f"{'method':9s} " + " ".join(f"{k:>14s}" for k in keys))
     table = {}
-    for method in evaluate.METHODS:
-        vals = {k: float(np.nanmean([r["methods"][method][k] for r in rows])) for k in keys}
+    for method in methods:
+        with warnings.catch_warnings():  # a measure a method does not have is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            vals = {k: float(np.nanmean([r["methods"][method].get(k, np.nan) for r in rows
+                                         if method in r["methods"]])) for k in keys}
         table[method] = vals
-        print(f"{method:8s} " + " ".join(f"{vals[k]:14.3f}" for k in keys))
+        print(f"{method:9s} " + " ".join(f"{vals[k]:14.3f}" for k in keys))
     return table
 
 
@@ -116,12 +164,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=["synthetic", "facegood",
                                                           "talkingface"])
+    parser.add_argument("--systems", nargs="+", default=list(METHODS), choices=METHODS,
+                        help="systems to compare (default: all four)")
     parser.add_argument("--corpus", type=Path, help="synthetic corpus (default: generate one)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
     args = parser.parse_args()
+    SYSTEMS[:] = args.systems
     if args.plots:
         args.plots.mkdir(parents=True, exist_ok=True)
         PLOTS.update({"synthetic": args.plots / "lipsync_synthetic.png",
@@ -145,8 +196,8 @@ def main() -> int:
                 for split in ("within-speaker", "leave-one-clip-out"):
                     part = [r for r in rows if r.get("split") == split]
                     results[name][split] = summarise(f"{name} {split}", part)
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=1))
+            if args.json:  # after every dataset, so a long run keeps what it finished
+                args.json.write_text(json.dumps(results, indent=1))
     return 0
 
 

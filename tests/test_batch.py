@@ -181,7 +181,8 @@ def test_run_line_in_process(tiny_db, tmp_path):
                         render="none", key=line_key(line, identity, "none"))
 
     bad = run_line(task("bored"))
-    assert bad["status"] == "failed" and "unknown emotion 'bored': it is not in the database" in bad["error"]
+    assert bad["status"] == "failed"
+    assert "unknown emotion 'bored': it is not in the database" in bad["error"]
     assert not (folder / DONE).exists() and not list(folder.glob(".*.tmp"))
     good = run_line(task("angry"))
     assert good["status"] == "done" and good["emotion"] == "angry", good

@@ -8,7 +8,8 @@ from conftest import require_shared
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
-from animegraph.emotion import (
+from db.errors import DataError, ParameterError
+from ingest.emotion.classifier import (
     EMODB_EMOTIONS,
     EmotionClassifier,
     emotion_features,
@@ -16,7 +17,6 @@ from animegraph.emotion import (
     real_cepstrum,
     rich_features,
 )
-from db.errors import DataError, ParameterError
 
 SR = 16000
 
@@ -242,7 +242,7 @@ def test_emodb_smoke():
 
 
 def test_speaker_normalize(rng):
-    from animegraph.emotion import speaker_normalize
+    from ingest.emotion.classifier import speaker_normalize
 
     F = rng.standard_normal((20, 4)) * 3 + 7
     F[:, 3] = 1.0

@@ -104,12 +104,20 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
     assert len(record["phones"]) == len(read_phones_csv(f"{stem}.phones.csv"))
     for suffix in (".csv", ".npz"):
         assert main([*argv[:-5], "-o", str(tmp_path / f"out{suffix}")]) == 0
+    assert main([*argv[:-5], "--tolerance", "0.05", "-o", str(tmp_path / "tol.npz")]) == 0
+    with np.load(tmp_path / "out.npz") as exact, np.load(tmp_path / "tol.npz") as tol:
+        assert exact["motion"].shape == tol["motion"].shape
 
 
 @pytest.mark.parametrize("extra, needle", [
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),
-    (["--method", "window"], "--window"),
+    (["--search", "window"], "--window"),
+    (["--method", "mu-mlp", "--window", "3"], "only apply"),
+    (["--method", "hmm"], "invalid choice"),
+    (["--tolerance", "1.5"], "--tolerance must be a number in [0, 1)"),
+    (["--window", "3", "--tolerance", "0.1"], "only used by method='exact'"),
+    (["--method", "mu-mlp", "--tolerance", "0.1"], "only apply"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out

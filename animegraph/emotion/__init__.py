@@ -1,23 +1,5 @@
-"""Emotion classification of speech (Cao et al. 2005, §6)."""
+"""Emotion in synthesis (Cao et al. 2005, §5-6): requests, mapping, evaluation, plots.
 
-from animegraph.emotion.classifier import (
-    EMODB_EMOTIONS,
-    N_CEPSTRUM,
-    EmotionClassifier,
-    emotion_features,
-    load_emodb,
-    real_cepstrum,
-    rich_features,
-    speaker_normalize,
-)
-
-__all__ = [
-    "EMODB_EMOTIONS",
-    "N_CEPSTRUM",
-    "EmotionClassifier",
-    "emotion_features",
-    "load_emodb",
-    "real_cepstrum",
-    "rich_features",
-    "speaker_normalize",
-]
+The classifier (§6) and the learned emotion model live in :mod:`ingest.emotion`: ingest
+trains them, and ``ingest`` may not import ``animegraph``.
+"""

@@ -1,0 +1,267 @@
+"""The estimator contract of the baselines, and how trained models are stored.
+
+A trained model is a dict of named float arrays (:meth:`BaselineModel.to_arrays`) plus a
+small JSON description (:meth:`BaselineModel.describe`: method, hyper-parameters,
+channels, frame rate, emotions). It is stored as one Parquet file of rows (name, shape,
+values) — :func:`db.store.arrays_to_table`, no pickles — with the description in the
+file's metadata, under the database folder::
+
+    DB/baselines/<version>/<method>.parquet
+
+``<version>`` is the database version the model was fitted on (``v000003``), so a
+re-ingest makes a stale model invisible; folders of versions that no longer exist are
+removed when a model is saved.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+from threadpoolctl import threadpool_limits
+
+from animegraph.baselines.data import TrainingSet, frame_times, resample_to, training_set
+from db.errors import DataError, ParameterError
+
+#: Key of the model description in a stored model's Parquet metadata.
+META_KEY = b"animegraph.baseline"
+#: Folder of stored baseline models inside a database folder.
+MODELS_DIR = "baselines"
+#: BLAS threads while fitting and predicting. The baselines' matrices are small (tens to
+#: hundreds of columns); extra BLAS threads only contend: on a loaded two-core machine a
+#: small mu-mlp fit spent over a minute in BLAS calls with the default thread pool and took
+#: 14 s in all with one thread.
+BLAS_THREADS = 1
+
+
+class BaselineModel(BaseEstimator):
+    """An audio-to-visual mapping fitted on clips of one motion database.
+
+    Subclasses set :attr:`method` and implement ``_fit(data)``, ``_predict(audio,
+    sample_rate, times, emotion)``, ``_arrays()`` and ``_restore(arrays)``; every
+    constructor argument is a hyper-parameter with the paper's value as its default
+    (scikit-learn convention: stored unchanged, validated in ``fit``).
+
+    Fitted attributes common to all methods: ``channels_``, ``groups_`` (tuple of str),
+    ``kind_``, ``fps_`` (the training frame rate) and ``emotions_`` (labels seen).
+    """
+
+    method: ClassVar[str] = ""
+
+    # -- the scikit-learn API -------------------------------------------------------
+    def fit(self, clips, y=None) -> BaselineModel:
+        """Fit on ``clips``: a database (or its path), prepared clips or a TrainingSet.
+
+        Raises
+        ------
+        DataError
+            Too little data for the model's parameters, clips of several channel layouts.
+        """
+        data = training_set(clips)
+        self.channels_ = data.names
+        self.groups_ = data.groups
+        self.kind_ = data.kind
+        self.fps_ = float(data.fps)
+        self.emotions_ = data.emotions
+        with threadpool_limits(limits=BLAS_THREADS):
+            self._fit(data)
+        return self
+
+    def predict(self, audio: np.ndarray, sample_rate: int, *, emotion: str | None = None,
+                n_frames: int | None = None) -> np.ndarray:
+        """Motion for speech ``audio``.
+
+        Parameters
+        ----------
+        audio : np.ndarray, shape (n_samples,)
+            Mono speech: float in [-1, 1] or int16.
+        sample_rate : int
+            Hz.
+        emotion : str, optional
+            An emotion the model was trained on (methods without an expression model
+            ignore it).
+        n_frames : int, optional
+            Frames to produce (default: the audio's duration at ``fps_``, rounded).
+
+        Returns
+        -------
+        np.ndarray, shape (n_frames, n_channels), float64
+            Motion in the training database's channels at ``fps_``.
+        """
+        check_is_fitted(self, "channels_")
+        audio = np.asarray(audio)
+        if audio.ndim != 1:
+            raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
+        audio = (audio.astype(np.float32) / 32767.0 if audio.dtype == np.int16
+                 else audio.astype(np.float32))
+        if emotion is not None and emotion not in self.emotions_:
+            raise ParameterError(f"emotion {emotion!r} was not in the training data "
+                                 f"(it had {', '.join(self.emotions_)})")
+        if n_frames is None:
+            n_frames = int(round(len(audio) / sample_rate * self.fps_))
+        if n_frames < 1:
+            raise DataError("the audio is too short for one motion frame")
+        with threadpool_limits(limits=BLAS_THREADS):
+            out = self._predict(audio, int(sample_rate), frame_times(n_frames, self.fps_),
+                                emotion)
+        return np.asarray(out, dtype=np.float64)
+
+    # -- to be implemented ---------------------------------------------------------
+    def _fit(self, data: TrainingSet) -> None:
+        raise NotImplementedError
+
+    def _predict(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
+                 emotion: str | None) -> np.ndarray:
+        """Motion at ``times`` (s): shape (len(times), n_channels)."""
+        raise NotImplementedError
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _restore(self, arrays: dict[str, np.ndarray]) -> None:
+        raise NotImplementedError
+
+    # -- storage -------------------------------------------------------------------
+    def describe(self) -> dict:
+        """JSON-serialisable description: method, hyper-parameters, channels, fps."""
+        check_is_fitted(self, "channels_")
+        return {"method": self.method, "params": self.get_params(),
+                "channels": list(self.channels_), "groups": list(self.groups_),
+                "kind": self.kind_, "fps": self.fps_, "emotions": list(self.emotions_)}
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The learned state as named float arrays (no pickles)."""
+        check_is_fitted(self, "channels_")
+        return {k: np.asarray(v, dtype=np.float64) for k, v in self._arrays().items()}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], description: dict) -> BaselineModel:
+        """Rebuild a fitted model from :meth:`to_arrays` and :meth:`describe`."""
+        if description.get("method") != cls.method:
+            raise DataError(f"stored model is {description.get('method')!r}, not {cls.method!r}")
+        # JSON has no tuples: sequence parameters come back as lists.
+        model = cls(**{k: tuple(v) if isinstance(v, list) else v
+                       for k, v in description["params"].items()})
+        model.channels_ = tuple(description["channels"])
+        model.groups_ = tuple(description["groups"])
+        model.kind_ = description["kind"]
+        model.fps_ = float(description["fps"])
+        model.emotions_ = tuple(description["emotions"])
+        model._restore(dict(arrays))
+        return model
+
+    def check_channels(self, names, where: str = "the database") -> None:
+        """Raise DataError unless ``names`` are the channels the model was trained on."""
+        names = tuple(names)
+        if names != tuple(self.channels_):
+            extra = sorted(set(names) - set(self.channels_))[:3]
+            lacking = sorted(set(self.channels_) - set(names))[:3]
+            raise DataError(
+                f"the {self.method} model has {len(self.channels_)} channels and {where} "
+                f"{len(names)}: they do not match (e.g. new {extra or 'none'}, missing "
+                f"{lacking or 'none'}); refit the model on it")
+
+
+def check_enough(n_samples: int, n_params: int, what: str) -> None:
+    """Raise DataError if ``n_samples`` is fewer than ``n_params``."""
+    if n_samples < n_params:
+        raise DataError(f"too little data for {what}: {n_samples} frames for {n_params} "
+                        "parameters")
+
+
+def sample_times(clips, rate: float):
+    """Frames of each of ``clips`` (TrainingClip) resampled at ``rate`` frames/s.
+
+    Yields
+    ------
+    (clip, times (n,), motion (n, n_channels))
+    """
+    for clip in clips:
+        duration = (clip.n_frames - 1) / clip.fps
+        times = np.arange(0.0, duration + 1e-9, 1.0 / rate)
+        yield clip, times, resample_to(clip.motion, clip.fps, times)
+
+
+# -- stored models ------------------------------------------------------------------
+def model_path(db_root, method: str) -> Path:
+    """Where the model ``method`` fitted on the live version of ``db_root`` is stored."""
+    from db.store import current_version
+
+    root = Path(db_root)
+    return root / MODELS_DIR / current_version(root) / f"{method}.parquet"
+
+
+def save_model(model: BaselineModel, db_root) -> Path:
+    """Store a fitted model with the database at ``db_root`` (atomic; see module doc)."""
+    import pyarrow.parquet as pq
+
+    from db.atomic import atomic_write
+    from db.store import arrays_to_table, current_version
+
+    root = Path(db_root)
+    path = model_path(root, model.method)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = arrays_to_table(model.to_arrays())
+    meta = {**model.describe(), "db_version": current_version(root)}
+    table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
+    with atomic_write(path) as handle:
+        pq.write_table(table, handle)
+    for stale in (root / MODELS_DIR).iterdir():
+        if stale.is_dir() and not (root / stale.name).is_dir():
+            shutil.rmtree(stale, ignore_errors=True)
+    return path
+
+
+def read_model(path) -> BaselineModel:
+    """Load a stored model file."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from animegraph.baselines import estimator_class
+    from db.store import arrays_from_table
+
+    try:
+        table = pq.read_table(path)
+        meta = json.loads(table.schema.metadata[META_KEY])
+    except (OSError, KeyError, ValueError, TypeError, pa.ArrowException) as exc:
+        raise DataError(f"stored model {path} is unreadable ({exc})") from exc
+    return estimator_class(meta["method"]).from_arrays(arrays_from_table(table), meta)
+
+
+def load_model(db_root, method: str) -> BaselineModel | None:
+    """The stored ``method`` model of the live database version, or None if there is none.
+
+    Raises
+    ------
+    DataError
+        If the stored model's channels are not the database's.
+    """
+    from db.store import Database
+
+    path = model_path(db_root, method)
+    if not path.is_file():
+        return None
+    model = read_model(path)
+    channels = Database.open(db_root).table("channels").column("name").to_pylist()
+    model.check_channels(channels, f"database {db_root}")
+    return model
+
+
+def fitted_model(db_root, method: str, *, refit: bool = False, **params) -> BaselineModel:
+    """The ``method`` model of a database: the stored one if there is one (whatever its
+    parameters) unless ``refit``, else fitted with ``params`` on all its clips and stored."""
+    from animegraph.baselines import estimator_class
+
+    cls = estimator_class(method)
+    if not refit:
+        model = load_model(db_root, method)
+        if model is not None:
+            return model
+    model = cls(**params).fit(db_root)
+    save_model(model, db_root)
+    return model

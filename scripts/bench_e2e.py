@@ -1,0 +1,64 @@
+"""End-to-end real-time factor of lip-sync synthesis in one resident process.
+
+Usage::
+
+    python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
+
+Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synth.synthesize` on it
+``--repeats`` times in this process (the first run pays numba's cache load), with the
+phones recognised (default), force-aligned to the text, or taken from eSpeak's events.
+Prints each run's phase timings and real-time factor (synthesis time / audio duration).
+DB defaults to the default database (built on first use, as by ``animegraph demo``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+TEXT = ("The quick brown fox jumps over the lazy dog while the children watch from the "
+        "garden, and everybody laughs when the old farmer finally catches it near the river.")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--db", type=Path, default=None)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--segmentation", choices=("recognized", "aligned", "labels"),
+                        default="recognized")
+    args = parser.parse_args()
+
+    from animegraph.synth import Model, synthesize
+    from ingest.espeak import speak
+    from ingest.formats.phones_csv import Segment
+
+    if args.db is None:
+        from animegraph.demo import ensure_default_corpus, ensure_default_db
+
+        corpus, _, _ = ensure_default_corpus()
+        args.db, _ = ensure_default_db(corpus)
+    utt = speak(TEXT)
+    seconds = len(utt.audio) / utt.sample_rate
+    model = Model.load(args.db)
+    kwargs = {}
+    if args.segmentation == "aligned":
+        kwargs["text"] = TEXT
+    elif args.segmentation == "labels":
+        kwargs["labels"] = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    print(f"# {seconds:.2f} s of speech, {model.graph.n_nodes} animes, phones "
+          f"{args.segmentation}")
+    for k in range(args.repeats):
+        t = time.perf_counter()
+        out = synthesize(model, utt.audio, utt.sample_rate, **kwargs)
+        total = time.perf_counter() - t
+        phases = " ".join(f"{name[:-2]} {v:.2f}" for name, v in out.timings.items()
+                          if name != "total_s")
+        print(f"run {k + 1}: {total:.2f} s, real-time factor {total / seconds:.3f} "
+              f"({phases}; {len(out.phones)} phones, {out.result.n_jumps} jumps)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
