@@ -363,8 +363,8 @@ def _point_columns(names) -> list[int]:
 
 
 def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
-    """Read a motion written by :func:`write_motion` (.c3d, .csv, .npz) in ``model``'s
-    channels: (motion of shape (n_frames, n_channels), frames per second).
+    """Read a motion file (.c3d, .csv, .npz; :func:`animegraph.motionio.read_motion`) in
+    ``model``'s channels: (motion of shape (n_frames, n_channels), frames per second).
 
     A C3D holds the point channels only: any other channel of the database is set to its
     mean over the database.
@@ -374,47 +374,23 @@ def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
     DataError
         Unreadable file, or channels that are not the database's.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"motion file {path} does not exist")
-    suffix = path.suffix.lower()
-    names = list(model.names)
-    try:
-        if suffix == ".npz":
-            with np.load(path, allow_pickle=False) as data:
-                motion, fps = np.asarray(data["motion"], dtype=np.float64), float(data["fps"])
-                channels = [str(c) for c in data["channels"]] if "channels" in data else names
-        elif suffix == ".csv":
-            with open(path) as handle:
-                header = handle.readline().strip().split(",")
-            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-            if header[:2] != ["frame", "time"]:
-                raise DataError(f"{path.name}: expected a header frame,time,<channels>")
-            channels, motion = header[2:], table[:, 2:]
-            times = table[:, 1]
-            fps = float(1.0 / np.median(np.diff(times))) if len(times) > 1 else model.graph.fps
-        elif suffix == ".c3d":
-            from ingest.formats.c3d import read_c3d
+    from animegraph.motionio import read_motion as read_file
 
-            data = read_c3d(path)
-            fps = float(data.rate)
-            channels = [f"{label}.{axis}" for label in data.labels for axis in "xyz"]
-            motion = data.points.reshape(len(data.points), -1)
-        else:
-            raise DataError(f"motion file must end in .c3d, .csv or .npz, got {path.name!r}")
-    except (OSError, ValueError, KeyError) as exc:
-        raise DataError(f"cannot read motion file {path}: {exc}") from None
-    if motion.ndim != 2 or len(motion) == 0:
-        raise DataError(f"{path.name} holds no motion frames")
-    index = {c: i for i, c in enumerate(channels)}
-    wanted = names if suffix != ".c3d" else [names[i] for i in _point_columns(model.names)]
+    path = Path(path)
+    motion = read_file(path)
+    names = list(model.names)
+    index = {c: i for i, c in enumerate(motion.names)}
+    points = _point_columns(names)
+    only_points = path.suffix.lower() == ".c3d"
+    wanted = [names[i] for i in points] if only_points else names
     missing = [c for c in wanted if c not in index]
     if missing:
         raise DataError(f"{path.name} lacks {len(missing)} of the database's channels "
                         f"(first: {missing[0]}): it is not motion of this database")
-    if suffix == ".c3d":
-        out = np.tile(model.decomposer.mean_, (len(motion), 1))
-        for i in _point_columns(model.names):
-            out[:, i] = motion[:, index[names[i]]]
-        return out, fps
-    return motion[:, [index[c] for c in names]], fps
+    values = np.asarray(motion.values, dtype=np.float64)
+    if only_points:
+        out = np.tile(model.decomposer.mean_, (len(values), 1))
+        for i in points:
+            out[:, i] = values[:, index[names[i]]]
+        return out, motion.fps
+    return values[:, [index[c] for c in names]], motion.fps
