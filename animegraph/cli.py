@@ -754,7 +754,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         how = f"classified from {args.audio.name}"
     elif source == "auto":
         source = emotions.guess_emotion(model.decomposer.transform(
-            _local(model, motion)))
+            model.to_local(motion)))
         how = "nearest mean emotion components"
     mapped = map_motion(model, motion, source, target, fps=fps)
     write_channels(mapped, fps, model.names, model.kind, args.output)
@@ -763,15 +763,6 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     print(f"animegraph: mapped {len(motion)} frames from {source} ({how}) to {name} in "
           f"{time.perf_counter() - t0:.2f} s; wrote {args.output}", file=sys.stderr)
     return 0
-
-
-def _local(model, motion):
-    from ingest.motion import fill_gaps, head_points, stabilize_points
-
-    filled, _ = fill_gaps(motion, model.names)
-    if model.head_reference is not None and head_points(model.groups) >= 3:
-        return stabilize_points(filled, model.groups, model.head_reference)
-    return filled
 
 
 def _cmd_info(args: argparse.Namespace) -> int:

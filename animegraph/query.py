@@ -163,7 +163,7 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
     DataError
         If the clip is not in the database.
     """
-    from ingest.motion import head_points, unstabilize_points
+    from animegraph.synth import to_world
 
     channels = db.table("channels").to_pylist()
     names = tuple(ch["name"] for ch in channels)
@@ -175,9 +175,7 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
     clip = clip[0]
     frames = db.table("frames", columns=["frame", *names], filter=mask).sort_by("frame")
     motion = np.stack([frames.column(n).to_numpy() for n in names], axis=1).astype(np.float64)
-    reference = db.arrays().get("head_reference")
-    if reference is not None and head_points(groups) >= 3:
-        motion = unstabilize_points(motion, groups, reference)
+    motion = to_world(motion, groups, db.arrays().get("head_reference"))
     sound = db.table("audio", filter=mask).to_pylist()[0]
     phones = [{"phone": p, "start": s, "end": e, "clip_id": clip_id, "jump": False}
               for p, s, e in zip(clip["phones"].split(), clip["phone_starts"],

@@ -33,7 +33,7 @@ from ingest.decompose import MotionDecomposer
 from ingest.emotion.model import EmotionModel
 from ingest.features import RastaPlpConfig, rasta_plp, slice_frames
 from ingest.formats.phones_csv import Segment
-from ingest.motion import head_points, unstabilize_points
+from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
 from ingest.segment import segment
 
 
@@ -72,6 +72,20 @@ class Model:
         """Motion in the database's channels (world coordinates for a head group)."""
         return to_world(self.decomposer.inverse_transform(ics), self.groups,
                         self.head_reference)
+
+    @property
+    def rigid_head(self) -> bool:
+        """True if the database stores motion head-stabilised (a rigid head group)."""
+        return self.head_reference is not None and head_points(self.groups) >= 3
+
+    def to_local(self, motion: np.ndarray) -> np.ndarray:
+        """Motion (n_frames, n_channels) in the database's channels, gaps filled, in the
+        stored (head-stabilised) space that its PCA/ICA model describes: the inverse of
+        :meth:`to_channels` before the decomposition."""
+        filled, _ = fill_gaps(np.asarray(motion, dtype=np.float64), self.names)
+        if self.rigid_head:
+            return stabilize_points(filled, self.groups, self.head_reference)
+        return filled
 
 
 def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:

@@ -22,7 +22,7 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.model import EmotionModel
-from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
+from ingest.motion import unstabilize_points
 
 AUTO = "auto"
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
@@ -239,10 +239,9 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
     if model is None:
         raise DataError("the database has no emotion model (built by an older animegraph): "
                         "run 'animegraph ingest SRC --db DB' once to learn it")
-    filled, _ = fill_gaps(np.asarray(motion, dtype=np.float64), synth_model.names)
     groups = synth_model.groups
-    rigid = synth_model.head_reference is not None and head_points(groups) >= 3
-    local = stabilize_points(filled, groups, synth_model.head_reference) if rigid else filled
+    rigid = synth_model.rigid_head
+    local = synth_model.to_local(motion)
     dec = synth_model.decomposer
     ics = dec.transform(local)
     mapped = model.map_components(ics, source, target)
@@ -255,4 +254,4 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
     if rigid:
         delta[:, np.asarray(groups) == "head"] = 0.0
         return unstabilize_points(local + delta, groups, synth_model.head_reference)
-    return filled + delta
+    return local + delta
