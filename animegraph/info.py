@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import Counter
 
+from animegraph.baselines.base import stored_models
 from db.store import Database
 from ingest.phones import PHONES
 
@@ -31,6 +32,7 @@ def database_info(db: Database) -> dict:
         "variance_target": m["variance_target"], "ica_converged": m["ica_converged"],
         "components": components,
         "emotion": m.get("emotion"),
+        "baselines": stored_models(db.root),
     }
 
 
@@ -82,6 +84,26 @@ def info_lines(info: dict) -> list[str]:
                                        if clf else "none"))
         for note in emotion.get("notes", []):
             lines.append(f"note:       {note}")
+    lines += _baseline_lines(info.get("baselines", []))
+    return lines
+
+
+def _baseline_lines(models: list[dict]) -> list[str]:
+    """One line per stored baseline model (``animegraph fit``, ``synth --method``)."""
+    if not models:
+        return ["baselines:  none fitted (animegraph fit --db DB --method M)"]
+    lines = []
+    for k, m in enumerate(models):
+        head = "baselines:  " if k == 0 else " " * 12
+        if "error" in m:
+            lines.append(f"{head}{m['method']} ({m['db_version']}): {m['error']}")
+            continue
+        params = ", ".join(f"{p}={v}" for p, v in sorted(m["params"].items())
+                           if p != "random_state")
+        state = ("" if m["current"] else
+                 f"; stale, fitted on {m['db_version']} (refitted at next use)")
+        lines.append(f"{head}{m['method']} ({params}); {m['n_channels']} channels, "
+                     f"{m['bytes'] / 1e6:.1f} MB{state}")
     return lines
 
 

@@ -112,6 +112,52 @@ def test_baum_welch_is_monotone(data):
     assert np.all(np.diff(hist) > -1e-6 * np.abs(hist[:-1])), hist
 
 
+def test_em_step_through_hmmlearn_hooks_is_exact_em():
+    """One Baum-Welch step of our GMMHMM subclass against stock hmmlearn and by hand.
+
+    Guards the hmmlearn hooks we override (``_compute_log_likelihood``,
+    ``_initialize/_accumulate_sufficient_statistics``, ``_do_mstep``; pinned to
+    hmmlearn 0.3): start, transition, weight and mean updates must equal stock
+    ``GMMHMM``'s, and the covariance must be the exact EM update around the new means
+    (stock hmmlearn centres on the previous means and adds a prior).
+    """
+    from hmmlearn.hmm import GMMHMM
+    from scipy.special import logsumexp
+    from scipy.stats import multivariate_normal
+
+    from animegraph.baselines import av_hmm
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((400, 3))
+    x[200:] += 2.0
+    lengths = [150, 250]
+    init = GMMHMM(n_components=2, n_mix=2, covariance_type="full", random_state=0)
+    init._init(x, lengths)
+
+    def start(cls):
+        m = cls(n_components=2, n_mix=2, covariance_type="full", n_iter=1, init_params="")
+        for a in ("startprob_", "transmat_", "weights_", "means_", "covars_"):
+            setattr(m, a, getattr(init, a).copy())
+        return m
+
+    ref, ours = start(GMMHMM), start(av_hmm._hmm_class())
+    ours.reg_covar = 0.0
+    gamma = ref.predict_proba(x, lengths)  # state posteriors under the initial model
+    comp = np.array([[np.log(init.weights_[j, k]) + multivariate_normal(
+        init.means_[j, k], init.covars_[j, k]).logpdf(x) for k in range(2)]
+        for j in range(2)]).transpose(2, 0, 1)  # (T, N, M)
+    w = gamma[:, :, None] * np.exp(comp - logsumexp(comp, axis=2, keepdims=True))
+    ref.fit(x, lengths)
+    ours.fit(x, lengths)
+    for a in ("startprob_", "transmat_", "weights_", "means_"):
+        np.testing.assert_allclose(getattr(ours, a), getattr(ref, a), atol=1e-10)
+    for j in range(2):
+        for k in range(2):
+            d = x - ours.means_[j, k]
+            want = (w[:, j, k, None] * d).T @ d / w[:, j, k].sum()
+            np.testing.assert_allclose(ours.covars_[j, k], want, atol=1e-10)
+
+
 def test_forward_backward_matches_brute_force(rng):
     n_t, n = 5, 3
     log_b = rng.normal(size=(n_t, n)) * 3

@@ -209,6 +209,31 @@ def test_cli_synth_method_uses_the_stored_model(fitted, tiny_db, split, tmp_path
                  str(tmp_path / "out.c3d")]) == 0
 
 
+def test_info_lists_the_stored_models(fitted, tiny_db, tmp_path, capsys):
+    import json
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    assert main(["info", "--db", str(db)]) == 0
+    assert "baselines:  none fitted" in capsys.readouterr().out
+    save_model(fitted["hier-pca"], db)
+    stale = db / "baselines" / "v000000"  # a model of an older version, left behind
+    stale.mkdir()
+    shutil.copy(model_path(db, "hier-pca"), stale / "hier-pca.parquet")
+    (stale / "mu-mlp.parquet").write_bytes(b"junk")
+    assert main(["info", "--db", str(db)]) == 0
+    lines = [x for x in capsys.readouterr().out.splitlines()[-3:]]
+    assert lines[0].startswith("baselines:  hier-pca (") and "n_clusters=8" in lines[0]
+    assert "216 channels" in lines[0] and "stale" not in lines[0]
+    assert "stale, fitted on v000000" in lines[1]
+    assert "mu-mlp" in lines[2] and "unreadable" in lines[2]
+    assert main(["info", "--db", str(db), "--json"]) == 0
+    models = json.loads(capsys.readouterr().out)["baselines"]
+    assert [(m["method"], m["current"]) for m in models] == [
+        ("hier-pca", True), ("hier-pca", False), ("mu-mlp", False)]
+    assert models[0]["params"]["n_clusters"] == 8
+
+
 def test_cli_fit_refuses_too_little_data_in_one_line(tiny_db, tmp_path, capsys):
     db = tmp_path / "db"
     shutil.copytree(tiny_db[0], db)

@@ -91,7 +91,12 @@ def _check_real(name: str, value: object) -> float:
 
 
 def _hmm_class():
-    """``hmmlearn.hmm.GMMHMM`` with a memory-lean full-covariance M-step (built lazily)."""
+    """``hmmlearn.hmm.GMMHMM`` with a memory-lean full-covariance M-step (built lazily).
+
+    It overrides hmmlearn's underscored EM hooks, which are not a public API: the
+    dependency is pinned below 0.4, and ``test_em_step_through_hmmlearn_hooks_is_exact_em``
+    checks one Baum-Welch step against stock ``GMMHMM`` and the EM update by hand.
+    """
     from hmmlearn import hmm
     from hmmlearn.base import BaseHMM
 
