@@ -626,6 +626,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     import numpy as np
 
     from animegraph.baselines.base import fitted_model
+    from animegraph.emotion.control import AUTO, check_names, parse_emotion
     from animegraph.synth import to_world, write_channels
     from db.store import Database
     from ingest.formats.wav import read_wav
@@ -642,16 +643,19 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only apply to "
                          f"--method anime-graph, not {args.method}")
+    emotion = parse_emotion(args.emotion)
+    if emotion == AUTO or isinstance(emotion, dict):
+        raise UsageError(f"animegraph synth: --emotion {args.emotion} (classified or mixed) "
+                         f"only applies to --method anime-graph; name one emotion for "
+                         f"{args.method}")
     db = Database.open(args.db)
-    emotions = sorted(set(db.table("clips", columns=["emotion"]).column("emotion").to_pylist()))
-    if args.emotion is not None and args.emotion not in emotions:
-        raise UsageError(f"animegraph synth: emotion {args.emotion!r} is not in the database "
-                         f"(it has {', '.join(emotions)})")
+    check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
+                .to_pylist())
     audio, sample_rate = read_wav(args.audio)
     t0 = time.perf_counter()
     model = fitted_model(args.db, args.method, refit=args.refit)
     t1 = time.perf_counter()
-    motion = model.predict(audio, sample_rate, emotion=args.emotion)
+    motion = model.predict(audio, sample_rate, emotion=emotion)
     t2 = time.perf_counter()
     head = db.arrays().get("head_reference")
     write_channels(to_world(motion, model.groups_, head), model.fps_, model.channels_,

@@ -207,6 +207,14 @@ def test_cli_synth_method_uses_the_stored_model(fitted, tiny_db, split, tmp_path
         assert abs(len(f["motion"]) - len(clip.motion)) <= 1
     assert main(["synth", str(wav), "--db", str(db), "--method", "hier-pca", "-o",
                  str(tmp_path / "out.c3d")]) == 0
+    capsys.readouterr()
+    for emotion, needle in (("bored", "unknown emotion 'bored'"), ("auto", "only applies"),
+                            ("happy=0.5,sad=0.5", "only applies")):
+        bad = tmp_path / f"{emotion}.npz"
+        assert main(["synth", str(wav), "--db", str(db), "--method", "hier-pca",
+                     "--emotion", emotion, "-o", str(bad)]) != 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and needle in err[0] and not bad.exists()
 
 
 def test_info_lists_the_stored_models(fitted, tiny_db, tmp_path, capsys):
