@@ -81,43 +81,23 @@ def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "rando
     Thin vertical lines mark the exact search's jump matches; phone labels run along the
     bottom.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from animegraph import evaluate
     from animegraph.synth import render_nodes
 
     phones, emotion, cands, audio_cost = evaluate.heldout_query(model, clip)
-    fig, ax = plt.subplots(figsize=(11, 3.5))
-    fps = model.graph.fps
-    truth = clip.motion.astype(np.float64)
-    ax.plot(np.arange(len(truth)) / fps, evaluate.mouth_opening(truth, model.names, model.kind),
-            "k", lw=2, label="recorded")
-    for k, method in enumerate(methods):
+    predictions, styles, marks = {}, {}, []
+    for method in methods:
         nodes, _ = evaluate.method_nodes(model, cands, audio_cost, method, emotion=emotion,
                                          rng=np.random.default_rng(0))
         ics, joins = render_nodes(model, phones, nodes, emotion=emotion)
-        pred = model.decomposer.inverse_transform(ics)
-        ax.plot(np.arange(len(pred)) / fps, evaluate.mouth_opening(pred, model.names,
-                                                                   model.kind),
-                f"C{k}" + (":" if method in ("random", "first") else ""), lw=1, label=method)
+        predictions[method] = model.decomposer.inverse_transform(ics)
+        styles[method] = ":" if method in ("random", "first") else "-"
         if method == "exact":
-            for j in joins:
-                ax.axvline(phones[j["index"] + 1].start, color="C0", lw=0.5, alpha=0.4)
-    for p in phones:
-        if p.phone != "SIL":
-            ax.text((p.start + p.end) / 2, 0.02, p.phone, fontsize=6, ha="center",
-                    transform=ax.get_xaxis_transform())
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("mouth opening")
-    ax.set_title(f"held-out {clip.clip_id} ({clip.emotion}): recorded vs synthesized")
-    ax.legend(fontsize=7, ncol=len(methods) + 1)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+            marks = [phones[j["index"] + 1].start for j in joins]
+    return _plot_mouth(clip, predictions, model.names, model.kind, path, fps=model.graph.fps,
+                       phones=phones, styles=styles, marks=marks,
+                       title=f"held-out {clip.clip_id} ({clip.emotion}): recorded vs "
+                             "synthesized")
 
 
 def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str], kind: str,
@@ -132,6 +112,16 @@ def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str],
         Motion of each system (e.g. ``exact`` for the Anime Graph, ``mu-mlp`` ...), in the
         database's channels at the clip's frame rate.
     """
+    return _plot_mouth(clip, predictions, names, kind, path, fps=clip.fps, phones=clip.phones,
+                       title=f"held-out {clip.clip_id} ({clip.emotion}): recorded vs every "
+                             "system")
+
+
+def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], kind: str,
+                path: Path, *, fps: float, phones, title: str, styles=None,
+                marks: Sequence[float] = ()) -> Path:
+    """The recorded mouth opening (black) against each prediction, phones along the
+    bottom, thin lines at ``marks`` (s); written to ``path`` (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -141,18 +131,20 @@ def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str],
 
     fig, ax = plt.subplots(figsize=(11, 3.5))
     truth = clip.motion.astype(np.float64)
-    t = np.arange(len(truth)) / clip.fps
-    ax.plot(t, evaluate.mouth_opening(truth, names, kind), "k", lw=2, label="recorded")
+    ax.plot(np.arange(len(truth)) / fps, evaluate.mouth_opening(truth, names, kind), "k",
+            lw=2, label="recorded")
     for k, (label, pred) in enumerate(predictions.items()):
-        ax.plot(np.arange(len(pred)) / clip.fps, evaluate.mouth_opening(pred, names, kind),
-                f"C{k}", lw=1, label=label)
-    for p in clip.phones:
+        ax.plot(np.arange(len(pred)) / fps, evaluate.mouth_opening(pred, names, kind),
+                f"C{k}" + (styles or {}).get(label, "-"), lw=1, label=label)
+    for t in marks:
+        ax.axvline(t, color="C0", lw=0.5, alpha=0.4)
+    for p in phones:
         if p.phone != "SIL":
             ax.text((p.start + p.end) / 2, 0.02, p.phone, fontsize=6, ha="center",
                     transform=ax.get_xaxis_transform())
     ax.set_xlabel("time (s)")
     ax.set_ylabel("mouth opening")
-    ax.set_title(f"held-out {clip.clip_id} ({clip.emotion}): recorded vs every system")
+    ax.set_title(title)
     ax.legend(fontsize=7, ncol=len(predictions) + 1)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
