@@ -43,6 +43,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from db.errors import DataError, ParameterError
 from ingest import facemesh
+from ingest.formats.text import read_utf8
 from ingest.motion import rigid_fit
 
 logger = logging.getLogger(__name__)
@@ -265,12 +266,7 @@ def read_marker_map(path: str | os.PathLike, mesh: Mesh) -> MarkerMap:
         listed twice, or a custom mesh without a ``region`` column.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except OSError as exc:
-        raise DataError(f"cannot read marker map {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise DataError(f"marker map {path} is not UTF-8 text") from None
+    text = read_utf8(path, "marker map")
     reader = csv.DictReader(io.StringIO(text))
     fields = [f.strip().lower() for f in reader.fieldnames or []]
     if "label" not in fields or "vertex" not in fields:

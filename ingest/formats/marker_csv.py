@@ -22,6 +22,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.c3d import MarkerData
+from ingest.formats.text import read_utf8
 
 logger = logging.getLogger(__name__)
 
@@ -116,12 +117,7 @@ def read_marker_csv(path: str | os.PathLike[str]) -> MarkerData:
         not increase, or the times are irregular or give no rate.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"marker CSV file not found: {path}")
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(f"marker CSV file is not UTF-8 text: {path}") from None
+    text = read_utf8(path, "marker CSV file")
     reader = csv.reader(io.StringIO(text))
     try:
         header = next(reader, None)

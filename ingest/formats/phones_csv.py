@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
+from ingest.formats.text import read_utf8
 from ingest.phones import PHONE_SET
 
 logger = logging.getLogger(__name__)
@@ -176,12 +177,7 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
         ``start >= end``, or is out of order or overlaps the line before.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"phones file not found: {path}")
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise DataError(f"phones file is not UTF-8 text: {path}") from exc
+    text = read_utf8(path, "phones file")
     lines = csv.reader(io.StringIO(text))
     try:
         header = next(lines, None)

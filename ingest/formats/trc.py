@@ -27,6 +27,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.c3d import MarkerData
+from ingest.formats.text import read_utf8
 
 logger = logging.getLogger(__name__)
 
@@ -67,12 +68,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         or non-numeric cells; the message names the line).
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"TRC file not found: {path}")
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(f"TRC file is not UTF-8 text: {path}") from None
+    text = read_utf8(path, "TRC file")
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise DataError(f"TRC file is empty: {path}")

@@ -28,6 +28,7 @@ import numpy as np
 from db.errors import DataError
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
+from ingest.formats.text import read_utf8
 from ingest.formats.textgrid import read_textgrid
 
 logger = logging.getLogger(__name__)
@@ -216,10 +217,7 @@ def read_fps(meta: dict, path: Path) -> float | None:
 
 def read_transcript(path: Path) -> str:
     """Read a transcript file (UTF-8); DataError if it is empty or not text."""
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(f"transcript is not UTF-8 text: {path}") from None
+    text = read_utf8(path, "transcript")
     text = " ".join(text.split())
     if not text:
         raise DataError(f"empty transcript file: {path}")

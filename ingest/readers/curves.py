@@ -29,6 +29,7 @@ import numpy as np
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats.marker_csv import infer_rate
+from ingest.formats.text import read_utf8
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
@@ -69,10 +70,7 @@ def curve_group(name: str) -> str:
 
 
 def _read_lines(path: Path) -> list[str]:
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(f"channel list is not UTF-8 text: {path}") from None
+    text = read_utf8(path, "channel list")
     return [line.strip() for line in text.splitlines() if line.strip()]
 
 
@@ -134,10 +132,7 @@ def read_curves_csv(path: Path) -> tuple[np.ndarray, list[str] | None, float | N
     rate : float or None
         From a ``time`` column, if there is one.
     """
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise DataError(f"curves CSV is not UTF-8 text: {path}") from None
+    text = read_utf8(path, "curves CSV")
     reader = csv.reader(io.StringIO(text))
     try:
         rows = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
