@@ -5,6 +5,7 @@ Usage::
     python scripts/eval_lipsync.py [--datasets synthetic facegood talkingface]
                                    [--systems anime-graph mu-mlp hier-pca av-hmm]
                                    [--corpus DIR] [--json OUT] [--plots DIR]
+                                   [--param av-hmm:n_states=8 ...]
 
 Systems (issue #8): ``anime-graph`` (exact and windowed search, and the naive random /
 first-anime baselines), ``mu-mlp`` (Hong et al. 2002), ``hier-pca`` (Cosker et al.) and
@@ -13,7 +14,9 @@ the fold's database is built from and scores all systems on the same held-out cl
 with the same measures plus Hong's R and MSE (Eq. 6, 8) and Terissi's AMSE and ACC
 (Eq. 11-12), the training time (database build for the Anime Graph, ``fit`` for a
 baseline) and the synthesis real-time factor. A baseline that cannot be fitted on a
-fold (too little data) is reported and left out of that fold.
+fold (too little data) is reported and left out of that fold. ``--param
+METHOD:NAME=VALUE`` sets a baseline's hyper-parameter (default: the paper's); its rows
+are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
 
 * synthetic: whole sentences held out of the database (two of those spoken in all five
   emotions and six single-emotion ones), each held-out clip synthesized from its audio
@@ -56,6 +59,34 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 PLOTS: dict[str, Path] = {}
 SYSTEMS: list[str] = list(METHODS)
+PARAMS: dict[str, dict] = {}
+
+
+def label(method: str) -> str:
+    """A system's row label: the method, with any non-default hyper-parameters."""
+    params = PARAMS.get(method)
+    return method + (f"({','.join(f'{k}={v}' for k, v in sorted(params.items()))})"
+                     if params else "")
+
+
+def parse_param(text: str) -> tuple[str, str, object]:
+    """``METHOD:NAME=VALUE`` (VALUE a JSON number, or else a string)."""
+    try:
+        method, rest = text.split(":", 1)
+        name, value = rest.split("=", 1)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected METHOD:NAME=VALUE, got {text!r}") from None
+    if method not in BASELINES:
+        raise argparse.ArgumentTypeError(f"{method!r} is not a baseline ({', '.join(BASELINES)})")
+    known = make_estimator(method).get_params()
+    if name not in known:
+        raise argparse.ArgumentTypeError(f"{method} has no parameter {name!r} "
+                                         f"({', '.join(sorted(known))})")
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        parsed = value
+    return method, name, parsed
 
 
 def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
@@ -67,14 +98,15 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
     rng = np.random.default_rng(0)
     estimators = {}
     for method in (m for m in SYSTEMS if m in BASELINES):
+        key = label(method)
         t0 = time.perf_counter()
         try:
-            estimators[method] = make_estimator(method).fit(train)
+            estimators[key] = make_estimator(method, **PARAMS.get(method, {})).fit(train)
         except AnimeGraphError as exc:
-            print(f"# {name}: {method} not fitted: {exc}", flush=True)
+            print(f"# {name}: {key} not fitted: {exc}", flush=True)
             continue
-        train_s[method] = time.perf_counter() - t0
-        print(f"# {name}: {method} fitted in {train_s[method]:.1f} s", flush=True)
+        train_s[key] = time.perf_counter() - t0
+        print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
     norm = evaluate.displacement_scale(np.concatenate([c.motion for c in train]))
     methods = evaluate.METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
@@ -93,7 +125,7 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
         both = PLOTS[dataset].with_name(PLOTS[dataset].stem + "_systems.png")
         if not both.exists():
             shown = {("anime-graph" if m == "exact" else m): p for m, p in preds.items()
-                     if m == "exact" or m in BASELINES}
+                     if m == "exact" or m in estimators}
             plot_systems(clip, shown, model.names, model.kind, both)
     return rows
 
@@ -171,8 +203,13 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
+    parser.add_argument("--param", type=parse_param, action="append", default=[],
+                        metavar="METHOD:NAME=VALUE",
+                        help="a baseline hyper-parameter, e.g. av-hmm:n_states=8 (repeatable)")
     args = parser.parse_args()
     SYSTEMS[:] = args.systems
+    for method, name, value in args.param:
+        PARAMS.setdefault(method, {})[name] = value
     if args.plots:
         args.plots.mkdir(parents=True, exist_ok=True)
         PLOTS.update({"synthetic": args.plots / "lipsync_synthetic.png",
