@@ -97,11 +97,13 @@ def _speech_to_d(rs: np.ndarray, d_var: np.ndarray, noise_var: float,
 
         d = (Λ - σ²) Rs^T (Rs (Λ - σ²) Rs^T + σ² I)^+ ds
 
-    Without the noise term the truncated model claims the speech is spanned by the kept
-    modes exactly; whenever they number no more than the speech dimensions ``d`` is then
-    the least-squares fit of ``Rs``, whatever ``Λ``, and extrapolates along modes with a
-    small speech part (on the synthetic corpus that made the appearance fit worse than the
-    cluster mean on the training frames themselves, see docs/results.md).
+    Without the noise term the truncated model claims the speech offset lies exactly in
+    the span of the kept modes' speech parts: speech variance the discarded modes held is
+    then explained by large ``d`` along kept modes with a small speech part, which
+    extrapolates the appearance (with no more kept modes than speech dimensions ``d`` is
+    the plain least-squares fit of ``Rs``, whatever ``Λ``). On the synthetic corpus that
+    made the appearance fit worse than the cluster mean on the training frames themselves
+    (docs/results.md).
     """
     lam = np.maximum(d_var - noise_var, 0.0)
     lam_rt = lam[:, None] * rs.T  # (k, n_s)
