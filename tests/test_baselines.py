@@ -17,7 +17,7 @@ from animegraph.baselines.base import (
     save_model,
 )
 from animegraph.baselines.data import audio_features, training_set
-from animegraph.baselines.hier_pca import HierPca
+from animegraph.baselines.hier_pca import HierPca, _pca, _speech_to_d
 from animegraph.baselines.mu_mlp import MuMlp
 from animegraph.cli import main
 from db.errors import DataError, ParameterError
@@ -149,6 +149,39 @@ def test_array_round_trip_and_database_storage(fitted, split, tiny_db, tmp_path,
     np.testing.assert_array_equal(read_model(path).to_arrays()["x_mean" if method == "mu-mlp"
                                                                else "a_mean"],
                                   arrays["x_mean" if method == "mu-mlp" else "a_mean"])
+
+
+def test_hier_pca_eq9_is_the_regression_of_the_cluster_data():
+    """Eq. 9 from a cluster's truncated joint PCA predicts its own appearance about as well
+    as least squares; conditioning the truncated model without its noise term had made
+    it far worse than the cluster mean (R² -6.4 here)."""
+    rng = np.random.default_rng(0)
+    s = rng.normal(size=(300, 6)) * np.sqrt([100, 30, 10, 3, 1, 0.5])
+    c = 0.1 * s[:, :3] @ rng.normal(size=(3, 3)) + rng.normal(size=(300, 3))
+    y = c - c.mean(axis=0)
+    ols = s - s.mean(axis=0)
+    ols = ols @ np.linalg.lstsq(ols, y, rcond=None)[0]
+    for variance in (0.98, 1.0):
+        mean, r, sd, noise = _pca(np.hstack([c, s]), variance)
+        assert (len(sd) <= 6 and noise > 0) if variance < 1 else noise == 0
+        pred = _speech_to_d(r[3:], sd**2, noise, s - mean[3:]) @ r[:3].T
+        r2 = 1 - ((y - pred) ** 2).sum() / (y**2).sum()
+        assert r2 > 0.95 * (1 - ((y - ols) ** 2).sum() / (y**2).sum())
+    np.testing.assert_allclose(pred, ols, atol=1e-8)  # nothing discarded: exactly OLS
+
+
+def test_hier_pca_refuses_a_model_stored_before_the_noise_term(fitted):
+    est = fitted["hier-pca"]
+    arrays = {k: v for k, v in est.to_arrays().items() if not k.endswith("/noise_var")}
+    with pytest.raises(DataError, match="refit"):
+        HierPca.from_arrays(arrays, est.describe())
+
+
+@pytest.mark.parametrize("params", [{"n_clusters": 0}, {"clamp_sd": -1.0},
+                                    {"speech_variance": 0.0}, {"speech_variance": 1.5}])
+def test_hier_pca_bad_parameters(split, params):
+    with pytest.raises(ParameterError, match="must be"):
+        HierPca(**params).fit(split[0])
 
 
 def test_too_little_data_and_missing_neutral(clips):

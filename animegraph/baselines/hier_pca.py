@@ -21,10 +21,13 @@ model for video-realistic facial animation" (``../shared/papers/cosker-*.txt``).
   distance (Eq. 8, the covariance of the speech training set) is chosen; the speech part
   of its eigenvectors gives the speech-appearance parameter ``d``, the appearance part
   gives ``c`` (Eq. 9), clamped to ±3 s.d. of the cluster (:data:`CLAMP_SD`). The
-  equation for ``d`` is lost in our copy of the paper; we take the most probable ``d``
-  given the speech under the cluster's joint model (:func:`_speech_to_d`), which a plain
-  pseudo-inverse of the speech part matches only when every joint mode has the same
-  variance.
+  equation for ``d`` is lost in our copy of the paper; we take the mean of ``d`` given
+  the speech under the cluster's joint PCA read as a probabilistic PCA, the discarded
+  modes' variance as isotropic noise (:func:`_speech_to_d`). Conditioning the truncated
+  model without that noise fits ``d`` to the speech by least squares and extrapolates: on
+  the synthetic corpus Eq. 9 then explained -350 % (face) and -850 % (mouth) of the
+  within-cluster appearance variance on the training frames themselves, against +20 % and
+  +37 % with the noise term (docs/results.md, "hier-pca: why it is weak").
 * §4.5: local averaging of the synthesised frames (:data:`AVERAGE_FRAMES`).
 
 Choices the paper leaves open, and fallbacks (ours): the number of Mel-cepstra (12) and
@@ -64,30 +67,48 @@ MIN_CLUSTER_FRAMES = 10
 AVERAGE_FRAMES = 3
 #: The hierarchy: node names, the root first.
 NODES = ("face", "mouth")
+#: Stored arrays of a cluster's joint model.
+CLUSTER_KEYS = ("c_mean", "s_mean", "rc", "rs", "d_var", "noise_var", "c_sd")
 
 
-def _pca(x: np.ndarray, variance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mean (d,), components (d, k), s.d. per component (k,)) keeping ``variance``."""
+def _pca(x: np.ndarray, variance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(mean (d,), components (d, k), s.d. per component (k,), mean variance of the
+    discarded components (0 if none)) keeping ``variance``."""
     mean = x.mean(axis=0)
     _, s, vt = np.linalg.svd(x - mean, full_matrices=False)
     var = s**2 / max(len(x) - 1, 1)
     if var.sum() <= 0:
-        return mean, vt[:1].T, np.ones(1)
+        return mean, vt[:1].T, np.ones(1), 0.0
     k = int(np.searchsorted(np.cumsum(var) / var.sum(), variance - 1e-12) + 1)
     k = min(k, len(var))
-    return mean, vt[:k].T, np.sqrt(np.maximum(var[:k], 1e-12))
+    rest = var[k:]
+    return (mean, vt[:k].T, np.sqrt(np.maximum(var[:k], 1e-12)),
+            float(rest.mean()) if len(rest) else 0.0)
 
 
-def _speech_to_d(rs: np.ndarray, d_var: np.ndarray, ds: np.ndarray) -> np.ndarray:
+def _speech_to_d(rs: np.ndarray, d_var: np.ndarray, noise_var: float,
+                 ds: np.ndarray) -> np.ndarray:
     """Speech-appearance parameters ``d`` (n, k) from scaled speech offsets ``ds`` (n, n_s).
 
-    The most probable ``d`` under the cluster's joint model given its speech part
-    ``rs @ d = ds``: ``d = Λ Rs^T (Rs Λ Rs^T)^+ ds`` with ``Λ`` the joint modes' variances
-    (a plain pseudo-inverse of ``Rs`` weighs every mode alike and extrapolates along the
-    weak ones).
+    The mean of ``d`` given the speech part under the cluster's joint PCA read as a
+    probabilistic PCA (Tipping & Bishop 1999): ``M = M̄ + R d + ε`` with ``d ~ N(0, Λ -
+    σ²)``, ``ε ~ N(0, σ² I)``, ``Λ`` the kept modes' variances and ``σ²`` the mean
+    variance of the discarded ones (``noise_var``)::
+
+        d = (Λ - σ²) Rs^T (Rs (Λ - σ²) Rs^T + σ² I)^+ ds
+
+    Without the noise term the truncated model claims the speech offset lies exactly in
+    the span of the kept modes' speech parts: speech variance the discarded modes held is
+    then explained by large ``d`` along kept modes with a small speech part, which
+    extrapolates the appearance (with no more kept modes than speech dimensions ``d`` is
+    the plain least-squares fit of ``Rs``, whatever ``Λ``). On the synthetic corpus that
+    made the appearance fit worse than the cluster mean on the training frames themselves
+    (docs/results.md).
     """
-    lam_rt = d_var[:, None] * rs.T  # (k, n_s)
-    return ds @ np.linalg.pinv(rs @ lam_rt, rcond=1e-6).T @ lam_rt.T
+    lam = np.maximum(d_var - noise_var, 0.0)
+    lam_rt = lam[:, None] * rs.T  # (k, n_s)
+    cov = rs @ lam_rt + noise_var * np.eye(rs.shape[0])
+    return ds @ np.linalg.pinv(cov, rcond=1e-6).T @ lam_rt.T
 
 
 class HierPca(BaselineModel):
@@ -105,6 +126,11 @@ class HierPca(BaselineModel):
         Appearance clamp in cluster standard deviations (§4.4).
     average_frames : int
         Width of the local average (§4.5), frames at ``frame_rate``; 1 = none.
+    speech_variance : float
+        Share of the speech vectors' variance the speech PCA keeps (Eq. 4; the paper gives
+        none). Unnormalised Mel-cepstra are dominated by ``c_0``: the default 0.95 keeps 6
+        of 12 dimensions on the synthetic corpus, 0.999 all 12 (mouth R 0.10 → 0.33 there,
+        docs/results.md).
     random_state : int
         Seed of k-means and the mixture.
     """
@@ -113,12 +139,14 @@ class HierPca(BaselineModel):
 
     def __init__(self, n_clusters: int = N_CLUSTERS, n_mfcc: int = N_MFCC,
                  frame_rate: float = FRAME_RATE, clamp_sd: float = CLAMP_SD,
-                 average_frames: int = AVERAGE_FRAMES, random_state: int = 0):
+                 average_frames: int = AVERAGE_FRAMES,
+                 speech_variance: float = SPEECH_VARIANCE, random_state: int = 0):
         self.n_clusters = n_clusters
         self.n_mfcc = n_mfcc
         self.frame_rate = frame_rate
         self.clamp_sd = clamp_sd
         self.average_frames = average_frames
+        self.speech_variance = speech_variance
         self.random_state = random_state
 
     def _speech_vectors(self, audio, sample_rate, times) -> np.ndarray:
@@ -132,6 +160,8 @@ class HierPca(BaselineModel):
                 raise ParameterError(f"{name} must be a positive integer, got {value!r}")
         if not self.frame_rate > 0 or not self.clamp_sd > 0:
             raise ParameterError("frame_rate and clamp_sd must be positive")
+        if not 0 < self.speech_variance <= 1:
+            raise ParameterError(f"speech_variance must be in (0, 1], got {self.speech_variance!r}")
         speech, motion = [], []
         for clip, times, m in sample_times(data.clips, self.frame_rate):
             speech.append(self._speech_vectors(clip.audio, clip.sample_rate, times))
@@ -139,7 +169,7 @@ class HierPca(BaselineModel):
         a, x = np.concatenate(speech), np.concatenate(motion)
         check_enough(len(x), MIN_CLUSTER_FRAMES, "the hier-pca PCA models")
         # Eq. 4: speech parameters.
-        self.a_mean_, self.a_p_, _ = _pca(a, SPEECH_VARIANCE)
+        self.a_mean_, self.a_p_, _, _ = _pca(a, self.speech_variance)
         s = (a - self.a_mean_) @ self.a_p_
         self.s_icov_ = np.linalg.pinv(np.cov(s, rowvar=False).reshape(s.shape[1], -1))
         mouth = lip_channels(data.names, data.groups)
@@ -151,7 +181,7 @@ class HierPca(BaselineModel):
                        for seed, (name, ch) in enumerate(self.node_channels_.items())}
 
     def _fit_node(self, x: np.ndarray, s: np.ndarray, seed: int) -> dict:
-        mean, p, sd = _pca(x, APPEARANCE_VARIANCE)
+        mean, p, sd, _ = _pca(x, APPEARANCE_VARIANCE)
         c = (x - mean) @ p
         w = np.sqrt((sd**2).sum() / max(s.var(axis=0).sum(), 1e-300))  # Eq. 6, scalar W
         k = max(1, min(self.n_clusters, len(x) // MIN_CLUSTER_FRAMES))
@@ -165,11 +195,11 @@ class HierPca(BaselineModel):
             if sel.sum() < MIN_CLUSTER_FRAMES:
                 continue  # documented fallback: too few frames for a joint model
             m = np.hstack([c[sel], w * s[sel]])
-            m_mean, r, sd_d = _pca(m, JOINT_VARIANCE)
+            m_mean, r, sd_d, noise = _pca(m, JOINT_VARIANCE)
             nc = c.shape[1]
             node["clusters"].append({
                 "c_mean": m_mean[:nc], "s_mean": m_mean[nc:] / w, "rc": r[:nc], "rs": r[nc:],
-                "d_var": sd_d**2,
+                "d_var": sd_d**2, "noise_var": np.array(noise),
                 "c_sd": c[sel].std(axis=0) + 1e-9,
             })
         if not node["clusters"]:
@@ -187,7 +217,8 @@ class HierPca(BaselineModel):
         c = np.empty((len(s), node["p"].shape[1]))
         for i in np.unique(choice):
             cl, sel = clusters[i], choice == i
-            d = _speech_to_d(cl["rs"], cl["d_var"], w * (s[sel] - cl["s_mean"]))
+            d = _speech_to_d(cl["rs"], cl["d_var"], float(cl["noise_var"]),
+                             w * (s[sel] - cl["s_mean"]))
             ci = cl["c_mean"] + d @ cl["rc"].T  # Eq. 9
             lim = self.clamp_sd * cl["c_sd"]
             c[sel] = np.clip(ci, cl["c_mean"] - lim, cl["c_mean"] + lim)
@@ -224,7 +255,9 @@ class HierPca(BaselineModel):
             node = {k: arrays[f"{name}/{k}"] for k in ("mean", "p", "w")}
             prefix = f"{name}/cluster/"
             ids = sorted({k[len(prefix):].split("/")[0] for k in arrays if k.startswith(prefix)})
-            node["clusters"] = [{k: arrays[f"{prefix}{i}/{k}"]
-                                 for k in ("c_mean", "s_mean", "rc", "rs", "d_var", "c_sd")}
+            if ids and f"{prefix}{ids[0]}/noise_var" not in arrays:
+                raise DataError("the stored hier-pca model predates its noise term (Eq. 9 "
+                                "fix): refit it (synth --refit)")
+            node["clusters"] = [{k: arrays[f"{prefix}{i}/{k}"] for k in CLUSTER_KEYS}
                                 for i in ids]
             self.nodes_[name] = node
