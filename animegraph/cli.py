@@ -177,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
-                     "phone (10 suits real data with recognized phones)")
+                     "phone (20 suits real data with recognized phones)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(

@@ -9,7 +9,7 @@
    (Eq. 2): exactly by default, or with the paper's bounded look-ahead.
 3. The chosen animes are time-warped, blended at jumps and smoothed (§4.3), and brought
    back from independent components to the database's channels. Beyond the paper, with
-   ``k_best`` each phone's motion is instead the mean of its k best-matching animes.
+   ``k_best`` each phone's motion is instead a weighted mean of its k best-matching animes.
 4. With an emotion asked for (a name, ``"auto"`` to classify the speech (§6), or a mix),
    the frames that came from animes of another emotion get their emotion components
    mapped into it (§5.2, Fig. 6; :mod:`animegraph.emotion.control`).
@@ -153,11 +153,11 @@ def synthesize(
         t > 0 lets the exact search stop at a sequence certified within (1 + t) × the
         optimum's cost.
     k_best : int, optional
-        Beyond the paper: each phone's motion is the mean of ``k_best`` animes, the
+        Beyond the paper: each phone's motion is a rank-weighted mean of ``k_best`` animes, the
         search's pick and the other candidates of least unary cost (audio, emotion;
         :func:`animegraph.search.k_best`, :func:`animegraph.synthesis.blend_k_best`),
         instead of the single picked anime joined at jumps (§4.3). None (default): the
-        paper's synthesis. On real data with recognized phones 10 measured best; with
+        paper's synthesis. On real data with recognized phones 20 measured best; with
         exact phone labels (the synthetic corpus) the paper's synthesis is better
         (docs/results.md). ``joins`` is then empty.
 
