@@ -175,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
+    syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
+                     help="beyond the paper: average the K best-matching animes of each "
+                     "phone (20 suits real data with recognized phones)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -585,7 +588,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
               file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
-                     tolerance=args.tolerance or 0.0, options=options)
+                     tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
     write_motion(out, model, args.output)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -639,7 +642,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--tolerance", args.tolerance is not None),
         ("--explain-json", args.explain_json is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
-        ("--no-smooth", args.no_smooth)) if on]
+        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only apply to "
                          f"--method anime-graph, not {args.method}")

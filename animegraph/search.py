@@ -331,6 +331,54 @@ def path_cost(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
     return problem.breakdown(idx)
 
 
+def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
+           nodes: Sequence[int] | np.ndarray, k: int, *, weights: SearchWeights | None = None,
+           emotion: str | None = None) -> tuple[np.ndarray, ...]:
+    """Per input, its matched node followed by the ``k - 1`` other candidates of least
+    unary cost (beyond the paper: the animes :func:`animegraph.synthesis.blend_k_best`
+    averages).
+
+    The unary cost is the part of Eq. (2) that depends on one node only:
+    ``w3 C_audio`` plus the emotion and back-off terms. Ties keep the candidates' order.
+
+    Parameters
+    ----------
+    graph : AnimeGraph
+    cands : Candidates
+        n inputs.
+    audio : sequence of np.ndarray
+        ``audio[i]``, shape (len(cands.nodes[i]),): C_audio (Eq. 5), as for :func:`search`.
+    nodes : array-like of int, shape (n,)
+        The matched sequence (e.g. ``search(...).nodes``); each a candidate of its input.
+    k : int
+        Nodes per input, >= 1 (fewer where an input has fewer candidates).
+    weights : SearchWeights, optional
+    emotion : str, optional
+        The input's emotion; None uses ``cands.emotion``.
+
+    Returns
+    -------
+    tuple of np.ndarray of int64
+        ``ranked[i]``, shape (min(k, len(cands.nodes[i])),), starting with ``nodes[i]``.
+
+    Raises
+    ------
+    ParameterError
+        If ``k`` is not an int >= 1, or on the errors of :func:`path_cost`.
+    """
+    if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
+        raise ParameterError(f"k must be an int >= 1, got {k!r}")
+    weights = weights or SearchWeights()
+    path_cost(graph, cands, audio, nodes=nodes, weights=weights, emotion=emotion)  # validates
+    problem = _Problem.build(graph, cands, audio, weights, emotion)
+    ranked = []
+    for i, node in enumerate(np.asarray(nodes, dtype=np.int64).reshape(-1)):
+        lo, hi = problem.off[i], problem.off[i + 1]
+        order = problem.cn[lo:hi][np.argsort(problem.u[lo:hi], kind="stable")]
+        ranked.append(np.concatenate([[node], order[order != node][:k - 1]]))
+    return tuple(ranked)
+
+
 # --------------------------------------------------------------------------------------
 # The search
 # --------------------------------------------------------------------------------------
@@ -1414,5 +1462,5 @@ def _paper_kernel(cn, off, u, nxt, last, first, w1, scale, max_expansions,
 
 __all__ = [
     "METHODS", "Candidates", "PathCost", "SearchResult", "SearchWeights", "candidates",
-    "path_cost", "search",
+    "k_best", "path_cost", "search",
 ]

@@ -431,3 +431,25 @@ def test_exact_threaded_queries_match_dp(seed, monkeypatch):
     audio = random_audio(rng, cands, high=30.0)
     exact = search(g, cands, audio)
     assert exact.cost == pytest.approx(search(g, cands, audio, method="dp").cost, abs=1e-9)
+
+
+def test_k_best_ranks_by_unary_cost_after_the_pick():
+    z = np.zeros((2, 3))
+    g = make_graph([["AA", "B"], ["AA", "B"], ["AA", "B"]], np.vstack([z] * 3),
+                   np.vstack([z] * 3), emotions=[0, 1, 1])
+    cands = candidates(g, ["AA", "B"])
+    audio = [np.array([3.0, 1.0, 2.0]), np.array([1.0, 2.0, 2.0])]
+    nodes = search(g, cands, audio).nodes
+    ranked = S.k_best(g, cands, audio, nodes, 2)
+    assert [r[0] for r in ranked] == list(nodes)  # the search's pick comes first
+    np.testing.assert_array_equal(ranked[0], [nodes[0], 2 if nodes[0] != 2 else 4])
+    full = S.k_best(g, cands, audio, [0, 1], 5)  # k beyond the candidates: all of them
+    np.testing.assert_array_equal(full[0], [0, 2, 4])
+    np.testing.assert_array_equal(full[1], [1, 3, 5])  # ties keep the candidates' order
+    # The emotion term ranks too: happy animes before the angry one.
+    happy = S.k_best(g, cands, audio, [2, 3], 2, emotion="happy")
+    np.testing.assert_array_equal(happy[0], [2, 4])
+    with pytest.raises(ParameterError, match="k must be"):
+        S.k_best(g, cands, audio, nodes, 0)
+    with pytest.raises(ParameterError, match="not a candidate"):
+        S.k_best(g, cands, audio, [1, 1], 2)

@@ -105,8 +105,10 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
     for suffix in (".csv", ".npz"):
         assert main([*argv[:-5], "-o", str(tmp_path / f"out{suffix}")]) == 0
     assert main([*argv[:-5], "--tolerance", "0.05", "-o", str(tmp_path / "tol.npz")]) == 0
-    with np.load(tmp_path / "out.npz") as exact, np.load(tmp_path / "tol.npz") as tol:
-        assert exact["motion"].shape == tol["motion"].shape
+    assert main([*argv[:-5], "--k-best", "3", "-o", str(tmp_path / "k3.npz")]) == 0
+    with np.load(tmp_path / "out.npz") as exact, np.load(tmp_path / "tol.npz") as tol, \
+            np.load(tmp_path / "k3.npz") as k3:
+        assert exact["motion"].shape == tol["motion"].shape == k3["motion"].shape
 
 
 @pytest.mark.parametrize("extra, needle", [
@@ -118,6 +120,7 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
     (["--tolerance", "1.5"], "--tolerance must be a number in [0, 1)"),
     (["--window", "3", "--tolerance", "0.1"], "only used by method='exact'"),
     (["--method", "mu-mlp", "--tolerance", "0.1"], "only apply"),
+    (["--method", "mu-mlp", "--k-best", "10"], "only apply"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out
@@ -173,3 +176,24 @@ def test_warp_positions_pin_the_ends():
     assert src[0] == 0.0 and src[-1] == 7.0
     assert np.all(np.diff(src) >= 0)
     assert warp_positions(c_input[:1], c_anime).tolist() == [0.0]
+
+
+def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
+    stem, clip = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    plain = synthesize(model, audio, sr, labels=labels)
+    one = synthesize(model, audio, sr, labels=labels, k_best=1)
+    unblended = synthesize(model, audio, sr, labels=labels, options=PostOptions(blend=False))
+    np.testing.assert_allclose(one.motion, unblended.motion)
+    assert one.joins == []
+    many = synthesize(model, audio, sr, labels=labels, emotion="happy", k_best=4)
+    assert many.motion.shape == plain.motion.shape and np.isfinite(many.motion).all()
+    assert not np.allclose(many.motion, plain.motion)
+    truth = face.marker_distance(clip.markers, "ulip_in_c", "llip_in_c")
+    opening = face.marker_distance(many.motion.reshape(len(many.motion), -1, 3), "ulip_in_c",
+                                   "llip_in_c")
+    n = min(len(truth), len(opening))
+    assert np.corrcoef(truth[:n], opening[:n])[0, 1] > 0.5
+    with pytest.raises(ParameterError, match="k must be"):
+        synthesize(model, audio, sr, labels=labels, k_best=0)
