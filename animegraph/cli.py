@@ -563,6 +563,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         if method != "exact":
             raise UsageError(f"animegraph synth: --tolerance is only used by method='exact' "
                              f"(the exact search), not {method}")
+    if args.k_best is not None and args.k_best < 1:
+        raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
     t0 = time.perf_counter()
     model = Model.load(args.db)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
@@ -604,8 +606,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     print(f"animegraph: {len(out.phones)} phones ({out.segmentation}), {r.n_jumps} jump "
           f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
-          f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}; "
-          f"wrote {args.output}", file=sys.stderr)
+          f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
+          + (f" (k-best {args.k_best}: each phone the mean of up to {args.k_best} animes)"
+             if args.k_best else "") + f"; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:
         print(f"animegraph: phones missing from the database, backed off: "
@@ -644,8 +647,9 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None)) if on]
     if search_only:
-        raise UsageError(f"animegraph synth: {', '.join(search_only)} only apply to "
-                         f"--method anime-graph, not {args.method}")
+        raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
+                         f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "
+                         f"anime-graph, not {args.method}")
     emotion = parse_emotion(args.emotion)
     if emotion == AUTO or isinstance(emotion, dict):
         raise UsageError(f"animegraph synth: --emotion {args.emotion} (classified or mixed) "

@@ -115,12 +115,14 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),
     (["--search", "window"], "--window"),
-    (["--method", "mu-mlp", "--window", "3"], "only apply"),
+    (["--method", "mu-mlp", "--window", "3"], "--window only applies"),
     (["--method", "hmm"], "invalid choice"),
     (["--tolerance", "1.5"], "--tolerance must be a number in [0, 1)"),
     (["--window", "3", "--tolerance", "0.1"], "only used by method='exact'"),
-    (["--method", "mu-mlp", "--tolerance", "0.1"], "only apply"),
-    (["--method", "mu-mlp", "--k-best", "10"], "only apply"),
+    (["--method", "mu-mlp", "--tolerance", "0.1", "--k-best", "10"],
+     "--tolerance, --k-best only apply"),
+    (["--method", "mu-mlp", "--k-best", "10"], "--k-best only applies"),
+    (["--k-best", "0"], "--k-best must be at least 1, got 0"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out
