@@ -101,7 +101,7 @@ def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "rando
 
 
 def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str], kind: str,
-                 path: Path) -> Path:
+                 path: Path, *, seconds: float | None = None) -> Path:
     """Mouth opening of a held-out clip: recorded against every system's synthesis.
 
     Parameters
@@ -111,17 +111,22 @@ def plot_systems(clip, predictions: dict[str, np.ndarray], names: Sequence[str],
     predictions : dict of str to np.ndarray, shape (n_frames, n_channels)
         Motion of each system (e.g. ``exact`` for the Anime Graph, ``mu-mlp`` ...), in the
         database's channels at the clip's frame rate.
+    seconds : float, optional
+        Show only the first ``seconds`` of the clip (a long real clip is unreadable whole).
     """
+    span = None if seconds is None or seconds >= clip.duration else (0.0, float(seconds))
     return _plot_mouth(clip, predictions, names, kind, path, fps=clip.fps, phones=clip.phones,
+                       span=span,
                        title=f"held-out {clip.clip_id} ({clip.emotion}): recorded vs every "
-                             "system")
+                             "system" + (f", first {seconds:g} s" if span else ""))
 
 
 def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], kind: str,
                 path: Path, *, fps: float, phones, title: str, styles=None,
-                marks: Sequence[float] = ()) -> Path:
+                marks: Sequence[float] = (), span: tuple[float, float] | None = None) -> Path:
     """The recorded mouth opening (black) against each prediction, phones along the
-    bottom, thin lines at ``marks`` (s); written to ``path`` (PNG)."""
+    bottom, thin lines at ``marks`` (s), only the time ``span`` (s) if given; written to
+    ``path`` (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,9 +144,11 @@ def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], 
     for t in marks:
         ax.axvline(t, color="C0", lw=0.5, alpha=0.4)
     for p in phones:
-        if p.phone != "SIL":
+        if p.phone != "SIL" and (span is None or span[0] <= p.start < span[1]):
             ax.text((p.start + p.end) / 2, 0.02, p.phone, fontsize=6, ha="center",
                     transform=ax.get_xaxis_transform())
+    if span is not None:
+        ax.set_xlim(*span)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("mouth opening")
     ax.set_title(title)

@@ -60,6 +60,8 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 PLOTS: dict[str, Path] = {}
 SYSTEMS: list[str] = list(METHODS)
 PARAMS: dict[str, dict] = {}
+#: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
+PLOT_SECONDS = 12.0
 
 
 def label(method: str) -> str:
@@ -124,9 +126,10 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
             plot_heldout(model, clip, PLOTS[dataset])
         both = PLOTS[dataset].with_name(PLOTS[dataset].stem + "_systems.png")
         if not both.exists():
-            shown = {("anime-graph" if m == "exact" else m): p for m, p in preds.items()
-                     if m == "exact" or m in estimators}
-            plot_systems(clip, shown, model.names, model.kind, both)
+            names = {"exact": "anime-graph", "kbest20": "anime-graph k-best 20"}
+            shown = {names.get(m, m): p for m, p in preds.items()
+                     if m in names or m in estimators}
+            plot_systems(clip, shown, model.names, model.kind, both, seconds=PLOT_SECONDS)
     return rows
 
 

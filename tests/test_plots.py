@@ -42,3 +42,16 @@ def test_plot_systems_overlays_each_prediction(model_and_clip, tmp_path):
                               model.names, model.kind, tmp_path / "two.png"))
     assert one.shape == two.shape and np.abs(one - two).max() > 0  # the second line shows
     assert evaluate.mouth_opening(flat, model.names, model.kind).std() == pytest.approx(0)
+
+
+def test_plot_systems_can_show_the_first_seconds_only(model_and_clip, tmp_path):
+    model, clip = model_and_clip
+    truth = clip.motion.astype(np.float64)
+    whole = _image(plot_systems(clip, {"x": truth}, model.names, model.kind,
+                                tmp_path / "whole.png"))
+    part = _image(plot_systems(clip, {"x": truth}, model.names, model.kind,
+                               tmp_path / "part.png", seconds=clip.duration / 3))
+    same = _image(plot_systems(clip, {"x": truth}, model.names, model.kind,
+                               tmp_path / "same.png", seconds=clip.duration + 1))
+    assert part.shape == whole.shape and np.abs(part - whole).max() > 0
+    np.testing.assert_array_equal(same, whole)  # a span past the end is the whole clip
