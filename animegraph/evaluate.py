@@ -173,7 +173,7 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
         k = int(method[len("kbest"):])
-        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion), jumps
+        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
     return render_nodes(model, phones, nodes, emotion=emotion)[0], jumps
 
 

@@ -28,7 +28,15 @@ from animegraph.emotion.control import EmotionChoice, map_frames, resolve_emotio
 from animegraph.graph import AnimeGraph
 from animegraph.search import SearchResult, SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
-from animegraph.synthesis import Phone, PostOptions, assemble, blend_k_best, output_frames, smooth
+from animegraph.synthesis import (
+    Phone,
+    PostOptions,
+    assemble,
+    blend_k_best,
+    output_frames,
+    rank_weights,
+    smooth,
+)
 from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.decompose import MotionDecomposer
@@ -108,6 +116,9 @@ class Synthesis:
         In the database's channels, at ``fps``.
     ics : np.ndarray, shape (n_frames, n_ics)
         The same motion in independent components.
+    blended : tuple of list of dict
+        With ``k_best``: per phone the animes its motion averages (node, clip_id,
+        position, weight), the search's pick first; empty otherwise.
     """
 
     motion: np.ndarray
@@ -121,6 +132,7 @@ class Synthesis:
     timings: dict = field(default_factory=dict)
     emotion: EmotionChoice = field(default_factory=lambda: EmotionChoice(None, None))
     notes: tuple[str, ...] = ()
+    blended: tuple[list[dict], ...] = ()
 
 
 def synthesize(
@@ -196,8 +208,9 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
-        ics, joins = render_k_best(model, phones, cands, audio_cost, result.nodes, k_best,
-                                   weights=weights, options=options, emotion=emotion), []
+        (ics, ranked), joins = render_k_best(model, phones, cands, audio_cost, result.nodes,
+                                             k_best, weights=weights, options=options,
+                                             emotion=emotion), []
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
@@ -206,9 +219,12 @@ def synthesize(
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
     explain = _explain(model, phones, result, cands, audio_cost)
+    blended = () if k_best is None else tuple(_blended(model.graph, r) for r in ranked)
+    for row, animes in zip(explain, blended, strict=False):
+        row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
-                     timings=timings, emotion=choice, notes=tuple(notes))
+                     timings=timings, emotion=choice, notes=tuple(notes), blended=blended)
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
@@ -276,12 +292,21 @@ def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = N
 
 def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
                   weights: SearchWeights | None = None, options: PostOptions | None = None,
-                  emotion: str | None = None) -> np.ndarray:
+                  emotion: str | None = None) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
     """Motion (independent components) averaging the ``k`` best animes of each phone around
-    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`)."""
+    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`), and those
+    animes per phone, best first."""
     ranked = ranked_candidates(model.graph, cands, audio_cost, nodes, k, weights=weights,
                                emotion=emotion)
-    return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs, options=options)
+    return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs,
+                        options=options), ranked
+
+
+def _blended(graph: AnimeGraph, ranked: np.ndarray) -> list[dict]:
+    """The animes one phone's k-best motion averages: where each came from, its weight."""
+    return [{"node": int(a), "clip_id": graph.clip_ids[graph.node_clip[a]],
+             "position": int(graph.position[a]), "weight": round(float(w), 4)}
+            for a, w in zip(ranked, rank_weights(len(ranked)), strict=True)]
 
 
 def _explain(model, phones, result, cands, audio_cost) -> list[dict]:
@@ -320,9 +345,12 @@ def explain_record(synth: Synthesis) -> dict:
     """The ``--explain`` record of a synthesis: every phone's source and costs, the joins,
     the search result and the timings (what ``synth --explain-json`` and ``batch`` write)."""
     r = synth.result
-    return {"phones": synth.explain, "joins": synth.joins, "cost": r.cost,
-            "n_jumps": r.n_jumps, "method": r.method, "segmentation": synth.segmentation,
-            "timings": synth.timings}
+    record = {"phones": synth.explain, "joins": synth.joins, "cost": r.cost,
+              "n_jumps": r.n_jumps, "method": r.method, "segmentation": synth.segmentation,
+              "timings": synth.timings}
+    if synth.blended:
+        record["k_best"] = list(synth.blended)
+    return record
 
 
 def backoffs(synth: Synthesis) -> list[str]:

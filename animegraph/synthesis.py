@@ -249,6 +249,13 @@ def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *
     return motion, joins
 
 
+def rank_weights(n: int) -> np.ndarray:
+    """Weights of :func:`blend_k_best`'s ``n`` ranked animes: ``r ** -RANK_DECAY`` for
+    r = 1..n, summing to 1; shape (n,)."""
+    w = (np.arange(n) + 1.0) ** -RANK_DECAY
+    return w / w.sum()
+
+
 def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequence[Phone], *,
                  cutoffs: np.ndarray | None = None,
                  options: PostOptions | None = None) -> np.ndarray:
@@ -283,10 +290,9 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     n, ranges = output_frames(phones, graph.fps)
     motion = np.zeros((n, graph.motion_values.shape[1]))
     for nodes, phone, (s, b) in zip(ranked, phones, ranges, strict=True):
-        w = (np.arange(len(nodes)) + 1.0) ** -RANK_DECAY
         pieces = [warp_anime(graph, int(a), phone, b - s, time_warp=opts.time_warp)
                   for a in nodes]
-        motion[s:b] = np.tensordot(w / w.sum(), np.array(pieces), axes=1)
+        motion[s:b] = np.tensordot(rank_weights(len(nodes)), np.array(pieces), axes=1)
     if opts.smooth and cutoffs is not None:
         motion = smooth(motion, cutoffs, graph.fps)
     return motion

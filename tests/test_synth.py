@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from animegraph.cli import main
-from animegraph.synth import Model, synthesize
+from animegraph.synth import Model, explain_record, synthesize
 from animegraph.synthesis import PostOptions, warp_positions
 from db.errors import DataError, ParameterError
 from ingest.corpus import face
@@ -197,5 +197,14 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
                                    "llip_in_c")
     n = min(len(truth), len(opening))
     assert np.corrcoef(truth[:n], opening[:n])[0, 1] > 0.5
+    # What was averaged is explained: per phone the pick first, weights falling, summing to 1.
+    assert plain.blended == () and "k_best" not in explain_record(plain)
+    assert len(many.blended) == len(many.phones) == len(explain_record(many)["k_best"])
+    for row, animes in zip(many.explain, many.blended, strict=True):
+        weights = [a["weight"] for a in animes]
+        assert animes[0]["node"] == row["node"] and row["k_best"] == len(animes) <= 4
+        assert weights == sorted(weights, reverse=True)
+        assert sum(weights) == pytest.approx(1, abs=1e-3)
+        assert row["pick_weight"] == weights[0]
     with pytest.raises(ParameterError, match="k must be"):
         synthesize(model, audio, sr, labels=labels, k_best=0)
