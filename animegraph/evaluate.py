@@ -156,8 +156,6 @@ def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None =
         nodes = baseline_nodes(cands.nodes, method, rng)
         return nodes, int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
     window = int(method[len("window"):]) if method.startswith("window") else None
-    if method.startswith("kbest"):
-        method = "exact"
     result = search(model.graph, cands, audio_cost, emotion=emotion,
                     method="window" if window else "exact", window=window)
     return result.nodes, result.n_jumps

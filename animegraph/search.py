@@ -310,16 +310,7 @@ def path_cost(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
                              f"{'both' if indices is not None else 'neither'}")
     n = len(cands)
     if nodes is not None:
-        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
-        if len(nodes) != n:
-            raise ParameterError(f"nodes must have one node per input ({n}), got {len(nodes)}")
-        idx = np.empty(n, dtype=np.int64)
-        for i in range(n):
-            k = int(np.searchsorted(cands.nodes[i], nodes[i]))
-            if k >= len(cands.nodes[i]) or cands.nodes[i][k] != nodes[i]:
-                raise ParameterError(f"nodes[{i}] = {int(nodes[i])} is not a candidate of input "
-                                     f"{i} ({cands.phones[i] if cands.phones else '?'})")
-            idx[i] = k
+        idx = _node_indices(cands, nodes)
     else:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         if len(idx) != n:
@@ -329,6 +320,23 @@ def path_cost(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
             i = int(np.flatnonzero((idx < 0) | (idx >= sizes))[0])
             raise ParameterError(f"indices[{i}] must be in [0, {sizes[i]}), got {idx[i]}")
     return problem.breakdown(idx)
+
+
+def _node_indices(cands: Candidates, nodes) -> np.ndarray:
+    """Position of each matched node in its input's candidates, shape (n,); ParameterError
+    if the count is wrong or a node is not a candidate of its input."""
+    n = len(cands)
+    nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+    if len(nodes) != n:
+        raise ParameterError(f"nodes must have one node per input ({n}), got {len(nodes)}")
+    idx = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        k = int(np.searchsorted(cands.nodes[i], nodes[i]))
+        if k >= len(cands.nodes[i]) or cands.nodes[i][k] != nodes[i]:
+            raise ParameterError(f"nodes[{i}] = {int(nodes[i])} is not a candidate of input "
+                                 f"{i} ({cands.phones[i] if cands.phones else '?'})")
+        idx[i] = k
+    return idx
 
 
 def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
@@ -364,18 +372,18 @@ def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
     Raises
     ------
     ParameterError
-        If ``k`` is not an int >= 1, or on the errors of :func:`path_cost`.
+        If ``k`` is not an int >= 1, on malformed inputs (as :func:`search`), or if a
+        node is not a candidate of its input.
     """
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
         raise ParameterError(f"k must be an int >= 1, got {k!r}")
-    weights = weights or SearchWeights()
-    path_cost(graph, cands, audio, nodes=nodes, weights=weights, emotion=emotion)  # validates
-    problem = _Problem.build(graph, cands, audio, weights, emotion)
+    problem = _Problem.build(graph, cands, audio, weights or SearchWeights(), emotion)
     ranked = []
-    for i, node in enumerate(np.asarray(nodes, dtype=np.int64).reshape(-1)):
+    for i, pick in enumerate(_node_indices(cands, nodes)):
         lo, hi = problem.off[i], problem.off[i + 1]
-        order = problem.cn[lo:hi][np.argsort(problem.u[lo:hi], kind="stable")]
-        ranked.append(np.concatenate([[node], order[order != node][:k - 1]]))
+        order = np.argsort(problem.u[lo:hi], kind="stable")
+        order = np.concatenate([[pick], order[order != pick][:k - 1]])
+        ranked.append(problem.cn[lo + order])
     return tuple(ranked)
 
 

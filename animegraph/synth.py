@@ -205,12 +205,13 @@ def synthesize(
     timings["search_s"] = time.perf_counter() - t2
 
     t3 = time.perf_counter()
+    ranked = ()
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
-        (ics, ranked), joins = render_k_best(model, phones, cands, audio_cost, result.nodes,
-                                             k_best, weights=weights, options=options,
-                                             emotion=emotion), []
+        ics, ranked = render_k_best(model, phones, cands, audio_cost, result.nodes, k_best,
+                                    weights=weights, options=options, emotion=emotion)
+        joins = []
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
@@ -219,7 +220,7 @@ def synthesize(
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
     explain = _explain(model, phones, result, cands, audio_cost)
-    blended = () if k_best is None else tuple(_blended(model.graph, r) for r in ranked)
+    blended = tuple(_blended(model.graph, r) for r in ranked)
     for row, animes in zip(explain, blended, strict=False):
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
