@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import welch
+from scipy.signal import butter, sosfiltfilt, welch
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.decomposition import PCA, FastICA
 from sklearn.exceptions import ConvergenceWarning
@@ -197,3 +197,20 @@ def cutoff_frequencies(sources: Sequence[np.ndarray], fps: float, *,
     cumulative /= np.maximum(cumulative[-1], 1e-300)
     index = np.array([np.searchsorted(cumulative[:, k], energy) for k in range(total.shape[1])])
     return freqs[np.minimum(index, len(freqs) - 1)]
+
+
+#: Order of the zero-phase Butterworth low-pass of the smoothing step (§4.3).
+SMOOTHING_ORDER = 2
+
+
+def smooth(motion: np.ndarray, cutoffs: np.ndarray, fps: float) -> np.ndarray:
+    """Zero-phase low-pass of each column at its cutoff (Hz); columns at Nyquist pass."""
+    out = motion.copy()
+    nyquist = fps / 2
+    if len(motion) < 3 * (2 * SMOOTHING_ORDER + 1):
+        return out  # too short to filter without edge artefacts swamping it
+    for k, cut in enumerate(cutoffs):
+        if 0 < cut < 0.99 * nyquist:
+            sos = butter(SMOOTHING_ORDER, cut / nyquist, output="sos")
+            out[:, k] = sosfiltfilt(sos, motion[:, k])
+    return out

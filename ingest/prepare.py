@@ -16,11 +16,11 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.clip import ChannelSchema, RawClip
-from ingest.features import RastaPlpConfig, rasta_plp
 from ingest.formats.phones_csv import Segment
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
 from ingest.readers import shift_motion
-from ingest.segment import segment
+from ingest.speech.features import RastaPlpConfig, rasta_plp
+from ingest.speech.segment import segment
 
 #: Emotion label of clips that come without one.
 UNKNOWN_EMOTION = "unknown"

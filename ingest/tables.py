@@ -17,8 +17,8 @@ import pyarrow as pa
 
 from db.store import arrays_to_table
 from ingest.decompose import MotionDecomposer
-from ingest.features import RastaPlpConfig, slice_frames
 from ingest.prepare import PreparedClip
+from ingest.speech.features import RastaPlpConfig, slice_frames
 
 _F32 = pa.list_(pa.float32())
 _F64 = pa.list_(pa.float64())

@@ -33,10 +33,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from animegraph.batch import BatchOptions, run_batch
+from animegraph.apps.batch import BatchOptions, run_batch
 from ingest.corpus.emotions import EMOTIONS
 from ingest.corpus.sentences import generate_sentences
-from ingest.espeak import Voice, speak
+from ingest.speech.espeak import Voice, speak
 
 #: Sentences of the default corpus (``CorpusConfig().sentences``): the script starts after.
 CORPUS_SENTENCES = 40
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     if args.db is None:
-        from animegraph.demo import ensure_default_corpus, ensure_default_db
+        from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
 
         corpus, _, _ = ensure_default_corpus()
         args.db, _ = ensure_default_db(corpus)

@@ -1,4 +1,4 @@
-"""Time the DTW audio cost (Eq. 5, ``animegraph.dtw``) against tslearn and librosa.
+"""Time the DTW audio cost (Eq. 5, ``animegraph.search.dtw``) against tslearn and librosa.
 
 Usage::
 
@@ -27,15 +27,15 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from animegraph import dtw as dtw_module
-from animegraph.dtw import audio_cost, audio_costs, dtw
+from animegraph.search import dtw as dtw_module
+from animegraph.search.dtw import audio_cost, audio_costs, dtw
 
 _COLD_SNIPPET = """
 import time
 {preload}
 t0 = time.perf_counter()
 import numpy as np
-from animegraph.dtw import audio_costs
+from animegraph.search.dtw import audio_costs
 t1 = time.perf_counter()
 rng = np.random.default_rng(0)
 lengths = rng.integers(2, 41, size={nodes})
@@ -168,7 +168,7 @@ def main() -> int:
         _cold_start(10)
         _cold_start(1000)
         pycache = Path(dtw_module.__file__).parent / "__pycache__"
-        print(f"numba cache files next to animegraph/dtw.py: "
+        print(f"numba cache files next to animegraph/search/dtw.py: "
               f"{len(list(pycache.glob('dtw.*.nb*')))} in {pycache}")
     return 0
 

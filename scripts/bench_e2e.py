@@ -4,7 +4,7 @@ Usage::
 
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
 
-Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synth.synthesize` on it
+Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
 phones recognised (default), force-aligned to the text, or taken from eSpeak's events.
 Prints each run's phase timings and real-time factor (synthesis time / audio duration).
@@ -30,12 +30,12 @@ def main() -> int:
                         default="recognized")
     args = parser.parse_args()
 
-    from animegraph.synth import Model, synthesize
-    from ingest.espeak import speak
+    from animegraph.synthesis import Model, synthesize
     from ingest.formats.phones_csv import Segment
+    from ingest.speech.espeak import speak
 
     if args.db is None:
-        from animegraph.demo import ensure_default_corpus, ensure_default_db
+        from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
 
         corpus, _, _ = ensure_default_corpus()
         args.db, _ = ensure_default_db(corpus)

@@ -19,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph.gltf import write_glb
-from animegraph.motionio import read_motion
-from animegraph.render import animate, deformer_for, encode, face_frames
+from animegraph.face.animation import animate
+from animegraph.face.gltf import write_glb
+from animegraph.face.render import deformer_for, encode, face_frames
+from animegraph.motion.files import read_motion
 from ingest.corpus import face
 from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.wav import write_wav

@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph.graph import AnimeGraph
 from animegraph.search import candidates, search
-from ingest.phones import PHONES
+from animegraph.search.graph import AnimeGraph
+from ingest.speech.phones import PHONES
 
 #: Approximate relative frequencies of the phones in English speech (per 1,000).
 PHONE_FREQ = {

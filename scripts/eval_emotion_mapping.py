@@ -60,7 +60,7 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     if args.db is None:
-        from animegraph.demo import ensure_default_corpus, ensure_default_db
+        from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
 
         args.corpus, _, _ = ensure_default_corpus()
         args.db, _ = ensure_default_db(args.corpus)

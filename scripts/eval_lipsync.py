@@ -44,10 +44,11 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph import evaluate
+from animegraph.apps import evaluate
+from animegraph.apps.plots import plot_heldout, plot_systems
 from animegraph.baselines import BASELINES, METHODS, make_estimator
-from animegraph.plots import plot_heldout, plot_systems
-from animegraph.synth import Model
+from animegraph.motion import measures
+from animegraph.synthesis import Model
 from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.pipeline import build_database, prepare_sources
@@ -109,7 +110,7 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
-    norm = evaluate.displacement_scale(np.concatenate([c.motion for c in train]))
+    norm = measures.displacement_scale(np.concatenate([c.motion for c in train]))
     methods = evaluate.METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
     rows = []

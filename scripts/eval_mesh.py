@@ -2,7 +2,7 @@
 
 The synthetic corpus' face rig is posed on every vertex of the canonical mesh (the
 truth) and on the markers (the input) for a spoken, expressive sentence; the markers
-are carried to the mesh by :class:`animegraph.mesh.Deformer` and compared with the
+are carried to the mesh by :class:`animegraph.face.mesh.Deformer` and compared with the
 truth: RMS vertex error over the face and around the mouth, and the error of the inner
 lip gap between two vertices that are not markers (82 upper, 87 lower) — what smears
 when the lips are interpolated together.
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from animegraph.mesh import Deformer, canonical_mesh, default_marker_map
+from animegraph.face.mesh import Deformer, canonical_mesh, default_marker_map
 from ingest.corpus import face
 from ingest.corpus.synthetic import ClipSpec, CorpusConfig, synthesize_clip
 

@@ -1,4 +1,4 @@
-"""Evaluate phone segmentation (ingest.segment) against a synthetic corpus's true timing.
+"""Evaluate phone segmentation (ingest.speech.segment) against a synthetic corpus's true timing.
 
 Generates a synthetic corpus (eSpeak NG speech whose phone timing is known exactly, in the
 five emotions), then for every clip:
@@ -32,7 +32,7 @@ import numpy as np
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.formats.phones_csv import read_phones_csv
 from ingest.formats.wav import read_wav
-from ingest.segment import align, boundary_errors, phone_error_rate, recognize
+from ingest.speech.segment import align, boundary_errors, phone_error_rate, recognize
 
 
 def _clips(folder: Path, limit: int | None) -> list[Path]:

@@ -34,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph import evaluate
 from animegraph.baselines.av_hmm import AVHMMBaseline
 from animegraph.baselines.data import training_set
+from animegraph.motion import measures
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.pipeline import prepare_sources
 from ingest.readers import discover
@@ -85,10 +85,10 @@ def evaluate_model(model: AVHMMBaseline, test) -> dict:
         model.hmm_.max_iter = keep
         first.append((one - model.motion_mean_) @ model.components_.T)
     est, first, truth = np.vstack(est), np.vstack(first), np.vstack(truth)
-    return {"amse": evaluate.amse(est, truth), "acc": evaluate.acc(est, truth),
-            "acc_per_param": [evaluate.acc(est[:, r], truth[:, r])
+    return {"amse": measures.amse(est, truth), "acc": measures.acc(est, truth),
+            "acc_per_param": [measures.acc(est[:, r], truth[:, r])
                               for r in range(truth.shape[1])],
-            "amse_1": evaluate.amse(first, truth), "acc_1": evaluate.acc(first, truth),
+            "amse_1": measures.amse(first, truth), "acc_1": measures.acc(first, truth),
             "rmse": float(np.sqrt(np.mean(np.vstack(motion_err)))),
             "inversion_iters": float(np.mean(iters)),
             "rtf": synth_s / audio_s, "test_frames": len(truth)}

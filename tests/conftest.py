@@ -46,7 +46,7 @@ def tiny_db(tiny_corpus, tmp_path_factory):
 @pytest.fixture(autouse=True)
 def _isolated_cache(tmp_path_factory, monkeypatch):
     """Keep every test's cache (the demo's default corpus) out of the user's home."""
-    from animegraph.cache import CACHE_ENV
+    from animegraph.apps.cache import CACHE_ENV
 
     monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "cache"))
 

@@ -56,7 +56,7 @@ def test_single_gaussian_inversion_is_the_conditional_mean(rng):
 
 
 def test_inversion_recovers_a_linear_gaussian_relation(data, fitted):
-    from animegraph.evaluate import acc, amse
+    from animegraph.motion.measures import acc, amse
 
     for audio, visual in data[10:]:
         est = fitted.invert(audio)
@@ -244,7 +244,7 @@ def test_baseline_predicts_motion(small_baseline):
 
 def test_baseline_beats_the_mean_pose_on_training_audio(small_baseline):
     from animegraph.baselines.data import training_set
-    from animegraph.evaluate import acc
+    from animegraph.motion.measures import acc
 
     model, path = small_baseline
     rs = []

@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from animegraph import evaluate
+from animegraph.apps.cli import main
 from animegraph.baselines import BASELINES, METHODS, estimator_class, make_estimator
 from animegraph.baselines.base import (
     fitted_model,
@@ -19,7 +19,7 @@ from animegraph.baselines.base import (
 from animegraph.baselines.data import audio_features, training_set
 from animegraph.baselines.hier_pca import HierPca, _pca, _speech_to_d
 from animegraph.baselines.mu_mlp import MuMlp
-from animegraph.cli import main
+from animegraph.motion import measures
 from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.tables import prepared_from_database
@@ -99,16 +99,16 @@ def test_learns_more_than_the_mean(fitted, split, method):
     face in lip RMSE (hier-pca does not on this little data, see docs/results.md)."""
     train, test = split
     names, groups, kind = test[0].schema.names, test[0].schema.groups, test[0].schema.kind
-    lips = evaluate.lip_channels(names, groups)
+    lips = measures.lip_channels(names, groups)
     mean = np.concatenate([c.motion for c in train]).mean(axis=0)
     rs, err, base = [], [], []
     for clip in test:
         pred = fitted[method].predict(clip.audio, clip.sample_rate, emotion=clip.emotion,
                                       n_frames=len(clip.motion))
-        rs.append(evaluate.pearson(evaluate.mouth_opening(pred, names, kind),
-                                   evaluate.mouth_opening(clip.motion, names, kind)))
-        err.append(evaluate.rmse(pred, clip.motion, lips))
-        base.append(evaluate.rmse(np.broadcast_to(mean, clip.motion.shape), clip.motion, lips))
+        rs.append(measures.pearson(measures.mouth_opening(pred, names, kind),
+                                   measures.mouth_opening(clip.motion, names, kind)))
+        err.append(measures.rmse(pred, clip.motion, lips))
+        base.append(measures.rmse(np.broadcast_to(mean, clip.motion.shape), clip.motion, lips))
     assert np.mean(rs) > 0.1
     if method == "mu-mlp":
         assert np.mean(err) < np.mean(base)

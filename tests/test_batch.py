@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from animegraph.batch import (
+from animegraph.apps.batch import (
     DONE,
     EXAMPLE_SCRIPT,
     BatchOptions,
@@ -22,14 +22,14 @@ from animegraph.batch import (
     run_line,
     voice_for,
 )
-from animegraph.cli import main
-from animegraph.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
+from animegraph.apps.cli import main
+from animegraph.apps.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
 from db.errors import DataError
 from ingest.corpus.emotions import STYLES
-from ingest.espeak import Voice, speak
 from ingest.formats.c3d import read_c3d
 from ingest.formats.phones_csv import read_phones_csv
 from ingest.formats.wav import read_wav
+from ingest.speech.espeak import Voice, speak
 
 # --------------------------------------------------------------------------- the script
 
@@ -165,7 +165,7 @@ def test_the_key_follows_inputs_recording_and_database(tmp_path):
 def test_run_line_in_process(tiny_db, tmp_path):
     """A worker's job, without the cluster: a stale marker goes first, a bad emotion fails
     the line with its reason, and the model is loaded once for both lines."""
-    from animegraph import batch
+    from animegraph.apps import batch
 
     db = tiny_db[0]
     version, identity = database_identity(db)

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from animegraph.cli import main
+from animegraph.apps.cli import main
 
 
 def _one_line_error(capsys, code, expected_code):
@@ -29,7 +29,7 @@ def test_console_script_is_installed():
 
 
 def test_module_entry_point_reports_errors_in_one_line():
-    out = subprocess.run([sys.executable, "-m", "animegraph.cli", "corpus", "synth"],
+    out = subprocess.run([sys.executable, "-m", "animegraph.apps.cli", "corpus", "synth"],
                          capture_output=True, text=True)
     assert out.returncode == 2
     assert len(out.stderr.strip().splitlines()) == 1

@@ -6,9 +6,9 @@ import json
 
 import numpy as np
 
-from animegraph.cache import default_corpus_dir, default_db_dir
-from animegraph.cli import main
-from animegraph.demo import DEMO_SENTENCE
+from animegraph.apps.cache import default_corpus_dir, default_db_dir
+from animegraph.apps.cli import main
+from animegraph.apps.demo import DEMO_SENTENCE
 from db.store import Database, current_version
 from ingest.corpus.sentences import cmudict, words
 from ingest.corpus.synthetic import CorpusConfig, plan_corpus

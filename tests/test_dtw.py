@@ -1,4 +1,4 @@
-"""Dynamic time warping (animegraph.dtw): known answers, tslearn and librosa as references."""
+"""Dynamic time warping (animegraph.search.dtw): known answers; tslearn, librosa as references."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-import animegraph.dtw as dtw_module
-from animegraph.dtw import (
+import animegraph.search.dtw as dtw_module
+from animegraph.search.dtw import (
     audio_cost,
     audio_costs,
     audio_costs_many,

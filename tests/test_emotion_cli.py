@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animegraph.cli import main
+from animegraph.apps.cli import main
 from animegraph.emotion.control import parse_emotion
 from animegraph.emotion.evaluate import EmotionData, cross_validate
-from animegraph.synth import Model, read_motion, synthesize
+from animegraph.synthesis import Model, read_database_motion, synthesize
 from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.formats.phones_csv import read_phones_csv
@@ -88,8 +88,8 @@ def test_map_emotion_changes_emotion_keeps_speech(tiny_db, tiny_corpus, tmp_path
     err = capsys.readouterr().err
     assert "from neutral (nearest mean emotion components) to happy" in err
     model = Model.load(tiny_db[0])
-    source, _ = read_motion(stem.with_suffix(".c3d"), model)
-    mapped, fps = read_motion(out, model)
+    source, _ = read_database_motion(stem.with_suffix(".c3d"), model)
+    mapped, fps = read_database_motion(out, model)
     assert mapped.shape == source.shape and fps == pytest.approx(120.0, rel=1e-3)
     # The smile the mapping adds lifts the lip corners relative to the eyes.
     pts_s, pts_m = source.reshape(len(source), -1, 3), mapped.reshape(len(mapped), -1, 3)
@@ -101,7 +101,7 @@ def test_map_emotion_changes_emotion_keeps_speech(tiny_db, tiny_corpus, tmp_path
     back = tmp_path / "back.npz"
     assert main(["map-emotion", str(out), "--db", str(tiny_db[0]), "--to", "neutral",
                  "--from", "happy", "-o", str(back)]) == 0
-    again, _ = read_motion(back, model)
+    again, _ = read_database_motion(back, model)
     assert np.nanmean(np.abs(again - source)) < np.nanmean(np.abs(mapped - source))
 
 

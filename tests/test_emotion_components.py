@@ -18,7 +18,7 @@ def data(tiny_db):
 
 
 def test_numpy_dtw_matches_the_numba_kernel(rng):
-    from animegraph.dtw import dtw
+    from animegraph.search.dtw import dtw
 
     for n, m in ((1, 5), (7, 7), (23, 31), (40, 12)):
         x, y = rng.normal(size=(n, 3)), rng.normal(size=(m, 3))
@@ -70,7 +70,7 @@ def test_scores_and_labels_are_in_the_database(tiny_db):
 
 
 def test_info_lists_every_component_with_its_scores(tiny_db, capsys):
-    from animegraph.cli import main
+    from animegraph.apps.cli import main
 
     assert main(["info", "--db", str(tiny_db[0])]) == 0
     out = capsys.readouterr().out

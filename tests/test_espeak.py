@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from db.errors import DataError, ParameterError
-from ingest.espeak import (
+from ingest.speech.espeak import (
     _LOCK,
     ESPEAK_TO_ARPABET,
     SYLLABIC_SPLIT,
@@ -27,7 +27,7 @@ from ingest.espeak import (
     map_mnemonic,
     speak,
 )
-from ingest.phones import PHONE_SET, VOWELS
+from ingest.speech.phones import PHONE_SET, VOWELS
 
 SENTENCE = "Hello there. How are you today? I hope the weather is nice where you are, my friend."
 
@@ -196,7 +196,7 @@ def test_agrees_with_cmudict_on_common_words():
 
 
 def test_varied_text_has_no_unknown_mnemonic(caplog):
-    caplog.set_level(logging.WARNING, logger="ingest.espeak")
+    caplog.set_level(logging.WARNING, logger="ingest.speech.espeak")
     for voice in ("en-us", "en", "en-029"):
         with _LOCK:
             _, events = _engine().synthesize(VARIED_TEXT, Voice(name=voice))
@@ -209,7 +209,7 @@ def test_varied_text_has_no_unknown_mnemonic(caplog):
 
 
 def test_unknown_mnemonic_warns_and_falls_back(caplog):
-    caplog.set_level(logging.WARNING, logger="ingest.espeak")
+    caplog.set_level(logging.WARNING, logger="ingest.speech.espeak")
     raw = np.ones(3000, dtype=np.int16)
     spans = _spans([(0, "k"), (1000, "'Y:#"), (2000, "_:")], raw)
     assert [s.phones for s in spans] == [("K",), ("UH",), ("SIL",)]

@@ -8,7 +8,7 @@ import pytest
 from db.errors import ParameterError
 from ingest import facemesh
 from ingest.corpus import articulation, face
-from ingest.phones import PHONES
+from ingest.speech.phones import PHONES
 
 
 def _controls(n=1, **values):

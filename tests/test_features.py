@@ -1,4 +1,4 @@
-"""Tests of ingest.features: RASTA-PLP (Cao et al. 2005 §4.1), MFCC and phone slicing.
+"""Tests of ingest.speech.features: RASTA-PLP (Cao et al. 2005 §4.1), MFCC and phone slicing.
 
 Real signals throughout: eSpeak NG speech with its exact phone timing, impulses, noise.
 The thresholds were measured on this implementation; each comment gives the measured value.
@@ -14,8 +14,8 @@ import pytest
 from scipy.signal import freqz, lfilter
 
 from db.errors import DataError, ParameterError
-from ingest.espeak import speak
-from ingest.features import (
+from ingest.speech.espeak import speak
+from ingest.speech.features import (
     RASTA_DENOMINATOR,
     RASTA_NUMERATOR,
     RastaPlpConfig,
@@ -24,7 +24,7 @@ from ingest.features import (
     rasta_plp,
     slice_frames,
 )
-from ingest.phones import VOWELS
+from ingest.speech.phones import VOWELS
 
 PLP = RastaPlpConfig(rasta=False)
 

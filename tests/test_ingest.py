@@ -10,7 +10,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
-from animegraph.cli import main
+from animegraph.apps.cli import main
 from db.errors import ParameterError
 from db.sql import query
 from db.store import Database, current_version

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from animegraph.mesh import (
+from animegraph.face.mesh import (
     REGIONS,
     Deformer,
     canonical_mesh,

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animegraph import evaluate
-from animegraph.plots import plot_heldout, plot_systems
-from animegraph.synth import Model
+from animegraph.apps.plots import plot_heldout, plot_systems
+from animegraph.motion import measures
+from animegraph.synthesis import Model
 from db.store import Database
 from ingest.tables import prepared_from_database
 
@@ -41,7 +41,7 @@ def test_plot_systems_overlays_each_prediction(model_and_clip, tmp_path):
     two = _image(plot_systems(clip, {"mean pose": flat, "recorded again": truth},
                               model.names, model.kind, tmp_path / "two.png"))
     assert one.shape == two.shape and np.abs(one - two).max() > 0  # the second line shows
-    assert evaluate.mouth_opening(flat, model.names, model.kind).std() == pytest.approx(0)
+    assert measures.mouth_opening(flat, model.names, model.kind).std() == pytest.approx(0)
 
 
 def test_plot_systems_can_show_the_first_seconds_only(model_and_clip, tmp_path):

@@ -7,8 +7,8 @@ import csv
 import numpy as np
 import pytest
 
-from animegraph.cli import main
-from animegraph.query import ClipData, QuerySpec, _write_snippet, build_sql, run_query
+from animegraph.apps.cli import main
+from animegraph.apps.query import ClipData, QuerySpec, _write_snippet, build_sql, run_query
 from db.errors import ParameterError
 from db.sql import query as run_sql
 from db.store import Database
@@ -109,7 +109,7 @@ def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
     snippet = out / index[0]["motion"]
     assert main(["render", str(snippet), "--db", str(tiny_db[0]), "-o",
                  str(tmp_path / "snip.glb")]) == 0
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import write_channel_csv
 
     write_channel_csv(tmp_path / "other.csv", np.zeros((3, 3)), ["foo.x", "foo.y", "foo.z"],
                       30)
@@ -143,7 +143,7 @@ def test_export_of_clips_and_nothing_matched(tiny_db, tmp_path, capsys):
 
 
 def test_curve_snippets_are_csv(tmp_path):
-    from animegraph.motionio import read_motion
+    from animegraph.motion.files import read_motion
 
     clip = ClipData(motion=np.arange(20.0).reshape(10, 2), names=("jawOpen", "smile"),
                     groups=("lips", "lips"), kind="curves", fps=30.0,

@@ -8,11 +8,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from animegraph.cli import main
-from animegraph.gltf import read_glb_frames
-from animegraph.mesh import canonical_mesh, default_marker_map
-from animegraph.motionio import Motion, read_motion
-from animegraph.render import animate, deformer_for, ffmpeg_exe
+from animegraph.apps.cli import main
+from animegraph.face.animation import animate
+from animegraph.face.gltf import read_glb_frames
+from animegraph.face.mesh import canonical_mesh, default_marker_map
+from animegraph.face.render import deformer_for, ffmpeg_exe
+from animegraph.motion.files import Motion, read_motion
 from ingest.corpus import face
 from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.wav import write_wav
@@ -124,7 +125,7 @@ def test_obj_frames_and_force(take, capsys):
 
 
 def test_landmark_motion_renders(tmp_path):
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import write_channel_csv
 
     verts = canonical_mesh().vertices
     values = np.repeat(verts.reshape(1, -1), 6, axis=0)
@@ -137,7 +138,7 @@ def test_landmark_motion_renders(tmp_path):
 
 
 def test_curves_render_as_curves(tmp_path, capsys):
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import write_channel_csv
 
     t = np.arange(60) / 30
     values = np.column_stack([np.sin(t * 6) ** 2, 0.5 * t, np.zeros_like(t)])
@@ -216,7 +217,7 @@ def test_custom_mesh_renders(take, tmp_path):
 def test_plot_against_truth(take, tmp_path, capsys):
     motion = read_motion(take / "take.c3d")
     noisy = Motion(values=motion.values + 0.3, names=motion.names, fps=motion.fps)
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import write_channel_csv
 
     write_channel_csv(tmp_path / "syn.csv", noisy.values, noisy.names, noisy.fps)
     out = tmp_path / "p.png"
@@ -252,7 +253,7 @@ def test_real_landmark_track_renders(tmp_path):
     """A real tracked face (EDTalk sample, ../shared/data) on the canonical mesh, as MP4."""
     from conftest import require_shared
 
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import write_channel_csv
     from ingest.readers.landmarks import normalise_landmarks
 
     folder = require_shared("talkingface", "edtalk_mouth_source")

@@ -6,10 +6,19 @@ import numpy as np
 import pytest
 
 from animegraph import search as S
-from animegraph.graph import PHONE_INDEX, AnimeGraph
-from animegraph.search import Candidates, SearchWeights, candidates, path_cost, search
+from animegraph.search import (
+    Candidates,
+    SearchWeights,
+    candidates,
+    dp,
+    path_cost,
+    problem,
+    search,
+)
+from animegraph.search import exact as exact_module
+from animegraph.search.graph import PHONE_INDEX, AnimeGraph
 from db.errors import ParameterError
-from ingest.phones import PHONES
+from ingest.speech.phones import PHONES
 
 EMOTIONS = ("angry", "happy", "neutral")
 
@@ -377,7 +386,7 @@ def test_dp_refuses_large_problems(monkeypatch):
     rng = np.random.default_rng(10)
     g = random_graph(rng, 30, ("AA", "B"))
     cands = candidates(g, ["AA", "B", "AA"])
-    monkeypatch.setattr(S, "DP_MAX_PAIRS", 4)
+    monkeypatch.setattr(dp, "DP_MAX_PAIRS", 4)
     with pytest.raises(ParameterError, match="dp"):
         search(g, cands, random_audio(rng, cands), method="dp")
 
@@ -407,15 +416,15 @@ def test_exact_bounds_are_admissible(seed):
     cands = candidates(g, [str(x) for x in rng.choice(phones, size=int(rng.integers(2, 9)))])
     audio = random_audio(rng, cands)
     weights = SearchWeights() if seed % 2 else SearchWeights(w_jump=0.5, w_audio=0.2)
-    p = S._Problem.build(g, cands, audio, weights, None)
+    p = problem.Problem.build(g, cands, audio, weights, None)
     pos = np.full(g.n_nodes, -1, dtype=np.int64)
-    h = S._relaxed_backward(p.cn, p.off, p.u, p.nxt, p.last, p.first,
-                            float(weights.w_jump), p.scale, pos)
+    h = exact_module._relaxed_backward(p.cn, p.off, p.u, p.nxt, p.last, p.first,
+                                       float(weights.w_jump), p.scale, pos)
     assert np.all(pos == -1)
     H = _cost_to_go(p)
     assert np.all(h <= H + 1e-9)
-    path, ub = S._greedy(p.cn, p.off, p.u, h, p.nxt, p.last, p.first, float(weights.w_jump),
-                         p.scale)
+    path, ub = exact_module._greedy(p.cn, p.off, p.u, h, p.nxt, p.last, p.first,
+                                    float(weights.w_jump), p.scale)
     assert ub == pytest.approx(p.breakdown(path - p.off[:-1]).cost, abs=1e-9)
     assert ub >= search(g, cands, audio, method="dp", weights=weights).cost - 1e-9
 
@@ -423,7 +432,7 @@ def test_exact_bounds_are_admissible(seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_exact_threaded_queries_match_dp(seed, monkeypatch):
     # Force the k-d tree and the multi-threaded query path on small layers.
-    monkeypatch.setattr(S, "_PARALLEL_MIN", 1)
+    monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
     rng = np.random.default_rng(800 + seed)
     phones = ("AA", "B", "S", "IY")
     g = random_graph(rng, 200, phones, length=(5, 20), n_pcs=4, scale=30.0)

@@ -1,4 +1,4 @@
-"""Tests of phone segmentation (ingest.segment) and G2P (ingest.g2p).
+"""Tests of phone segmentation (ingest.speech.segment) and G2P (ingest.speech.g2p).
 
 Real PocketSphinx and eSpeak NG, no mocks. Reference timing comes from eSpeak NG, which
 knows where each phone it synthesises starts.
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from db.errors import DataError, ParameterError
-from ingest.espeak import Voice, speak
 from ingest.formats.phones_csv import Segment
-from ingest.g2p import (
+from ingest.speech.espeak import Voice, speak
+from ingest.speech.g2p import (
     espeak_g2p,
     g2p,
     number_to_words,
@@ -23,8 +23,8 @@ from ingest.g2p import (
     rule_g2p,
     transcript_words,
 )
-from ingest.phones import PHONE_SET, SILENCE
-from ingest.segment import (
+from ingest.speech.phones import PHONE_SET, SILENCE
+from ingest.speech.segment import (
     MIN_DURATION,
     align,
     boundary_errors,
@@ -93,7 +93,7 @@ def test_align_recovers_phones_and_timing(spoken):
 def test_align_out_of_vocabulary_word(caplog):
     text = "The blorptastic wizard counted 42 frogs."
     utterance = speak(text)
-    with caplog.at_level(logging.DEBUG, logger="ingest.segment"):
+    with caplog.at_level(logging.DEBUG, logger="ingest.speech.segment"):
         segments = align(utterance.audio, utterance.sample_rate, text)
     _check_tiling(segments, len(utterance.audio), utterance.sample_rate)
     assert "blorptastic" in caplog.text
@@ -237,7 +237,7 @@ def test_segment_order_of_preference(spoken):
 
 
 def test_segment_falls_back_to_recognition(caplog):
-    with caplog.at_level(logging.WARNING, logger="ingest.segment"):
+    with caplog.at_level(logging.WARNING, logger="ingest.speech.segment"):
         segments, method = segment(np.zeros(32000), 16000, text="hello world")
     assert method == "recognized"
     assert segments == [Segment(SILENCE, 0.0, 2.0)]

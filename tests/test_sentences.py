@@ -17,7 +17,7 @@ from ingest.corpus.sentences import (
     max_sentences,
     words,
 )
-from ingest.phones import CONSONANTS, VOWELS
+from ingest.speech.phones import CONSONANTS, VOWELS
 
 CMU_PHONES = frozenset(VOWELS + CONSONANTS)
 

@@ -7,9 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from animegraph.cli import main
-from animegraph.synth import Model, explain_record, synthesize
-from animegraph.synthesis import PostOptions, warp_positions
+from animegraph.apps.cli import main
+from animegraph.synthesis import Model, PostOptions, explain_record, synthesize, warp_positions
 from db.errors import DataError, ParameterError
 from ingest.corpus import face
 from ingest.corpus.synthetic import ClipSpec, CorpusConfig, synthesize_clip, write_clip
@@ -137,9 +136,9 @@ def test_a_minute_long_utterance_at_any_rate_in_stereo(model, tmp_path):
     """The paper's longest synthesis was 62 s; 44.1 kHz stereo input is read as mono."""
     from scipy.signal import resample_poly
 
-    from ingest.espeak import speak
     from ingest.formats.phones_csv import Segment
     from ingest.formats.wav import write_wav
+    from ingest.speech.espeak import speak
 
     text = " ".join(["Bob moved the warm vase away from the window, and Pam sang."] * 16)
     utt = speak(text)

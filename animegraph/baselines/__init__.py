@@ -1,7 +1,7 @@
 """Baseline speech-to-face methods, measured side by side with the Anime Graph (issue #8).
 
 Methods (:data:`METHODS`): ``anime-graph`` (this project: search of recorded motion,
-:mod:`animegraph.synth`), ``mu-mlp`` (Hong, Wen & Huang 2002, :mod:`.mu_mlp`),
+:mod:`animegraph.synthesis`), ``mu-mlp`` (Hong, Wen & Huang 2002, :mod:`.mu_mlp`),
 ``hier-pca`` (Cosker et al., :mod:`.hier_pca`) and ``av-hmm`` (Terissi et al. 2013,
 :mod:`.av_hmm`). The last three are compact statistical audio-to-visual mappings.
 
@@ -29,6 +29,9 @@ The contract every baseline follows
   raise :class:`db.errors.ParameterError`.
 * Audio features: :func:`.data.audio_features` (MFCCs at motion-frame times with
   edge-padded context).
+
+Imports: ``db``, ``ingest`` and :mod:`animegraph.motion` (the measures) -- never the
+search or synthesis they are compared with.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ Process. 2013:5 (``../shared/papers/terissi2013-*.txt``).
   (Eq. 3-4) whose update is Eq. 7 — per frame, the precision-weighted combination of every
   (state, mixture) component's conditional visual mean, weighted by the posterior
   occupancies computed with the current estimate — repeated until it converges (Fig. 4).
-* §6, Eq. 11-12: AMSE and ACC (:func:`animegraph.evaluate.amse`, :func:`~.acc`).
+* §6, Eq. 11-12: AMSE and ACC (:func:`animegraph.motion.measures.amse`, :func:`~.acc`).
 
 :class:`AVHMM` is the model on plain arrays; the estimator that takes prepared clips and
 audio is :class:`AVHMMBaseline`.

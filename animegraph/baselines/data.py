@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from db.errors import DataError, ParameterError
-from ingest.features import mfcc
 from ingest.formats.phones_csv import Segment
+from ingest.speech.features import mfcc
 
 #: Frame hop of the MFCC analysis (s) before it is interpolated to the requested times.
 MFCC_HOP_S = 0.010
@@ -143,7 +143,7 @@ def audio_features_at(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
                       n_mfcc: int, context: int, context_hop_s: float) -> np.ndarray:
     """MFCCs at ``times`` with ``context`` frames each side, ``context_hop_s`` apart.
 
-    The MFCCs (:func:`ingest.features.mfcc`, 10 ms hop, 25 ms window) are linearly
+    The MFCCs (:func:`ingest.speech.features.mfcc`, 10 ms hop, 25 ms window) are linearly
     interpolated to ``times + k * context_hop_s`` for k = -context..context; times before
     the start or after the end take the first or last frame (edge padding).
 

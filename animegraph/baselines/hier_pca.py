@@ -6,7 +6,7 @@ model for video-realistic facial animation" (``../shared/papers/cosker-*.txt``).
 * §2, §5: a hierarchy of facial areas — the whole face at the root, the mouth as a
   sub-node; each node synthesises its area from speech and the sub-node's result
   replaces the root's mouth region. Here the mouth is the database's ``lips`` motion
-  group (:func:`animegraph.evaluate.lip_channels`: lip markers or landmarks; jaw, mouth
+  group (:func:`animegraph.motion.measures.lip_channels`: lip markers or landmarks; jaw, mouth
   and lip curves).
 * §4.1: per node an appearance model; our analogue is a PCA of the node's motion
   channels (:data:`APPEARANCE_VARIANCE` of the variance kept), giving appearance
@@ -47,7 +47,7 @@ from sklearn.mixture import GaussianMixture
 
 from animegraph.baselines.base import BaselineModel, check_enough, sample_times
 from animegraph.baselines.data import TrainingSet, audio_features_at, resample_to
-from animegraph.evaluate import lip_channels
+from animegraph.motion.measures import lip_channels
 from db.errors import DataError, ParameterError
 
 #: Clusters of the non-linear appearance model (§4.2: "approximately 60").

@@ -21,7 +21,7 @@ using neural networks", IEEE Trans. Neural Networks 13(4), 2002
   that expression's frames, and one MLP ``Υk`` (:data:`EXPRESSION_HIDDEN` = 30 hidden
   units) maps them to the final UMUPs and EMUPs.
 * §VII-A: evaluation by Pearson R (Eq. 6) and MSE (Eq. 8) of normalised displacements:
-  :func:`animegraph.evaluate.hong_r`, :func:`~animegraph.evaluate.hong_nmse`.
+  :func:`animegraph.motion.measures.hong_r`, :func:`~animegraph.motion.measures.hong_nmse`.
 
 Choices the paper leaves open (ours): the phoneme classes are the phone labels present
 in the training data (ARPAbet 39 + SIL, not the paper's 44); a class with fewer than

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from db.errors import DataError, ParameterError
+from ingest.decompose import smooth
 from ingest.emotion.model import EmotionModel
 from ingest.motion import unstabilize_points
 
@@ -224,7 +225,7 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
 
     Parameters
     ----------
-    synth_model : animegraph.synth.Model
+    synth_model : animegraph.synthesis.Model
     motion : np.ndarray, shape (n_frames, n_channels)
     source : str
     target : str or dict of str to float
@@ -247,8 +248,6 @@ def map_motion(synth_model, motion: np.ndarray, source: str, target, *,
     mapped = model.map_components(ics, source, target)
     e = model.split.emotion_components
     if fps is not None and e.size and not np.array_equal(mapped, ics):
-        from animegraph.synthesis import smooth
-
         mapped[:, e] = smooth(mapped[:, e], synth_model.cutoffs[e], fps)
     delta = dec.inverse_transform(mapped) - dec.inverse_transform(ics)
     if rigid:

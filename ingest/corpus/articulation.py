@@ -20,7 +20,7 @@ import numpy as np
 
 from db.errors import ParameterError
 from ingest.corpus.face import SPEECH_CONTROLS
-from ingest.phones import PHONE_SET
+from ingest.speech.phones import PHONE_SET
 
 # A target is a value per control; diphthongs give (onset, offset) pairs.
 Target = dict[str, float | tuple[float, float]]

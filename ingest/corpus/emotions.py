@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from db.errors import ParameterError
-from ingest.espeak import Voice
+from ingest.speech.espeak import Voice
 
 #: Emotion labels, in the paper's order of database size (§3.1: 59 frustrated,
 #: 85 happy, 86 neutral, 100 sad, 112 angry sentences).

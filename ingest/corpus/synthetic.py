@@ -44,10 +44,10 @@ from db.errors import ParameterError
 from ingest.corpus import articulation, face, gestures
 from ingest.corpus.emotions import EMOTIONS, EmotionStyle, vary
 from ingest.corpus.sentences import generate_sentences
-from ingest.espeak import Utterance, speak
 from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.phones_csv import write_phones_csv
 from ingest.formats.wav import write_wav
+from ingest.speech.espeak import Utterance, speak
 
 logger = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ emotion mappings, and may not import :mod:`animegraph` (whose numba DTW scores p
 curves at search time), hence this plain NumPy version: Euclidean local cost, steps
 (1, 0), (0, 1), (1, 1) of weight 1, no band, computed one anti-diagonal at a time.
 Ties while backtracking go to the diagonal, then (i-1, j), then (i, j-1), the convention of
-:func:`animegraph.dtw.dtw`, whose paths it reproduces (checked by the tests).
+:func:`animegraph.search.dtw.dtw`, whose paths it reproduces (checked by the tests).
 """
 
 from __future__ import annotations

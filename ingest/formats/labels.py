@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment, as_segments  # noqa: F401  (re-exported)
-from ingest.phones import PHONE_SET, SILENCE
+from ingest.speech.phones import PHONE_SET, SILENCE
 
 #: Labels (compared in lower case, white space stripped) that mean silence or non-speech:
 #: Montreal Forced Aligner / Kaldi (``sil``, ``sp``, ``spn``), HTK/HTS (``sil``, ``pau``),
@@ -36,7 +36,7 @@ ALIASES: dict[str, str] = {
 
 
 def to_arpabet(label: str) -> str:
-    """Map one phone label to a phone of :data:`ingest.phones.PHONE_SET`.
+    """Map one phone label to a phone of :data:`ingest.speech.phones.PHONE_SET`.
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 
 One header line ``start,end,phone``, then one line per phone segment: start and end
 times in seconds with six decimals, and an ARPAbet phone of
-:data:`ingest.phones.PHONE_SET` (upper case, no stress digit)::
+:data:`ingest.speech.phones.PHONE_SET` (upper case, no stress digit)::
 
     start,end,phone
     0.000000,0.120000,SIL
@@ -25,7 +25,7 @@ from typing import NamedTuple
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.text import read_utf8
-from ingest.phones import PHONE_SET
+from ingest.speech.phones import PHONE_SET
 
 logger = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ def as_segments(segments: Iterable[object]) -> list[Segment]:
     ----------
     segments : iterable
         Objects with ``.phone .start .end`` (seconds) or ``(phone, start, end)`` tuples;
-        phones of :data:`ingest.phones.PHONE_SET`, sorted, not overlapping. Times are
+        phones of :data:`ingest.speech.phones.PHONE_SET`, sorted, not overlapping. Times are
         rounded to a microsecond.
 
     Returns

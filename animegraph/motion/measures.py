@@ -1,10 +1,10 @@
-"""Measures of synthesized motion against recorded motion, and naive baselines.
+"""Measures of facial motion: mouth opening and other distances, and errors against truth.
 
 The measures follow the lip-sync literature: RMSE over channels, the *lip vertex error*
 (for each frame the largest error over the lip points, averaged over frames), and the
-Pearson correlation of mouth opening. The baselines show what the search adds: a random
-anime of the right phoneme for every phone, and phoneme matching that ignores every
-cost (always the first anime of the phoneme).
+Pearson correlation of mouth opening; the baselines' own measures (Hong et al. 2002
+Eq. 6 and 8; Terissi et al. 2013 Eq. 11-12); and the facial measures an animator looks
+at in a plot (mouth opening and width, brow height, the busiest curves).
 """
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
+from animegraph.motion.files import Motion
 
 #: Point pairs whose distance is the mouth opening, per kind of database.
 MOUTH_POINTS = {"markers": ("ulip_in_c", "llip_in_c"), "landmarks": ("lm13", "lm14")}
@@ -78,22 +80,6 @@ def pearson(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a[ok], b[ok])[0, 1])
 
 
-def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
-                   rng: np.random.Generator | None = None) -> np.ndarray:
-    """A naive anime sequence: ``"random"`` candidate per phone, or the ``"first"``."""
-    if kind == "random":
-        rng = rng or np.random.default_rng(0)
-        return np.array([int(rng.choice(c)) for c in candidate_nodes], dtype=np.int64)
-    if kind == "first":
-        return np.array([int(c[0]) for c in candidate_nodes], dtype=np.int64)
-    raise ValueError(f"unknown baseline {kind!r}")
-
-
-#: Methods compared: exact search, the paper's look-ahead, the two baselines, and (beyond
-#: the paper) the exact search's motion averaged over the 20 best animes of each phone
-#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
-METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
-
 
 def motion_scores(pred: np.ndarray, truth: np.ndarray, names: Sequence[str],
                   groups: Sequence[str], kind: str, active: np.ndarray) -> dict:
@@ -127,53 +113,6 @@ def motion_scores(pred: np.ndarray, truth: np.ndarray, names: Sequence[str],
     return out
 
 
-def heldout_query(model, clip):
-    """The search input of a held-out prepared clip, from its audio and its phones.
-
-    Returns
-    -------
-    (phones, emotion or None, candidates, audio costs)
-    """
-    from animegraph.synth import query_phones, score_candidates
-
-    audio = clip.audio.astype(np.float32) / 32767.0
-    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
-    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
-    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
-    return phones, emotion, cands, audio_cost
-
-
-def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None = None,
-                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
-    """The anime sequence one of :data:`METHODS` picks, and its number of jump matches.
-
-    ``"kbest<K>"`` picks the exact search's sequence (its motion averages K animes a phone:
-    :func:`method_motion`).
-    """
-    from animegraph.search import search
-
-    if method in ("random", "first"):
-        nodes = baseline_nodes(cands.nodes, method, rng)
-        return nodes, int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
-    window = int(method[len("window"):]) if method.startswith("window") else None
-    result = search(model.graph, cands, audio_cost, emotion=emotion,
-                    method="window" if window else "exact", window=window)
-    return result.nodes, result.n_jumps
-
-
-def method_motion(model, phones, cands, audio_cost, method: str, *,
-                  emotion: str | None = None,
-                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
-    """The motion (independent components) one of :data:`METHODS` synthesizes from the
-    search input of :func:`heldout_query`, and its number of jump matches."""
-    from animegraph.synth import render_k_best, render_nodes
-
-    nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
-    if method.startswith("kbest"):
-        k = int(method[len("kbest"):])
-        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
-    return render_nodes(model, phones, nodes, emotion=emotion)[0], jumps
-
 
 def paper_scores(pred: np.ndarray, truth: np.ndarray, active: np.ndarray, lips: np.ndarray,
                  norm: tuple[np.ndarray, np.ndarray]) -> dict:
@@ -195,70 +134,6 @@ def paper_scores(pred: np.ndarray, truth: np.ndarray, active: np.ndarray, lips: 
             "amse": amse(pred[:, mouth], truth[:, mouth]),
             "acc": acc(pred[:, mouth], truth[:, mouth])}
 
-
-def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
-                  estimators: dict | None = None,
-                  norm: tuple[np.ndarray, np.ndarray] | None = None,
-                  rng: np.random.Generator | None = None,
-                  predictions: dict | None = None) -> dict:
-    """Synthesize a held-out prepared clip from its audio and phones; score every method.
-
-    Parameters
-    ----------
-    model : animegraph.synth.Model
-        A database that does not contain the clip.
-    clip : ingest.prepare.PreparedClip
-        The clip (its motion, in the database's space, is the ground truth).
-    methods : sequence of str
-        Anime Graph search methods (:data:`METHODS`) to score.
-    estimators : dict of str to BaselineModel, optional
-        Fitted baselines (:mod:`animegraph.baselines`), scored on the clip's audio alone.
-    norm : (center, scale), optional
-        :func:`displacement_scale` of the training motion; with it every row also has
-        :func:`paper_scores`.
-    predictions : dict, optional
-        Filled with each method's motion, shape (n_frames, n_channels).
-
-    Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
-    and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
-    and ``rtf`` (``synth_s`` over the clip's duration).
-    """
-    import time
-
-    rng = rng or np.random.default_rng(0)
-    t0 = time.perf_counter()
-    phones, emotion, cands, audio_cost = heldout_query(model, clip)
-    query_s = time.perf_counter() - t0
-    truth = clip.motion.astype(np.float64)
-    # Channels that move: their share of the database's motion variance (from the PCA).
-    share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
-    active = np.flatnonzero(share > 1e-4 * share.max())
-    lips = lip_channels(model.names, model.groups)
-    rows = {}
-
-    def record(name, pred, extra):
-        row = {**motion_scores(pred, truth, model.names, model.groups, model.kind, active),
-               **extra}
-        if norm is not None:
-            row |= paper_scores(pred, truth, active, lips, norm)
-        row["rtf"] = row["synth_s"] / clip.duration
-        rows[name] = row
-        if predictions is not None:
-            predictions[name] = pred
-
-    for method in methods:
-        t0 = time.perf_counter()
-        ics, jumps = method_motion(model, phones, cands, audio_cost, method, emotion=emotion,
-                                   rng=rng)
-        pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
-        record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
-    for name, est in (estimators or {}).items():
-        t0 = time.perf_counter()
-        pred = est.predict(clip.audio, clip.sample_rate, n_frames=len(truth),
-                           emotion=clip.emotion if clip.emotion in est.emotions_ else None)
-        record(name, pred, {"synth_s": time.perf_counter() - t0})
-    return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
-            "seconds": round(clip.duration, 2), "methods": rows}
 
 
 def _paired(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -373,3 +248,70 @@ def hong_nmse(pred: np.ndarray, truth: np.ndarray) -> float:
     n = min(len(pred), len(truth))
     d = np.asarray(pred[:n], np.float64) - np.asarray(truth[:n], np.float64)
     return float(np.nanmean(np.nanmean(d**2, axis=1)))
+
+
+#: (label, point a, point b) distances per kind of point set; the first is the mouth.
+POINT_MEASURES = {
+    "markers": (("mouth opening (mm)", "ulip_in_c", "llip_in_c"),
+                ("mouth width (mm)", "lip_corner_r", "lip_corner_l"),
+                ("brow to eye (mm)", "brow_r1", "eye_in_r")),
+    "landmarks": (("mouth opening (mm)", "lm13", "lm14"),
+                  ("mouth width (mm)", "lm61", "lm291"),
+                  ("brow to eye (mm)", "lm105", "lm159")),
+}
+
+
+def point_kind(names: Sequence[str]) -> str | None:
+    """``markers`` or ``landmarks`` if the channels hold that point set, else None."""
+    names = set(names)
+    for kind, measures in POINT_MEASURES.items():
+        if all(f"{p}.x" in names for _, a, b in measures[:1] for p in (a, b)):
+            return kind
+    return None
+
+
+def _distance(values: np.ndarray, names: Sequence[str], a: str, b: str) -> np.ndarray:
+    index = {n: i for i, n in enumerate(names)}
+    pa = values[:, [index[f"{a}.{x}"] for x in "xyz"]]
+    pb = values[:, [index[f"{b}.{x}"] for x in "xyz"]]
+    return np.linalg.norm(pa - pb, axis=1)
+
+
+def measures(values: np.ndarray, names: Sequence[str], kind: str | None = None,
+             *, max_curves: int = 4, reference: Motion | None = None
+             ) -> list[tuple[str, np.ndarray]]:
+    """Facial measures over time: list of (label, values of shape (n_frames,)).
+
+    Point sets: the distances of :data:`POINT_MEASURES` that the channels allow. Curves:
+    the jaw/mouth-opening curve if there is one, then the busiest curves (busiest in
+    ``reference`` when given, so two motions show the same curves).
+    """
+    kind = point_kind(names) if kind not in POINT_MEASURES else kind
+    present = set(names)
+    if kind in POINT_MEASURES:
+        return [(label, _distance(values, names, a, b))
+                for label, a, b in POINT_MEASURES[kind]
+                if f"{a}.x" in present and f"{b}.x" in present]
+    out = []
+    mouth = next((n for n in MOUTH_CURVES if n in present), None)
+    if mouth is not None:
+        out.append((mouth, values[:, list(names).index(mouth)]))
+    source = reference.values if reference is not None else values
+    source_names = reference.names if reference is not None else names
+    spread = np.nanstd(np.asarray(source, dtype=np.float64), axis=0)
+    still = 1e-6 * max(float(np.nanmax(spread)), 1e-12) if len(spread) else 0.0
+    for c in np.argsort(-spread):
+        name = source_names[c]
+        if name in present and name != mouth and len(out) < max_curves and spread[c] > still:
+            out.append((name, values[:, list(names).index(name)]))
+    return out
+
+
+def measure(values: np.ndarray, names: Sequence[str], kind: str | None = None
+            ) -> tuple[str, np.ndarray]:
+    """The first of :func:`measures`: mouth opening where there is one."""
+    found = measures(values, names, kind, max_curves=1)
+    if not found:
+        return "value", np.asarray(values, dtype=np.float64)
+    return found[0]
+

@@ -12,7 +12,8 @@ Three steps, each optional so their effect can be measured:
   a_i+1 in their recordings (or extrapolated by velocity at a recording's end) and the
   two are cross-faded linearly.
 * **Smoothing** — each independent component is low-pass filtered at the cutoff learned
-  from the database (99 % of that component's energy below it).
+  from the database (99 % of that component's energy below it;
+  :func:`ingest.decompose.smooth`, beside the learning of the cutoffs).
 
 Beyond the paper, :func:`blend_k_best` averages the k best-matching animes of each phone
 instead of joining one anime per phone (opt-in: ``synthesize(..., k_best=K)``).
@@ -27,13 +28,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
-from animegraph.dtw import dtw, warp_indices
-from animegraph.graph import AnimeGraph
+from animegraph.search.dtw import dtw, warp_indices
+from animegraph.search.graph import AnimeGraph
+from ingest.decompose import smooth
 
-#: Order of the zero-phase Butterworth low-pass of the smoothing step.
-SMOOTHING_ORDER = 2
 #: :func:`blend_k_best` weighs the r-th ranked anime (r = 1, 2, ...) by ``r ** -RANK_DECAY``.
 #: Measured against equal weights (0) and 1 (docs/results.md): 0.5 was as good or better
 #: on every data set.
@@ -100,7 +99,7 @@ def warp_anime(graph: AnimeGraph, node: int, phone: Phone, n_out: int, *,
 def warp_positions(c_input: np.ndarray, c_anime: np.ndarray) -> np.ndarray:
     """Fractional anime prosody frame shown at each input prosody frame (§4.3).
 
-    The DTW alignment of the two prosody curves (:func:`animegraph.dtw.warp_indices`),
+    The DTW alignment of the two prosody curves (:func:`animegraph.search.dtw.warp_indices`),
     with its ends pinned: the first input frame shows the anime's first frame and the
     last its last. Where DTW matches several anime frames to an end frame, the mean
     would start the anime late (or end it early), and two consecutive animes of one
@@ -296,16 +295,3 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     if opts.smooth and cutoffs is not None:
         motion = smooth(motion, cutoffs, graph.fps)
     return motion
-
-
-def smooth(motion: np.ndarray, cutoffs: np.ndarray, fps: float) -> np.ndarray:
-    """Zero-phase low-pass of each column at its cutoff (Hz); columns at Nyquist pass."""
-    out = motion.copy()
-    nyquist = fps / 2
-    if len(motion) < 3 * (2 * SMOOTHING_ORDER + 1):
-        return out  # too short to filter without edge artefacts swamping it
-    for k, cut in enumerate(cutoffs):
-        if 0 < cut < 0.99 * nyquist:
-            sos = butter(SMOOTHING_ORDER, cut / nyquist, output="sos")
-            out[:, k] = sosfiltfilt(sos, motion[:, k])
-    return out

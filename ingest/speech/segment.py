@@ -4,8 +4,8 @@ Cao et al. cut their recordings into phones with Festival; here PocketSphinx doe
 the US-English acoustic model, CMUdict and phone language model its wheel ships:
 
 * :func:`align` — forced alignment of a known transcript. Words are normalised
-  (:func:`ingest.g2p.transcript_words`); words CMUdict lacks get a pronunciation from
-  :func:`ingest.g2p.g2p` (eSpeak NG, else letter-to-sound rules) and are added to the
+  (:func:`ingest.speech.g2p.transcript_words`); words CMUdict lacks get a pronunciation from
+  :func:`ingest.speech.g2p.g2p` (eSpeak NG, else letter-to-sound rules) and are added to the
   decoder's dictionary. A first pass aligns words (with optional pauses between them), a
   second pass aligns phones inside them.
 * :func:`recognize` — phone recognition without a transcript (PocketSphinx's *allphone*
@@ -16,7 +16,7 @@ the US-English acoustic model, CMUdict and phone language model its wheel ships:
 
 Every function returns :class:`~ingest.formats.phones_csv.Segment` lists that tile
 ``[0, len(audio) / sample_rate]`` exactly, in seconds of the input audio, with ARPAbet
-phones of :data:`ingest.phones.PHONE_SET` (pauses, edges and PocketSphinx's noise fillers
+phones of :data:`ingest.speech.phones.PHONE_SET` (pauses, edges and PocketSphinx's noise fillers
 are ``SIL``; adjacent ``SIL`` are merged; no segment is empty).
 
 :func:`boundary_errors` and :func:`phone_error_rate` score a segmentation against a
@@ -90,8 +90,8 @@ from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
-from ingest.g2p import g2p, transcript_words
-from ingest.phones import PHONE_SET, SILENCE
+from ingest.speech.g2p import g2p, transcript_words
+from ingest.speech.phones import PHONE_SET, SILENCE
 
 logger = logging.getLogger(__name__)
 
@@ -490,7 +490,7 @@ def align(
         Its sampling rate in Hz (resampled to 16 kHz internally).
     text : str
         What is said. Case and punctuation do not matter; numbers are spelled out;
-        words CMUdict lacks are pronounced by :func:`ingest.g2p.g2p`.
+        words CMUdict lacks are pronounced by :func:`ingest.speech.g2p.g2p`.
     refine : bool, optional
         Move boundaries to the nearest spectral change (see the module docstring).
 
@@ -645,7 +645,7 @@ def snap_labels(
     ----------
     labels : sequence of Segment
         ``(phone, start, end)`` items (or objects with those attributes), phones from
-        :data:`ingest.phones.PHONE_SET`, in time order.
+        :data:`ingest.speech.phones.PHONE_SET`, in time order.
     duration : float
         Length of the audio in seconds.
     tolerance : float, optional

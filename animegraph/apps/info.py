@@ -6,7 +6,7 @@ from collections import Counter
 
 from animegraph.baselines.base import stored_models
 from db.store import Database
-from ingest.phones import PHONES
+from ingest.speech.phones import PHONES
 
 
 def database_info(db: Database) -> dict:

@@ -1,6 +1,6 @@
 """``animegraph batch``: a dialogue script in, a folder of animated lines out (issue #7).
 
-Every line of the script (:mod:`animegraph.script`) becomes a folder ``OUT/<id>/``:
+Every line of the script (:mod:`animegraph.apps.script`) becomes a folder ``OUT/<id>/``:
 
 - ``speech.wav``: the speech used (the recording, or eSpeak NG's speech);
 - ``motion.c3d`` (marker and landmark databases) or ``motion.csv`` (curves);
@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from animegraph import __version__
-from animegraph.script import EmotionSpec, ScriptLine, read_script
+from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, current_version
@@ -144,7 +144,7 @@ def run_batch(
     Parameters
     ----------
     script : Path
-        CSV or JSON Lines dialogue script (:func:`animegraph.script.read_script`).
+        CSV or JSON Lines dialogue script (:func:`animegraph.apps.script.read_script`).
     options : BatchOptions
     progress : callable, optional
         ``progress(total)`` returns a wrapper of the iterable of finished lines (a bar).
@@ -319,10 +319,10 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
     """
     import numpy as np
 
-    from animegraph.dtw import audio_costs
-    from animegraph.synth import Model, synthesize
-    from ingest.espeak import Voice, speak
+    from animegraph.search.dtw import audio_costs
+    from animegraph.synthesis import Model, synthesize
     from ingest.formats.phones_csv import Segment
+    from ingest.speech.espeak import Voice, speak
 
     model = Model.load(db)
     utt = speak("Good morning, class.", Voice())
@@ -423,7 +423,7 @@ def worker_model(db: str, version: str):
         The database's live version is no longer ``version`` (it was rebuilt during the
         batch).
     """
-    from animegraph.synth import Model
+    from animegraph.synthesis import Model
 
     key = (str(Path(db).resolve()), version)
     with _MODEL_LOCK:
@@ -476,7 +476,7 @@ def run_line(task: LineTask) -> dict:
 
 
 def _make_line(task: LineTask, model, folder: Path) -> dict:
-    from animegraph.synth import backoffs, synthesize, write_explain, write_motion
+    from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
     from ingest.formats.phones_csv import write_phones_csv
     from ingest.formats.wav import read_wav, write_wav
 
@@ -520,8 +520,8 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
 
 
 def _speak(line: ScriptLine, warnings: list[str]):
-    from ingest.espeak import speak
     from ingest.formats.phones_csv import Segment
+    from ingest.speech.espeak import speak
 
     utt = speak(line.text, voice_for(line, warnings))  # errors name the text or the voice
     labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
@@ -533,7 +533,7 @@ def voice_for(line: ScriptLine, warnings: list[str] | None = None):
     (a mix blends the presets by weight; ``auto`` and no emotion speak neutrally), with
     the line's ``voice`` name if it has one."""
     from ingest.corpus.emotions import STYLES
-    from ingest.espeak import Voice
+    from ingest.speech.espeak import Voice
 
     spec = line.emotion
     weights = spec.weights if spec.source in ("given", "mix") else (("neutral", 1.0),)
@@ -577,8 +577,8 @@ def _render(folder: Path, motion_name: str, phones) -> None:
     phones as captions."""
     import secrets
 
-    from animegraph.motionio import read_motion
-    from animegraph.render import deformer_for, render_motion
+    from animegraph.face.render import deformer_for, render_motion
+    from animegraph.motion.files import read_motion
 
     motion = read_motion(folder / motion_name)
     track = [{"phone": p.phone, "start": p.start, "end": p.end} for p in phones]

@@ -17,9 +17,9 @@ import pyarrow as pa
 
 from db.errors import DataError
 from db.store import Database
-from ingest.phones import PHONES
+from ingest.speech.phones import PHONES
 
-#: Index of each phone in :data:`ingest.phones.PHONES`.
+#: Index of each phone in :data:`ingest.speech.phones.PHONES`.
 PHONE_INDEX = {p: i for i, p in enumerate(PHONES)}
 
 
@@ -30,7 +30,7 @@ class AnimeGraph:
     Attributes
     ----------
     node_phone : np.ndarray of int16, shape (n_nodes,)
-        Index into :data:`ingest.phones.PHONES`.
+        Index into :data:`ingest.speech.phones.PHONES`.
     node_emotion : np.ndarray of int16, shape (n_nodes,)
         Index into ``emotions``.
     node_clip : np.ndarray of int32, shape (n_nodes,)

@@ -63,7 +63,7 @@ def build_sql(spec: QuerySpec) -> str:
     ParameterError
         On an unknown phoneme or order field, a bad word, a negative duration or limit.
     """
-    from ingest.phones import PHONE_SET
+    from ingest.speech.phones import PHONE_SET
 
     where = []
     if spec.phoneme is not None:
@@ -163,7 +163,7 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
     DataError
         If the clip is not in the database.
     """
-    from animegraph.synth import to_world
+    from animegraph.synthesis import to_world
 
     channels = db.table("channels").to_pylist()
     names = tuple(ch["name"] for ch in channels)
@@ -290,8 +290,7 @@ def _safe(name: str) -> str:
 
 def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     """C3D for marker databases (at most 255 points), else channel CSV; the file name."""
-    from animegraph.mesh import point_labels
-    from animegraph.motionio import write_channel_csv
+    from animegraph.motion.files import point_labels, write_channel_csv
     from ingest.formats.c3d import MAX_MARKERS, MarkerData, write_c3d
 
     part = clip.motion[f0:f1]
@@ -315,7 +314,7 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from animegraph.plot_motion import measure
+    from animegraph.motion.measures import measure
 
     part = clip.motion[f0:f1]
     t = np.arange(len(part)) / clip.fps
@@ -348,8 +347,9 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
 
 
 def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
-    from animegraph.motionio import Motion
-    from animegraph.render import FaceRenderer, animate, animation_bounds, deformer_for
+    from animegraph.face.animation import animate, animation_bounds
+    from animegraph.face.render import FaceRenderer, deformer_for
+    from animegraph.motion.files import Motion
 
     try:
         deformer = deformer_for(clip.names)

@@ -1,7 +1,7 @@
-"""Rendering motion for an animator: MP4, GIF, PNG, glTF 2.0 (.glb, :mod:`animegraph.gltf`)
+"""Rendering motion for an animator: MP4, GIF, PNG, glTF 2.0 (.glb, :mod:`animegraph.face.gltf`)
 or OBJ frames.
 
-Point motion (markers, landmarks) is carried onto a face mesh (:mod:`animegraph.mesh`,
+Point motion (markers, landmarks) is carried onto a face mesh (:mod:`animegraph.face.mesh`,
 Cao et al. §7) and drawn as a flat-shaded face (matplotlib's Agg rasteriser, triangles
 in depth order), the frames piped as raw RGB into the ffmpeg binary that
 ``imageio-ffmpeg`` ships, with the speech muxed in. Curve motion (blendshape weights:
@@ -19,13 +19,13 @@ import secrets
 import shutil
 import subprocess
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from animegraph.mesh import Deformer, MarkerMap, Mesh, motion_points
-from animegraph.motionio import Motion
+from animegraph.face.animation import FaceAnimation, animate, animation_bounds
+from animegraph.face.mesh import Deformer, MarkerMap, Mesh
+from animegraph.motion.files import Motion
 from db.errors import DataError, ParameterError
 
 logger = logging.getLogger(__name__)
@@ -43,80 +43,6 @@ def ffmpeg_exe() -> str:
     import imageio_ffmpeg
 
     return imageio_ffmpeg.get_ffmpeg_exe()
-
-
-@dataclass(frozen=True, eq=False)
-class FaceAnimation:
-    """Vertex trajectories of a mesh, sampled at the render rate.
-
-    Attributes
-    ----------
-    vertices : np.ndarray, shape (n_frames, n_vertices, 3)
-        World positions (motion units, mm).
-    local : np.ndarray, shape (n_frames, n_vertices, 3)
-        The same in the head's frame (rigid head motion removed).
-    rotation : np.ndarray, shape (n_frames, 3, 3)
-    translation : np.ndarray, shape (n_frames, 3)
-        ``vertices = rotation @ local + translation`` frame by frame.
-    displacement : np.ndarray, shape (n_frames, n_markers, 3)
-        Marker displacements from the rest frame, in the head's frame.
-    operator : np.ndarray, shape (n_vertices, n_markers)
-        ``local = mesh.vertices + operator @ displacement``.
-    fps : float
-    """
-
-    mesh: Mesh
-    vertices: np.ndarray
-    local: np.ndarray
-    displacement: np.ndarray
-    operator: np.ndarray
-    rotation: np.ndarray
-    translation: np.ndarray
-    fps: float
-
-    @property
-    def n_frames(self) -> int:
-        return len(self.vertices)
-
-
-def resample(values: np.ndarray, fps: float, target_fps: float) -> np.ndarray:
-    """Values (n_frames, ...) at ``target_fps``, linearly interpolated, same duration."""
-    n_out = max(1, int(np.floor(len(values) * target_fps / fps + 1e-9)))
-    t = np.arange(n_out) / target_fps * fps
-    i0 = np.clip(np.floor(t).astype(int), 0, len(values) - 1)
-    i1 = np.minimum(i0 + 1, len(values) - 1)
-    frac = (t - i0).reshape((-1,) + (1,) * (values.ndim - 1))
-    return values[i0] * (1 - frac) + values[i1] * frac
-
-
-def animate(motion: Motion, deformer: Deformer, *, fps: float | None = None,
-            rigid: bool = True) -> FaceAnimation:
-    """Carry point motion onto the deformer's mesh, at ``fps`` (default the motion's).
-
-    Raises
-    ------
-    DataError
-        If the motion lacks markers of the map (one line naming them).
-    """
-    points = motion_points(motion.names, motion.values, deformer.markers.labels)
-    if np.isnan(points).any():
-        from ingest.motion import fill_gaps
-
-        filled, _ = fill_gaps(points.reshape(len(points), -1))
-        points = filled.reshape(points.shape)
-    fps = motion.fps if fps is None else float(fps)
-    points = resample(points, motion.fps, fps)
-    local, rotation, translation = deformer.local_frames(points, rigid=rigid)
-    n = len(points)
-    if rotation is None:
-        rotation = np.tile(np.eye(3), (n, 1, 1))
-        translation = np.zeros((n, 3))
-    displacement = local - deformer.rest[None]
-    verts_local = deformer.mesh.vertices[None] + np.matmul(deformer.operator, displacement)
-    world = np.matmul(verts_local, np.transpose(rotation, (0, 2, 1))) + translation[:, None]
-    return FaceAnimation(mesh=deformer.mesh, vertices=world, local=verts_local,
-                         displacement=displacement, operator=deformer.operator,
-                         rotation=rotation, translation=translation, fps=fps)
 
 
 class FaceRenderer:
@@ -188,12 +114,6 @@ class FaceRenderer:
         import matplotlib.pyplot as plt
 
         plt.close(self.fig)
-
-
-def animation_bounds(animation: FaceAnimation) -> np.ndarray:
-    """(2, 3) lowest and highest coordinates over the animation."""
-    v = animation.vertices
-    return np.stack([v.min(axis=(0, 1)), v.max(axis=(0, 1))])
 
 
 def captions(phones: Sequence[dict], n_frames: int, fps: float) -> list[str]:
@@ -423,7 +343,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
     animation = animate(motion, deformer, fps=fps)
     if kind == ".glb":
-        from animegraph.gltf import write_glb
+        from animegraph.face.gltf import write_glb
 
         return write_glb(animation, out)
     return write_obj_frames(animation, out, force=force)
@@ -464,13 +384,13 @@ def deformer_for(names: Sequence[str], *, mesh_path: Path | None = None,
     DataError
         On an unreadable mesh or map, or a map naming markers the motion lacks.
     """
-    from animegraph.mesh import (
+    from animegraph.face.mesh import (
         canonical_mesh,
         default_marker_map,
         load_mesh,
-        point_labels,
         read_marker_map,
     )
+    from animegraph.motion.files import point_labels
 
     labels = point_labels(names)
     if not labels:

@@ -528,9 +528,3 @@ def motion_points(names, motion: np.ndarray, labels) -> np.ndarray:
                         f"({', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''})")
     cols = [index[f"{lab}.{a}"] for lab in labels for a in "xyz"]
     return np.asarray(motion, dtype=np.float64)[:, cols].reshape(len(motion), len(labels), 3)
-
-
-def point_labels(names) -> tuple[str, ...]:
-    """Point labels of x/y/z channel triples, in order (other channels ignored)."""
-    seen = dict.fromkeys(n[:-2] for n in names if n.endswith((".x", ".y", ".z")))
-    return tuple(lab for lab in seen if all(f"{lab}.{a}" in names for a in "xyz"))

@@ -1,4 +1,13 @@
-"""Pictures an animator checks: speech, phones and facial measures over time."""
+"""Pictures an animator checks: speech, phones and facial measures over time.
+
+* :func:`plot_motion` -- ``animegraph plot``: synthesized motion against the ground truth
+  when there is one, measured where the eye looks (:func:`animegraph.motion.measures.measures`),
+  over the speech and its phone timeline, with the jump matches marked and each phone
+  coloured by the recording its motion came from;
+* :func:`plot_clips` -- the demo's picture of corpus clips (and their synthesis);
+* :func:`plot_heldout`, :func:`plot_systems` -- mouth opening of a held-out clip against
+  the search methods or every system (``scripts/eval_lipsync.py``).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from animegraph.motion.files import Motion
+from animegraph.motion.measures import measures, mouth_opening
 from ingest.corpus import face
 
 #: Distances between markers that read as facial actions whatever the head does.
@@ -81,8 +92,8 @@ def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "rando
     Thin vertical lines mark the exact search's jump matches; phone labels run along the
     bottom.
     """
-    from animegraph import evaluate
-    from animegraph.synth import render_nodes
+    from animegraph.apps import evaluate
+    from animegraph.synthesis import render_nodes
 
     phones, emotion, cands, audio_cost = evaluate.heldout_query(model, clip)
     predictions, styles, marks = {}, {}, []
@@ -132,14 +143,12 @@ def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from animegraph import evaluate
-
     fig, ax = plt.subplots(figsize=(11, 3.5))
     truth = clip.motion.astype(np.float64)
-    ax.plot(np.arange(len(truth)) / fps, evaluate.mouth_opening(truth, names, kind), "k",
+    ax.plot(np.arange(len(truth)) / fps, mouth_opening(truth, names, kind), "k",
             lw=2, label="recorded")
     for k, (label, pred) in enumerate(predictions.items()):
-        ax.plot(np.arange(len(pred)) / fps, evaluate.mouth_opening(pred, names, kind),
+        ax.plot(np.arange(len(pred)) / fps, mouth_opening(pred, names, kind),
                 f"C{k}" + (styles or {}).get(label, "-"), lw=1, label=label)
     for t in marks:
         ax.axvline(t, color="C0", lw=0.5, alpha=0.4)
@@ -157,3 +166,86 @@ def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], 
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
+                phones: Sequence[dict] = (), audio: tuple[np.ndarray, int] | None = None,
+                title: str = "") -> Path:
+    """Plot synthesized ``motion`` (against ``truth``) with speech, phones and jumps.
+
+    Parameters
+    ----------
+    motion, truth : Motion
+        Channels are matched by name; the truth may be at another frame rate.
+    phones : sequence of dict
+        ``phone``, ``start``, ``end`` and optionally ``clip_id`` (source recording) and
+        ``jump`` (a jump match into the phone), as in ``synth --explain-json``.
+    audio : (samples, sample_rate), optional
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from db.atomic import atomic_write
+
+    rows = measures(motion.values, motion.names, reference=truth)
+    truth_rows = dict(measures(truth.values, truth.names, reference=truth)) if truth else {}
+    n_panels = 1 + len(rows)
+    heights = [1.3] + [1.0] * len(rows)
+    fig, axes = plt.subplots(n_panels, 1, figsize=(11, 1.2 + 1.6 * n_panels), sharex=True,
+                             gridspec_kw={"height_ratios": heights})
+    axes = np.atleast_1d(axes)
+    top = axes[0]
+    if audio is not None:
+        samples, rate = audio
+        top.plot(np.arange(len(samples)) / rate, samples, lw=0.3, color="0.45")
+        top.set_ylabel("speech")
+    else:
+        top.set_yticks([])
+        top.set_ylabel("phones")
+    _timeline(top, phones)
+    t = np.arange(motion.n_frames) / motion.fps
+    for ax, (label, values) in zip(axes[1:], rows, strict=True):
+        if label in truth_rows:
+            tt = np.arange(truth.n_frames) / truth.fps
+            ax.plot(tt, truth_rows[label], color="k", lw=1.6, label="ground truth")
+        ax.plot(t, values, color="C3", lw=1.1, label="synthesized")
+        ax.set_ylabel(label, fontsize=8)
+        for p in phones:
+            if p.get("jump"):
+                ax.axvline(p["start"], color="C0", lw=0.8, ls="--", alpha=0.7)
+    if len(axes) > 1:
+        axes[1].legend(loc="upper right", fontsize=7, ncol=2)
+    axes[-1].set_xlabel("time (s)")
+    end = max(motion.duration, truth.duration if truth else 0.0,
+              max((p["end"] for p in phones), default=0.0))
+    axes[-1].set_xlim(0, end)
+    n_jumps = sum(1 for p in phones if p.get("jump"))
+    subtitle = (f"{len(phones)} phones, {n_jumps} jump matches (dashed)" if phones else "")
+    fig.suptitle(" - ".join(s for s in (title, subtitle) if s), fontsize=10)
+    fig.tight_layout()
+    with atomic_write(path) as handle:
+        fig.savefig(handle, format="png", dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def _timeline(ax, phones: Sequence[dict]) -> None:
+    """Phone labels along the top panel; a bar per phone coloured by its source clip."""
+    sources = list(dict.fromkeys(p.get("clip_id") for p in phones if p.get("clip_id")))
+    colours = {s: f"C{i % 10}" for i, s in enumerate(sources)}
+    trans = ax.get_xaxis_transform()
+    for k, p in enumerate(phones):
+        ax.axvline(p["start"], color="0.85", lw=0.5, zorder=0)
+        source = p.get("clip_id")
+        if source:
+            ax.axvspan(p["start"], p["end"], ymin=0.0, ymax=0.08, color=colours[source],
+                       lw=0, alpha=0.8)
+        if p.get("jump"):
+            ax.axvline(p["start"], color="C0", lw=1.0, ls="--")
+            ax.text(p["start"], 0.12, source or "", rotation=90, fontsize=5, va="bottom",
+                    transform=trans, color="C0")
+        if p["phone"] != "SIL":
+            ax.text(0.5 * (p["start"] + p["end"]), 0.86 if k % 2 else 0.74, p["phone"],
+                    ha="center", fontsize=6, transform=trans)

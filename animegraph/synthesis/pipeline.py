@@ -19,91 +19,27 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from animegraph.dtw import audio_costs_many
 from animegraph.emotion.control import EmotionChoice, map_frames, resolve_emotion
-from animegraph.graph import AnimeGraph
 from animegraph.search import SearchResult, SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
-from animegraph.synthesis import (
+from animegraph.search.dtw import audio_costs_many
+from animegraph.synthesis.assemble import (
     Phone,
     PostOptions,
     assemble,
     blend_k_best,
     output_frames,
-    rank_weights,
-    smooth,
 )
+from animegraph.synthesis.explain import blended_sources, explain_rows
+from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
-from db.store import Database
-from ingest.decompose import MotionDecomposer
-from ingest.emotion.model import EmotionModel
-from ingest.features import RastaPlpConfig, rasta_plp, slice_frames
+from ingest.decompose import smooth
 from ingest.formats.phones_csv import Segment
-from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
-from ingest.segment import segment
-
-
-@dataclass(frozen=True, eq=False)
-class Model:
-    """Everything synthesis needs from a database, loaded once."""
-
-    db: Database
-    graph: AnimeGraph
-    decomposer: MotionDecomposer
-    cutoffs: np.ndarray
-    names: tuple[str, ...]
-    groups: tuple[str, ...]
-    kind: str
-    head_reference: np.ndarray | None
-    emotion_model: EmotionModel | None = None  # None: a database built before emotion models
-
-    @classmethod
-    def load(cls, path) -> Model:
-        db = Database.open(path)
-        arrays = db.arrays()
-        channels = db.table("channels").to_pylist()
-        try:
-            emotion_model = EmotionModel.from_database(db)
-        except DataError:
-            emotion_model = None
-        return cls(
-            db=db, graph=AnimeGraph.from_database(db),
-            decomposer=MotionDecomposer.from_arrays(arrays), cutoffs=arrays["ic_cutoff_hz"],
-            names=tuple(c["name"] for c in channels), groups=tuple(c["group"] for c in channels),
-            kind=channels[0]["kind"], head_reference=arrays.get("head_reference"),
-            emotion_model=emotion_model,
-        )
-
-    def to_channels(self, ics: np.ndarray) -> np.ndarray:
-        """Motion in the database's channels (world coordinates for a head group)."""
-        return to_world(self.decomposer.inverse_transform(ics), self.groups,
-                        self.head_reference)
-
-    @property
-    def rigid_head(self) -> bool:
-        """True if the database stores motion head-stabilised (a rigid head group)."""
-        return self.head_reference is not None and head_points(self.groups) >= 3
-
-    def to_local(self, motion: np.ndarray) -> np.ndarray:
-        """Motion (n_frames, n_channels) in the database's channels, gaps filled, in the
-        stored (head-stabilised) space that its PCA/ICA model describes: the inverse of
-        :meth:`to_channels` before the decomposition."""
-        filled, _ = fill_gaps(np.asarray(motion, dtype=np.float64), self.names)
-        if self.rigid_head:
-            return stabilize_points(filled, self.groups, self.head_reference)
-        return filled
-
-
-def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:
-    """Motion (n_frames, n_channels) in the database's stored, head-stabilised space back
-    in world coordinates (unchanged when the database has no rigid head group)."""
-    if head_reference is not None and head_points(groups) >= 3:
-        motion = unstabilize_points(motion, groups, head_reference)
-    return motion
+from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
+from ingest.speech.segment import segment
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,8 +155,8 @@ def synthesize(
     motion = model.to_channels(ics)
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
-    explain = _explain(model, phones, result, cands, audio_cost)
-    blended = tuple(_blended(model.graph, r) for r in ranked)
+    explain = explain_rows(model, phones, result, cands, audio_cost)
+    blended = tuple(blended_sources(model.graph, r) for r in ranked)
     for row, animes in zip(explain, blended, strict=False):
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
@@ -301,163 +237,3 @@ def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
                                emotion=emotion)
     return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs,
                         options=options), ranked
-
-
-def _blended(graph: AnimeGraph, ranked: np.ndarray) -> list[dict]:
-    """The animes one phone's k-best motion averages: where each came from, its weight."""
-    return [{"node": int(a), "clip_id": graph.clip_ids[graph.node_clip[a]],
-             "position": int(graph.position[a]), "weight": round(float(w), 4)}
-            for a, w in zip(ranked, rank_weights(len(ranked)), strict=True)]
-
-
-def _explain(model, phones, result, cands, audio_cost) -> list[dict]:
-    """One row per input phone: where its motion came from and what it cost."""
-    g = model.graph
-    rows = []
-    for i, (p, node) in enumerate(zip(phones, result.nodes, strict=True)):
-        node = int(node)
-        k = int(np.flatnonzero(cands.nodes[i] == node)[0])
-        row = {
-            "index": i, "phone": p.phone, "start": round(p.start, 4), "end": round(p.end, 4),
-            "node": node, "clip_id": g.clip_ids[g.node_clip[node]],
-            "anime_phone": _phone_name(g, node), "position": int(g.position[node]),
-            "emotion": g.emotions[g.node_emotion[node]],
-            "audio_cost": float(audio_cost[i][k]),
-            "backoff": cands.backoff[i],
-        }
-        if i > 0:
-            prev = int(result.nodes[i - 1])
-            row["jump"] = bool(g.next_node[prev] != node)
-            dist = np.linalg.norm(g.last_pcs[prev] - g.first_pcs[node]) / np.sqrt(g.n_channels)
-            row["jump_cost"] = float(dist)
-        else:
-            row["jump"], row["jump_cost"] = False, 0.0
-        rows.append(row)
-    return rows
-
-
-def _phone_name(graph: AnimeGraph, node: int) -> str:
-    from ingest.phones import PHONES
-
-    return PHONES[int(graph.node_phone[node])]
-
-
-def explain_record(synth: Synthesis) -> dict:
-    """The ``--explain`` record of a synthesis: every phone's source and costs, the joins,
-    the search result and the timings (what ``synth --explain-json`` and ``batch`` write)."""
-    r = synth.result
-    record = {"phones": synth.explain, "joins": synth.joins, "cost": r.cost,
-              "n_jumps": r.n_jumps, "method": r.method, "segmentation": synth.segmentation,
-              "timings": synth.timings}
-    if synth.blended:
-        record["k_best"] = list(synth.blended)
-    return record
-
-
-def backoffs(synth: Synthesis) -> list[str]:
-    """Phones the database lacks and the phone used instead, e.g. ``["ZH->SH"]``."""
-    return sorted({f"{e['phone']}->{e['anime_phone']}" for e in synth.explain if e["backoff"]})
-
-
-def write_explain(synth: Synthesis, path: Path, **extra) -> Path:
-    """Write :func:`explain_record` (plus ``extra`` keys) as JSON, atomically."""
-    import json
-
-    from db.atomic import atomic_write
-
-    record = {**extra, **explain_record(synth)}
-    with atomic_write(path) as handle:
-        handle.write(json.dumps(record, indent=1, default=_jsonable).encode())
-    return path
-
-
-def _jsonable(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    return str(value)
-
-
-def write_motion(synth: Synthesis, model: Model, path: Path) -> Path:
-    """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
-    return write_channels(synth.motion, synth.fps, model.names, model.kind, path,
-                          extra={"ics": synth.ics, "nodes": synth.result.nodes})
-
-
-def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
-                   extra: dict | None = None) -> Path:
-    """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
-
-    ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and ``channels``.
-    """
-    from db.atomic import atomic_write
-
-    path = Path(path)
-    motion = np.asarray(motion, dtype=np.float64)
-    names = tuple(names)
-    suffix = path.suffix.lower()
-    if suffix == ".c3d":
-        if kind not in ("markers", "landmarks"):
-            raise ParameterError(f"C3D holds 3D points; this database has {kind} "
-                                 "(write .csv or .npz)")
-        from ingest.formats.c3d import MarkerData, write_c3d
-
-        point_cols = _point_columns(names)
-        labels = tuple(names[i][:-2] for i in point_cols[::3])
-        points = motion[:, point_cols].reshape(len(motion), -1, 3)
-        write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
-    elif suffix == ".csv":
-        header = "frame,time," + ",".join(names)
-        n = len(motion)
-        table = np.column_stack([np.arange(n), np.arange(n) / fps, motion])
-        with atomic_write(path) as handle:
-            np.savetxt(handle, table, delimiter=",", header=header, comments="",
-                       fmt=["%d", "%.5f"] + ["%.6g"] * len(names))
-    elif suffix == ".npz":
-        with atomic_write(path) as handle:
-            np.savez(handle, motion=motion, fps=fps, channels=np.array(names),
-                     **(extra or {}))
-    else:
-        raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
-    return path
-
-
-def _point_columns(names) -> list[int]:
-    return [i for i, n in enumerate(names) if n.endswith((".x", ".y", ".z"))]
-
-
-def read_motion(path: Path, model: Model) -> tuple[np.ndarray, float]:
-    """Read a motion file (.c3d, .csv, .npz; :func:`animegraph.motionio.read_motion`) in
-    ``model``'s channels: (motion of shape (n_frames, n_channels), frames per second).
-
-    A C3D holds the point channels only: any other channel of the database is set to its
-    mean over the database.
-
-    Raises
-    ------
-    DataError
-        Unreadable file, or channels that are not the database's.
-    """
-    from animegraph.motionio import read_motion as read_file
-
-    path = Path(path)
-    motion = read_file(path)
-    names = list(model.names)
-    index = {c: i for i, c in enumerate(motion.names)}
-    points = _point_columns(names)
-    only_points = path.suffix.lower() == ".c3d"
-    wanted = [names[i] for i in points] if only_points else names
-    missing = [c for c in wanted if c not in index]
-    if missing:
-        raise DataError(f"{path.name} lacks {len(missing)} of the database's channels "
-                        f"(first: {missing[0]}): it is not motion of this database")
-    values = np.asarray(motion.values, dtype=np.float64)
-    if only_points:
-        out = np.tile(model.decomposer.mean_, (len(values), 1))
-        for i in points:
-            out[:, i] = values[:, index[names[i]]]
-        return out, motion.fps
-    return values[:, [index[c] for c in names]], motion.fps

@@ -24,8 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from animegraph.cache import default_corpus_dir, default_db_dir
-from animegraph.plots import plot_clips
+from animegraph.apps.cache import default_corpus_dir, default_db_dir
+from animegraph.apps.plots import plot_clips
 from db.errors import ParameterError
 from db.store import Database, is_database
 from ingest.corpus.emotions import EMOTIONS, style
@@ -165,7 +165,7 @@ def run_demo(
         stem = out / clip.spec.clip_id
         result.outputs += [stem.with_suffix(".wav"), stem.with_suffix(".c3d"),
                            Path(f"{stem}.phones.csv")]
-    from animegraph.synth import Model, synthesize, write_motion
+    from animegraph.synthesis import Model, synthesize, write_motion
     from ingest.formats.phones_csv import Segment
 
     say("synthesizing the held-out sentence from the database ...")
@@ -190,8 +190,8 @@ def run_demo(
 
 def _render_video(synth, model, out: Path, emotion: str, say) -> Path:
     """The synthesized sentence on the face mesh, with its speech: an MP4 (§7)."""
-    from animegraph.motionio import Motion
-    from animegraph.render import deformer_for, render_motion
+    from animegraph.face.render import deformer_for, render_motion
+    from animegraph.motion.files import Motion
 
     say("rendering the synthesized motion on the face mesh ...")
     motion = Motion(values=synth.motion, names=model.names, fps=synth.fps)

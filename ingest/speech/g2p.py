@@ -1,11 +1,11 @@
 """Grapheme-to-phoneme conversion and transcript normalisation for the aligner.
 
-The forced aligner (:mod:`ingest.segment`) needs a pronunciation for every word of a
+The forced aligner (:mod:`ingest.speech.segment`) needs a pronunciation for every word of a
 transcript. CMUdict (shipped with PocketSphinx) covers most English words; the others
 (names, coinages such as "blorptastic", misspellings) get one from this module:
 
 1. :func:`espeak_g2p` — eSpeak NG's own letter-to-sound rules and exception lists, read
-   back from the phone labels of speaking the word alone (:func:`ingest.espeak.speak`).
+   back from the phone labels of speaking the word alone (:func:`ingest.speech.espeak.speak`).
    This is an excellent G2P and needs nothing beyond what the project already ships.
 2. :func:`rule_g2p` — a small rule-based English letter-to-sound converter (digraphs,
    vowel teams, r-coloured vowels, final silent *e* ...), used only when eSpeak fails.
@@ -15,7 +15,7 @@ turns free text into dictionary-style words: lower case, typographic apostrophes
 plain, accents stripped, numbers spelled out (:func:`number_to_words`), ``&`` and ``%``
 read, hyphenated compounds kept whole only when the dictionary knows them.
 
-All phones are ARPAbet from :data:`ingest.phones.PHONE_SET`, without stress digits.
+All phones are ARPAbet from :data:`ingest.speech.phones.PHONE_SET`, without stress digits.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import unicodedata
 from collections.abc import Callable
 
 from db.errors import AnimeGraphError, DataError, ParameterError
-from ingest.phones import PHONE_SET, SILENCE
+from ingest.speech.phones import PHONE_SET, SILENCE
 
 logger = logging.getLogger(__name__)
 
@@ -233,7 +233,7 @@ def espeak_g2p(word: str) -> tuple[str, ...]:
         If eSpeak NG is unusable or says nothing for the word.
     """
     word = _check_word(word)
-    from ingest.espeak import ESPEAK_SAMPLE_RATE, speak
+    from ingest.speech.espeak import ESPEAK_SAMPLE_RATE, speak
 
     try:
         utterance = speak(word, sample_rate=ESPEAK_SAMPLE_RATE, pad=0.0)

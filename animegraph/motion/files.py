@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from db.errors import DataError
+from db.atomic import atomic_write
+from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 
 
@@ -45,8 +46,6 @@ class Motion:
     @property
     def has_points(self) -> bool:
         """True if the channels hold 3-D points (markers or landmarks)."""
-        from animegraph.mesh import point_labels
-
         return bool(point_labels(self.names))
 
 
@@ -126,8 +125,6 @@ def _checked(motion: Motion, path: Path) -> Motion:
 def write_channel_csv(path: str | os.PathLike, values: np.ndarray, names, fps: float,
                       *, start_frame: int = 0) -> None:
     """Write ``frame,time,<channel>...`` (atomically); frames numbered from ``start_frame``."""
-    from db.atomic import atomic_write
-
     n = len(values)
     frames = np.arange(start_frame, start_frame + n)
     table = np.column_stack([frames, frames / fps, values])
@@ -167,3 +164,49 @@ def read_phone_track(*, labels: str | os.PathLike | None = None,
         return [{"phone": s.phone, "start": float(s.start), "end": float(s.end),
                  "clip_id": None, "jump": False} for s in segments]
     return []
+
+
+def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
+                   extra: dict | None = None) -> Path:
+    """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
+
+    ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and ``channels``.
+    """
+    path = Path(path)
+    motion = np.asarray(motion, dtype=np.float64)
+    names = tuple(names)
+    suffix = path.suffix.lower()
+    if suffix == ".c3d":
+        if kind not in ("markers", "landmarks"):
+            raise ParameterError(f"C3D holds 3D points; this database has {kind} "
+                                 "(write .csv or .npz)")
+        from ingest.formats.c3d import MarkerData, write_c3d
+
+        point_cols = point_columns(names)
+        labels = tuple(names[i][:-2] for i in point_cols[::3])
+        points = motion[:, point_cols].reshape(len(motion), -1, 3)
+        write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
+    elif suffix == ".csv":
+        header = "frame,time," + ",".join(names)
+        n = len(motion)
+        table = np.column_stack([np.arange(n), np.arange(n) / fps, motion])
+        with atomic_write(path) as handle:
+            np.savetxt(handle, table, delimiter=",", header=header, comments="",
+                       fmt=["%d", "%.5f"] + ["%.6g"] * len(names))
+    elif suffix == ".npz":
+        with atomic_write(path) as handle:
+            np.savez(handle, motion=motion, fps=fps, channels=np.array(names),
+                     **(extra or {}))
+    else:
+        raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
+    return path
+
+
+def point_columns(names) -> list[int]:
+    return [i for i, n in enumerate(names) if n.endswith((".x", ".y", ".z"))]
+
+
+def point_labels(names) -> tuple[str, ...]:
+    """Point labels of x/y/z channel triples, in order (other channels ignored)."""
+    seen = dict.fromkeys(n[:-2] for n in names if n.endswith((".x", ".y", ".z")))
+    return tuple(lab for lab in seen if all(f"{lab}.{a}" in names for a in "xyz"))

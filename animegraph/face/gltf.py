@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from animegraph.render import FaceAnimation
+from animegraph.face.animation import FaceAnimation
 
 
 def write_glb(animation: FaceAnimation, path: Path, *, max_targets: int = 64,

@@ -4,7 +4,7 @@ A :mod:`ctypes` binding to the eSpeak NG library shipped by the ``espeakng-loade
 eSpeak reports a phoneme event at the sample where it starts to synthesise each phoneme;
 those events are the ground truth of :func:`speak`'s phone segments, so a corpus built from
 it knows its phone timing exactly. eSpeak's phoneme mnemonics are converted to the project's
-phone set (:data:`ingest.phones.PHONES`) by :data:`ESPEAK_TO_ARPABET`.
+phone set (:data:`ingest.speech.phones.PHONES`) by :data:`ESPEAK_TO_ARPABET`.
 
 The library is global state and not thread-safe: every synthesis holds a module-level lock.
 eSpeak also carries synthesis state from one call to the next in static variables that no
@@ -72,7 +72,7 @@ import numpy as np
 from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
-from ingest.phones import CONSONANTS, PHONE_SET, SILENCE, VOWELS
+from ingest.speech.phones import CONSONANTS, PHONE_SET, SILENCE, VOWELS
 
 logger = logging.getLogger(__name__)
 
@@ -339,7 +339,7 @@ class Voice:
 class PhoneSegment:
     """One phone of an utterance."""
 
-    phone: str  # ARPAbet, one of ingest.phones.PHONES (39 CMU phones + "SIL"), no stress digits
+    phone: str  # ARPAbet: ingest.speech.phones.PHONES, no stress digits
     start: float  # seconds
     end: float  # seconds
     stress: int  # 0 none, 1 primary ("'" in eSpeak), 2 secondary (",")

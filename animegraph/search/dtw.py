@@ -462,7 +462,7 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
         The input phone's prosody curve.
     values : np.ndarray of float32 or float64, shape (n_frames, d)
         Every node's curve, end to end
-        (:attr:`animegraph.graph.AnimeGraph.prosody_values`).
+        (:attr:`animegraph.search.graph.AnimeGraph.prosody_values`).
     offsets : np.ndarray of int, shape (n_nodes + 1,)
         Node ``a``'s curve is ``values[offsets[a]:offsets[a + 1]]``.
     nodes : np.ndarray of int, shape (k,)

@@ -251,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_animator_commands(sub) -> None:
     """``query``, ``render`` and ``plot``: the animator's commands (issue #6)."""
-    from animegraph.query import ANIME_FIELDS, CLIP_FIELDS
+    from animegraph.apps.query import ANIME_FIELDS, CLIP_FIELDS
 
     qry = sub.add_parser(
         "query", help="find anime nodes or clips; export them for other tools",
@@ -338,8 +338,8 @@ def _add_animator_commands(sub) -> None:
 
 
 def _cmd_query(args: argparse.Namespace) -> int:
-    from animegraph.query import QuerySpec, build_sql, export_hits, run_query
-    from animegraph.tabular import format_table
+    from animegraph.apps.query import QuerySpec, build_sql, export_hits, run_query
+    from animegraph.apps.tabular import format_table
     from db.store import Database
 
     spec = QuerySpec(phoneme=args.phoneme, emotion=args.emotion, text=args.text,
@@ -374,7 +374,7 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _phone_track(args: argparse.Namespace) -> list[dict]:
-    from animegraph.motionio import read_phone_track
+    from animegraph.motion.files import read_phone_track
 
     if args.explain is not None and args.labels is not None:
         raise UsageError(f"animegraph {args.command}: give --explain or --labels, not both")
@@ -388,8 +388,8 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
 def _cmd_render(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.motionio import read_motion
-    from animegraph.render import deformer_for, render_motion
+    from animegraph.face.render import deformer_for, render_motion
+    from animegraph.motion.files import read_motion
 
     size = _size(args.size)
     if args.fps is not None and not args.fps > 0:
@@ -415,7 +415,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 def _rest(motion, args: argparse.Namespace):
     """Rest-frame marker positions for the deformer, or None for the mesh's own."""
-    from animegraph.mesh import default_marker_map, load_mesh, motion_points, read_marker_map
+    from animegraph.face.mesh import default_marker_map, load_mesh, motion_points, read_marker_map
 
     if args.mesh is not None and args.marker_map is None:
         raise UsageError("animegraph render: --mesh needs --marker-map (which marker sits on "
@@ -427,7 +427,8 @@ def _rest(motion, args: argparse.Namespace):
     if not 0 <= index < motion.n_frames:
         raise UsageError(f"animegraph render: --rest-frame must be in 0-{motion.n_frames - 1}, "
                          f"got {index}")
-    from animegraph.mesh import canonical_mesh, point_labels
+    from animegraph.face.mesh import canonical_mesh
+    from animegraph.motion.files import point_labels
 
     mesh = load_mesh(args.mesh) if args.mesh is not None else canonical_mesh()
     markers = (read_marker_map(args.marker_map, mesh) if args.marker_map is not None
@@ -447,8 +448,8 @@ def _check_db_channels(db_path: Path, motion) -> None:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from animegraph.motionio import read_motion
-    from animegraph.plot_motion import plot_motion
+    from animegraph.apps.plots import plot_motion
+    from animegraph.motion.files import read_motion
     from ingest.formats.wav import read_wav
 
     if args.output.suffix.lower() != ".png":
@@ -499,7 +500,7 @@ def _default_parallel(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from animegraph.demo import run_demo
+    from animegraph.apps.demo import run_demo
 
     def progress(total: int):
         return _progress(total, args.quiet, "clip")
@@ -524,7 +525,7 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
 
 def _cmd_sql(args: argparse.Namespace) -> int:
-    from animegraph.tabular import format_table
+    from animegraph.apps.tabular import format_table
     from db.sql import query
     from db.store import Database
 
@@ -543,8 +544,14 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     import numpy as np
 
     from animegraph.emotion.control import check_names, parse_emotion, resolve_emotion
-    from animegraph.synth import Model, backoffs, synthesize, write_explain, write_motion
-    from animegraph.synthesis import PostOptions
+    from animegraph.synthesis import (
+        Model,
+        PostOptions,
+        backoffs,
+        synthesize,
+        write_explain,
+        write_motion,
+    )
     from ingest.formats.wav import read_wav
     from ingest.readers.common import read_labels
 
@@ -616,7 +623,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.explain:
         import pyarrow as pa
 
-        from animegraph.tabular import format_table
+        from animegraph.apps.tabular import format_table
 
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
@@ -633,7 +640,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
 
     from animegraph.baselines.base import fitted_model
     from animegraph.emotion.control import AUTO, check_names, parse_emotion
-    from animegraph.synth import to_world, write_channels
+    from animegraph.motion.files import write_channels
+    from animegraph.synthesis import to_world
     from db.store import Database
     from ingest.formats.wav import read_wav
 
@@ -686,7 +694,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from animegraph.batch import BatchOptions, run_batch
+    from animegraph.apps.batch import BatchOptions, run_batch
 
     if args.scheduler is None and args.workers < 1:
         raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
@@ -731,7 +739,8 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     import time
 
     from animegraph.emotion.control import classify_speech, map_motion, parse_emotion
-    from animegraph.synth import Model, read_motion, write_channels
+    from animegraph.motion.files import write_channels
+    from animegraph.synthesis import Model, read_database_motion
     from ingest.formats.wav import read_wav
 
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
@@ -757,7 +766,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     if source != "auto":
         for name in [target] if isinstance(target, str) else list(target):
             emotions.mapping(source, name)  # too few parallel sentences: say so now
-    motion, fps = read_motion(args.motion, model)
+    motion, fps = read_database_motion(args.motion, model)
     how = "given"
     if source == "auto" and args.audio is not None:
         audio, sample_rate = read_wav(args.audio)
@@ -779,7 +788,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
 def _cmd_info(args: argparse.Namespace) -> int:
     import json
 
-    from animegraph.info import database_info, info_lines
+    from animegraph.apps.info import database_info, info_lines
     from db.store import Database
 
     info = database_info(Database.open(args.db))

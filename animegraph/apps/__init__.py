@@ -1,0 +1,14 @@
+"""What users run: the command line and the work it drives.
+
+* :mod:`.cli` -- ``animegraph`` and its sub-commands (the entry point);
+* :mod:`.demo` -- ``animegraph demo`` on the embedded default data; :mod:`.cache` -- where
+  the default corpus and database live;
+* :mod:`.batch`, :mod:`.script` -- batch synthesis of dialogue scripts on Dask;
+* :mod:`.query` -- clip queries and export; :mod:`.info` -- what a database holds;
+  :mod:`.tabular` -- tables printed as text, CSV or JSON;
+* :mod:`.plots` -- the pictures: ``animegraph plot``, the demo's, held-out comparisons;
+* :mod:`.evaluate` -- held-out lip-sync evaluation (``scripts/eval_lipsync.py``).
+
+Imports: anything below it (``db``, ``ingest`` and every other room of ``animegraph``);
+nothing imports it but the scripts and tests.
+"""

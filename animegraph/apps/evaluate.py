@@ -1,0 +1,139 @@
+"""Held-out evaluation of lip-sync: synthesize a clip the database does not hold, score it.
+
+The naive rows show what the search adds: a random anime of the right phoneme for every
+phone, and phoneme matching that ignores every cost (always the first anime of the
+phoneme). Used by ``scripts/eval_lipsync.py`` and the plots of :mod:`.plots`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
+from animegraph.search import search
+from animegraph.synthesis import query_phones, render_k_best, render_nodes, score_candidates
+
+
+def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
+                   rng: np.random.Generator | None = None) -> np.ndarray:
+    """A naive anime sequence: ``"random"`` candidate per phone, or the ``"first"``."""
+    if kind == "random":
+        rng = rng or np.random.default_rng(0)
+        return np.array([int(rng.choice(c)) for c in candidate_nodes], dtype=np.int64)
+    if kind == "first":
+        return np.array([int(c[0]) for c in candidate_nodes], dtype=np.int64)
+    raise ValueError(f"unknown baseline {kind!r}")
+
+
+#: Methods compared: exact search, the paper's look-ahead, the two baselines, and (beyond
+#: the paper) the exact search's motion averaged over the 20 best animes of each phone
+#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
+METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+
+
+def heldout_query(model, clip):
+    """The search input of a held-out prepared clip, from its audio and its phones.
+
+    Returns
+    -------
+    (phones, emotion or None, candidates, audio costs)
+    """
+    audio = clip.audio.astype(np.float32) / 32767.0
+    emotion = clip.emotion if clip.emotion in model.graph.emotions else None
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    return phones, emotion, cands, audio_cost
+
+
+def method_nodes(model, cands, audio_cost, method: str, *, emotion: str | None = None,
+                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
+    """The anime sequence one of :data:`METHODS` picks, and its number of jump matches.
+
+    ``"kbest<K>"`` picks the exact search's sequence (its motion averages K animes a phone:
+    :func:`method_motion`).
+    """
+    if method in ("random", "first"):
+        nodes = baseline_nodes(cands.nodes, method, rng)
+        return nodes, int(np.sum(model.graph.next_node[nodes[:-1]] != nodes[1:]))
+    window = int(method[len("window"):]) if method.startswith("window") else None
+    result = search(model.graph, cands, audio_cost, emotion=emotion,
+                    method="window" if window else "exact", window=window)
+    return result.nodes, result.n_jumps
+
+
+def method_motion(model, phones, cands, audio_cost, method: str, *,
+                  emotion: str | None = None,
+                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
+    """The motion (independent components) one of :data:`METHODS` synthesizes from the
+    search input of :func:`heldout_query`, and its number of jump matches."""
+    nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
+    if method.startswith("kbest"):
+        k = int(method[len("kbest"):])
+        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
+    return render_nodes(model, phones, nodes, emotion=emotion)[0], jumps
+
+
+def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
+                  estimators: dict | None = None,
+                  norm: tuple[np.ndarray, np.ndarray] | None = None,
+                  rng: np.random.Generator | None = None,
+                  predictions: dict | None = None) -> dict:
+    """Synthesize a held-out prepared clip from its audio and phones; score every method.
+
+    Parameters
+    ----------
+    model : animegraph.synthesis.Model
+        A database that does not contain the clip.
+    clip : ingest.prepare.PreparedClip
+        The clip (its motion, in the database's space, is the ground truth).
+    methods : sequence of str
+        Anime Graph search methods (:data:`METHODS`) to score.
+    estimators : dict of str to BaselineModel, optional
+        Fitted baselines (:mod:`animegraph.baselines`), scored on the clip's audio alone.
+    norm : (center, scale), optional
+        :func:`displacement_scale` of the training motion; with it every row also has
+        :func:`paper_scores`.
+    predictions : dict, optional
+        Filled with each method's motion, shape (n_frames, n_channels).
+
+    Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
+    and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
+    and ``rtf`` (``synth_s`` over the clip's duration).
+    """
+    rng = rng or np.random.default_rng(0)
+    t0 = time.perf_counter()
+    phones, emotion, cands, audio_cost = heldout_query(model, clip)
+    query_s = time.perf_counter() - t0
+    truth = clip.motion.astype(np.float64)
+    # Channels that move: their share of the database's motion variance (from the PCA).
+    share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
+    active = np.flatnonzero(share > 1e-4 * share.max())
+    lips = lip_channels(model.names, model.groups)
+    rows = {}
+
+    def record(name, pred, extra):
+        row = {**motion_scores(pred, truth, model.names, model.groups, model.kind, active),
+               **extra}
+        if norm is not None:
+            row |= paper_scores(pred, truth, active, lips, norm)
+        row["rtf"] = row["synth_s"] / clip.duration
+        rows[name] = row
+        if predictions is not None:
+            predictions[name] = pred
+
+    for method in methods:
+        t0 = time.perf_counter()
+        ics, jumps = method_motion(model, phones, cands, audio_cost, method, emotion=emotion,
+                                   rng=rng)
+        pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
+        record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
+    for name, est in (estimators or {}).items():
+        t0 = time.perf_counter()
+        pred = est.predict(clip.audio, clip.sample_rate, n_frames=len(truth),
+                           emotion=clip.emotion if clip.emotion in est.emotions_ else None)
+        record(name, pred, {"synth_s": time.perf_counter() - t0})
+    return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
+            "seconds": round(clip.duration, 2), "methods": rows}
