@@ -75,3 +75,15 @@ def test_scripts_hold_no_library_code():
     for path in sorted((ROOT / "scripts").glob("*.py")):
         tree = ast.parse(path.read_text())
         assert not [n for n in tree.body if isinstance(n, ast.ClassDef)], path.name
+
+
+def test_public_names_import_from_the_package():
+    # The names users import keep working whatever room they live in.
+    import animegraph
+
+    for name in animegraph.__all__:
+        assert getattr(animegraph, name) is not None, name
+    assert callable(animegraph.synthesize)
+    assert hasattr(animegraph.MuMlp(), "fit")
+    with pytest.raises(AttributeError):
+        animegraph.no_such_name  # noqa: B018
