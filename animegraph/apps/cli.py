@@ -167,7 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="exact search only: accept a sequence certified within (1 + T) of "
                      "the optimum's cost, e.g. 0.01 (much faster on huge databases)")
     syn.add_argument("-o", "--output", required=True, type=Path,
-                     help="motion file: .c3d (marker databases), .csv or .npz")
+                     help="motion file: .c3d (marker databases), .csv or .npz; "
+                     "NAME.livelink.csv writes Live Link Face CSV (ARKit databases)")
+    syn.add_argument("--timecode", default=None, metavar="HH:MM:SS:FF",
+                     help="first frame's timecode in a .livelink.csv (default 00:00:00:00)")
     syn.add_argument("--explain", action="store_true",
                      help="print where every phone's motion came from and its costs")
     syn.add_argument("--explain-json", type=Path, default=None,
@@ -558,6 +561,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
         raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
                          f"{args.output.name!r}")
+    _check_timecode(args)
     if args.method != "anime-graph":
         return _synth_baseline(args)
     method = args.search or ("window" if args.window is not None else "exact")
@@ -598,7 +602,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
-    write_motion(out, model, args.output)
+    write_motion(out, model, args.output, timecode=args.timecode)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
               f"{out.emotion.search}, emotion components blended from their mappings",
@@ -630,6 +634,23 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.explain_json:
         write_explain(out, args.explain_json)
     return 0
+
+
+def _check_timecode(args: argparse.Namespace) -> None:
+    """``synth --timecode``: only with a ``.livelink.csv`` output, and a real timecode."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import parse_timecode
+
+    livelink = args.output.name.lower().endswith(LIVELINK_SUFFIX)
+    if args.timecode is None:
+        return
+    if not livelink:
+        raise UsageError(f"animegraph synth: --timecode needs -o NAME{LIVELINK_SUFFIX} "
+                         f"(Live Link Face CSV), got {args.output.name!r}")
+    try:
+        parse_timecode(args.timecode)
+    except ValueError as exc:
+        raise UsageError(f"animegraph synth: --timecode: {exc}") from None
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -674,7 +695,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     t2 = time.perf_counter()
     head = db.arrays().get("head_reference")
     write_channels(to_world(motion, model.groups_, head), model.fps_, model.channels_,
-                   model.kind_, args.output, extra={"method": np.array(args.method)})
+                   model.kind_, args.output, extra={"method": np.array(args.method)},
+                   timecode=args.timecode)
     print(f"animegraph: {args.method} model ready in {t1 - t0:.2f} s; synthesized "
           f"{len(audio) / sample_rate:.1f} s of speech in {t2 - t1:.2f} s; wrote "
           f"{args.output}", file=sys.stderr)

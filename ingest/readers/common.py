@@ -72,7 +72,7 @@ class ClipSource:
     layout : str
         Which reader loads it: ``"synthetic"`` (the project's corpus), ``"markers"``
         (generic marker folder), ``"facegood"``, ``"curves"`` (generic curve clips) or
-        ``"talkingface"``.
+        ``"talkingface"`` or ``"livelink"`` (an iPhone capture).
     source : Path
         The motion file (or, for landmark clips, the clip folder).
     files : tuple of (str, Path)
