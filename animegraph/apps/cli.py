@@ -393,6 +393,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     from animegraph.face.render import deformer_for, render_motion
     from animegraph.motion.files import read_motion
+    from ingest.formats.livelink import is_arkit
 
     size = _size(args.size)
     if args.fps is not None and not args.fps > 0:
@@ -411,6 +412,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                         progress=lambda total: _progress(total, args.quiet, "frame"))
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
+    if deformer is None and is_arkit(motion.names):
+        what = "ARKit blendshapes on the canonical face mesh"
     print(f"animegraph: rendered {motion.duration:.2f} s of motion ({what}) in "
           f"{time.perf_counter() - t0:.1f} s: {out}", file=sys.stderr)
     return 0
