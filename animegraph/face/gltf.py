@@ -4,8 +4,9 @@
 vertex motion as morph targets with per-frame weights, and the head's rotation and
 translation as node animation, in metres, through ``pygltflib``; :func:`write_arkit_glb`
 does the same with the 52 ARKit blendshapes as morph targets named by ARKit (the names
-are in the mesh's ``extras.targetNames``, where Blender and three.js read them); :func:`read_glb_frames`
-reads such a file back into vertex positions (for checking round trips).
+are in the mesh's ``extras.targetNames``, where Blender and three.js read them);
+:func:`read_glb_frames` reads such a file back into vertex positions (for checking round
+trips).
 """
 
 from __future__ import annotations
