@@ -22,7 +22,6 @@ spelling. :func:`read_livelink` reads a take, :func:`write_livelink` writes one 
 
 from __future__ import annotations
 
-import csv
 import io
 import math
 import os
@@ -34,7 +33,7 @@ import numpy as np
 
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
-from ingest.formats.text import read_utf8
+from ingest.formats.text import read_csv_rows
 
 #: ARKit's 52 blendshapes in the order Live Link Face writes them.
 ARKIT_BLENDSHAPES: tuple[str, ...] = (
@@ -199,12 +198,7 @@ def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
         no rows. Timecode order (repeats, steps back) is checked by the reader of a clip.
     """
     path = Path(path)
-    text = read_utf8(path, "Live Link Face CSV")
-    reader = csv.reader(io.StringIO(text))
-    try:
-        rows = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
-    except csv.Error as exc:
-        raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+    rows = read_csv_rows(path, "Live Link Face CSV")
     if not rows:
         raise DataError(f"{path}: empty file, not a Live Link Face CSV")
     header = [h.strip() for h in rows[0][1]]

@@ -261,6 +261,32 @@ def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
     return text, phones
 
 
+def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: dict,
+                          meta_path: Path | None):
+    """A clip's audio (its duration checked against the motion's), metadata fields and
+    transcript/labels.
+
+    Returns
+    -------
+    audio : np.ndarray, shape (n_samples,)
+    sample_rate : int
+    fields : dict
+        :data:`META_KEYS` from ``meta`` (None if absent), ``"text"`` from a transcript
+        file if there is one.
+    phones : tuple of Segment or None
+    """
+    from ingest.formats.wav import read_wav
+
+    audio, sample_rate = read_wav(source.file("audio"))
+    audio_seconds = len(audio) / sample_rate
+    check_durations(n_frames, fps, audio_seconds, where)
+    fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(META_KEYS)
+    text, phones = transcript_and_labels(source, audio_seconds)
+    if text is not None:
+        fields["text"] = text
+    return audio, sample_rate, fields, phones
+
+
 def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
     """Load a ``.npy`` array without pickles.
 

@@ -39,14 +39,11 @@ from ingest.formats.livelink import (
     format_timecode,
     read_livelink,
 )
-from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
-    check_durations,
     check_motion,
-    metadata_fields,
     read_json_object,
-    transcript_and_labels,
+    speech_and_side_files,
 )
 from ingest.readers.sync import audio_envelope, estimate_lag, opening_width_activity
 
@@ -216,14 +213,9 @@ def load_livelink(source: ClipSource) -> RawClip:
 
     meta_path = source.file("metadata")
     meta = read_json_object(meta_path) if meta_path else {}
-    audio, sample_rate = read_wav(audio_path)
+    audio, sample_rate, fields, phones = speech_and_side_files(
+        source, len(motion), fps, path, meta, meta_path)
     audio_seconds = len(audio) / sample_rate
-    check_durations(len(motion), fps, audio_seconds, path)
-    fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
-        ("text", "emotion", "speaker", "sentence_id"))
-    text, phones = transcript_and_labels(source, audio_seconds)
-    if text is not None:
-        fields["text"] = text
 
     filled = np.where(np.isnan(motion), np.nanmean(motion, axis=0), motion)
     loudness = audio_envelope(audio, sample_rate, fps, len(motion))
