@@ -39,6 +39,7 @@ logger = logging.getLogger(__name__)
 FORMATS = (".mp4", ".gif", ".glb", ".png", "")
 _SKIN = np.array([0.86, 0.68, 0.58])
 _MOUTH = np.array([0.30, 0.06, 0.07])
+_EYE = np.array([0.12, 0.10, 0.10])
 _LIGHT = np.array([-0.35, 0.45, 0.82])
 _LIGHT = _LIGHT / np.linalg.norm(_LIGHT)
 
@@ -77,6 +78,8 @@ class FaceRenderer:
         self.mesh = mesh
         self.is_mouth = np.zeros(len(mesh.faces), dtype=bool)
         self.is_mouth[mesh.mouth] = True
+        self.is_eye = np.zeros(len(mesh.faces), dtype=bool)
+        self.is_eye[mesh.eyes] = True
         dpi = 100
         self.fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor="0.13")
         self.canvas = FigureCanvasAgg(self.fig)
@@ -106,7 +109,8 @@ class FaceRenderer:
         lambert = np.clip(normal[order] @ _LIGHT, 0.0, 1.0)
         half = _LIGHT + np.array([0.0, 0.0, 1.0])
         spec = np.clip(normal[order] @ (half / np.linalg.norm(half)), 0, 1) ** 24
-        base = np.where(self.is_mouth[order, None], _MOUTH, _SKIN)
+        base = np.where(self.is_mouth[order, None], _MOUTH,
+                        np.where(self.is_eye[order, None], _EYE, _SKIN))
         colour = np.clip(base * (0.28 + 0.72 * lambert[:, None]) + 0.12 * spec[:, None], 0, 1)
         self.coll.set_verts(tri[order, :, :2])
         self.coll.set_facecolor(colour)
