@@ -316,7 +316,8 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
 
 def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones, path: Path,
              *, title: str) -> None:
-    """PNG: the face at the anime's middle (point databases) and its main measure."""
+    """PNG: the face at the anime's middle (point and ARKit databases) and its main
+    measure."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -356,18 +357,21 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
 
 def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
     from animegraph.face.animation import animate, animation_bounds
+    from animegraph.face.arkit import arkit_animation
     from animegraph.face.render import FaceRenderer, deformer_for
     from animegraph.motion.files import Motion
+    from ingest.formats.livelink import is_arkit
 
+    motion = Motion(values=part, names=clip.names, fps=clip.fps)
     try:
         deformer = deformer_for(clip.names)
     except DataError:
         return None
-    if deformer is None:
+    if deformer is None and not is_arkit(clip.names):
         return None
-    animation = animate(Motion(values=part, names=clip.names, fps=clip.fps), deformer)
+    animation = (arkit_animation(motion) if deformer is None else animate(motion, deformer))
     frame = min(max(frame, 0), animation.n_frames - 1)
-    renderer = FaceRenderer(deformer.mesh, animation_bounds(animation), (240, 270))
+    renderer = FaceRenderer(animation.mesh, animation_bounds(animation), (240, 270))
     try:
         return renderer.frame(animation.vertices[frame])
     finally:
