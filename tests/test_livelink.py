@@ -346,6 +346,14 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
     # render draws the face of a synthesized take.
     assert main(["render", str(out), "-o", str(tmp_path / "line.png")]) == 0
 
+    # batch writes Live Link CSV for an ARKit database too.
+    script = tmp_path / "lines.csv"
+    script.write_text('id,text\nhello,"Hello there, how are you?"\n')
+    assert main(["batch", str(script), "--db", str(tmp_path / "db"), "--out",
+                 str(tmp_path / "batch"), "--workers", "1", "--quiet"]) == 0
+    assert read_livelink(tmp_path / "batch" / "hello" / "motion.livelink.csv").names \
+        == ARKIT_CHANNELS
+
 
 def test_synth_timecode_needs_a_livelink_output(capsys, tmp_path):
     from animegraph.apps.cli import main
