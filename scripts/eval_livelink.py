@@ -10,9 +10,10 @@ Prints, for the real capture of ``../shared/data/livelink``:
 
 1. what the clip reader reports: rows, frame rate from the timecode, dropped frames, the
    lip-audio lag (positive: lips lead) and its correlation;
-2. the round trip read -> write (``.livelink.csv``) -> read: the largest value difference
+2. the lag estimate on the capture's curves moved by known offsets (-0.3 .. +0.3 s);
+3. the round trip read -> write (``.livelink.csv``) -> read: the largest value difference
    and whether every value cell is the capture's, character for character;
-3. a held-out synthesis: a database from the first ``--train-fraction`` of the take
+4. a held-out synthesis: a database from the first ``--train-fraction`` of the take
    (phones recognised by PocketSphinx, as at ingest), the rest synthesized from its audio
    and phones and scored against the capture (ARKit weights; :func:`animegraph.apps.evaluate
    .score_heldout`): the exact search, the paper's look-ahead windows, the naive random /
@@ -36,8 +37,9 @@ from animegraph.synthesis import Model
 from ingest.formats.livelink import format_timecode, read_livelink, write_livelink
 from ingest.pipeline import build_database, prepare_sources
 from ingest.prepare import slice_clip
-from ingest.readers import discover, load
-from ingest.readers.livelink import frame_steps
+from ingest.readers import discover, estimate_lag, load, shift_motion
+from ingest.readers.livelink import frame_steps, mouth_activity
+from ingest.readers.sync import audio_envelope
 
 CAPTURE = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "livelink"
            / "neurosync_testset.csv")
@@ -50,6 +52,25 @@ def reader_facts(capture: Path) -> dict:
             "audio_s": round(clip.duration, 3), **{k: clip.extra[k] for k in (
                 "timecode_start", "dropped_frames", "gaps", "lip_audio_lag_s",
                 "lag_confidence", "motion_audio_offset_s")}}
+
+
+def lag_recovery(capture: Path, offsets=(-0.3, -0.2, -0.1, 0.1, 0.2, 0.3)) -> list[dict]:
+    """The capture's curves moved by known offsets: the lag each estimate finds.
+
+    A motion advanced by ``d`` seconds has its lips leading the audio by ``d`` more than
+    the recording's own lag, so the estimate should move by ``d``.
+    """
+    clip = load(discover([capture])[0])
+    loudness = audio_envelope(clip.audio, clip.sample_rate, clip.fps, clip.n_frames)
+    base = clip.extra["lip_audio_lag_s"]
+    rows = []
+    for d in offsets:
+        moved = shift_motion(clip.motion, -d, clip.fps)
+        lag, r = estimate_lag(mouth_activity(moved, clip.schema.names), loudness, clip.fps)
+        rows.append({"offset_s": d, "expected_s": round(base + d, 4),
+                     "estimated_s": round(lag, 4), "error_ms": round(1000 * (lag - base - d), 1),
+                     "r": round(r, 3)})
+    return rows
 
 
 def round_trip(capture: Path, folder: Path) -> dict:
@@ -92,6 +113,9 @@ def main(argv=None) -> int:
     out: dict = {"capture": str(args.capture)}
     out["reader"] = reader_facts(args.capture)
     print("reader:", json.dumps(out["reader"]))
+    out["lag_recovery"] = lag_recovery(args.capture)
+    for row in out["lag_recovery"]:
+        print("lag recovery:", json.dumps(row))
     with tempfile.TemporaryDirectory() as tmp:
         out["round_trip"] = round_trip(args.capture, Path(tmp))
         print("round trip:", json.dumps(out["round_trip"]))
