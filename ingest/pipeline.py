@@ -267,6 +267,8 @@ def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
     one clip needs nothing but the clip.
     """
     for source in found:
+        if source.kind == "curves":  # no points, no head frame: not worth reading
+            return None
         try:
             raw = load(source)
         except DataError:
