@@ -115,6 +115,17 @@ def test_write_clamps_blendshapes_not_rotations(tmp_path):
     np.testing.assert_allclose(np.diff(take.frames), 1.0)
 
 
+def test_timecode_rate_is_found_from_the_rollover(tmp_path):
+    from ingest.readers.livelink import frame_steps
+
+    for fps in (24.0, 25.0, 30.0, 60.0):
+        path = write_livelink(tmp_path / "r.csv", _take_values(int(2 * fps)), ARKIT_CHANNELS,
+                              fps, start="00:00:00:10")
+        take = read_livelink(path)
+        assert take.timecode_rate == fps
+        assert frame_steps(take.frames, take.timecode_rate, path)[0] == fps
+
+
 def test_writer_rejects_non_arkit_motion(tmp_path):
     with pytest.raises(ParameterError, match="not ARKit motion"):
         write_livelink(tmp_path / "d.csv", np.zeros((3, 2)), ("jaw", "lips"), 60.0)
@@ -353,6 +364,18 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
                  str(tmp_path / "batch"), "--workers", "1", "--quiet"]) == 0
     assert read_livelink(tmp_path / "batch" / "hello" / "motion.livelink.csv").names \
         == ARKIT_CHANNELS
+
+
+def test_synth_livelink_needs_an_arkit_database(capsys, tiny_db, tmp_path):
+    from animegraph.apps.cli import main
+
+    write_wav(tmp_path / "a.wav", np.zeros(1600, dtype=np.float32), 16000)
+    code = main(["synth", str(tmp_path / "a.wav"), "--db", str(tiny_db[0]), "-o",
+                 str(tmp_path / "a.livelink.csv")])
+    err = capsys.readouterr().err
+    assert code != 0 and "needs a database of ARKit blendshapes" in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "a.livelink.csv").exists()
 
 
 def test_synth_timecode_needs_a_livelink_output(capsys, tmp_path):

@@ -581,6 +581,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
     t0 = time.perf_counter()
     model = Model.load(args.db)
+    _check_livelink_channels(args, model.names)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
     if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
             args.emotion_mix:
@@ -656,6 +657,17 @@ def _check_timecode(args: argparse.Namespace) -> None:
         raise UsageError(f"animegraph synth: --timecode: {exc}") from None
 
 
+def _check_livelink_channels(args: argparse.Namespace, names) -> None:
+    """A ``.livelink.csv`` output needs an ARKit database: say so before synthesizing."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import is_arkit
+
+    if args.output.name.lower().endswith(LIVELINK_SUFFIX) and not is_arkit(names):
+        raise UsageError(f"animegraph synth: -o {args.output.name}: Live Link Face CSV needs "
+                         f"a database of ARKit blendshapes (an iPhone capture); this one has "
+                         f"other channels (write .csv or .npz)")
+
+
 def _synth_baseline(args: argparse.Namespace) -> int:
     """``synth --method <baseline>``: motion from the audio alone by a fitted baseline."""
     import time
@@ -688,6 +700,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
+    _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
     check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
                 .to_pylist())
     audio, sample_rate = read_wav(args.audio)

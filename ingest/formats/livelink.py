@@ -27,6 +27,7 @@ import math
 import os
 import re
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
@@ -290,7 +291,7 @@ def write_livelink(path: str | os.PathLike, values: np.ndarray, names, fps: floa
     if values.ndim != 2 or values.shape[1] != len(names) or len(values) < 1:
         raise ParameterError(f"values: expected (n_frames, {len(names)}) with at least one "
                              f"frame, got {values.shape}")
-    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
+    if isinstance(fps, bool) or not (isinstance(fps, Real) and math.isfinite(fps) and fps > 0):
         raise ParameterError(f"fps: expected a number > 0, got {fps!r}")
     if not np.isfinite(values).all():
         raise ParameterError("values: NaN or infinite values cannot go into a Live Link CSV")
