@@ -212,6 +212,35 @@ def test_bad_takes_fail_with_one_reason(tmp_path, case, needle):
     assert "\n" not in str(info.value)
 
 
+def test_speech_from_the_takes_video(tmp_path):
+    """Live Link Face keeps the speech in the take's .mov: read through ffmpeg."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    from ingest.formats.media import read_audio
+    from ingest.formats.wav import read_wav
+
+    _write_take(tmp_path)
+    wav = tmp_path / "take.wav"
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error",
+                    "-f", "lavfi", "-i", "color=black:s=64x64:r=30", "-i", str(wav),
+                    "-shortest", "-c:v", "libx264", "-c:a", "aac", "-b:a", "96k",
+                    str(tmp_path / "take.mov")], check=True)
+    original, sr = read_wav(wav)
+    wav.unlink()
+    clip = _load_one(tmp_path)
+    assert clip.sample_rate == sr
+    assert abs(clip.duration - len(original) / sr) < 0.1
+    n = min(len(original), len(clip.audio))
+    # The same speech, through AAC: correlated sample by sample once aligned.
+    lag = int(np.argmax(np.correlate(clip.audio[:4000], original[:2000], "valid")))
+    assert np.corrcoef(clip.audio[lag:n], original[: n - lag])[0, 1] > 0.9
+    (tmp_path / "empty.mov").write_bytes(b"not a video")
+    with pytest.raises(DataError, match="empty.mov"):
+        read_audio(tmp_path / "empty.mov")
+
+
 def test_marker_csv_is_not_taken_for_livelink(tmp_path):
     (tmp_path / "m.csv").write_text("frame,time,a.x,a.y,a.z\n0,0,1,2,3\n")
     assert not sniff_livelink(tmp_path / "m.csv")

@@ -263,7 +263,8 @@ def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
 
 def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: dict,
                           meta_path: Path | None):
-    """A clip's audio (its duration checked against the motion's), metadata fields and
+    """A clip's audio (a WAV, or a video's sound track: :func:`ingest.formats.media.
+    read_audio`; its duration checked against the motion's), metadata fields and
     transcript/labels.
 
     Returns
@@ -275,9 +276,9 @@ def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: 
         file if there is one.
     phones : tuple of Segment or None
     """
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
 
-    audio, sample_rate = read_wav(source.file("audio"))
+    audio, sample_rate = read_audio(source.file("audio"))
     audio_seconds = len(audio) / sample_rate
     check_durations(n_frames, fps, audio_seconds, where)
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(META_KEYS)

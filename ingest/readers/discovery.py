@@ -12,7 +12,8 @@ Per folder, the first layout that fits wins:
 3. **talking-face clip**: a folder with ``landmarks.npy``;
 4. **generic**: per file stem, a marker file (``.c3d`` > ``.trc`` > marker ``.csv``),
    else a Live Link Face ``.csv`` (header ``Timecode,BlendshapeCount,...``: an iPhone
-   capture, :mod:`ingest.readers.livelink`), else a curve file (``.npy`` >
+   capture, :mod:`ingest.readers.livelink`; its speech is ``<stem>.wav``, else the sound
+   track of the app's ``<stem>.mov``/``.mp4``), else a curve file (``.npy`` >
    ``.curves.csv``), with its side files.
    A marker or Live Link file without ``<stem>.wav`` is still a clip (``load`` then
    rejects it);
@@ -29,6 +30,7 @@ from pathlib import Path
 
 from db.errors import ParameterError
 from ingest.formats.livelink import sniff_livelink
+from ingest.formats.media import MEDIA_SUFFIXES
 from ingest.readers.common import ClipSource
 from ingest.readers.landmarks import AUDIO_NAMES
 
@@ -118,6 +120,8 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         elif livelink is not None:
             kind, layout, motion = "curves", "livelink", livelink
             ignored = curves
+            # Live Link Face keeps a take's speech in its video.
+            audio = audio or next((files[s] for s in MEDIA_SUFFIXES if s in files), None)
         elif curves and (audio is not None or ".channels.txt" in files):
             kind, layout, motion = "curves", "curves", curves[0]
             ignored = curves[1:]

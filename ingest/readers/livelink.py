@@ -1,7 +1,8 @@
 """iPhone face captures: Live Link Face CSV (ARKit blendshapes) with their speech.
 
 Layout: ``<take>.csv`` (Live Link Face's export, :mod:`ingest.formats.livelink`) with
-``<take>.wav`` beside it, and optionally ``<take>.txt`` (transcript), phone labels
+``<take>.wav`` beside it (or, as the app saves a take, the video ``<take>.mov`` whose
+sound track is read through ffmpeg), and optionally ``<take>.txt`` (transcript), phone labels
 (``.phones.csv``/``.TextGrid``/``.lab``) and ``<take>.json`` (speaker, emotion, text), as
 for every clip kind. The CSV is told from other tables by its header
 (``Timecode,BlendshapeCount,...``).
@@ -202,7 +203,8 @@ def load_livelink(source: ClipSource) -> RawClip:
     path = source.source
     audio_path = source.file("audio")
     if audio_path is None:
-        raise DataError(f"{path}: no {path.stem}.wav beside it (the take's speech)")
+        raise DataError(f"{path}: no {path.stem}.wav or {path.stem}.mov beside it (the "
+                        f"take's speech)")
     take = read_livelink(path)
     fps, dropped = frame_steps(take.frames, take.timecode_rate, path)
     names = tuple(n for n in ARKIT_BLENDSHAPES + ROTATIONS if n in take.names)
