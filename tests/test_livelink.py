@@ -173,6 +173,7 @@ def test_dropped_frames_are_reported_and_filled(tmp_path):
     ("duplicate", "timecode repeats"),
     ("backwards", "timecode goes back"),
     ("nan", "NaN"),
+    ("percent", "an ARKit weight lies in"),
     ("short_audio", "but audio"),
     ("two_takes", "more than one take"),
     ("no_audio", "no take.wav"),
@@ -199,6 +200,13 @@ def test_bad_takes_fail_with_one_reason(tmp_path, case, needle):
         cells = lines[5].split(",")
         cells[20] = "nan"
         lines[5] = ",".join(cells)
+        path.write_text("\n".join(lines) + "\n")
+    elif case == "percent":
+        path = _write_take(tmp_path)
+        lines = path.read_text().splitlines()
+        cells = lines[7].split(",")
+        cells[2] = "35.0"
+        lines[7] = ",".join(cells)
         path.write_text("\n".join(lines) + "\n")
     elif case == "short_audio":
         _write_take(tmp_path, n=600, audio_s=4.0)

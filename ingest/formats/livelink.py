@@ -67,6 +67,8 @@ TIMECODE_RATES = (24.0, 25.0, 30.0, 48.0, 50.0, 60.0)
 LIVELINK_FPS = 60.0
 #: Decimals of the values in Live Link Face's export (written the same way).
 DECIMALS = 10
+#: How far outside [0, 1] a blendshape weight may stray before the file is refused.
+WEIGHT_SLACK = 0.05
 
 _TIMECODE = re.compile(r"^(\d{1,2}):(\d{2}):(\d{2})[:;](\d{2}(?:\.\d+)?)$")
 
@@ -178,6 +180,20 @@ def _timecode_rate(parts: list[tuple[int, int, int, float]]) -> float:
     return best
 
 
+def _check_ranges(values: np.ndarray, names, lines: list[int], path: Path) -> None:
+    """Plausibility: blendshape weights in [0, 1] (within :data:`WEIGHT_SLACK`), rotations
+    within a turn (radians); DataError at the first value outside."""
+    shapes = np.array([n in ARKIT_BLENDSHAPES for n in names])
+    limit = np.where(shapes, 1.0 + WEIGHT_SLACK, 2 * math.pi)
+    low = np.where(shapes, -WEIGHT_SLACK, -2 * math.pi)
+    bad = (values > limit) | (values < low)
+    if bad.any():
+        i, j = (int(k[0]) for k in np.nonzero(bad))
+        what = "an ARKit weight lies in [0, 1]" if shapes[j] else "angles are in radians"
+        raise DataError(f"{path}:{lines[i]}: {livelink_column(names[j])} is {values[i, j]:g}; "
+                        f"{what} (another unit, or not Live Link Face's data?)")
+
+
 def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
     """Read a Live Link Face CSV.
 
@@ -195,8 +211,10 @@ def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
     DataError
         One line naming the file (and line) if it is not a Live Link Face CSV (another
         app's columns), lacks ARKit columns, has a ``BlendshapeCount`` that does not match
-        its columns, a bad timecode, a value that is not a number or is NaN/infinite, or
-        no rows. Timecode order (repeats, steps back) is checked by the reader of a clip.
+        its columns, a bad timecode, a value that is not a number or is NaN/infinite, a
+        blendshape weight outside [0, 1] (by more than :data:`WEIGHT_SLACK`) or a rotation
+        beyond a full turn (radians), or no rows. Timecode order (repeats, steps back) is
+        checked by the reader of a clip (:func:`ingest.readers.livelink.frame_steps`).
     """
     path = Path(path)
     rows = read_csv_rows(path, "Live Link Face CSV")
@@ -244,6 +262,7 @@ def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
             bad = columns[int(np.flatnonzero(~np.isfinite(values[i]))[0])]
             raise DataError(f"{path}:{line}: {bad} is {values[i][columns.index(bad)]} "
                             "(NaN or infinite)")
+    _check_ranges(values, names, [line for line, _ in body], path)
     try:
         rate = _timecode_rate(parts)
     except ValueError as exc:
