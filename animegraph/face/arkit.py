@@ -15,12 +15,12 @@ jawOpen                 the lower jaw drops 20 mm at the lower lip and slides ba
 jawForward/Left/Right   the jaw region moves 5 mm forward / to the side
 mouthClose              the lower lip rises back by the jaw's drop (lips shut, jaw open)
 mouthFunnel             lips forward 4 mm, narrower, and parted (funnel)
-mouthPucker             lips forward 6 mm, 35 % narrower, pressed together
+mouthPucker             lips forward 5 mm, 35 % narrower, pressed together
 mouthLeft/Right         both lips 6 mm to the side
 mouthSmile{L,R}         lip corner up 5, out 4, back 2 mm; cheek and lower lid rise
 mouthFrown{L,R}         lip corner down 4 mm, chin boss up
 mouthDimple{L,R}        lip corner back 3 and out 2 mm
-mouthStretch{L,R}       lip corner out 4 and down 2 mm, lips flattened
+mouthStretch{L,R}       lip corner out 7 and down 2 mm, lips flattened
 mouthRollLower/Upper    that lip rolls in: back 4 mm, towards the other lip 1.5 mm
 mouthShrugLower/Upper   lower lip and chin up 3 mm / upper lip up 2.5 mm
 mouthPress{L,R}         lips pressed together and back (1.5 mm)
