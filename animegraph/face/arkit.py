@@ -20,7 +20,7 @@ mouthLeft/Right         both lips 6 mm to the side
 mouthSmile{L,R}         lip corner up 5, out 4, back 2 mm; cheek and lower lid rise
 mouthFrown{L,R}         lip corner down 4 mm, chin boss up
 mouthDimple{L,R}        lip corner back 3 and out 2 mm
-mouthStretch{L,R}       lip corner out 7 and down 2 mm, lips flattened
+mouthStretch{L,R}       lip corner out 6 and down 2 mm, lips flattened
 mouthRollLower/Upper    that lip rolls in: back 4 mm, towards the other lip 1.5 mm
 mouthShrugLower/Upper   lower lip and chin up 3 mm / upper lip up 2.5 mm
 mouthPress{L,R}         lips pressed together and back (1.5 mm)
