@@ -58,6 +58,15 @@ def _write_take(folder: Path, stem: str = "take", n: int = 180, *, rows=None,
     return path
 
 
+def _set_cell(path: Path, line: int, column: int, text: str) -> None:
+    """Overwrite one cell of a CSV (``line`` 0 = the header)."""
+    lines = path.read_text().splitlines()
+    cells = lines[line].split(",")
+    cells[column] = text
+    lines[line] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
 def _load_one(folder: Path):
     sources = discover([folder])
     assert len(sources) == 1
@@ -195,19 +204,9 @@ def test_bad_takes_fail_with_one_reason(tmp_path, case, needle):
     elif case == "backwards":
         _write_take(tmp_path, rows=[*range(0, 60), 58, *range(61, 180)])
     elif case == "nan":
-        path = _write_take(tmp_path)
-        lines = path.read_text().splitlines()
-        cells = lines[5].split(",")
-        cells[20] = "nan"
-        lines[5] = ",".join(cells)
-        path.write_text("\n".join(lines) + "\n")
+        _set_cell(_write_take(tmp_path), 5, 20, "nan")
     elif case == "percent":
-        path = _write_take(tmp_path)
-        lines = path.read_text().splitlines()
-        cells = lines[7].split(",")
-        cells[2] = "35.0"
-        lines[7] = ",".join(cells)
-        path.write_text("\n".join(lines) + "\n")
+        _set_cell(_write_take(tmp_path), 7, 2, "35.0")
     elif case == "short_audio":
         _write_take(tmp_path, n=600, audio_s=4.0)
     elif case == "two_takes":
