@@ -111,8 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--fps", type=_number, default=None,
                      help="database frame rate (default: the highest of the clips)")
     ing.add_argument("--no-lag-correction", action="store_true",
-                     help="keep landmark motion where it is instead of shifting it by the "
-                     "estimated lip-audio lag")
+                     help="keep landmark and iPhone (Live Link) motion where it is "
+                     "instead of shifting it by the estimated lip-audio lag")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
