@@ -33,6 +33,10 @@ LOWER_LIP_INNER = (95, 88, 178, 87, 14, 317, 402, 318, 324)
 #: Inner-lip midpoints: their distance is the mouth opening.
 UPPER_LIP_MID, LOWER_LIP_MID = 13, 14
 EYE_R = {"upper": 159, "lower": 145, "outer": 33, "inner": 133}
+#: The lid margins around each eye opening (mediapipe's eye contours), right then left:
+#: the triangles between them fill the opening (the mesh has no eyeballs).
+EYE_RING_R = (33, 7, 163, 144, 145, 153, 154, 155, 133, 173, 157, 158, 159, 160, 161, 246)
+EYE_RING_L = (263, 249, 390, 373, 374, 380, 381, 382, 362, 398, 384, 385, 386, 387, 388, 466)
 EYE_L = {"upper": 386, "lower": 374, "outer": 263, "inner": 362}
 
 

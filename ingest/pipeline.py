@@ -53,7 +53,7 @@ class IngestConfig:
     energy: float = ENERGY_KEPT  # energy below each component's cutoff (§4.3: 99 %)
     fps: float | None = None  # database frame rate (default: the existing database's, else
     #                           the highest among the new clips)
-    correct_lag: bool = True  # shift landmark motion by its estimated lip-audio lag
+    correct_lag: bool = True  # shift landmark / Live Link motion by its estimated lip-audio lag
     random_state: int = 0  # FastICA seed
 
 
@@ -267,6 +267,8 @@ def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
     one clip needs nothing but the clip.
     """
     for source in found:
+        if source.kind == "curves":  # no points, no head frame: not worth reading
+            return None
         try:
             raw = load(source)
         except DataError:

@@ -111,8 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--fps", type=_number, default=None,
                      help="database frame rate (default: the highest of the clips)")
     ing.add_argument("--no-lag-correction", action="store_true",
-                     help="keep landmark motion where it is instead of shifting it by the "
-                     "estimated lip-audio lag")
+                     help="keep landmark and iPhone (Live Link) motion where it is "
+                     "instead of shifting it by the estimated lip-audio lag")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
@@ -167,7 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="exact search only: accept a sequence certified within (1 + T) of "
                      "the optimum's cost, e.g. 0.01 (much faster on huge databases)")
     syn.add_argument("-o", "--output", required=True, type=Path,
-                     help="motion file: .c3d (marker databases), .csv or .npz")
+                     help="motion file: .c3d (marker databases), .csv or .npz; "
+                     "NAME.livelink.csv writes Live Link Face CSV (ARKit databases)")
+    syn.add_argument("--timecode", default=None, metavar="HH:MM:SS:FF",
+                     help="first frame's timecode in a .livelink.csv (default 00:00:00:00)")
     syn.add_argument("--explain", action="store_true",
                      help="print where every phone's motion came from and its costs")
     syn.add_argument("--explain-json", type=Path, default=None,
@@ -390,6 +393,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     from animegraph.face.render import deformer_for, render_motion
     from animegraph.motion.files import read_motion
+    from ingest.formats.livelink import is_arkit
 
     size = _size(args.size)
     if args.fps is not None and not args.fps > 0:
@@ -408,6 +412,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                         progress=lambda total: _progress(total, args.quiet, "frame"))
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
+    if deformer is None and is_arkit(motion.names):
+        what = "ARKit blendshapes on the canonical face mesh"
     print(f"animegraph: rendered {motion.duration:.2f} s of motion ({what}) in "
           f"{time.perf_counter() - t0:.1f} s: {out}", file=sys.stderr)
     return 0
@@ -558,6 +564,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
         raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
                          f"{args.output.name!r}")
+    _check_timecode(args)
     if args.method != "anime-graph":
         return _synth_baseline(args)
     method = args.search or ("window" if args.window is not None else "exact")
@@ -574,6 +581,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
     t0 = time.perf_counter()
     model = Model.load(args.db)
+    _check_livelink_channels(args, model.names)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
     if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
             args.emotion_mix:
@@ -598,7 +606,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
-    write_motion(out, model, args.output)
+    write_motion(out, model, args.output, timecode=args.timecode)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
               f"{out.emotion.search}, emotion components blended from their mappings",
@@ -630,6 +638,34 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.explain_json:
         write_explain(out, args.explain_json)
     return 0
+
+
+def _check_timecode(args: argparse.Namespace) -> None:
+    """``synth --timecode``: only with a ``.livelink.csv`` output, and a real timecode."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import parse_timecode
+
+    livelink = args.output.name.lower().endswith(LIVELINK_SUFFIX)
+    if args.timecode is None:
+        return
+    if not livelink:
+        raise UsageError(f"animegraph synth: --timecode needs -o NAME{LIVELINK_SUFFIX} "
+                         f"(Live Link Face CSV), got {args.output.name!r}")
+    try:
+        parse_timecode(args.timecode)
+    except ValueError as exc:
+        raise UsageError(f"animegraph synth: --timecode: {exc}") from None
+
+
+def _check_livelink_channels(args: argparse.Namespace, names) -> None:
+    """A ``.livelink.csv`` output needs an ARKit database: say so before synthesizing."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import is_arkit
+
+    if args.output.name.lower().endswith(LIVELINK_SUFFIX) and not is_arkit(names):
+        raise UsageError(f"animegraph synth: -o {args.output.name}: Live Link Face CSV needs "
+                         f"a database of ARKit blendshapes (an iPhone capture); this one has "
+                         f"other channels (write .csv or .npz)")
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -664,6 +700,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
+    _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
     check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
                 .to_pylist())
     audio, sample_rate = read_wav(args.audio)
@@ -674,7 +711,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     t2 = time.perf_counter()
     head = db.arrays().get("head_reference")
     write_channels(to_world(motion, model.groups_, head), model.fps_, model.channels_,
-                   model.kind_, args.output, extra={"method": np.array(args.method)})
+                   model.kind_, args.output, extra={"method": np.array(args.method)},
+                   timecode=args.timecode)
     print(f"animegraph: {args.method} model ready in {t1 - t0:.2f} s; synthesized "
           f"{len(audio) / sample_rate:.1f} s of speech in {t2 - t1:.2f} s; wrote "
           f"{args.output}", file=sys.stderr)

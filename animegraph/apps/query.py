@@ -289,13 +289,21 @@ def _safe(name: str) -> str:
 
 
 def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
-    """C3D for marker databases (at most 255 points), else channel CSV; the file name."""
-    from animegraph.motion.files import point_labels, write_channel_csv
+    """C3D for marker databases (at most 255 points), Live Link Face CSV for ARKit
+    databases (timecode = the snippet's start in its recording), else channel CSV; the
+    file name."""
+    from animegraph.motion.files import LIVELINK_SUFFIX, point_labels, write_channel_csv
     from ingest.formats.c3d import MAX_MARKERS, MarkerData, write_c3d
+    from ingest.formats.livelink import LIVELINK_FPS, format_timecode, is_arkit, write_livelink
 
     part = clip.motion[f0:f1]
     labels = point_labels(clip.names)
-    if clip.kind == "markers" and labels and 3 * len(labels) == len(clip.names) \
+    if is_arkit(clip.names):
+        path = stem.with_name(stem.name + LIVELINK_SUFFIX)
+        write_livelink(path, part, clip.names, clip.fps,
+                       start=format_timecode(f0 / clip.fps * LIVELINK_FPS, LIVELINK_FPS),
+                       timecode_rate=LIVELINK_FPS)
+    elif clip.kind == "markers" and labels and 3 * len(labels) == len(clip.names) \
             and len(labels) <= MAX_MARKERS:
         path = stem.with_suffix(".c3d")
         write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3), labels=labels,
@@ -308,7 +316,8 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
 
 def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones, path: Path,
              *, title: str) -> None:
-    """PNG: the face at the anime's middle (point databases) and its main measure."""
+    """PNG: the face at the anime's middle (point and ARKit databases) and its main
+    measure."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -348,18 +357,21 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
 
 def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
     from animegraph.face.animation import animate, animation_bounds
+    from animegraph.face.arkit import arkit_animation
     from animegraph.face.render import FaceRenderer, deformer_for
     from animegraph.motion.files import Motion
+    from ingest.formats.livelink import is_arkit
 
+    motion = Motion(values=part, names=clip.names, fps=clip.fps)
     try:
         deformer = deformer_for(clip.names)
     except DataError:
         return None
-    if deformer is None:
+    if deformer is None and not is_arkit(clip.names):
         return None
-    animation = animate(Motion(values=part, names=clip.names, fps=clip.fps), deformer)
+    animation = (arkit_animation(motion) if deformer is None else animate(motion, deformer))
     frame = min(max(frame, 0), animation.n_frames - 1)
-    renderer = FaceRenderer(deformer.mesh, animation_bounds(animation), (240, 270))
+    renderer = FaceRenderer(animation.mesh, animation_bounds(animation), (240, 270))
     try:
         return renderer.frame(animation.vertices[frame])
     finally:

@@ -2,8 +2,11 @@
 
 :func:`write_glb` stores the mesh at rest, the principal components of its non-rigid
 vertex motion as morph targets with per-frame weights, and the head's rotation and
-translation as node animation, in metres, through ``pygltflib``; :func:`read_glb_frames`
-reads such a file back into vertex positions (for checking round trips).
+translation as node animation, in metres, through ``pygltflib``; :func:`write_arkit_glb`
+does the same with the 52 ARKit blendshapes as morph targets named by ARKit (the names
+are in the mesh's ``extras.targetNames``, where Blender and three.js read them);
+:func:`read_glb_frames` reads such a file back into vertex positions (for checking round
+trips).
 """
 
 from __future__ import annotations
@@ -29,13 +32,7 @@ def write_glb(animation: FaceAnimation, path: Path, *, max_targets: int = 64,
     -------
     Path
     """
-    import pygltflib as gl
-
-    from db.atomic import atomic_write
-
-    mm = 0.001
     n = animation.n_frames
-    base = animation.mesh.vertices
     # Vertex motion is the fixed operator times the marker motion, so the principal
     # components of the (small) marker displacements carry over to the vertices.
     disp = animation.displacement.reshape(n, -1)
@@ -50,6 +47,44 @@ def write_glb(animation: FaceAnimation, path: Path, *, max_targets: int = 64,
     scale = s[:k] / np.sqrt(n)
     targets = np.matmul(op, (vt[:k] * scale[:, None]).reshape(k, -1, 3))
     weights = u[:, :k] * np.sqrt(n)
+    return _write_gltf(animation, targets, [f"pc{i}" for i in range(k)], weights, path)
+
+
+def write_arkit_glb(animation: FaceAnimation, weights: np.ndarray, path: Path) -> Path:
+    """glTF 2.0 binary with the 52 ARKit blendshapes as morph targets named by ARKit (atomic).
+
+    Blender (shape keys) and three.js (``morphTargetDictionary``) bind the animation to
+    any ARKit-rigged head by these names; the canonical mesh carries the shapes of
+    :func:`animegraph.face.arkit.arkit_shapes` so the file also plays on its own.
+
+    Parameters
+    ----------
+    animation : FaceAnimation
+        From :func:`animegraph.face.arkit.arkit_animation` (gives mesh, head motion, fps).
+    weights : np.ndarray, shape (n_frames, 52)
+        Blendshape weights at the animation's frames, in
+        :data:`ingest.formats.livelink.ARKIT_BLENDSHAPES` order.
+    path : Path
+    """
+    from animegraph.face.arkit import arkit_shapes
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    return _write_gltf(animation, np.asarray(arkit_shapes()), list(ARKIT_BLENDSHAPES),
+                       np.asarray(weights, dtype=np.float64), path)
+
+
+def _write_gltf(animation: FaceAnimation, targets: np.ndarray, names: list[str],
+                weights: np.ndarray, path: Path) -> Path:
+    """The mesh at rest, ``targets`` (k, n_vertices, 3) mm named ``names`` with
+    ``weights`` (n_frames, k) animated, and the head's rigid motion, as .glb (atomic)."""
+    import pygltflib as gl
+
+    from db.atomic import atomic_write
+
+    mm = 0.001
+    n = animation.n_frames
+    k = len(targets)
+    base = animation.mesh.vertices
     quats = _quaternions(animation.rotation)
     times = np.arange(n, dtype=np.float32) / np.float32(animation.fps)
 
@@ -86,7 +121,6 @@ def write_glb(animation: FaceAnimation, path: Path, *, max_targets: int = 64,
     r_out = add(quats.astype(np.float32), "VEC4", gl.FLOAT)
     tr_out = add((animation.translation * mm).astype(np.float32), "VEC3", gl.FLOAT)
 
-    names = [f"pc{i}" for i in range(k)]
     gltf = gl.GLTF2(
         asset=gl.Asset(generator="animegraph", version="2.0"),
         scene=0, scenes=[gl.Scene(nodes=[0])],

@@ -33,7 +33,7 @@ import csv
 import io
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -75,12 +75,16 @@ class Mesh:
         mouth.
     name : str
         Where it came from.
+    eyes : np.ndarray, shape (n_eyes,)
+        Indices into ``faces`` of the triangles that fill the eye openings (drawn dark,
+        so lids opening and closing show). Empty if unknown.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     mouth: np.ndarray
     name: str
+    eyes: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
 
     @property
     def n_vertices(self) -> int:
@@ -119,9 +123,12 @@ def canonical_mesh() -> Mesh:
     face = facemesh.load_canonical_face()
     ring = set(_INNER_UPPER) | set(_INNER_LOWER)
     mouth = np.array([i for i, tri in enumerate(face.faces) if set(tri.tolist()) <= ring])
+    lids = (set(facemesh.EYE_RING_R), set(facemesh.EYE_RING_L))
+    eyes = np.array([i for i, tri in enumerate(face.faces)
+                     if any(set(tri.tolist()) <= ring for ring in lids)], dtype=np.int64)
     return Mesh(vertices=np.asarray(face.vertices, dtype=np.float64),
                 faces=np.asarray(face.faces, dtype=np.int64), mouth=mouth,
-                name="canonical face mesh")
+                name="canonical face mesh", eyes=eyes)
 
 
 def load_mesh(path: str | os.PathLike) -> Mesh:

@@ -4,8 +4,11 @@ or OBJ frames.
 Point motion (markers, landmarks) is carried onto a face mesh (:mod:`animegraph.face.mesh`,
 Cao et al. §7) and drawn as a flat-shaded face (matplotlib's Agg rasteriser, triangles
 in depth order), the frames piped as raw RGB into the ffmpeg binary that
-``imageio-ffmpeg`` ships, with the speech muxed in. Curve motion (blendshape weights:
-no rig here) is drawn as curves over time with the phones and a moving cursor.
+``imageio-ffmpeg`` ships, with the speech muxed in. ARKit blendshape curves (an iPhone
+capture, an ARKit database) drive the canonical face through the shapes of
+:mod:`animegraph.face.arkit` (and become a glTF with ARKit-named morph targets); other
+curve motion (no rig here) is drawn as curves over time with the phones and a moving
+cursor.
 
 Every output appears complete or not at all: files are written beside the target under
 a temporary name and renamed; OBJ frames go to a hidden folder renamed into place.
@@ -24,9 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from animegraph.face.animation import FaceAnimation, animate, animation_bounds
+from animegraph.face.arkit import arkit_animation, arkit_weights
 from animegraph.face.mesh import Deformer, MarkerMap, Mesh
 from animegraph.motion.files import Motion
 from db.errors import DataError, ParameterError
+from ingest.formats.livelink import is_arkit
 
 logger = logging.getLogger(__name__)
 
@@ -34,6 +39,7 @@ logger = logging.getLogger(__name__)
 FORMATS = (".mp4", ".gif", ".glb", ".png", "")
 _SKIN = np.array([0.86, 0.68, 0.58])
 _MOUTH = np.array([0.30, 0.06, 0.07])
+_EYE = np.array([0.12, 0.10, 0.10])
 _LIGHT = np.array([-0.35, 0.45, 0.82])
 _LIGHT = _LIGHT / np.linalg.norm(_LIGHT)
 
@@ -72,6 +78,8 @@ class FaceRenderer:
         self.mesh = mesh
         self.is_mouth = np.zeros(len(mesh.faces), dtype=bool)
         self.is_mouth[mesh.mouth] = True
+        self.is_eye = np.zeros(len(mesh.faces), dtype=bool)
+        self.is_eye[mesh.eyes] = True
         dpi = 100
         self.fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor="0.13")
         self.canvas = FigureCanvasAgg(self.fig)
@@ -101,7 +109,8 @@ class FaceRenderer:
         lambert = np.clip(normal[order] @ _LIGHT, 0.0, 1.0)
         half = _LIGHT + np.array([0.0, 0.0, 1.0])
         spec = np.clip(normal[order] @ (half / np.linalg.norm(half)), 0, 1) ** 24
-        base = np.where(self.is_mouth[order, None], _MOUTH, _SKIN)
+        base = np.where(self.is_mouth[order, None], _MOUTH,
+                        np.where(self.is_eye[order, None], _EYE, _SKIN))
         colour = np.clip(base * (0.28 + 0.72 * lambert[:, None]) + 0.12 * spec[:, None], 0, 1)
         self.coll.set_verts(tri[order, :, :2])
         self.coll.set_facecolor(colour)
@@ -322,7 +331,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     if kind != "" and out.is_dir():
         raise DataError(f"{out} is a folder")
     video_fps = fps or (20.0 if kind == ".gif" else 30.0)
-    if deformer is None:
+    arkit = deformer is None and is_arkit(motion.names)
+    if deformer is None and not arkit:
         if kind in (".glb", ""):
             raise ParameterError("curve motion (no marker geometry) cannot become a mesh "
                                  "animation: render .mp4, .gif or .png")
@@ -333,7 +343,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
                               size=(960, 540) if kind == ".mp4" else (640, 360))
         return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
     if kind in (".mp4", ".gif", ".png"):
-        animation = animate(motion, deformer, fps=video_fps)
+        animation = _animation(motion, deformer, video_fps)
         if kind == ".png":
             return _still(animation, out, phones, size)
         gif_size = (240, 270) if kind == ".gif" else size
@@ -341,12 +351,21 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         if progress is not None:
             frames = progress(animation.n_frames)(frames)
         return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
-    animation = animate(motion, deformer, fps=fps)
+    animation = _animation(motion, deformer, fps)
     if kind == ".glb":
-        from animegraph.face.gltf import write_glb
+        from animegraph.face.gltf import write_arkit_glb, write_glb
 
+        if arkit:
+            return write_arkit_glb(animation, arkit_weights(motion, animation.fps), out)
         return write_glb(animation, out)
     return write_obj_frames(animation, out, force=force)
+
+
+def _animation(motion: Motion, deformer: Deformer | None, fps: float | None) -> FaceAnimation:
+    """Point motion through the deformer; ARKit curves (no deformer) on the canonical face."""
+    if deformer is None:
+        return arkit_animation(motion, fps=fps)
+    return animate(motion, deformer, fps=fps)
 
 
 def _still(animation: FaceAnimation, out: Path, phones, size) -> Path:

@@ -53,8 +53,9 @@ def read_motion(path: str | os.PathLike) -> Motion:
     """Read a motion file by its extension.
 
     ``.c3d`` (markers), ``.csv`` (``frame,time,<channel>...``: what ``synth``, ``query
-    --export`` and the corpus write), ``.npz`` (``motion``, ``fps``, ``channels``, as
-    ``synth`` writes).
+    --export`` and the corpus write; or Live Link Face's ``Timecode,BlendshapeCount,...``,
+    told by its header: ARKit channels, dropped frames interpolated), ``.npz``
+    (``motion``, ``fps``, ``channels``, as ``synth`` writes).
 
     Raises
     ------
@@ -73,6 +74,13 @@ def read_motion(path: str | os.PathLike) -> Motion:
         return Motion(values=data.points.reshape(data.n_frames, -1), names=names,
                       fps=float(data.rate))
     if suffix == ".csv":
+        from ingest.formats.livelink import sniff_livelink
+
+        if sniff_livelink(path):
+            from ingest.readers.livelink import read_livelink_motion
+
+            values, names, fps = read_livelink_motion(path)
+            return Motion(values=values, names=names, fps=fps)
         return _read_channel_csv(path)
     if suffix == ".npz":
         try:
@@ -166,17 +174,32 @@ def read_phone_track(*, labels: str | os.PathLike | None = None,
     return []
 
 
+#: Name ending that selects Live Link Face CSV (ARKit databases) over the channel CSV.
+LIVELINK_SUFFIX = ".livelink.csv"
+
+
 def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
-                   extra: dict | None = None) -> Path:
+                   extra: dict | None = None, timecode: str | None = None) -> Path:
     """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
 
-    ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and ``channels``.
+    A name ending in :data:`LIVELINK_SUFFIX` (``take.livelink.csv``) writes Live Link
+    Face CSV (:func:`ingest.formats.livelink.write_livelink`: ARKit channels only,
+    blendshapes clamped to [0, 1], the timecode running from ``timecode``, default
+    ``00:00:00:00``). ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and
+    ``channels``.
     """
     path = Path(path)
     motion = np.asarray(motion, dtype=np.float64)
     names = tuple(names)
     suffix = path.suffix.lower()
-    if suffix == ".c3d":
+    if path.name.lower().endswith(LIVELINK_SUFFIX):
+        from ingest.formats.livelink import write_livelink
+
+        write_livelink(path, motion, names, fps, start=timecode or "00:00:00:00")
+    elif timecode is not None:
+        raise ParameterError(f"a timecode goes only into Live Link CSV (-o NAME"
+                             f"{LIVELINK_SUFFIX}), not {path.name!r}")
+    elif suffix == ".c3d":
         if kind not in ("markers", "landmarks"):
             raise ParameterError(f"C3D holds 3D points; this database has {kind} "
                                  "(write .csv or .npz)")

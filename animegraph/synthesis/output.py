@@ -10,10 +10,12 @@ from animegraph.motion.files import point_columns, read_motion, write_channels
 from db.errors import DataError
 
 
-def write_motion(synth, model, path: Path) -> Path:
-    """Write the motion as C3D (point databases), CSV or NPZ, by ``path``'s extension."""
+def write_motion(synth, model, path: Path, *, timecode: str | None = None) -> Path:
+    """Write the motion as C3D (point databases), CSV, NPZ or, for ``.livelink.csv``,
+    Live Link Face CSV starting at ``timecode`` (ARKit databases), by ``path``'s name."""
     return write_channels(synth.motion, synth.fps, model.names, model.kind, path,
-                          extra={"ics": synth.ics, "nodes": synth.result.nodes})
+                          extra={"ics": synth.ics, "nodes": synth.result.nodes},
+                          timecode=timecode)
 
 
 def read_database_motion(path: Path, model) -> tuple[np.ndarray, float]:

@@ -98,6 +98,47 @@ def _gauss(d2: np.ndarray) -> np.ndarray:
     return np.exp(-d2)
 
 
+def face_weights(rest: np.ndarray) -> dict[str, np.ndarray]:
+    """Smooth regional weights of points on the canonical face (each shape (n_points,)).
+
+    ``jaw`` (what the lower jaw carries: below the lips, fading to nothing at the
+    hinge; the product of ``jaw_split``, below the lips, and ``jaw_reach``, towards the
+    hinge), ``lips`` (a flat-topped blob around the mouth), ``corners`` (the lip
+    corners), ``cheeks``, ``chin`` (the chin boss), ``low_lids``/``up_lids`` (lower and
+    upper eyelids), ``brows`` (a band over the eyes fading into the forehead), ``inner``
+    (1 between the brows, fading outwards), ``upper_lip``/``lower_lip`` (the share of
+    each lip's closing motion a point follows) and ``side`` (sign of x: +1 on the
+    subject's left). The actions of :func:`action_fields` are built from them.
+    """
+    x, y, z = rest[:, 0], rest[:, 1], rest[:, 2]
+    ax = np.abs(x)
+    sharp = _smoothstep(_MOUTH_Y + 2.0, _MOUTH_Y - 2.0, y)
+    broad = _smoothstep(_MOUTH_Y + 15.0, _MOUTH_Y - 10.0, y)
+    lateral = _smoothstep(22.0, 35.0, ax)
+    w_jaw = (1 - lateral) * sharp + lateral * broad
+    reach = np.clip((z - _HINGE_Z) / (_MOUTH_Z - _HINGE_Z), 0.0, 1.0)
+    brows = _smoothstep(30.0, 40.0, y) * np.exp(-np.maximum(0.0, y - 50.0) / 20.0)
+    upper_lip, lower_lip = _lip_weights(rest)
+    return {
+        "side": np.sign(x),
+        "jaw": w_jaw * reach,
+        "jaw_split": w_jaw,
+        "jaw_reach": reach,
+        # The lips as a flat-topped blob around the mouth.
+        "lips": _gauss(((x / 28.0) ** 2 + ((y - _MOUTH_Y) / 14.0) ** 2) ** 2) * (z > 25.0),
+        "corners": _gauss(((ax - _CORNER_X) ** 2 + (y - (_MOUTH_Y - 0.7)) ** 2
+                           + (z - 42.8) ** 2) / 11.0**2),
+        "cheeks": _gauss(((ax - 40.0) ** 2 + (y + 20.0) ** 2 + (z - 38.0) ** 2) / 15.0**2),
+        "chin": _gauss((x**2 + (y + 62.0) ** 2 + (z - 50.0) ** 2) / 12.0**2),
+        "low_lids": _gauss(((ax - 31.8) ** 2 / 9.0**2) + (y - 22.9) ** 2 / 4.0**2),
+        "up_lids": _gauss(((ax - 31.8) ** 2 / 9.0**2) + (y - 29.6) ** 2 / 4.0**2),
+        "brows": brows * _smoothstep(78.0, 66.0, y) * _smoothstep(68.0, 58.0, ax),
+        "inner": np.where(ax < 12.0, 1.0, _gauss(((ax - 12.0) / 14.0) ** 2)),
+        "upper_lip": upper_lip,
+        "lower_lip": lower_lip,
+    }
+
+
 def action_fields(rest: np.ndarray) -> dict[str, np.ndarray]:
     """Displacement of each point under one unit of each linear action.
 
@@ -113,29 +154,20 @@ def action_fields(rest: np.ndarray) -> dict[str, np.ndarray]:
         linear actions (``jaw_open``, ``lip_round``, ``lip_spread``, the emotion
         controls and ``blink``).
     """
-    x, y, z = rest[:, 0], rest[:, 1], rest[:, 2]
-    ax = np.abs(x)
-    side = np.sign(x)
+    x, y = rest[:, 0], rest[:, 1]
+    w = face_weights(rest)
+    side = w["side"]
     zero = np.zeros_like(rest)
     f: dict[str, np.ndarray] = {}
 
     # Jaw: everything below the lips drops and slides back; a sharp split between the
     # lips inside the mouth's width, a broad one over the cheeks beside it.
-    sharp = _smoothstep(_MOUTH_Y + 2.0, _MOUTH_Y - 2.0, y)
-    broad = _smoothstep(_MOUTH_Y + 15.0, _MOUTH_Y - 10.0, y)
-    lateral = _smoothstep(22.0, 35.0, ax)
-    w_jaw = (1 - lateral) * sharp + lateral * broad
-    reach = np.clip((z - _HINGE_Z) / (_MOUTH_Z - _HINGE_Z), 0.0, 1.0)
     jaw = zero.copy()
-    jaw[:, 1] = -_JAW_DROP_MM * w_jaw * reach
-    jaw[:, 2] = -0.3 * _JAW_DROP_MM * w_jaw * reach
+    jaw[:, 1] = -_JAW_DROP_MM * w["jaw_split"] * w["jaw_reach"]
+    jaw[:, 2] = -0.3 * _JAW_DROP_MM * w["jaw_split"] * w["jaw_reach"]
     f["jaw_open"] = jaw
 
-    # The lips as a flat-topped blob around the mouth.
-    lips = _gauss(((x / 28.0) ** 2 + ((y - _MOUTH_Y) / 14.0) ** 2) ** 2) * (z > 25.0)
-    corner_d2 = ((ax - _CORNER_X) ** 2 + (y - (_MOUTH_Y - 0.7)) ** 2 + (z - 42.8) ** 2)
-    corners = _gauss(corner_d2 / 11.0**2)
-
+    lips, corners = w["lips"], w["corners"]
     rnd = zero.copy()
     rnd[:, 0] = -0.35 * x * lips  # narrower
     rnd[:, 2] = 6.0 * lips * np.clip(1 - (x / 30.0) ** 2, 0, 1)  # pushed forward
@@ -148,8 +180,7 @@ def action_fields(rest: np.ndarray) -> dict[str, np.ndarray]:
     f["lip_spread"] = spr
 
     # Smile (AU6+12): corners up, out and back; cheeks rise; lower lids push up.
-    cheeks = _gauss(((ax - 40.0) ** 2 + (y + 20.0) ** 2 + (z - 38.0) ** 2) / 15.0**2)
-    low_lids = _gauss(((ax - 31.8) ** 2 / 9.0**2) + (y - 22.9) ** 2 / 4.0**2)
+    cheeks, low_lids = w["cheeks"], w["low_lids"]
     smile = zero.copy()
     smile[:, 0] = 4.0 * side * corners
     smile[:, 1] = 5.0 * corners + 2.5 * cheeks + 1.0 * low_lids
@@ -157,17 +188,14 @@ def action_fields(rest: np.ndarray) -> dict[str, np.ndarray]:
     f["smile"] = smile
 
     # Lip-corner depressor (AU15), with the chin boss pushed up (AU17).
-    chin = _gauss((x**2 + (y + 62.0) ** 2 + (z - 50.0) ** 2) / 12.0**2)
+    chin = w["chin"]
     dep = zero.copy()
     dep[:, 0] = -1.0 * side * corners
     dep[:, 1] = -4.0 * corners + 1.5 * chin
     f["lip_corner_depress"] = dep
 
     # Brows: a band over the eyes fading into the forehead, nothing on the skull.
-    brows = _smoothstep(30.0, 40.0, y) * np.exp(-np.maximum(0.0, y - 50.0) / 20.0)
-    brows = brows * _smoothstep(78.0, 66.0, y) * _smoothstep(68.0, 58.0, ax)
-    inner = np.where(ax < 12.0, 1.0, _gauss(((ax - 12.0) / 14.0) ** 2))
-    up_lids = _gauss(((ax - 31.8) ** 2 / 9.0**2) + (y - 29.6) ** 2 / 4.0**2)
+    brows, inner, up_lids = w["brows"], w["inner"], w["up_lids"]
     raise_ = zero.copy()
     raise_[:, 1] = 5.0 * brows + 1.0 * up_lids
     f["brow_raise"] = raise_

@@ -14,6 +14,8 @@ Kinds and layouts (see each module):
 - ``"markers"``: :mod:`ingest.readers.markers` (the synthetic corpus; generic folders of
   ``.c3d``/``.trc``/marker ``.csv`` + ``.wav``);
 - ``"curves"``: :mod:`ingest.readers.curves` (FACEGOOD; generic ``.npy``/``.curves.csv``);
+- ``"curves"`` from an iPhone: :mod:`ingest.readers.livelink` (Live Link Face CSV, ARKit
+  blendshapes; timecode gaps filled, lip-audio lag estimated);
 - ``"landmarks"``: :mod:`ingest.readers.landmarks` (talking-face clip folders; head pose
   removed by Procrustes to the canonical mesh, lip-audio lag estimated, not applied:
   :func:`shift_motion` applies it).
@@ -36,6 +38,7 @@ from ingest.readers.common import (
 from ingest.readers.curves import load_curves
 from ingest.readers.discovery import discover
 from ingest.readers.landmarks import load_talkingface, normalise_landmarks
+from ingest.readers.livelink import load_livelink
 from ingest.readers.markers import load_markers
 from ingest.readers.sync import estimate_lag, lip_audio_lag, shift_motion
 
@@ -47,6 +50,7 @@ _LOADERS = {
     "facegood": load_curves,
     "curves": load_curves,
     "talkingface": load_talkingface,
+    "livelink": load_livelink,
 }
 
 

@@ -72,7 +72,7 @@ class ClipSource:
     layout : str
         Which reader loads it: ``"synthetic"`` (the project's corpus), ``"markers"``
         (generic marker folder), ``"facegood"``, ``"curves"`` (generic curve clips) or
-        ``"talkingface"``.
+        ``"talkingface"`` or ``"livelink"`` (an iPhone capture).
     source : Path
         The motion file (or, for landmark clips, the clip folder).
     files : tuple of (str, Path)
@@ -259,6 +259,33 @@ def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
         check_labels(segments, audio_seconds, labels_path)
         phones = tuple(segments)
     return text, phones
+
+
+def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: dict,
+                          meta_path: Path | None):
+    """A clip's audio (a WAV, or a video's sound track: :func:`ingest.formats.media.
+    read_audio`; its duration checked against the motion's), metadata fields and
+    transcript/labels.
+
+    Returns
+    -------
+    audio : np.ndarray, shape (n_samples,)
+    sample_rate : int
+    fields : dict
+        :data:`META_KEYS` from ``meta`` (None if absent), ``"text"`` from a transcript
+        file if there is one.
+    phones : tuple of Segment or None
+    """
+    from ingest.formats.media import read_audio
+
+    audio, sample_rate = read_audio(source.file("audio"))
+    audio_seconds = len(audio) / sample_rate
+    check_durations(n_frames, fps, audio_seconds, where)
+    fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(META_KEYS)
+    text, phones = transcript_and_labels(source, audio_seconds)
+    if text is not None:
+        fields["text"] = text
+    return audio, sample_rate, fields, phones
 
 
 def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:

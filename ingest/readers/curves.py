@@ -18,8 +18,6 @@ Motion groups are guessed from the curve names (:func:`curve_group`).
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 import math
 from pathlib import Path
@@ -29,17 +27,14 @@ import numpy as np
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats.marker_csv import infer_rate
-from ingest.formats.text import read_utf8
-from ingest.formats.wav import read_wav
+from ingest.formats.text import read_csv_rows, read_utf8
 from ingest.readers.common import (
     ClipSource,
-    check_durations,
     check_motion,
     load_npy,
-    metadata_fields,
     read_fps,
     read_json_object,
-    transcript_and_labels,
+    speech_and_side_files,
 )
 
 logger = logging.getLogger(__name__)
@@ -132,12 +127,7 @@ def read_curves_csv(path: Path) -> tuple[np.ndarray, list[str] | None, float | N
     rate : float or None
         From a ``time`` column, if there is one.
     """
-    text = read_utf8(path, "curves CSV")
-    reader = csv.reader(io.StringIO(text))
-    try:
-        rows = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
-    except csv.Error as exc:
-        raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+    rows = read_csv_rows(path, "curves CSV")
     if not rows:
         raise DataError(f"curves CSV is empty: {path}")
     header = None
@@ -247,14 +237,9 @@ def load_curves(source: ClipSource) -> RawClip:
     except DataError as exc:
         raise DataError(f"{motion_path}: {exc}") from None
 
-    audio, sample_rate = read_wav(audio_path)
+    audio, sample_rate, fields, phones = speech_and_side_files(
+        source, len(motion), fps, motion_path, meta, meta_path)
     audio_seconds = len(audio) / sample_rate
-    check_durations(len(motion), fps, audio_seconds, motion_path)
-    fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
-        ("text", "emotion", "speaker", "sentence_id"))
-    text, phones = transcript_and_labels(source, audio_seconds)
-    if text is not None:
-        fields["text"] = text
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
         fps=fps, schema=schema, audio=audio, sample_rate=sample_rate,

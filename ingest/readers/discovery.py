@@ -10,9 +10,13 @@ Per folder, the first layout that fits wins:
    and ``clips/``: every ``clips/<id>.c3d`` (also when ``clips/`` itself is given);
 2. **FACEGOOD**: folders ``bs_value/`` (``bs_value_<clip>.npy``) and ``wav/``;
 3. **talking-face clip**: a folder with ``landmarks.npy``;
-4. **generic**: per file stem, a marker file (``.c3d`` > ``.trc`` > marker ``.csv``) or,
-   failing that, a curve file (``.npy`` > ``.curves.csv``), with its side files.
-   A marker file without ``<stem>.wav`` is still a clip (``load`` then rejects it);
+4. **generic**: per file stem, a marker file (``.c3d`` > ``.trc`` > marker ``.csv``),
+   else a Live Link Face ``.csv`` (header ``Timecode,BlendshapeCount,...``: an iPhone
+   capture, :mod:`ingest.readers.livelink`; its speech is ``<stem>.wav``, else the sound
+   track of the app's ``<stem>.mov``/``.mp4``), else a curve file (``.npy`` >
+   ``.curves.csv``), with its side files.
+   A marker or Live Link file without ``<stem>.wav`` is still a clip (``load`` then
+   rejects it);
    a ``.npy`` or ``.curves.csv`` without one is not taken for a clip.
 """
 
@@ -25,6 +29,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from db.errors import ParameterError
+from ingest.formats.livelink import sniff_livelink
+from ingest.formats.media import MEDIA_SUFFIXES
 from ingest.readers.common import ClipSource
 from ingest.readers.landmarks import AUDIO_NAMES
 
@@ -105,9 +111,17 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         curves = [files[s] for s in CURVE_SUFFIXES if s in files]
         labels = [files[s] for s in LABEL_SUFFIXES if s in files]
         audio = files.get(".wav")
+        livelink = files.get(".csv") if not markers and ".csv" in files else None
+        if livelink is not None and not sniff_livelink(livelink):
+            livelink = None
         if markers:
             kind, layout, motion = "markers", layout_markers, markers[0]
             ignored = markers[1:] + curves
+        elif livelink is not None:
+            kind, layout, motion = "curves", "livelink", livelink
+            ignored = curves
+            # Live Link Face keeps a take's speech in its video.
+            audio = audio or next((files[s] for s in MEDIA_SUFFIXES if s in files), None)
         elif curves and (audio is not None or ".channels.txt" in files):
             kind, layout, motion = "curves", "curves", curves[0]
             ignored = curves[1:]
@@ -127,7 +141,7 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         }
         if kind == "markers":
             role_files["marker_table"] = marker_table
-        else:
+        elif layout != "livelink":
             role_files["channel_names"] = files.get(".channels.txt")
             role_files["settings"] = settings
         sources.append(ClipSource.make(corpus, stem, kind, layout, motion, role_files))

@@ -84,6 +84,24 @@ def lip_activity(points: np.ndarray) -> np.ndarray:
     """
     opening = np.linalg.norm(points[:, UPPER_LIP_MID] - points[:, LOWER_LIP_MID], axis=1)
     width = np.linalg.norm(points[:, LIP_CORNERS[0]] - points[:, LIP_CORNERS[1]], axis=1)
+    return opening_width_activity(opening, width)
+
+
+def opening_width_activity(opening: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """``|d opening| + |d width|`` per frame, smoothed over 3 frames (NaN -> the mean).
+
+    Parameters
+    ----------
+    opening, width : np.ndarray, shape (n_frames,)
+        Mouth opening and width, in any one unit (mm for points, blendshape weight for
+        ARKit curves).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames,)
+    """
+    opening = np.asarray(opening, dtype=np.float64)
+    width = np.asarray(width, dtype=np.float64)
     if len(opening) < 2:
         return np.zeros(len(opening))
     activity = np.abs(np.gradient(opening)) + np.abs(np.gradient(width))

@@ -1,0 +1,65 @@
+"""The sound track of a video (``.mov``, ``.mp4``, ``.m4a``), through ffmpeg.
+
+Live Link Face saves each take's speech only inside the take's video (``<take>.mov``
+beside ``<take>.csv``); :func:`read_audio` reads it as mono float32, so an iPhone take
+ingests as it comes off the phone. The ffmpeg binary is the one ``imageio-ffmpeg`` ships
+(a dependency, used for rendering too). WAV files go through :func:`ingest.formats.wav.
+read_wav` as everywhere else.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from db.errors import DataError
+from ingest.formats.wav import read_wav
+
+#: Extensions read through ffmpeg (lower case, with the dot).
+MEDIA_SUFFIXES = (".mov", ".mp4", ".m4a")
+
+
+def read_audio(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
+    """Mono float32 audio in [-1, 1] and its rate: a WAV, or a video's sound track.
+
+    Raises
+    ------
+    DataError
+        One line naming the file if it is missing, has no sound track, or ffmpeg cannot
+        read it.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in MEDIA_SUFFIXES:
+        return read_wav(path)
+    if not path.is_file():
+        raise DataError(f"audio file not found: {path}")
+    import imageio_ffmpeg
+
+    rate = _sample_rate(path)
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-i", str(path),
+           "-vn", "-map", "0:a:0", "-ac", "1", "-f", "f32le", "-acodec", "pcm_f32le", "-"]
+    proc = subprocess.run(cmd, capture_output=True, check=False)
+    if proc.returncode != 0 or not proc.stdout:
+        lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
+        reason = lines[-1] if lines else "no sound track"
+        raise DataError(f"cannot read the sound track of {path}: {reason}")
+    audio = np.frombuffer(proc.stdout, dtype="<f4").astype(np.float32)
+    return np.clip(audio, -1.0, 1.0), rate
+
+
+def _sample_rate(path: Path) -> int:
+    """The first sound track's sample rate, from ffmpeg's description of the file."""
+    import re
+
+    import imageio_ffmpeg
+
+    proc = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-i",
+                           str(path)], capture_output=True, check=False)
+    info = proc.stderr.decode(errors="replace")
+    match = re.search(r"Stream #\S+.*?Audio: .*?(\d+) Hz", info)
+    if not match:
+        raise DataError(f"{path}: no sound track")
+    return int(match.group(1))
