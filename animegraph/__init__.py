@@ -14,9 +14,9 @@ laid out in rooms, each importing only the ones listed before it:
 
 The names most users need are importable from here (loaded on first use, so that
 ``import animegraph`` stays quick): :func:`synthesize`, :class:`Model`,
-:class:`SearchWeights`, :class:`AnimeGraph`, :class:`Motion`, the baseline estimators (:class:`MuMlp`, :class:`HierPca`,
-:class:`AVHMMBaseline`) and the estimators learned at ingest (:class:`MotionDecomposer`,
-:class:`EmotionClassifier`, :class:`EmotionMapping`).
+:class:`SearchWeights`, :class:`AnimeGraph`, :class:`Motion`, the baseline estimators
+(:class:`MuMlp`, :class:`HierPca`, :class:`AVHMMBaseline`) and the estimators learned at
+ingest (:class:`MotionDecomposer`, :class:`EmotionClassifier`, :class:`EmotionMapping`).
 """
 
 from importlib import import_module

@@ -22,11 +22,9 @@ from __future__ import annotations
 import csv
 import io
 import logging
-import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -41,6 +39,7 @@ from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.tables import build_tables, prepared_from_database
+from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)
 
@@ -250,10 +249,8 @@ def _run(found, known, fps, config, workers, progress, reference):
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        results = pool.map(_work, jobs, chunksize=4)
-        return list(progress(len(jobs))(results) if progress else results)
+    return map_in_processes(_work, jobs, workers=workers, chunksize=4,
+                            progress=progress(len(jobs)) if progress else None)
 
 
 def _has_head(schema) -> bool:

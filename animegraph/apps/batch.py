@@ -45,6 +45,7 @@ from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, current_version
+from ingest.workers import sigint_blocked
 
 logger = logging.getLogger(__name__)
 
@@ -275,25 +276,14 @@ def dask_client(options: BatchOptions, *, prepare: Callable[[], object] | None =
 def _client(options: BatchOptions, prepare: Callable[[], object] | None):
     from distributed import Client, LocalCluster
 
-    cluster = None
-    if options.scheduler:
-        address = options.scheduler
-        try:
-            client = Client(address, timeout=options.connect_timeout, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
-    else:
-        if prepare is not None:
-            prepare()
-        cluster = LocalCluster(
-            n_workers=options.workers, threads_per_worker=1, processes=True,
-            dashboard_address=None, silence_logs=logging.ERROR,
-            # One core per worker: numba's own threads would compete with the other workers.
-            env={"NUMBA_NUM_THREADS": "1"},
-        )
-        client = Client(cluster, set_as_default=False)
+    cluster = client = None
     try:
-        if cluster is None:
+        if options.scheduler:
+            address = options.scheduler
+            try:
+                client = Client(address, timeout=options.connect_timeout, set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
             try:
                 client.wait_for_workers(1, timeout=options.connect_timeout)
             except (OSError, TimeoutError) as exc:
@@ -301,9 +291,24 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                                 f"({type(exc).__name__})") from None
             if prepare is not None:
                 prepare()
+        else:
+            if prepare is not None:
+                prepare()
+            # The cluster's threads, and the worker processes they start, are born with
+            # SIGINT blocked: a Ctrl-C ends the batch here, and the batch ends the workers
+            # (a Ctrl-C meanwhile is delivered when the block ends, after ``cluster`` is set).
+            with sigint_blocked():
+                cluster = LocalCluster(
+                    n_workers=options.workers, threads_per_worker=1, processes=True,
+                    dashboard_address=None, silence_logs=logging.ERROR,
+                    # One core per worker: numba's own threads would compete with the others.
+                    env={"NUMBA_NUM_THREADS": "1"},
+                )
+                client = Client(cluster, set_as_default=False)
         yield client
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
 

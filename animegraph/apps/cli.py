@@ -7,9 +7,12 @@ on stderr and a non-zero exit; tracebacks are kept for bugs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -806,8 +809,45 @@ def _configure_logging(verbosity: int) -> None:
                         stream=sys.stderr)
 
 
+def _on_interrupt(signum, frame) -> None:
+    # The first Ctrl-C stops the work; later ones must not cut short the cleanup that
+    # follows (ending worker processes, removing a half-built folder): they are ignored
+    # until main() returns.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def _error_line(message: str) -> str:
+    """The one error style: ``animegraph: error: [COMMAND: ]MESSAGE``."""
+    if message.startswith("animegraph: "):
+        message = message[len("animegraph: "):]
+    elif message.startswith("animegraph "):
+        message = message[len("animegraph "):]
+    return f"animegraph: error: {message}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the tool; return the exit status."""
+    """Run the tool; return the exit status (0, 1 bad input or data, 2 usage, 130 Ctrl-C)."""
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, _on_interrupt) if in_main else None
+    try:
+        status = _main(argv)
+    except KeyboardInterrupt:
+        # SIGINT stays ignored: the process is on its way out, and a Ctrl-C now would
+        # turn the exit into a death by signal.
+        return _interrupted()
+    if previous is not None:
+        signal.signal(signal.SIGINT, previous)
+    return status
+
+
+def _interrupted() -> int:
+    with contextlib.suppress(OSError):
+        print("animegraph: interrupted", file=sys.stderr)
+    return 130
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -822,10 +862,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                              f"(see 'animegraph {args.command} --help')")
         return int(args.func(args) or 0)
     except UsageError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(_error_line(str(exc)), file=sys.stderr)
         return 2
     except AnimeGraphError as exc:
-        print(f"animegraph: error: {exc}", file=sys.stderr)
+        print(_error_line(str(exc)), file=sys.stderr)
         return 1
     except BrokenPipeError:
         # The reader went away (``animegraph sql ... | head``): not an error.
@@ -833,12 +873,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except OSError as exc:
         # Disk full, permission denied, a folder vanished: the environment, not a bug.
-        where = f" {exc.filename}" if exc.filename else ""
-        print(f"animegraph: error:{where}: {exc.strerror or exc}", file=sys.stderr)
+        where = f" {exc.filename}:" if exc.filename else ""
+        print(f"animegraph: error:{where} {exc.strerror or exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("animegraph: interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":
