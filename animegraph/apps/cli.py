@@ -48,9 +48,14 @@ def _number(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every sub-command."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
     parser = _Parser(
         prog="animegraph",
         description="Expressive speech-driven facial animation (after Cao et al. 2005).",
+        epilog=f"Commands that read a database take --db DB; left out, ${DB_ENV} is used if "
+        f"set, else the default database that 'animegraph demo' builds: {default_db_dir()}. "
+        "Exit status: 0 done, 1 bad input or data, 2 wrong command line, 130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"animegraph {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
@@ -126,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
-    sql.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(sql)
     sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
@@ -141,11 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
         "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
     )
     syn.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
-    syn.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(syn)
     given = syn.add_mutually_exclusive_group()
     given.add_argument("--text", default=None, help="transcript (forced alignment)")
     given.add_argument("--labels", type=Path, default=None,
-                       help="phone labels (.phones.csv, .TextGrid or HTK .lab)")
+                       help="phone labels (.phones.csv, .TextGrid or HTK .lab; default: "
+                       "AUDIO's <stem>.phones.csv, .TextGrid or .lab beside it, if any, "
+                       "else the phones are recognized)")
     feel = syn.add_mutually_exclusive_group()
     feel.add_argument("--emotion", default=None, metavar="E|auto",
                       help="the face's emotion: prefer animes of E and map the others into "
@@ -193,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Finished lines are skipped on a re-run unless --force.",
     )
     bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
-    bat.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(bat)
     bat.add_argument("--out", required=True, type=Path, help="output folder")
     bat.add_argument("--workers", type=_whole_number, default=2,
                      help="worker processes of the local Dask cluster (default 2; "
@@ -213,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
         "real-cepstrum coefficients, trained on the database's clips at ingest).",
     )
     cls.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
-    cls.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
     cls.set_defaults(func=_cmd_classify)
 
@@ -224,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
         "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
     )
     mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
-    mp.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(mp)
     mp.add_argument("--to", required=True, metavar="E|E=W,...",
                     help="target emotion, or a mix such as happy=0.7,neutral=0.3")
     mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
@@ -241,20 +248,52 @@ def build_parser() -> argparse.ArgumentParser:
         "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
         "--method' uses it (and fits it on first use if absent).",
     )
-    fit.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(fit)
     fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
     fit.set_defaults(func=_cmd_fit)
 
-    info = sub.add_parser("info", help="summarise a database")
-    info.add_argument("--db", required=True, type=Path, help="database folder")
+    info = sub.add_parser(
+        "info", help="summarise a database",
+        description="Say which database is used (--db, $ANIMEGRAPH_DB or the demo's) and "
+        "summarise it: clips, emotions, phones, motion components, emotion model and "
+        "fitted baselines.",
+    )
+    _db_option(info)
     info.add_argument("--json", action="store_true", help="the summary as JSON")
     info.set_defaults(func=_cmd_info)
     return parser
 
 
+def _db_option(parser: argparse.ArgumentParser) -> None:
+    """``--db``, which may be left out: ``$ANIMEGRAPH_DB``, else the demo's database."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
+    parser.add_argument("--db", type=Path, default=None,
+                        help=f"database folder (default: ${DB_ENV} if set, else the one "
+                        f"'animegraph demo' builds, {default_db_dir()})")
+    parser.set_defaults(default_db=True)
+
+
+def _resolve_db(args: argparse.Namespace) -> None:
+    """Fill in a left-out ``--db``; say how to make one if it does not exist yet."""
+    from animegraph.apps.cache import default_database
+    from db.errors import DataError
+    from db.store import is_database
+
+    args.db_source = "--db"
+    if args.db is not None:
+        return
+    args.db, args.db_source = default_database()
+    if not is_database(args.db):
+        how = ("run 'animegraph demo' to build it" if args.db_source.startswith("the demo")
+               else f"run 'animegraph ingest SRC --db {args.db}' to build it")
+        raise DataError(f"no --db given, and {args.db_source} ({args.db}) does not exist "
+                        f"yet: {how}, or give --db DB")
+
+
 def _add_animator_commands(sub) -> None:
     """``query``, ``render`` and ``plot``: the animator's commands (issue #6)."""
-    from animegraph.apps.query import ANIME_FIELDS, CLIP_FIELDS
+    from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 
     qry = sub.add_parser(
         "query", help="find anime nodes or clips; export them for other tools",
@@ -264,7 +303,7 @@ def _add_animator_commands(sub) -> None:
         "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
         "(WAV), a PNG preview, and index.csv.",
     )
-    qry.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(qry)
     qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
     qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
     qry.add_argument("--text", default=None, metavar="WORDS",
@@ -584,6 +623,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
+    if args.labels is None and args.text is None:
+        args.labels = _sidecar_labels(args.audio)
+        if args.labels is not None:
+            print(f"animegraph: using the phone labels beside the speech, {args.labels} "
+                  "(--labels or --text to use others)", file=sys.stderr)
     labels = read_labels(args.labels) if args.labels else None
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
@@ -633,6 +677,20 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.explain_json:
         write_explain(out, args.explain_json)
     return 0
+
+
+#: Phone-label files looked for beside a speech file, in this order (what 'corpus synth',
+#: 'demo', 'query --export' and 'batch' write, and the label formats ingest reads).
+SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
+
+
+def _sidecar_labels(audio: Path) -> Path | None:
+    """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``audio``, if there is one."""
+    for suffix in SIDECAR_LABELS:
+        beside = audio.with_name(audio.stem + suffix)
+        if beside.is_file():
+            return beside
+    return None
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -795,6 +853,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from db.store import Database
 
     info = database_info(Database.open(args.db))
+    info["chosen_by"] = args.db_source
     if args.json:
         print(json.dumps(info, indent=1))
     else:
@@ -860,6 +919,8 @@ def _main(argv: Sequence[str] | None) -> int:
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "
                              f"(see 'animegraph {args.command} --help')")
+        if getattr(args, "default_db", False):
+            _resolve_db(args)
         return int(args.func(args) or 0)
     except UsageError as exc:
         print(_error_line(str(exc)), file=sys.stderr)

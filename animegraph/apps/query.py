@@ -25,14 +25,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
 
-#: Fields a query may be ordered by, per mode.
-ANIME_FIELDS = ("node_id", "clip_id", "phoneme", "emotion", "speaker", "start_time",
-                "duration")
-CLIP_FIELDS = ("clip_id", "emotion", "speaker", "duration", "n_animes")
 _WORD = re.compile(r"^[A-Za-z0-9']+$")
 
 
