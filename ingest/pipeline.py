@@ -144,6 +144,7 @@ def ingest(
     *,
     workers: int = 1,
     progress: Callable[[int], Callable] | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -158,6 +159,9 @@ def ingest(
         Processes preparing clips in parallel.
     progress : callable, optional
         ``progress(total)`` returns a wrapper for an iterable of finished clips.
+    say : callable, optional
+        Receives a line naming each corpus-wide step after the clips are read
+        (decomposition, emotion model, writing), which take most of a large ingest.
 
     Raises
     ------
@@ -212,10 +216,11 @@ def ingest(
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report, reference)
+            _write(db_path, everything, config, target_fps, report, reference, say)
     elif existing is not None and "emotion" not in existing.manifest:
         # Written before emotion models existed: learn it now from the stored clips.
-        _write(db_path, prepared_from_database(existing), config, fps, report, reference)
+        _write(db_path, prepared_from_database(existing), config, fps, report, reference,
+               say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
@@ -299,8 +304,7 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
         if clip.schema == reference:
             out.append(clip)
             continue
-        reason = (f"its channels ({clip.schema.kind}, {clip.schema.n_channels}) differ from "
-                  f"the database's ({reference.kind}, {reference.n_channels})")
+        reason = clip.schema.difference(reference)
         old = by_id[(clip.clip_id, clip.source)]
         report.clips[report.clips.index(old)] = ClipReport(old.source, old.clip_id,
                                                            "rejected", reason=reason)
@@ -308,8 +312,10 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
-           report: IngestReport, reference: np.ndarray | None) -> None:
-    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference)
+           report: IngestReport, reference: np.ndarray | None,
+           say: Callable[[str], object] | None = None) -> None:
+    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference,
+                                          say=say)
     report.written = True
     report.version = version_dir.name
     report.summary = summary
@@ -318,6 +324,7 @@ def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: 
 def build_database(
     db_path: str | os.PathLike, clips: Sequence[PreparedClip], config: IngestConfig | None = None,
     *, fps: float | None = None, reference: np.ndarray | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> tuple[dict, Path]:
     """Decompose prepared clips together and write them as a new database version.
 
@@ -334,6 +341,8 @@ def build_database(
     if not clips:
         raise ParameterError("no clips to build a database from")
     fps = fps or clips[0].fps
+    say = say or (lambda _line: None)
+    say(f"ingest: decomposing the motion of {len(clips)} clips (PCA, then FastICA) ...")
     motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
@@ -341,12 +350,14 @@ def build_database(
     sources = [model.transform(c.motion) for c in clips]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
+    say("ingest: learning the emotion model (components, mappings, classifier) ...")
     emotion = fit_emotion_model(
         sources, [c.motion for c in clips], [c.emotion for c in clips],
         [c.sentence_id for c in clips], [(c.audio, c.sample_rate) for c in clips],
         model.mixing_.T @ model.components_, clips[0].schema.groups, fps,
         random_state=config.random_state)
     emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
+    say("ingest: building the anime nodes and writing the database ...")
     tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},
                           component_columns=emotion_columns)
     emotions: dict[str, int] = {}

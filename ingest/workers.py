@@ -143,21 +143,21 @@ def _abandon(pool: ProcessPoolExecutor) -> None:
 
 
 @contextlib.contextmanager
-def sigint_blocked() -> Iterator[None]:
-    """Block SIGINT in this thread while processes (and threads) are started in it.
+def sigint_ignored_by_children() -> Iterator[None]:
+    """Ignore SIGINT while worker processes are started by code we do not control.
 
-    A blocked signal stays blocked across ``fork`` and ``exec``, in every thread this
-    thread starts and in every process those start, so that workers started meanwhile
-    (e.g. by a Dask cluster's own threads) never see the terminal's Ctrl-C, which is
-    sent to the whole process group; their parent decides and ends them. A Ctrl-C that
-    arrives meanwhile is not lost: it is delivered when the block ends. No-op where
-    ``pthread_sigmask`` does not exist.
+    An ignored signal stays ignored across ``fork`` and ``exec`` (Python keeps it so),
+    whichever thread starts the process, so workers started meanwhile (e.g. by a Dask
+    cluster's own threads) never see the terminal's Ctrl-C, which is sent to the whole
+    process group: their parent decides and ends them. (A blocked signal would not do:
+    the cluster's threads exist before the block and start the processes.) The price: a
+    Ctrl-C during these seconds is not seen; the next one is. Only in the main thread.
     """
-    if not hasattr(signal, "pthread_sigmask"):
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, previous)

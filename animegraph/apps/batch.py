@@ -45,7 +45,7 @@ from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, current_version
-from ingest.workers import sigint_blocked
+from ingest.workers import sigint_ignored_by_children
 
 logger = logging.getLogger(__name__)
 
@@ -294,10 +294,9 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
         else:
             if prepare is not None:
                 prepare()
-            # The cluster's threads, and the worker processes they start, are born with
-            # SIGINT blocked: a Ctrl-C ends the batch here, and the batch ends the workers
-            # (a Ctrl-C meanwhile is delivered when the block ends, after ``cluster`` is set).
-            with sigint_blocked():
+            # The worker processes are born ignoring SIGINT: a Ctrl-C ends the batch
+            # here, and the batch ends the workers.
+            with sigint_ignored_by_children():
                 cluster = LocalCluster(
                     n_workers=options.workers, threads_per_worker=1, processes=True,
                     dashboard_address=None, silence_logs=logging.ERROR,

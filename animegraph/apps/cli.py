@@ -20,6 +20,10 @@ from animegraph import __version__
 from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
 
+#: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
+SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), any "
+                  "sample rate, channels averaged to mono")
+
 
 class UsageError(Exception):
     """The command line itself is wrong (exit status 2)."""
@@ -145,7 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
         "matching anime sequence (Cao et al. 2005, Eq. 2: jump matches, jump cost, DTW "
         "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
     )
-    syn.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
+    syn.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
     _db_option(syn)
     given = syn.add_mutually_exclusive_group()
     given.add_argument("--text", default=None, help="transcript (forced alignment)")
@@ -169,7 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
     mode.add_argument("--exact", action="store_true",
                       help="the global optimum (default)")
     mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
-                      help="the paper's bounded look-ahead of K phonemes (3-6)")
+                      help="the paper's bounded look-ahead of K phonemes (K >= 1; the "
+                      "paper uses 3-6)")
     mode.add_argument("--search", choices=("exact", "paper", "window", "dp"), default=None,
                       help="Anime Graph search algorithm (paper: the published priority "
                       "queue)")
@@ -219,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
         "speech (Cao et al. 2005 §6: SVM on the signal's mean, variance, RMS and first 500 "
         "real-cepstrum coefficients, trained on the database's clips at ingest).",
     )
-    cls.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
+    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
     _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
     cls.set_defaults(func=_cmd_classify)
@@ -244,7 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
     mp.set_defaults(func=_cmd_map_emotion)
     fit = sub.add_parser(
         "fit", help="fit a baseline method on a database and store it there",
-        description="Fit a baseline (issue #8) on every clip of a database and store the "
+        description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
+        "av-hmm: Terissi et al. 2013) on every clip of a database and store the "
         "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
         "--method' uses it (and fits it on first use if absent).",
     )
@@ -292,7 +298,7 @@ def _resolve_db(args: argparse.Namespace) -> None:
 
 
 def _add_animator_commands(sub) -> None:
-    """``query``, ``render`` and ``plot``: the animator's commands (issue #6)."""
+    """``query``, ``render`` and ``plot``: the animator's commands."""
     from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 
     qry = sub.add_parser(
@@ -447,7 +453,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                             rest_frame=_rest(motion, args))
     out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
                         fps=args.fps, phones=phones, size=size, force=args.force,
-                        progress=lambda total: _progress(total, args.quiet, "frame"))
+                        progress=lambda total: _progress(total, args.quiet, "frame",
+                                                              "rendering"))
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
     print(f"animegraph: rendered {motion.duration:.2f} s of motion ({what}) in "
@@ -506,13 +513,18 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(total: int, quiet: bool, unit: str):
+def _progress(total: int, quiet: bool, unit: str, step: str):
+    """A progress bar factory labelled with its step (every step over ~2 s has one)."""
     from functools import partial
 
     from tqdm import tqdm
 
-    return partial(tqdm, total=total, unit=unit, disable=quiet, file=sys.stderr,
+    return partial(tqdm, total=total, unit=unit, desc=step, disable=quiet, file=sys.stderr,
                    dynamic_ncols=True)
+
+
+def _say(line: str) -> None:
+    print(f"animegraph: {line}", file=sys.stderr)
 
 
 def _cmd_corpus_synth(args: argparse.Namespace) -> int:
@@ -528,7 +540,8 @@ def _cmd_corpus_synth(args: argparse.Namespace) -> int:
     )
     n = len(plan_corpus(config))
     summary = generate_corpus(args.out, config, workers=args.workers, force=args.force,
-                              progress=_progress(n, args.quiet, "clip"))
+                              progress=_progress(n, args.quiet, "clip",
+                                                  "generating the corpus"))
     print(f"wrote {summary.n_clips} clips of {summary.n_sentences} sentences, "
           f"{summary.duration_s / 60:.1f} min of speech, to {summary.path}")
     return 0
@@ -544,8 +557,8 @@ def _default_parallel(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from animegraph.apps.demo import run_demo
 
-    def progress(total: int):
-        return _progress(total, args.quiet, "clip")
+    def progress(total: int, step: str = "clips"):
+        return _progress(total, args.quiet, "clip", step)
 
     result = run_demo(args.out, emotion=args.emotion, text=args.text, workers=args.workers,
                       progress=progress, say=print)
@@ -560,7 +573,9 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction)
     report = ingest(args.sources, args.db, config, workers=args.workers,
-                    progress=lambda total: _progress(total, args.quiet, "clip"))
+                    progress=lambda total: _progress(total, args.quiet, "clip",
+                                                     "ingest: reading clips"),
+                    say=None if args.quiet else _say)
     for line in report.lines():
         print(line)
     return 1 if report.count("rejected") else 0
@@ -603,6 +618,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.method != "anime-graph":
         return _synth_baseline(args)
     method = args.search or ("window" if args.window is not None else "exact")
+    if args.window is not None and args.window < 1:
+        raise UsageError(f"animegraph synth: --window must be at least 1, got {args.window}")
     if method == "window" and args.window is None:
         raise UsageError("animegraph synth: --search window needs --window K")
     if args.tolerance is not None:
@@ -767,7 +784,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             print(f"animegraph: {line}", file=sys.stderr)
 
     result = run_batch(args.script, options, say=say,
-                       progress=lambda total: _progress(total, args.quiet, "line"))
+                       progress=lambda total: _progress(total, args.quiet, "line",
+                                                      "batch: lines"))
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1
