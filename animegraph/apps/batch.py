@@ -31,6 +31,7 @@ import hashlib
 import io
 import json
 import logging
+import multiprocessing
 import os
 import threading
 import time
@@ -46,6 +47,9 @@ from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, current_version
 from ingest.workers import sigint_ignored_by_children
+
+#: Longest wait for a local cluster's workers to start (a bound against a hang).
+WORKER_START_TIMEOUT_S = 300.0
 
 logger = logging.getLogger(__name__)
 
@@ -294,16 +298,28 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
         else:
             if prepare is not None:
                 prepare()
-            # The worker processes are born ignoring SIGINT: a Ctrl-C ends the batch
-            # here, and the batch ends the workers.
+            cluster = LocalCluster(
+                n_workers=0, threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=logging.ERROR,
+                # One core per worker: numba's own threads would compete with the others.
+                env={"NUMBA_NUM_THREADS": "1"},
+            )
+            client = Client(cluster, set_as_default=False)
+            # The worker processes are born ignoring SIGINT (a terminal's Ctrl-C reaches
+            # the whole process group): a Ctrl-C ends the batch here, and the batch ends
+            # the workers. Ignored only until they exist, so no Ctrl-C goes unseen for long.
             with sigint_ignored_by_children():
-                cluster = LocalCluster(
-                    n_workers=options.workers, threads_per_worker=1, processes=True,
-                    dashboard_address=None, silence_logs=logging.ERROR,
-                    # One core per worker: numba's own threads would compete with the others.
-                    env={"NUMBA_NUM_THREADS": "1"},
-                )
-                client = Client(cluster, set_as_default=False)
+                started = set(multiprocessing.active_children())
+                cluster.scale(options.workers)
+                deadline = time.monotonic() + options.connect_timeout
+                while (len(set(multiprocessing.active_children()) - started) < options.workers
+                       and time.monotonic() < deadline):
+                    time.sleep(0.01)
+            try:
+                client.wait_for_workers(options.workers, timeout=WORKER_START_TIMEOUT_S)
+            except TimeoutError:
+                raise DataError(f"the {options.workers} local Dask workers did not start "
+                                f"within {WORKER_START_TIMEOUT_S:.0f} s") from None
         yield client
     finally:
         if client is not None:

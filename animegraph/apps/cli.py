@@ -66,7 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="more log output (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    corpus = sub.add_parser("corpus", help="corpus tools")
+    corpus = sub.add_parser("corpus", help="corpus tools",
+                            description="Corpus tools: 'corpus synth' generates the "
+                            "synthetic expressive speech + facial motion-capture corpus.")
     corpus_sub = corpus.add_subparsers(dest="corpus_command", metavar="ACTION",
                                        parser_class=_Parser)
     synth = corpus_sub.add_parser(
@@ -659,6 +661,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
               file=sys.stderr)
+    from animegraph.search.kernels import compile_notice
+
+    notice = compile_notice(method)
+    if notice:
+        print(f"animegraph: {notice}", file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)

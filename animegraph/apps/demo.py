@@ -169,10 +169,14 @@ def run_demo(
         result.outputs += [stem.with_suffix(".wav"), stem.with_suffix(".c3d"),
                            Path(f"{stem}.phones.csv"), Path(f"{stem}.controls.csv"),
                            stem.with_suffix(".json")]
+    from animegraph.search.kernels import compile_notice
     from animegraph.synthesis import Model, synthesize, write_motion
     from ingest.formats.phones_csv import Segment
 
     say("synthesizing the held-out sentence from the database ...")
+    notice = compile_notice()
+    if notice:
+        say(notice)
     model = Model.load(db_path)
     first = clips[0]
     labels = [Segment(p.phone, p.start, p.end) for p in first.utterance.phones]
