@@ -193,3 +193,40 @@ def test_mp3_speech_is_read_as_documented(tmp_path):
     assert help_text  # the synth help names the formats:
     synth = dict(_subparsers(build_parser()))["synth"].format_help()
     assert "MP3" in synth and "WAV" in synth
+
+
+# ------------------------------------------------------------------ tables and plots
+
+
+def test_a_cut_text_column_ends_in_an_ellipsis():
+    import pyarrow as pa
+
+    from animegraph.apps.tabular import format_table
+
+    text = format_table(pa.table({"text": ["x" * 100, "short"]}), "table", max_rows=5)
+    first = text.splitlines()[2]
+    assert first.endswith("…") and len(first) == 60 and "short" in text
+
+
+def test_query_export_shows_its_progress(tiny_db, tmp_path, capsys):
+    out = tmp_path / "export"
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "2",
+                 "--export", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "exporting" in err and "2/2" in err
+
+
+def test_head_pitch_from_markers_follows_the_rig():
+    from animegraph.apps.plots import head_pitch
+    from ingest.corpus import face
+
+    rest = np.repeat(face.marker_rest()[None], 50, axis=0)
+    pitch = 4.0 * np.sin(np.linspace(0, 3, 50))
+    zero = np.zeros(50)
+    moved = face.rigid_transform(rest, {"head_pitch": pitch, "head_yaw": 2 + zero,
+                                        "head_roll": -1 + zero, "head_tx": 3 + zero,
+                                        "head_ty": zero, "head_tz": zero})
+    assert np.allclose(head_pitch(moved), pitch, atol=0.05)
+    moved[7, [i for i, m in enumerate(face.MARKERS) if m[2] == "head"][0]] = np.nan
+    est = head_pitch(moved)
+    assert np.isnan(est[7]) and np.isfinite(np.delete(est, 7)).all()

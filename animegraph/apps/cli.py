@@ -408,7 +408,9 @@ def _cmd_query(args: argparse.Namespace) -> int:
         if args.format == "table" else hits
     sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
     if args.export is not None:
-        rows = export_hits(db, hits, args.export, context=args.context, force=args.force)
+        rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
+                           progress=lambda total: _progress(total, False, "hit",
+                                                            "exporting"))
         print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
               file=sys.stderr)
     return 0
