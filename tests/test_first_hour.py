@@ -230,3 +230,14 @@ def test_head_pitch_from_markers_follows_the_rig():
     moved[7, [i for i, m in enumerate(face.MARKERS) if m[2] == "head"][0]] = np.nan
     est = head_pitch(moved)
     assert np.isnan(est[7]) and np.isfinite(np.delete(est, 7)).all()
+
+
+# ------------------------------------------------------------------ no silent minutes
+
+
+def test_corpus_generation_labels_its_steps(tmp_path, capsys):
+    assert main(["corpus", "synth", "--out", str(tmp_path / "c"), "--sentences", "2",
+                 "--parallel", "0", "--variations", "1", "--workers", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "preparing 2 workers" in err and "generating the corpus" in err
+    assert "2/2" in err

@@ -545,7 +545,8 @@ def _cmd_corpus_synth(args: argparse.Namespace) -> int:
     n = len(plan_corpus(config))
     summary = generate_corpus(args.out, config, workers=args.workers, force=args.force,
                               progress=_progress(n, args.quiet, "clip",
-                                                  "generating the corpus"))
+                                                  "generating the corpus"),
+                              say=None if args.quiet else _say)
     print(f"wrote {summary.n_clips} clips of {summary.n_sentences} sentences, "
           f"{summary.duration_s / 60:.1f} min of speech, to {summary.path}")
     return 0

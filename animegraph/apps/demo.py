@@ -87,6 +87,7 @@ class DemoResult:
 
 def ensure_default_corpus(
     *, workers: int | None = None, progress: Callable[..., Callable] | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> tuple[Path, bool, int]:
     """Generate the default corpus in the cache folder unless it is there already.
 
@@ -102,7 +103,7 @@ def ensure_default_corpus(
     n = len(plan_corpus(config))
     summary: CorpusSummary = generate_corpus(
         path, config, workers=workers, force=True,
-        progress=progress(n, "generating the corpus") if progress else None,
+        progress=progress(n, "generating the corpus") if progress else None, say=say,
     )
     return path, True, summary.n_clips
 
@@ -141,7 +142,8 @@ def run_demo(
     say = say or (lambda _line: None)
     if not (default_corpus_dir() / "corpus.json").exists():
         say(f"generating the default corpus in {default_corpus_dir()} (once) ...")
-    corpus, created, n_clips = ensure_default_corpus(workers=workers, progress=progress)
+    corpus, created, n_clips = ensure_default_corpus(workers=workers, progress=progress,
+                                                     say=say)
     db_path, db_created = ensure_default_db(corpus, workers=workers, progress=progress,
                                             say=say)
     db = Database.open(db_path)

@@ -302,6 +302,7 @@ def generate_corpus(
     workers: int | None = None,
     force: bool = False,
     progress: Callable | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> CorpusSummary:
     """Generate a synthetic corpus into the folder ``out``.
 
@@ -320,6 +321,8 @@ def generate_corpus(
         Replace an existing non-empty ``out``.
     progress : callable, optional
         Wraps the iterable of finished clips (e.g. ``functools.partial(tqdm, total=n)``).
+    say : callable, optional
+        Receives a line before the one-off preparation of the workers.
 
     Raises
     ------
@@ -348,6 +351,9 @@ def generate_corpus(
             results = map(_make_and_write, jobs)
             done = list(progress(results) if progress else results)
         else:
+            if say is not None:
+                say(f"preparing {workers} workers (librosa's pitch kernels are compiled "
+                    "once per environment) ...")
             gestures.warm_up()  # compile librosa's cached gufuncs once, before the workers
             done = map_in_processes(_make_and_write, jobs, workers=workers, chunksize=4,
                                     progress=progress)
