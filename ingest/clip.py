@@ -57,6 +57,30 @@ class ChannelSchema:
     def n_channels(self) -> int:
         return len(self.names)
 
+    def difference(self, other: ChannelSchema) -> str:
+        """What differs from ``other``, in words ("" if nothing), for a rejection."""
+        if self.kind != other.kind:
+            return f"its motion is {self.kind}, the database's {other.kind}"
+        if self.n_channels != other.n_channels:
+            return (f"it has {self.n_channels} {self.kind} channels, the database "
+                    f"{other.n_channels}")
+        if self.names != other.names:
+            pairs = [(a, b) for a, b in zip(self.names, other.names, strict=True) if a != b]
+            if set(self.names) == set(other.names):
+                return "its channels are the database's in another order"
+            return (f"{len(pairs)} of its channel names differ from the database's (first: "
+                    f"{pairs[0][0]} where the database has {pairs[0][1]})")
+        if self.groups != other.groups:
+            k = next(i for i, (a, b) in enumerate(zip(self.groups, other.groups, strict=True))
+                     if a != b)
+            hint = (" (is its markers.csv, which gives the motion groups, missing?)"
+                    if "other" in (self.groups[k], other.groups[k]) else "")
+            return (f"its motion groups differ from the database's (first: {self.names[k]} "
+                    f"is {self.groups[k]}, in the database {other.groups[k]}){hint}")
+        if self.units != other.units:
+            return f"its units are {self.units}, the database's {other.units}"
+        return ""
+
     @classmethod
     def for_points(cls, kind: str, labels, groups, units: str) -> ChannelSchema:
         """Schema of x/y/z triples of named points (markers or landmarks)."""

@@ -22,11 +22,9 @@ from __future__ import annotations
 import csv
 import io
 import logging
-import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -41,6 +39,7 @@ from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.tables import build_tables, prepared_from_database
+from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)
 
@@ -145,6 +144,7 @@ def ingest(
     *,
     workers: int = 1,
     progress: Callable[[int], Callable] | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -159,6 +159,9 @@ def ingest(
         Processes preparing clips in parallel.
     progress : callable, optional
         ``progress(total)`` returns a wrapper for an iterable of finished clips.
+    say : callable, optional
+        Receives a line naming each corpus-wide step after the clips are read
+        (decomposition, emotion model, writing), which take most of a large ingest.
 
     Raises
     ------
@@ -213,10 +216,11 @@ def ingest(
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report, reference)
+            _write(db_path, everything, config, target_fps, report, reference, say)
     elif existing is not None and "emotion" not in existing.manifest:
         # Written before emotion models existed: learn it now from the stored clips.
-        _write(db_path, prepared_from_database(existing), config, fps, report, reference)
+        _write(db_path, prepared_from_database(existing), config, fps, report, reference,
+               say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
@@ -250,10 +254,8 @@ def _run(found, known, fps, config, workers, progress, reference):
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        results = pool.map(_work, jobs, chunksize=4)
-        return list(progress(len(jobs))(results) if progress else results)
+    return map_in_processes(_work, jobs, workers=workers, chunksize=4,
+                            progress=progress(len(jobs)) if progress else None)
 
 
 def _has_head(schema) -> bool:
@@ -304,8 +306,7 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
         if clip.schema == reference:
             out.append(clip)
             continue
-        reason = (f"its channels ({clip.schema.kind}, {clip.schema.n_channels}) differ from "
-                  f"the database's ({reference.kind}, {reference.n_channels})")
+        reason = clip.schema.difference(reference)
         old = by_id[(clip.clip_id, clip.source)]
         report.clips[report.clips.index(old)] = ClipReport(old.source, old.clip_id,
                                                            "rejected", reason=reason)
@@ -313,8 +314,10 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
-           report: IngestReport, reference: np.ndarray | None) -> None:
-    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference)
+           report: IngestReport, reference: np.ndarray | None,
+           say: Callable[[str], object] | None = None) -> None:
+    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference,
+                                          say=say)
     report.written = True
     report.version = version_dir.name
     report.summary = summary
@@ -323,6 +326,7 @@ def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: 
 def build_database(
     db_path: str | os.PathLike, clips: Sequence[PreparedClip], config: IngestConfig | None = None,
     *, fps: float | None = None, reference: np.ndarray | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> tuple[dict, Path]:
     """Decompose prepared clips together and write them as a new database version.
 
@@ -339,6 +343,8 @@ def build_database(
     if not clips:
         raise ParameterError("no clips to build a database from")
     fps = fps or clips[0].fps
+    say = say or (lambda _line: None)
+    say(f"ingest: decomposing the motion of {len(clips)} clips (PCA, then FastICA) ...")
     motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
@@ -346,12 +352,14 @@ def build_database(
     sources = [model.transform(c.motion) for c in clips]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
+    say("ingest: learning the emotion model (components, mappings, classifier) ...")
     emotion = fit_emotion_model(
         sources, [c.motion for c in clips], [c.emotion for c in clips],
         [c.sentence_id for c in clips], [(c.audio, c.sample_rate) for c in clips],
         model.mixing_.T @ model.components_, clips[0].schema.groups, fps,
         random_state=config.random_state)
     emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
+    say("ingest: building the anime nodes and writing the database ...")
     tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},
                           component_columns=emotion_columns)
     emotions: dict[str, int] = {}

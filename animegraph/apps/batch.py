@@ -32,6 +32,7 @@ import hashlib
 import io
 import json
 import logging
+import multiprocessing
 import os
 import threading
 import time
@@ -46,6 +47,10 @@ from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, current_version
+from ingest.workers import sigint_ignored_by_children
+
+#: Longest wait for a local cluster's workers to start (a bound against a hang).
+WORKER_START_TIMEOUT_S = 300.0
 
 logger = logging.getLogger(__name__)
 
@@ -276,25 +281,14 @@ def dask_client(options: BatchOptions, *, prepare: Callable[[], object] | None =
 def _client(options: BatchOptions, prepare: Callable[[], object] | None):
     from distributed import Client, LocalCluster
 
-    cluster = None
-    if options.scheduler:
-        address = options.scheduler
-        try:
-            client = Client(address, timeout=options.connect_timeout, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
-    else:
-        if prepare is not None:
-            prepare()
-        cluster = LocalCluster(
-            n_workers=options.workers, threads_per_worker=1, processes=True,
-            dashboard_address=None, silence_logs=logging.ERROR,
-            # One core per worker: numba's own threads would compete with the other workers.
-            env={"NUMBA_NUM_THREADS": "1"},
-        )
-        client = Client(cluster, set_as_default=False)
+    cluster = client = None
     try:
-        if cluster is None:
+        if options.scheduler:
+            address = options.scheduler
+            try:
+                client = Client(address, timeout=options.connect_timeout, set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
             try:
                 client.wait_for_workers(1, timeout=options.connect_timeout)
             except (OSError, TimeoutError) as exc:
@@ -302,9 +296,35 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                                 f"({type(exc).__name__})") from None
             if prepare is not None:
                 prepare()
+        else:
+            if prepare is not None:
+                prepare()
+            cluster = LocalCluster(
+                n_workers=0, threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=logging.ERROR,
+                # One core per worker: numba's own threads would compete with the others.
+                env={"NUMBA_NUM_THREADS": "1"},
+            )
+            client = Client(cluster, set_as_default=False)
+            # The worker processes are born ignoring SIGINT (a terminal's Ctrl-C reaches
+            # the whole process group): a Ctrl-C ends the batch here, and the batch ends
+            # the workers. Ignored only until they exist, so no Ctrl-C goes unseen for long.
+            with sigint_ignored_by_children():
+                started = set(multiprocessing.active_children())
+                cluster.scale(options.workers)
+                deadline = time.monotonic() + options.connect_timeout
+                while (len(set(multiprocessing.active_children()) - started) < options.workers
+                       and time.monotonic() < deadline):
+                    time.sleep(0.01)
+            try:
+                client.wait_for_workers(options.workers, timeout=WORKER_START_TIMEOUT_S)
+            except TimeoutError:
+                raise DataError(f"the {options.workers} local Dask workers did not start "
+                                f"within {WORKER_START_TIMEOUT_S:.0f} s") from None
         yield client
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
 

@@ -26,3 +26,19 @@ def default_corpus_dir() -> Path:
 def default_db_dir() -> Path:
     """Folder of the database built from the default corpus, on first use."""
     return cache_dir() / "db-default"
+
+
+#: Names the database a command uses when ``--db`` is left out.
+DB_ENV = "ANIMEGRAPH_DB"
+
+
+def default_database() -> tuple[Path, str]:
+    """The database used without ``--db``: ``$ANIMEGRAPH_DB`` if set, else the demo's.
+
+    Returns
+    -------
+    (path, where the choice came from, for messages)
+    """
+    if os.environ.get(DB_ENV):
+        return Path(os.environ[DB_ENV]), f"${DB_ENV}"
+    return default_db_dir(), "the demo's default database"

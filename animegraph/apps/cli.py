@@ -7,15 +7,22 @@ on stderr and a non-zero exit; tracebacks are kept for bugs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
 from animegraph import __version__
 from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
+
+#: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
+SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), any "
+                  "sample rate, channels averaged to mono")
 
 
 class UsageError(Exception):
@@ -45,16 +52,23 @@ def _number(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every sub-command."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
     parser = _Parser(
         prog="animegraph",
         description="Expressive speech-driven facial animation (after Cao et al. 2005).",
+        epilog=f"Commands that read a database take --db DB; left out, ${DB_ENV} is used if "
+        f"set, else the default database that 'animegraph demo' builds: {default_db_dir()}. "
+        "Exit status: 0 done, 1 bad input or data, 2 wrong command line, 130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"animegraph {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
                         help="more log output (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    corpus = sub.add_parser("corpus", help="corpus tools")
+    corpus = sub.add_parser("corpus", help="corpus tools",
+                            description="Corpus tools: 'corpus synth' generates the "
+                            "synthetic expressive speech + facial motion-capture corpus.")
     corpus_sub = corpus.add_subparsers(dest="corpus_command", metavar="ACTION",
                                        parser_class=_Parser)
     synth = corpus_sub.add_parser(
@@ -123,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
-    sql.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(sql)
     sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
@@ -137,12 +151,14 @@ def build_parser() -> argparse.ArgumentParser:
         "matching anime sequence (Cao et al. 2005, Eq. 2: jump matches, jump cost, DTW "
         "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
     )
-    syn.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
-    syn.add_argument("--db", required=True, type=Path, help="database folder")
+    syn.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
+    _db_option(syn)
     given = syn.add_mutually_exclusive_group()
     given.add_argument("--text", default=None, help="transcript (forced alignment)")
     given.add_argument("--labels", type=Path, default=None,
-                       help="phone labels (.phones.csv, .TextGrid or HTK .lab)")
+                       help="phone labels (.phones.csv, .TextGrid or HTK .lab; default: "
+                       "AUDIO's <stem>.phones.csv, .TextGrid or .lab beside it, if any, "
+                       "else the phones are recognized)")
     feel = syn.add_mutually_exclusive_group()
     feel.add_argument("--emotion", default=None, metavar="E|auto",
                       help="the face's emotion: prefer animes of E and map the others into "
@@ -159,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     mode.add_argument("--exact", action="store_true",
                       help="the global optimum (default)")
     mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
-                      help="the paper's bounded look-ahead of K phonemes (3-6)")
+                      help="the paper's bounded look-ahead of K phonemes (K >= 1; the "
+                      "paper uses 3-6)")
     mode.add_argument("--search", choices=("exact", "paper", "window", "dp"), default=None,
                       help="Anime Graph search algorithm (paper: the published priority "
                       "queue)")
@@ -193,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Finished lines are skipped on a re-run unless --force.",
     )
     bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
-    bat.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(bat)
     bat.add_argument("--out", required=True, type=Path, help="output folder")
     bat.add_argument("--workers", type=_whole_number, default=2,
                      help="worker processes of the local Dask cluster (default 2; "
@@ -212,8 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
         "speech (Cao et al. 2005 §6: SVM on the signal's mean, variance, RMS and first 500 "
         "real-cepstrum coefficients, trained on the database's clips at ingest).",
     )
-    cls.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
-    cls.add_argument("--db", required=True, type=Path, help="database folder")
+    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
+    _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
     cls.set_defaults(func=_cmd_classify)
 
@@ -224,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
         "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
     )
     mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
-    mp.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(mp)
     mp.add_argument("--to", required=True, metavar="E|E=W,...",
                     help="target emotion, or a mix such as happy=0.7,neutral=0.3")
     mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
@@ -237,24 +254,57 @@ def build_parser() -> argparse.ArgumentParser:
     mp.set_defaults(func=_cmd_map_emotion)
     fit = sub.add_parser(
         "fit", help="fit a baseline method on a database and store it there",
-        description="Fit a baseline (issue #8) on every clip of a database and store the "
+        description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
+        "av-hmm: Terissi et al. 2013) on every clip of a database and store the "
         "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
         "--method' uses it (and fits it on first use if absent).",
     )
-    fit.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(fit)
     fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
     fit.set_defaults(func=_cmd_fit)
 
-    info = sub.add_parser("info", help="summarise a database")
-    info.add_argument("--db", required=True, type=Path, help="database folder")
+    info = sub.add_parser(
+        "info", help="summarise a database",
+        description="Say which database is used (--db, $ANIMEGRAPH_DB or the demo's) and "
+        "summarise it: clips, emotions, phones, motion components, emotion model and "
+        "fitted baselines.",
+    )
+    _db_option(info)
     info.add_argument("--json", action="store_true", help="the summary as JSON")
     info.set_defaults(func=_cmd_info)
     return parser
 
 
+def _db_option(parser: argparse.ArgumentParser) -> None:
+    """``--db``, which may be left out: ``$ANIMEGRAPH_DB``, else the demo's database."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
+    parser.add_argument("--db", type=Path, default=None,
+                        help=f"database folder (default: ${DB_ENV} if set, else the one "
+                        f"'animegraph demo' builds, {default_db_dir()})")
+    parser.set_defaults(default_db=True)
+
+
+def _resolve_db(args: argparse.Namespace) -> None:
+    """Fill in a left-out ``--db``; say how to make one if it does not exist yet."""
+    from animegraph.apps.cache import default_database
+    from db.errors import DataError
+    from db.store import is_database
+
+    args.db_source = "--db"
+    if args.db is not None:
+        return
+    args.db, args.db_source = default_database()
+    if not is_database(args.db):
+        how = ("run 'animegraph demo' to build it" if args.db_source.startswith("the demo")
+               else f"run 'animegraph ingest SRC --db {args.db}' to build it")
+        raise DataError(f"no --db given, and {args.db_source} ({args.db}) does not exist "
+                        f"yet: {how}, or give --db DB")
+
+
 def _add_animator_commands(sub) -> None:
-    """``query``, ``render`` and ``plot``: the animator's commands (issue #6)."""
-    from animegraph.apps.query import ANIME_FIELDS, CLIP_FIELDS
+    """``query``, ``render`` and ``plot``: the animator's commands."""
+    from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 
     qry = sub.add_parser(
         "query", help="find anime nodes or clips; export them for other tools",
@@ -264,7 +314,7 @@ def _add_animator_commands(sub) -> None:
         "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
         "(WAV), a PNG preview, and index.csv.",
     )
-    qry.add_argument("--db", required=True, type=Path, help="database folder")
+    _db_option(qry)
     qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
     qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
     qry.add_argument("--text", default=None, metavar="WORDS",
@@ -361,7 +411,9 @@ def _cmd_query(args: argparse.Namespace) -> int:
         if args.format == "table" else hits
     sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
     if args.export is not None:
-        rows = export_hits(db, hits, args.export, context=args.context, force=args.force)
+        rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
+                           progress=lambda total: _progress(total, False, "hit",
+                                                            "exporting"))
         print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
               file=sys.stderr)
     return 0
@@ -409,7 +461,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                             rest_frame=_rest(motion, args))
     out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
                         fps=args.fps, phones=phones, size=size, force=args.force,
-                        progress=lambda total: _progress(total, args.quiet, "frame"))
+                        progress=lambda total: _progress(total, args.quiet, "frame",
+                                                              "rendering"))
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
     if deformer is None and is_arkit(motion.names):
@@ -470,13 +523,18 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(total: int, quiet: bool, unit: str):
+def _progress(total: int, quiet: bool, unit: str, step: str):
+    """A progress bar factory labelled with its step (every step over ~2 s has one)."""
     from functools import partial
 
     from tqdm import tqdm
 
-    return partial(tqdm, total=total, unit=unit, disable=quiet, file=sys.stderr,
+    return partial(tqdm, total=total, unit=unit, desc=step, disable=quiet, file=sys.stderr,
                    dynamic_ncols=True)
+
+
+def _say(line: str) -> None:
+    print(f"animegraph: {line}", file=sys.stderr)
 
 
 def _cmd_corpus_synth(args: argparse.Namespace) -> int:
@@ -492,7 +550,9 @@ def _cmd_corpus_synth(args: argparse.Namespace) -> int:
     )
     n = len(plan_corpus(config))
     summary = generate_corpus(args.out, config, workers=args.workers, force=args.force,
-                              progress=_progress(n, args.quiet, "clip"))
+                              progress=_progress(n, args.quiet, "clip",
+                                                  "generating the corpus"),
+                              say=None if args.quiet else _say)
     print(f"wrote {summary.n_clips} clips of {summary.n_sentences} sentences, "
           f"{summary.duration_s / 60:.1f} min of speech, to {summary.path}")
     return 0
@@ -508,8 +568,8 @@ def _default_parallel(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from animegraph.apps.demo import run_demo
 
-    def progress(total: int):
-        return _progress(total, args.quiet, "clip")
+    def progress(total: int, step: str = "clips"):
+        return _progress(total, args.quiet, "clip", step)
 
     result = run_demo(args.out, emotion=args.emotion, text=args.text, workers=args.workers,
                       progress=progress, say=print)
@@ -524,7 +584,9 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction)
     report = ingest(args.sources, args.db, config, workers=args.workers,
-                    progress=lambda total: _progress(total, args.quiet, "clip"))
+                    progress=lambda total: _progress(total, args.quiet, "clip",
+                                                     "ingest: reading clips"),
+                    say=None if args.quiet else _say)
     for line in report.lines():
         print(line)
     return 1 if report.count("rejected") else 0
@@ -568,6 +630,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.method != "anime-graph":
         return _synth_baseline(args)
     method = args.search or ("window" if args.window is not None else "exact")
+    if args.window is not None and args.window < 1:
+        raise UsageError(f"animegraph synth: --window must be at least 1, got {args.window}")
     if method == "window" and args.window is None:
         raise UsageError("animegraph synth: --search window needs --window K")
     if args.tolerance is not None:
@@ -589,6 +653,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
+    if args.labels is None and args.text is None:
+        args.labels = _sidecar_labels(args.audio)
+        if args.labels is not None:
+            print(f"animegraph: using the phone labels beside the speech, {args.labels} "
+                  "(--labels or --text to use others)", file=sys.stderr)
     labels = read_labels(args.labels) if args.labels else None
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
@@ -603,6 +672,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
               file=sys.stderr)
+    from animegraph.search.kernels import compile_notice
+
+    notice = compile_notice(method)
+    if notice:
+        print(f"animegraph: {notice}", file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
@@ -666,6 +740,20 @@ def _check_livelink_channels(args: argparse.Namespace, names) -> None:
         raise UsageError(f"animegraph synth: -o {args.output.name}: Live Link Face CSV needs "
                          f"a database of ARKit blendshapes (an iPhone capture); this one has "
                          f"other channels (write .csv or .npz)")
+
+
+#: Phone-label files looked for beside a speech file, in this order (what 'corpus synth',
+#: 'demo', 'query --export' and 'batch' write, and the label formats ingest reads).
+SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
+
+
+def _sidecar_labels(audio: Path) -> Path | None:
+    """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``audio``, if there is one."""
+    for suffix in SIDECAR_LABELS:
+        beside = audio.with_name(audio.stem + suffix)
+        if beside.is_file():
+            return beside
+    return None
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -744,7 +832,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             print(f"animegraph: {line}", file=sys.stderr)
 
     result = run_batch(args.script, options, say=say,
-                       progress=lambda total: _progress(total, args.quiet, "line"))
+                       progress=lambda total: _progress(total, args.quiet, "line",
+                                                      "batch: lines"))
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1
@@ -830,6 +919,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from db.store import Database
 
     info = database_info(Database.open(args.db))
+    info["chosen_by"] = args.db_source
     if args.json:
         print(json.dumps(info, indent=1))
     else:
@@ -844,8 +934,45 @@ def _configure_logging(verbosity: int) -> None:
                         stream=sys.stderr)
 
 
+def _on_interrupt(signum, frame) -> None:
+    # The first Ctrl-C stops the work; later ones must not cut short the cleanup that
+    # follows (ending worker processes, removing a half-built folder): they are ignored
+    # until main() returns.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def _error_line(message: str) -> str:
+    """The one error style: ``animegraph: error: [COMMAND: ]MESSAGE``."""
+    if message.startswith("animegraph: "):
+        message = message[len("animegraph: "):]
+    elif message.startswith("animegraph "):
+        message = message[len("animegraph "):]
+    return f"animegraph: error: {message}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the tool; return the exit status."""
+    """Run the tool; return the exit status (0, 1 bad input or data, 2 usage, 130 Ctrl-C)."""
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, _on_interrupt) if in_main else None
+    try:
+        status = _main(argv)
+    except KeyboardInterrupt:
+        # SIGINT stays ignored: the process is on its way out, and a Ctrl-C now would
+        # turn the exit into a death by signal.
+        return _interrupted()
+    if previous is not None:
+        signal.signal(signal.SIGINT, previous)
+    return status
+
+
+def _interrupted() -> int:
+    with contextlib.suppress(OSError):
+        print("animegraph: interrupted", file=sys.stderr)
+    return 130
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -858,12 +985,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "
                              f"(see 'animegraph {args.command} --help')")
+        if getattr(args, "default_db", False):
+            _resolve_db(args)
         return int(args.func(args) or 0)
     except UsageError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(_error_line(str(exc)), file=sys.stderr)
         return 2
     except AnimeGraphError as exc:
-        print(f"animegraph: error: {exc}", file=sys.stderr)
+        print(_error_line(str(exc)), file=sys.stderr)
         return 1
     except BrokenPipeError:
         # The reader went away (``animegraph sql ... | head``): not an error.
@@ -871,12 +1000,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except OSError as exc:
         # Disk full, permission denied, a folder vanished: the environment, not a bug.
-        where = f" {exc.filename}" if exc.filename else ""
-        print(f"animegraph: error:{where}: {exc.strerror or exc}", file=sys.stderr)
+        where = f" {exc.filename}:" if exc.filename else ""
+        print(f"animegraph: error:{where} {exc.strerror or exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("animegraph: interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

@@ -70,14 +70,15 @@ class DemoResult:
             f"corpus: {self.corpus} ({state}, {self.corpus_clips} clips)",
             f"database: {self.db} ({db_state}; {self.db_summary})",
             f"held-out sentence ({self.emotion}): {self.text}",
-            f"search nodes: {len(phones)} phones; "
+            f"search nodes: {len(self.candidates)} phones ({len(phones)} besides silence); "
             + (f"no anime in the database for {', '.join(sorted(set(missing)))}" if missing
                else "every one has matching animes in the database")
             + (f" (fewest in {self.emotion}: {fewest[0]}, {fewest[2]})" if fewest else ""),
             f"synthesized: {self.synthesis}",
             "outputs:",
             *[f"  {p}" for p in self.outputs],
-            "demo_<emotion>.c3d is the reference motion from the corpus' face model;",
+            "demo_<emotion>.c3d is the reference motion from the corpus' face model "
+            "(its rig controls in .controls.csv, its settings in .json);",
             "demo_<emotion>_synthesized.c3d is what the Anime Graph made from the speech;",
             "demo_<emotion>_synthesized.mp4 shows it on the face mesh, with the speech.",
         ]
@@ -85,7 +86,8 @@ class DemoResult:
 
 
 def ensure_default_corpus(
-    *, workers: int | None = None, progress: Callable[[int], Callable] | None = None,
+    *, workers: int | None = None, progress: Callable[..., Callable] | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> tuple[Path, bool, int]:
     """Generate the default corpus in the cache folder unless it is there already.
 
@@ -100,7 +102,8 @@ def ensure_default_corpus(
     config = CorpusConfig()
     n = len(plan_corpus(config))
     summary: CorpusSummary = generate_corpus(
-        path, config, workers=workers, force=True, progress=progress(n) if progress else None,
+        path, config, workers=workers, force=True,
+        progress=progress(n, "generating the corpus") if progress else None, say=say,
     )
     return path, True, summary.n_clips
 
@@ -111,7 +114,7 @@ def run_demo(
     emotion: str = "happy",
     text: str | None = None,
     workers: int | None = None,
-    progress: Callable[[int], Callable] | None = None,
+    progress: Callable[..., Callable] | None = None,
     say: Callable[[str], object] | None = None,
 ) -> DemoResult:
     """Run the demo; see the module docstring.
@@ -127,7 +130,8 @@ def run_demo(
     workers : int, optional
         Processes for generating the corpus.
     progress : callable, optional
-        ``progress(total)`` returns a wrapper for an iterable of finished clips.
+        ``progress(total, step)`` returns a wrapper for an iterable of finished clips,
+        labelled with the step.
     say : callable, optional
         Receives a line of news before each long step.
     """
@@ -138,7 +142,8 @@ def run_demo(
     say = say or (lambda _line: None)
     if not (default_corpus_dir() / "corpus.json").exists():
         say(f"generating the default corpus in {default_corpus_dir()} (once) ...")
-    corpus, created, n_clips = ensure_default_corpus(workers=workers, progress=progress)
+    corpus, created, n_clips = ensure_default_corpus(workers=workers, progress=progress,
+                                                     say=say)
     db_path, db_created = ensure_default_db(corpus, workers=workers, progress=progress,
                                             say=say)
     db = Database.open(db_path)
@@ -164,11 +169,16 @@ def run_demo(
         write_clip(clip, out)
         stem = out / clip.spec.clip_id
         result.outputs += [stem.with_suffix(".wav"), stem.with_suffix(".c3d"),
-                           Path(f"{stem}.phones.csv")]
+                           Path(f"{stem}.phones.csv"), Path(f"{stem}.controls.csv"),
+                           stem.with_suffix(".json")]
+    from animegraph.search.kernels import compile_notice
     from animegraph.synthesis import Model, synthesize, write_motion
     from ingest.formats.phones_csv import Segment
 
     say("synthesizing the held-out sentence from the database ...")
+    notice = compile_notice()
+    if notice:
+        say(notice)
     model = Model.load(db_path)
     first = clips[0]
     labels = [Segment(p.phone, p.start, p.end) for p in first.utterance.phones]
@@ -202,7 +212,7 @@ def _render_video(synth, model, out: Path, emotion: str, say) -> Path:
 
 def ensure_default_db(
     corpus: Path, *, workers: int | None = None,
-    progress: Callable[[int], Callable] | None = None,
+    progress: Callable[..., Callable] | None = None,
     say: Callable[[str], object] | None = None,
 ) -> tuple[Path, bool]:
     """Ingest the default corpus into the default database unless it is there already."""
@@ -214,7 +224,9 @@ def ensure_default_db(
     # (A database from before emotion models is brought up to date by ingest.)
     if say:
         say(f"building the default database in {path} (once) ...")
-    ingest([corpus], path, workers=workers or os.cpu_count() or 1, progress=progress)
+    ingest([corpus], path, workers=workers or os.cpu_count() or 1,
+           progress=(lambda total: progress(total, "ingest: reading clips")) if progress
+           else None, say=say)
     return path, True
 
 

@@ -42,7 +42,8 @@ def info_lines(info: dict) -> list[str]:
     rare = sorted(info["phones"].items(), key=lambda kv: kv[1])[:5]
     lines = [
         f"database:   {info['path']} ({info['version']}, schema {info['schema_version']}, "
-        f"written by animegraph {info['animegraph_version']} at {info['created']})",
+        f"written by animegraph {info['animegraph_version']} at {info['created']})"
+        + (f"; chosen by {info['chosen_by']}" if info.get("chosen_by") else ""),
         f"motion:     {info['kind']}, {info['n_channels']} channels at {info['fps']:g} fps",
         f"clips:      {info['n_clips']} ({emotions}); {info['duration_s'] / 60:.1f} min, "
         f"{info['n_frames']} frames; corpora {', '.join(info['corpora'])}",

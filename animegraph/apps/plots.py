@@ -69,21 +69,61 @@ def plot_clips(clips: Sequence, path: Path, *, title: str = "",
                     color=colors[i % len(colors)], label=clip.spec.emotion)
             ax.set_ylabel(name)
         pitch = clip.controls[:, face.CONTROLS.index("head_pitch")]
-        axes[-1].plot(t, pitch, lw=1, color=colors[i % len(colors)])
+        axes[-1].plot(t, pitch, lw=1, color=colors[i % len(colors)], label=clip.spec.emotion)
     for k, (label, (markers, fps)) in enumerate((synthesized or {}).items()):
         t = np.arange(len(markers)) / fps
+        color = colors[(len(clips) + k) % len(colors)]
         for ax, (_, a, b) in zip(axes[1:], MEASURES, strict=False):
-            ax.plot(t, face.marker_distance(markers, a, b), "--", lw=1.2,
-                    color=colors[(len(clips) + k) % len(colors)], label=label)
+            ax.plot(t, face.marker_distance(markers, a, b), "--", lw=1.2, color=color,
+                    label=label)
+        axes[-1].plot(t, head_pitch(markers), "--", lw=1.2, color=color, label=label)
     axes[-1].set_ylabel("head pitch (deg)")
     axes[-1].set_xlabel("time (s)")
-    axes[1].legend(loc="upper right", fontsize=7, ncol=len(clips) + len(synthesized or {}))
+    for ax in axes[1:]:  # every panel says which curve is which
+        ax.legend(loc="upper right", fontsize=7, ncol=len(clips) + len(synthesized or {}),
+                  framealpha=0.8)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def head_pitch(markers: np.ndarray) -> np.ndarray:
+    """Head pitch (degrees, positive tips the face down) of marker motion, per frame.
+
+    The rotation of the rigid head markers from their rest positions (Kabsch: SVD of
+    their cross-covariance), read as the rig's pitch: the rig composes R = Ry Rx Rz
+    (:func:`ingest.corpus.face.rigid_transform`), so R[1, 2] = -sin(pitch). On the
+    demo's reference clip it follows the rig's own head_pitch control within 0.2 deg.
+
+    Parameters
+    ----------
+    markers : np.ndarray, shape (n_frames, n_markers, 3)
+        In :data:`ingest.corpus.face.MARKERS` order.
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames,)
+        NaN where a head marker is missing.
+    """
+    head = [i for i, (_, _, group) in enumerate(face.MARKERS) if group == "head"]
+    rest = face.marker_rest()[head]
+    rest = rest - rest.mean(axis=0)
+    points = np.asarray(markers, dtype=np.float64)[:, head]
+    out = np.full(len(points), np.nan)
+    ok = np.isfinite(points).all(axis=(1, 2))
+    if not ok.any():
+        return out
+    moved = points[ok] - points[ok].mean(axis=1, keepdims=True)
+    u, _, vt = np.linalg.svd(np.einsum("pi,tpj->tij", rest, moved))
+    v, ut = np.swapaxes(vt, 1, 2), np.swapaxes(u, 1, 2)
+    flip = np.ones((len(moved), 3))
+    flip[:, 2] = np.sign(np.linalg.det(v @ ut))
+    rotation = v @ (flip[:, :, None] * ut)
+    out[ok] = np.rad2deg(-np.arcsin(np.clip(rotation[:, 1, 2], -1.0, 1.0)))
+    return out
 
 
 def plot_heldout(model, clip, path: Path, *, methods=("exact", "window3", "random")) -> Path:
@@ -215,8 +255,8 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
         for p in phones:
             if p.get("jump"):
                 ax.axvline(p["start"], color="C0", lw=0.8, ls="--", alpha=0.7)
-    if len(axes) > 1:
-        axes[1].legend(loc="upper right", fontsize=7, ncol=2)
+    for ax in axes[1:]:  # every panel says which curve is which
+        ax.legend(loc="upper right", fontsize=7, ncol=2, framealpha=0.8)
     axes[-1].set_xlabel("time (s)")
     end = max(motion.duration, truth.duration if truth else 0.0,
               max((p["end"] for p in phones), default=0.0))
@@ -231,11 +271,22 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
     return Path(path)
 
 
+#: Rows of clip-id labels at the jump lines in ``plot``, and the width of one character
+#: of them as a share of the time axis (7 pt text on the 11-inch figure).
+JUMP_LABEL_ROWS = 3
+JUMP_LABEL_CHAR = 0.0075
+
+
 def _timeline(ax, phones: Sequence[dict]) -> None:
     """Phone labels along the top panel; a bar per phone coloured by its source clip."""
     sources = list(dict.fromkeys(p.get("clip_id") for p in phones if p.get("clip_id")))
     colours = {s: f"C{i % 10}" for i, s in enumerate(sources)}
     trans = ax.get_xaxis_transform()
+    span = max((p["end"] for p in phones), default=1.0) or 1.0
+    # Clip ids at the jump lines: upright, legible, in up to JUMP_LABEL_ROWS staggered
+    # rows; a label that would overlap every row is left out (its colour bar remains).
+    char_s = span * JUMP_LABEL_CHAR
+    row_ends = [-np.inf] * JUMP_LABEL_ROWS
     for k, p in enumerate(phones):
         ax.axvline(p["start"], color="0.85", lw=0.5, zorder=0)
         source = p.get("clip_id")
@@ -244,8 +295,11 @@ def _timeline(ax, phones: Sequence[dict]) -> None:
                        lw=0, alpha=0.8)
         if p.get("jump"):
             ax.axvline(p["start"], color="C0", lw=1.0, ls="--")
-            ax.text(p["start"], 0.12, source or "", rotation=90, fontsize=5, va="bottom",
-                    transform=trans, color="C0")
+            row = next((r for r, end in enumerate(row_ends) if end < p["start"]), None)
+            if source and row is not None:
+                ax.text(p["start"], 0.12 + 0.15 * row, f" {source}", fontsize=7,
+                        va="bottom", ha="left", transform=trans, color=colours[source])
+                row_ends[row] = p["start"] + char_s * (len(source) + 2)
         if p["phone"] != "SIL":
             ax.text(0.5 * (p["start"] + p["end"]), 0.86 if k % 2 else 0.74, p["phone"],
                     ha="center", fontsize=6, transform=trans)

@@ -25,14 +25,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
 
-#: Fields a query may be ordered by, per mode.
-ANIME_FIELDS = ("node_id", "clip_id", "phoneme", "emotion", "speaker", "start_time",
-                "duration")
-CLIP_FIELDS = ("clip_id", "emotion", "speaker", "duration", "n_animes")
 _WORD = re.compile(r"^[A-Za-z0-9']+$")
 
 
@@ -186,7 +183,7 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
 
 
 def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,
-                force: bool = False) -> list[dict]:
+                force: bool = False, progress=None) -> list[dict]:
     """Write every hit as motion + speech + preview, and ``index.csv``, into ``out``.
 
     Parameters
@@ -197,6 +194,8 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
         A folder to create; an existing one is replaced only with ``force``.
     context : float
         Seconds kept before and after each anime (clipped to its recording).
+    progress : callable, optional
+        ``progress(total)`` returns a wrapper for the iterable of hits (a bar).
 
     Returns
     -------
@@ -223,7 +222,7 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
     staging = out.parent / f".{out.name}.partial-{secrets.token_hex(4)}"
     staging.mkdir()
     try:
-        rows = _export_into(db, hits, staging, context)
+        rows = _export_into(db, hits, staging, context, progress)
         replace_dir(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -231,14 +230,16 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
     return rows
 
 
-def _export_into(db: Database, hits: pa.Table, folder: Path, context: float) -> list[dict]:
+def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
+                 progress=None) -> list[dict]:
     from ingest.formats.phones_csv import write_phones_csv
     from ingest.formats.wav import write_wav
 
     cache: dict[tuple[str, str], ClipData] = {}
     index = []
     anime_mode = "node_id" in hits.column_names
-    for n, hit in enumerate(hits.to_pylist()):
+    rows = hits.to_pylist()
+    for n, hit in enumerate(progress(len(rows))(rows) if progress else rows):
         key = (hit["corpus"], hit["clip_id"])
         if key not in cache:
             cache[key] = load_clip(db, *key)

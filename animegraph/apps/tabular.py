@@ -76,8 +76,12 @@ def _pretty(table: pa.Table, max_rows: int) -> str:
     widths = [max([len(n)] + [len(c[i]) for c in cells]) for i, n in enumerate(names)]
     widths = [min(w, 60) for w in widths]
 
+    def cut(value: str, width: int) -> str:
+        return value if len(value) <= width else value[:width - 1] + "…"
+
     def line(values):
-        return "  ".join(v[:w].ljust(w) for v, w in zip(values, widths, strict=True)).rstrip()
+        return "  ".join(cut(v, w).ljust(w) for v, w in zip(values, widths, strict=True)
+                         ).rstrip()
 
     out = [line(names), line(["-" * w for w in widths])]
     out += [line(c) for c in cells]

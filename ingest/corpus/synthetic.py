@@ -28,12 +28,10 @@ from __future__ import annotations
 
 import json
 import logging
-import multiprocessing
 import os
 import shutil
 import uuid
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -48,6 +46,7 @@ from ingest.formats.c3d import MarkerData, write_c3d
 from ingest.formats.phones_csv import write_phones_csv
 from ingest.formats.wav import write_wav
 from ingest.speech.espeak import Utterance, speak
+from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)
 
@@ -303,6 +302,7 @@ def generate_corpus(
     workers: int | None = None,
     force: bool = False,
     progress: Callable | None = None,
+    say: Callable[[str], object] | None = None,
 ) -> CorpusSummary:
     """Generate a synthetic corpus into the folder ``out``.
 
@@ -321,6 +321,8 @@ def generate_corpus(
         Replace an existing non-empty ``out``.
     progress : callable, optional
         Wraps the iterable of finished clips (e.g. ``functools.partial(tqdm, total=n)``).
+    say : callable, optional
+        Receives a line before the one-off preparation of the workers.
 
     Raises
     ------
@@ -349,11 +351,12 @@ def generate_corpus(
             results = map(_make_and_write, jobs)
             done = list(progress(results) if progress else results)
         else:
+            if say is not None:
+                say(f"preparing {workers} workers (librosa's pitch kernels are compiled "
+                    "once per environment) ...")
             gestures.warm_up()  # compile librosa's cached gufuncs once, before the workers
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                results = pool.map(_make_and_write, jobs, chunksize=4)
-                done = list(progress(results) if progress else results)
+            done = map_in_processes(_make_and_write, jobs, workers=workers, chunksize=4,
+                                    progress=progress)
         duration = float(sum(d for _, d, _ in done))
         frames = int(sum(f for _, _, f in done))
         n_sentences = len({s.sentence_id for s in specs})

@@ -1,0 +1,54 @@
+"""Whether the search's numba kernels are compiled yet (they are cached on disk once).
+
+The first synthesis in a fresh environment compiles every kernel of the search (about a
+minute on two cores, measured in ``docs/results.md``, issue 17); later runs load them
+from numba's cache (``__pycache__/*.nbi`` beside each module). Commands say so before
+that first minute instead of going silent.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from pathlib import Path
+
+#: Modules of this room holding cached numba kernels, by the search method using them.
+KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree"),
+                  "paper": ("dtw", "problem", "paper"),
+                  "window": ("dtw", "problem"), "dp": ("dtw", "problem")}
+#: What the one-off compilation takes, for the message (measured, docs/results.md).
+COMPILE_NOTE = "about a minute on two cores"
+
+
+def kernel_caches(method: str = "exact") -> list[tuple[str, Path]]:
+    """(``module.function``, its numba cache index file) for each kernel ``method`` runs.
+
+    Numba's cache layout is not public API: kernels whose index cannot be found are
+    left out (so nothing is announced rather than something false).
+    """
+    from numba.core.dispatcher import Dispatcher
+
+    found = []
+    for name in KERNEL_MODULES.get(method, KERNEL_MODULES["exact"]):
+        module = import_module(f"animegraph.search.{name}")
+        for attr, value in vars(module).items():
+            if not isinstance(value, Dispatcher) or value.__module__ != module.__name__:
+                continue
+            index = getattr(getattr(getattr(value, "_cache", None), "_cache_file", None),
+                            "_index_path", None)
+            if index is not None:
+                found.append((f"{name}.{attr}", Path(index)))
+    return found
+
+
+def uncompiled_kernels(method: str = "exact") -> list[str]:
+    """Names of ``method``'s kernels not compiled and cached on disk yet."""
+    return [name for name, index in kernel_caches(method) if not index.is_file()]
+
+
+def compile_notice(method: str = "exact") -> str | None:
+    """A line announcing the one-off compilation, or None if the kernels are cached."""
+    missing = uncompiled_kernels(method)
+    if not missing:
+        return None
+    return (f"compiling the search kernels once ({len(missing)} to go, {COMPILE_NOTE}; "
+            "cached for later runs) ...")

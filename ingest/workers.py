@@ -1,0 +1,163 @@
+"""Worker processes that end with their parent and on Ctrl-C, without hanging.
+
+:func:`map_in_processes` is ``ProcessPoolExecutor.map`` made safe to interrupt:
+
+* Each worker ignores SIGINT (a Ctrl-C in a terminal reaches the whole process group;
+  the parent alone decides what happens) and asks the kernel to send it SIGTERM when its
+  parent dies (``prctl(PR_SET_PDEATHSIG)`` on Linux; elsewhere a thread that watches the
+  parent's pid), so that ``kill -9`` of the parent leaves no orphan behind.
+* On any exception in the parent (``KeyboardInterrupt`` above all), the workers are
+  terminated (then killed if they linger) *before* the pool is shut down, pending work
+  is cancelled, and nothing waits on a worker again. ``with ProcessPoolExecutor(...)``
+  instead waits for every queued job on the way out, and CPython's result thread can
+  die with ``InvalidStateError: CANCELLED`` on a cancelled future, after which that
+  wait never ends (the hang seen in issue 17).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+
+#: Seconds a terminated worker gets to exit before it is killed.
+TERMINATE_GRACE_S = 3.0
+#: Seconds between two looks at the parent's pid (where prctl is not available).
+PARENT_POLL_S = 0.5
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+
+
+def die_with_parent(parent: int | None = None) -> None:
+    """Make this process end when its parent does (call it first thing in a worker).
+
+    Parameters
+    ----------
+    parent : int, optional
+        The parent's pid as the parent saw it (to catch a parent that died before this
+        ran); default ``os.getppid()`` now.
+    """
+    parent = os.getppid() if parent is None else parent
+    armed = False
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if os.getppid() != parent:  # the parent is already gone
+        os._exit(1)
+    if not armed:
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                         name="animegraph-parent-watch").start()
+
+
+def _watch_parent(parent: int) -> None:
+    import time
+
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def worker_initializer(parent: int) -> None:
+    """Initializer of every worker process: ignore Ctrl-C, end with the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
+
+
+def end_workers(processes: Iterable[multiprocessing.Process]) -> None:
+    """Terminate processes, wait a little, kill those still alive, and reap them all."""
+    processes = [p for p in processes if p.is_alive()]
+    for p in processes:
+        with contextlib.suppress(OSError, ValueError):
+            p.terminate()
+    for p in processes:
+        with contextlib.suppress(OSError, ValueError, AssertionError):
+            p.join(TERMINATE_GRACE_S)
+            if p.is_alive():
+                p.kill()
+                p.join(TERMINATE_GRACE_S)
+
+
+def map_in_processes(
+    func: Callable, jobs: Sequence, *, workers: int, chunksize: int = 1,
+    progress: Callable[[Iterator], Iterable] | None = None,
+) -> list:
+    """``[func(j) for j in jobs]`` in ``workers`` spawned processes, in order.
+
+    Parameters
+    ----------
+    func : callable
+        A module-level function (it is pickled to the workers).
+    jobs : sequence
+        Its arguments, one per call.
+    workers : int
+        Number of processes.
+    chunksize : int
+        Jobs sent to a worker at once.
+    progress : callable, optional
+        Wraps the iterator of results (e.g. a progress bar).
+
+    Returns
+    -------
+    list
+        The results, in the order of ``jobs``.
+
+    Notes
+    -----
+    On any exception (``KeyboardInterrupt`` included) the workers are ended at once and
+    the exception propagates; no job is left running.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                               initializer=worker_initializer, initargs=(os.getpid(),))
+    try:
+        results = pool.map(func, jobs, chunksize=chunksize)
+        done = list(progress(results) if progress else results)
+    except BaseException:
+        _abandon(pool)
+        raise
+    pool.shutdown(wait=True)
+    return done
+
+
+def _abandon(pool: ProcessPoolExecutor) -> None:
+    """End a pool's workers now; a Ctrl-C meanwhile does not cut this short."""
+    restore = None
+    if threading.current_thread() is threading.main_thread():
+        restore = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        end_workers(processes)
+    finally:
+        if restore is not None:
+            signal.signal(signal.SIGINT, restore)
+
+
+@contextlib.contextmanager
+def sigint_ignored_by_children() -> Iterator[None]:
+    """Ignore SIGINT while worker processes are started by code we do not control.
+
+    An ignored signal stays ignored across ``fork`` and ``exec`` (Python keeps it so),
+    whichever thread starts the process, so workers started meanwhile (e.g. by a Dask
+    cluster's own threads) never see the terminal's Ctrl-C, which is sent to the whole
+    process group: their parent decides and ends them. (A blocked signal would not do:
+    the cluster's threads exist before the block and start the processes.) The price: a
+    Ctrl-C during these seconds is not seen; the next one is. Only in the main thread.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -1,0 +1,134 @@
+"""Ctrl-C and a dying parent, with real signals sent to a real ``animegraph`` process.
+
+Each test starts the command in its own session (as a terminal's foreground job), waits
+until its worker processes exist, sends SIGINT to the whole group (what Ctrl-C does) or
+SIGKILL to the parent, and then polls, with a bounded wait, for every process to end.
+No test asserts on speed; the bounds only keep a broken build from hanging the suite.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from db.store import is_database
+
+#: Longest wait for a process to appear or to end (a bound, not a measurement).
+BOUND_S = 120.0
+
+
+def _start(args: list[str], tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    err = tmp_path / "stderr.txt"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "animegraph", *args], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=err.open("w"), env=env,
+                            start_new_session=True)
+    return proc, err
+
+
+def _wait_for(condition, what: str) -> None:
+    deadline = time.monotonic() + BOUND_S
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"gave up waiting for {what}")
+        time.sleep(0.1)
+
+
+def _workers(proc: subprocess.Popen) -> list[psutil.Process]:
+    try:
+        return psutil.Process(proc.pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def _gone(processes: list[psutil.Process]) -> bool:
+    return not [p for p in processes if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+
+
+def _interrupt(proc: subprocess.Popen, times: int) -> None:
+    for _ in range(times):
+        os.killpg(proc.pid, signal.SIGINT)
+        time.sleep(0.3)
+
+
+def _ended(proc: subprocess.Popen, workers: list[psutil.Process]) -> int:
+    try:
+        code = proc.wait(BOUND_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        pytest.fail("the command did not end after Ctrl-C")
+    _wait_for(lambda: _gone(workers), "the worker processes to end")
+    return code
+
+
+def _clean_exit(code: int, err: Path) -> None:
+    text = err.read_text()
+    assert code == 130, text
+    assert "Traceback" not in text and "InvalidStateError" not in text, text
+    assert text.rstrip().endswith("animegraph: interrupted"), text
+
+
+@pytest.mark.parametrize("presses", [1, 2, 3])
+def test_ctrl_c_ends_a_parallel_ingest(tiny_corpus, tmp_path, presses):
+    db = tmp_path / "db"
+    proc, err = _start(["ingest", str(tiny_corpus), "--db", str(db), "--workers", "2"],
+                       tmp_path)
+    _wait_for(lambda: len(_workers(proc)) >= 2 or proc.poll() is not None, "the workers")
+    assert proc.poll() is None, err.read_text()
+    time.sleep(1.0)  # let them take work
+    workers = _workers(proc)
+    _interrupt(proc, presses)
+    _clean_exit(_ended(proc, workers), err)
+    assert not is_database(db)  # nothing half-written
+
+
+def test_ctrl_c_ends_a_corpus_being_generated(tmp_path):
+    out = tmp_path / "corpus"
+    proc, err = _start(["corpus", "synth", "--out", str(out), "--sentences", "6",
+                        "--parallel", "2", "--workers", "2"], tmp_path)
+    _wait_for(lambda: len(_workers(proc)) >= 2 or proc.poll() is not None, "the workers")
+    time.sleep(1.0)
+    workers = _workers(proc)
+    _interrupt(proc, 2)
+    _clean_exit(_ended(proc, workers), err)
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".corpus")]  # no staging
+
+
+def test_workers_end_when_the_parent_is_killed(tiny_corpus, tmp_path):
+    proc, err = _start(["ingest", str(tiny_corpus), "--db", str(tmp_path / "db"),
+                        "--workers", "2"], tmp_path)
+    _wait_for(lambda: len(_workers(proc)) >= 2 or proc.poll() is not None, "the workers")
+    workers = _workers(proc)
+    assert workers, err.read_text()
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(BOUND_S)
+    _wait_for(lambda: _gone(workers), "the orphaned workers to end")
+
+
+def test_ctrl_c_ends_a_batch(tiny_db, tmp_path):
+    script = tmp_path / "script.csv"
+    script.write_text("id,text\n" + "".join(
+        f"l{i},This is line number {i} of a long dialogue.\n" for i in range(12)))
+    out = tmp_path / "out"
+    proc, err = _start(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(out),
+                        "--workers", "2"], tmp_path)
+    # Two Dask workers (each a nanny and its worker process) once the cluster is up.
+    _wait_for(lambda: len(_workers(proc)) >= 2 or proc.poll() is not None, "the workers")
+    assert proc.poll() is None, err.read_text()
+    time.sleep(2.0)
+    workers = _workers(proc)
+    _interrupt(proc, 2)
+    _clean_exit(_ended(proc, workers), err)
+    for folder in out.iterdir() if out.exists() else []:
+        done = folder / "done.json"
+        if done.exists():  # a line that says it is finished is complete
+            json.loads(done.read_text())
