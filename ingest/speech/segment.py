@@ -97,11 +97,14 @@ logger = logging.getLogger(__name__)
 
 __all__ = [
     "BOUNDARY_OFFSET",
+    "DEFAULT_ENGINE",
+    "ENGINES",
     "DITHER_LSB",
     "MIN_DURATION",
     "SAMPLE_RATE",
     "align",
     "boundary_errors",
+    "check_engine",
     "edit_alignment",
     "phone_error_rate",
     "recognize",
@@ -109,6 +112,12 @@ __all__ = [
     "snap_labels",
 ]
 
+#: Phone engines: the CTC phone recogniser ``hama`` ships (:mod:`ingest.speech.ctc`) and
+#: PocketSphinx (this module).
+ENGINES: tuple[str, ...] = ("hama", "pocketsphinx")
+#: The engine used when none is named (the one that measured better on real speech,
+#: ``scripts/eval_segmentation.py``; docs/results.md, issue 13).
+DEFAULT_ENGINE = "pocketsphinx"
 #: Sampling rate of PocketSphinx's en-US acoustic model (Hz).
 SAMPLE_RATE = 16000
 #: Analysis frames per second (PocketSphinx's default; the model is trained at it).
@@ -713,13 +722,16 @@ def segment(
     *,
     text: str | None = None,
     labels: Sequence[Segment] | None = None,
+    engine: str | None = None,
 ) -> tuple[list[Segment], str]:
     """Phone segments of speech by the best means at hand.
 
     In order of preference: ``labels`` (checked and snapped to the audio by
-    :func:`snap_labels`), forced alignment of ``text`` (:func:`align`), phone
-    recognition (:func:`recognize`). If the alignment fails (:class:`~db.errors.DataError`
-    from :func:`align`) a warning is logged and recognition is used instead.
+    :func:`snap_labels`), forced alignment of ``text``, phone recognition, by the phone
+    engine ``engine`` (:data:`ENGINES`: PocketSphinx's :func:`align` and
+    :func:`recognize`, or the CTC model of :mod:`ingest.speech.ctc`). If the alignment
+    fails (:class:`~db.errors.DataError`) a warning is logged ("transcript alignment
+    failed: ...; fell back to phone recognition") and recognition is used instead.
 
     Parameters
     ----------
@@ -731,6 +743,8 @@ def segment(
         The transcript.
     labels : sequence of Segment, optional
         Known phone labels (seconds).
+    engine : str, optional
+        ``"hama"`` or ``"pocketsphinx"``; default :data:`DEFAULT_ENGINE`.
 
     Returns
     -------
@@ -747,15 +761,33 @@ def segment(
         If PocketSphinx is unusable.
     """
     samples, sample_rate = _check_audio(audio, sample_rate)
+    engine = check_engine(engine)
     if labels is not None:
         return snap_labels(labels, len(samples) / sample_rate), "labels"
+    if engine == "hama":
+        from ingest.speech import ctc
+
+        do_align, do_recognize = ctc.align, ctc.recognize
+    else:
+        do_align, do_recognize = align, recognize
     if text is not None:
         _check_text(text)
         try:
-            return align(samples, sample_rate, text), "aligned"
+            return do_align(samples, sample_rate, text), "aligned"
         except DataError as exc:
-            logger.warning("%s; falling back to phone recognition", exc)
-    return recognize(samples, sample_rate), "recognized"
+            logger.warning("transcript alignment failed: %s; fell back to phone recognition",
+                           exc)
+    return do_recognize(samples, sample_rate), "recognized"
+
+
+def check_engine(engine: object) -> str:
+    """``engine`` checked against :data:`ENGINES` (None: :data:`DEFAULT_ENGINE`)."""
+    if engine is None:
+        return DEFAULT_ENGINE
+    if engine not in ENGINES:
+        raise ParameterError(f"phone engine: expected one of {', '.join(ENGINES)}, "
+                             f"got {engine!r}")
+    return str(engine)
 
 
 # ---------------------------------------------------------------------------------------------
