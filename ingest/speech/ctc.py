@@ -27,9 +27,9 @@ CTC posteriors are *peaky*: a phone shows as one or two frames of high probabili
 near its start, then blanks. A segment therefore runs from its phone's first frame (less
 :data:`ONSET_SHIFT`, the median lead measured on the synthetic corpus, see
 ``scripts/eval_segmentation.py``) to the next phone's start. Pauses come from the audio:
-a run of at least :data:`MIN_PAUSE` seconds whose 20 ms frames are all more than
-:data:`PAUSE_DB` below the clip's loud frames (95th percentile), lying between two
-phones, is ``SIL``; so are the edges before the first phone and after the last phone's
+a run of at least :data:`MIN_PAUSE` seconds of quiet 20 ms frames (``_quiet_frames``:
+:data:`PAUSE_DB` below the clip's loud frames, or nearer its noise floor) lying between
+two phones is ``SIL``; so are the edges before the first phone and after the last phone's
 frames when they are quiet.
 
 Failures
@@ -80,10 +80,17 @@ FRAME_RATE = 50
 #: Seconds a phone's segment starts before its first frame: the median lead of the true
 #: onset on the synthetic corpus (``scripts/eval_segmentation.py --engine hama``).
 ONSET_SHIFT = 0.06
+#: Boundaries move to the largest spectral change this near (seconds; the 20 ms frames'
+#: quantisation), as PocketSphinx's do within 10 ms (:func:`ingest.speech.segment._refine`).
+REFINE_WINDOW = 0.02
 #: Shortest quiet run (seconds) between two phones taken as a pause (``SIL``).
 MIN_PAUSE = 0.1
 #: A 20 ms frame is quiet when this many dB below the clip's loud (95th percentile) frames.
 PAUSE_DB = 30.0
+#: ... or this fraction of the way from the clip's noise floor to its loud frames, if higher.
+PAUSE_FRACTION = 0.35
+#: Frames (20 ms) over which frame levels are median-smoothed before the quiet test.
+PAUSE_SMOOTH = 5
 #: Largest drop (nats per frame) of an alignment's mean log posterior below the free
 #: best path before the transcript is judged not to match the audio.
 MAX_ALIGN_LOSS = 2.0
@@ -333,21 +340,34 @@ def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int) -> tuple[
 
 
 def _quiet_frames(samples16: np.ndarray, n_frames: int) -> np.ndarray:
-    """True for 20 ms frames :data:`PAUSE_DB` below the clip's loud frames."""
+    """True for quiet 20 ms frames.
+
+    Frame levels (dB, median-smoothed over :data:`PAUSE_SMOOTH` frames) are quiet below
+    the higher of: :data:`PAUSE_DB` under the clip's loud frames (95th percentile), or
+    :data:`PAUSE_FRACTION` of the way from its noise floor (5th percentile) to them (a
+    recording's noise floor may lie only 30 dB under its speech).
+    """
+    from scipy.ndimage import median_filter
+
     hop = SAMPLE_RATE // FRAME_RATE
     padded = np.zeros(n_frames * hop, dtype=np.float64)
     m = min(len(samples16), len(padded))
     padded[:m] = samples16[:m]
     energy = np.mean(padded.reshape(n_frames, hop) ** 2, axis=1)
-    level = 10 * np.log10(energy + 1e-12)
-    loud = np.percentile(level, 95) if n_frames else 0.0
-    return level < loud - PAUSE_DB
+    level = median_filter(10 * np.log10(energy + 1e-12), size=PAUSE_SMOOTH, mode="nearest")
+    if not n_frames:
+        return np.zeros(0, dtype=bool)
+    loud, floor = np.percentile(level, 95), np.percentile(level, 5)
+    threshold = max(loud - PAUSE_DB, floor + PAUSE_FRACTION * (loud - floor))
+    return level < threshold
 
 
-def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, quiet: np.ndarray,
-           duration: float) -> list[Segment]:
+def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, samples16: np.ndarray,
+           n_frames: int, duration: float, refine: bool) -> list[Segment]:
     """Phones with their first and last frames -> segments tiling ``[0, duration]``."""
-    from ingest.speech.segment import _tile
+    from ingest.speech.segment import _refine, _tile
+
+    quiet = _quiet_frames(samples16, n_frames)
 
     frame = 1.0 / FRAME_RATE
     min_run = max(1, int(round(MIN_PAUSE * FRAME_RATE)))
@@ -365,6 +385,8 @@ def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, quiet: np.nd
         run = _longest_run(quiet[lo: int(starts[k + 1])])
         if run is not None and run[1] - run[0] >= min_run:
             onsets.append((SILENCE, (lo + run[0]) * frame))
+    if refine:
+        onsets = _refine(onsets, samples16 * 32767.0, REFINE_WINDOW)
     return _tile(onsets, duration)
 
 
@@ -399,7 +421,7 @@ def _last_frames(path_starts: np.ndarray, log_probs: np.ndarray, labels: np.ndar
 # ---------------------------------------------------------------------------------------------
 
 
-def recognize(audio: np.ndarray, sample_rate: int) -> list[Segment]:
+def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> list[Segment]:
     """Recognise phones without a transcript (CTC greedy decoding of :func:`posteriors`).
 
     Parameters
@@ -408,6 +430,8 @@ def recognize(audio: np.ndarray, sample_rate: int) -> list[Segment]:
         Mono audio, float or integer PCM, any level.
     sample_rate : int
         Its sampling rate in Hz.
+    refine : bool, optional
+        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
 
     Returns
     -------
@@ -438,8 +462,8 @@ def recognize(audio: np.ndarray, sample_rate: int) -> list[Segment]:
         return _silence(duration)
     labels = best[starts]
     last = _last_frames(starts, log_probs, labels)
-    quiet = _quiet_frames(samples16, len(log_probs))
-    return _timed([PHONES[i] for i in labels], starts, last, quiet, duration)
+    return _timed([PHONES[i] for i in labels], starts, last, samples16, len(log_probs),
+                  duration, refine)
 
 
 def transcript_phones(text: str) -> list[str]:
@@ -450,7 +474,8 @@ def transcript_phones(text: str) -> list[str]:
     return phones
 
 
-def align(audio: np.ndarray, sample_rate: int, text: str) -> list[Segment]:
+def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
+          ) -> list[Segment]:
     """Forced alignment of a transcript by CTC Viterbi over :func:`posteriors`.
 
     Parameters
@@ -461,6 +486,8 @@ def align(audio: np.ndarray, sample_rate: int, text: str) -> list[Segment]:
         Its sampling rate in Hz.
     text : str
         What is said (English; numbers and symbols are spelled out).
+    refine : bool, optional
+        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
 
     Returns
     -------
@@ -496,5 +523,4 @@ def align(audio: np.ndarray, sample_rate: int, text: str) -> list[Segment]:
         raise DataError(f"the transcript {text[:60]!r} does not match the audio "
                         f"(alignment {loss:.2f} nats/frame below recognition)")
     last = _last_frames(starts, log_probs, labels)
-    quiet = _quiet_frames(samples16, len(log_probs))
-    return _timed(phones, starts, last, quiet, duration)
+    return _timed(phones, starts, last, samples16, len(log_probs), duration, refine)
