@@ -329,7 +329,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", nargs="+", choices=("synthetic", "emodb", "grid"),
                         default=["synthetic", "emodb", "grid"], help="data sets")
-    parser.add_argument("--engines", nargs="+", choices=ps.ENGINES, default=list(ps.ENGINES))
+    parser.add_argument("--engines", nargs="+", choices=("hama", "pocketsphinx"),
+                        default=["hama", "pocketsphinx"])
     parser.add_argument("--corpus", type=Path, help="an existing synthetic corpus folder")
     parser.add_argument("--shared", type=Path, default=SHARED,
                         help="folder holding emodb/ and grid/s1/ (../shared/data)")

@@ -16,6 +16,7 @@ from pathlib import Path
 from animegraph import __version__
 from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
+from ingest.speech.engines import ENGINES
 
 
 class UsageError(Exception):
@@ -113,6 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark motion where it is instead of shifting it by the "
                      "estimated lip-audio lag")
+    ing.add_argument("--phones-engine", choices=ENGINES, default=None,
+                     help="phone engine when there are no labels: auto (default: PocketSphinx "
+                     "aligns a transcript, hama recognises phones without one: each measured "
+                     "best at it), "
+                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
@@ -175,6 +181,11 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
+    syn.add_argument("--phones-engine", choices=ENGINES, default=None,
+                     help="phone engine when there are no labels: auto (default: PocketSphinx "
+                     "aligns a --text, hama recognises phones without one: each measured "
+                     "best at it), "
+                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
@@ -516,7 +527,8 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
 
     config = IngestConfig(variance=args.variance, fps=args.fps,
-                          correct_lag=not args.no_lag_correction)
+                          correct_lag=not args.no_lag_correction,
+                          phones_engine=args.phones_engine)
     report = ingest(args.sources, args.db, config, workers=args.workers,
                     progress=lambda total: _progress(total, args.quiet, "clip"))
     for line in report.lines():
@@ -597,7 +609,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
               file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
-                     tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
+                     tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best,
+                     phones_engine=args.phones_engine)
     write_motion(out, model, args.output)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "

@@ -91,9 +91,11 @@ PAUSE_DB = 30.0
 PAUSE_FRACTION = 0.35
 #: Frames (20 ms) over which frame levels are median-smoothed before the quiet test.
 PAUSE_SMOOTH = 5
-#: Largest drop (nats per frame) of an alignment's mean log posterior below the free
-#: best path before the transcript is judged not to match the audio.
-MAX_ALIGN_LOSS = 2.0
+#: Largest drop (nats per frame) of an alignment's log posterior below the free best
+#: path before the transcript is judged not to match the audio. Measured: 0.11-0.29 with
+#: the right transcript (eSpeak speech, GRID), 0.9-1.9 with another sentence of the
+#: synthetic corpus; GRID's look-alike sentences (same grammar) 0.21-0.51 are not caught.
+MAX_ALIGN_LOSS = 0.6
 #: Audio is fed to the model in pieces of at most this many seconds, each with
 #: :data:`CHUNK_CONTEXT` seconds of context either side (the model gives at most 1,500
 #: frames, 30 s, per call: longer input is cut short).

@@ -90,6 +90,7 @@ from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
+from ingest.speech.engines import aligner, check_engine, recognizer
 from ingest.speech.g2p import g2p, transcript_words
 from ingest.speech.phones import PHONE_SET, SILENCE
 
@@ -97,14 +98,11 @@ logger = logging.getLogger(__name__)
 
 __all__ = [
     "BOUNDARY_OFFSET",
-    "DEFAULT_ENGINE",
-    "ENGINES",
     "DITHER_LSB",
     "MIN_DURATION",
     "SAMPLE_RATE",
     "align",
     "boundary_errors",
-    "check_engine",
     "edit_alignment",
     "phone_error_rate",
     "recognize",
@@ -112,12 +110,6 @@ __all__ = [
     "snap_labels",
 ]
 
-#: Phone engines: the CTC phone recogniser ``hama`` ships (:mod:`ingest.speech.ctc`) and
-#: PocketSphinx (this module).
-ENGINES: tuple[str, ...] = ("hama", "pocketsphinx")
-#: The engine used when none is named (the one that measured better on real speech,
-#: ``scripts/eval_segmentation.py``; docs/results.md, issue 13).
-DEFAULT_ENGINE = "pocketsphinx"
 #: Sampling rate of PocketSphinx's en-US acoustic model (Hz).
 SAMPLE_RATE = 16000
 #: Analysis frames per second (PocketSphinx's default; the model is trained at it).
@@ -728,8 +720,9 @@ def segment(
 
     In order of preference: ``labels`` (checked and snapped to the audio by
     :func:`snap_labels`), forced alignment of ``text``, phone recognition, by the phone
-    engine ``engine`` (:data:`ENGINES`: PocketSphinx's :func:`align` and
-    :func:`recognize`, or the CTC model of :mod:`ingest.speech.ctc`). If the alignment
+    engine ``engine`` (:mod:`ingest.speech.engines`: PocketSphinx's :func:`align` and
+    :func:`recognize`, the CTC model of :mod:`ingest.speech.ctc`, or each task by the
+    engine that measured better at it). If the alignment
     fails (:class:`~db.errors.DataError`) a warning is logged ("transcript alignment
     failed: ...; fell back to phone recognition") and recognition is used instead.
 
@@ -744,7 +737,7 @@ def segment(
     labels : sequence of Segment, optional
         Known phone labels (seconds).
     engine : str, optional
-        ``"hama"`` or ``"pocketsphinx"``; default :data:`DEFAULT_ENGINE`.
+        One of :data:`ingest.speech.engines.ENGINES`; default ``"auto"``.
 
     Returns
     -------
@@ -764,12 +757,7 @@ def segment(
     engine = check_engine(engine)
     if labels is not None:
         return snap_labels(labels, len(samples) / sample_rate), "labels"
-    if engine == "hama":
-        from ingest.speech import ctc
-
-        do_align, do_recognize = ctc.align, ctc.recognize
-    else:
-        do_align, do_recognize = align, recognize
+    do_align, do_recognize = aligner(engine), recognizer(engine)
     if text is not None:
         _check_text(text)
         try:
@@ -778,16 +766,6 @@ def segment(
             logger.warning("transcript alignment failed: %s; fell back to phone recognition",
                            exc)
     return do_recognize(samples, sample_rate), "recognized"
-
-
-def check_engine(engine: object) -> str:
-    """``engine`` checked against :data:`ENGINES` (None: :data:`DEFAULT_ENGINE`)."""
-    if engine is None:
-        return DEFAULT_ENGINE
-    if engine not in ENGINES:
-        raise ParameterError(f"phone engine: expected one of {', '.join(ENGINES)}, "
-                             f"got {engine!r}")
-    return str(engine)
 
 
 # ---------------------------------------------------------------------------------------------
