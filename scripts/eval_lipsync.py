@@ -69,6 +69,8 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 PLOTS: dict[str, Path] = {}
 SYSTEMS: list[str] = list(METHODS)
 PARAMS: dict[str, dict] = {}
+#: The Anime Graph's rows (``animegraph.apps.evaluate.METHODS``; ``--graph-methods``).
+GRAPH_METHODS: list[str] = list(evaluate.METHODS)
 #: IngestConfig settings of every prepared clip (the phone engine).
 INGEST: dict[str, object] = {}
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
@@ -125,7 +127,7 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
         estimators[key] = reference_row().fit(train)
         train_s[key] = time.perf_counter() - t0
     norm = measures.displacement_scale(np.concatenate([c.motion for c in train]))
-    methods = evaluate.METHODS if "anime-graph" in SYSTEMS else ()
+    methods = GRAPH_METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
     rows = []
     for k, clip in enumerate(test):
@@ -221,6 +223,8 @@ def main() -> int:
                         help="systems to compare (default: all four)")
     parser.add_argument("--corpus", type=Path, help="synthetic corpus (default: generate one)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--graph-methods", nargs="+", default=list(evaluate.METHODS),
+                        choices=evaluate.METHODS, help="the Anime Graph's rows (default all)")
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help="phone engine for clips without labels (default: auto)")
     parser.add_argument("--json", type=Path)
@@ -232,6 +236,7 @@ def main() -> int:
     args = parser.parse_args()
     SYSTEMS[:] = args.systems
     INGEST["phones_engine"] = args.phones_engine
+    GRAPH_METHODS[:] = args.graph_methods
     for method, name, value in args.param:
         PARAMS.setdefault(method, {})[name] = value
     if args.plots:

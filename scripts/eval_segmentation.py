@@ -10,8 +10,9 @@ Both engines (``--engines hama pocketsphinx``), side by side, on up to three dat
   labels from its ``lablaut`` files: recognition only (the engines' aligners pronounce
   English). SAMPA is mapped to ARPAbet by :data:`SAMPA_TO_ARPABET` (nearest English phone;
   a stop's closure ``_t``/``t`` and release ``!t``/``tasp`` are one phone; marker-only
-  labels ``+hoe``, ``-sth`` ... extend the segment before them; the glottal stop ``?`` and
-  breath ``(`` / end ``.`` are ``SIL``). This copy is cut (or zero-padded) to 2.0 s: labels
+  labels ``+hoe``, ``-sth`` ... are annotations, not segments; each label starts at its
+  time (xlabel), the final ``.`` marks the end of speech; the glottal stop ``?`` and
+  breath ``(`` are ``SIL``). This copy is cut (or zero-padded) to 2.0 s: labels
   past 2.0 s are dropped and the last one is cut there.
 * ``grid`` -- GRID speaker s1 (``../shared/data/grid/s1``; English, real), the corpus' own
   word alignments (``*.align``): forced alignment of the transcript gives word onset and
@@ -111,10 +112,12 @@ def _timed(func, *args):
 
 
 def read_lablaut(path: Path, duration: float) -> list[Segment]:
-    """EmoDB ``.lablaut`` (xlabel: end time, colour, SAMPA label) -> ARPAbet segments.
+    """EmoDB ``.lablaut`` (xlabel: time, colour, SAMPA label) -> ARPAbet segments.
 
-    Stop closure and release are one phone; marker-only labels extend the previous
-    segment; labels are cut at ``duration``.
+    Each label *starts* at its time and runs to the next label's (the first label comes
+    after leading silence; the last, ``.``, marks the end of speech). Marker-only lines
+    (``+hoe``, ``-sth`` ...) annotate the segment they fall in. Stop closure and release
+    are one phone. Labels are cut at ``duration``.
     """
     rows: list[tuple[float, str]] = []
     body = False
@@ -123,42 +126,29 @@ def read_lablaut(path: Path, duration: float) -> list[Segment]:
             body = True
             continue
         fields = line.split()
-        if not body or len(fields) < 2:
+        if not body or len(fields) < 3 or fields[2][0] in "+-":
             continue
-        label = fields[2] if len(fields) > 2 else ""
-        rows.append((float(fields[0]), label))
-    pieces: list[list] = []  # [phone, start, end, part]
-    start = 0.0
-    for end, label in rows:
+        rows.append((float(fields[0]), fields[2]))
+    pieces: list[list] = []  # [phone, start, end]
+    for k, (start, label) in enumerate(rows):
+        end = rows[k + 1][0] if k + 1 < len(rows) else duration
         if end <= start:
             continue
-        if not label or label[0] in "+-":
-            if pieces:
-                pieces[-1][2] = end
-            start = end
-            continue
-        part = "whole"
-        core = label
-        for mark in ("+", ","):
-            core = core.split(mark)[0]
+        core, release = label.split("+")[0].split(",")[0], False
         if core.startswith("_"):
-            core, part = core[1:], "closure"
+            core = core[1:]
         elif core.startswith("!"):
-            core, part = core[1:], "release"
+            core, release = core[1:], True
         elif core.endswith("asp") or core in ("dsap", "gas"):
-            part = "release"
-        core = core.split("-")[0] if core not in SAMPA_TO_ARPABET else core
-        phone = SAMPA_TO_ARPABET.get(core)
-        if phone is None:
-            phone = SILENCE
-        if part == "release" and pieces and pieces[-1][0] == phone:
-            pieces[-1][2] = end
-        elif pieces and pieces[-1][0] == phone == SILENCE:
+            release = True
+        if core not in SAMPA_TO_ARPABET:
+            core = core.split("-")[0]
+        phone = SAMPA_TO_ARPABET.get(core, SILENCE)
+        if pieces and pieces[-1][0] == phone and (release or phone == SILENCE):
             pieces[-1][2] = end
         else:
-            pieces.append([phone, start, end, part])
-        start = end
-    segments = [Segment(p, s, min(e, duration)) for p, s, e, _ in pieces if s < duration]
+            pieces.append([phone, start, end])
+    segments = [Segment(p, s, min(e, duration)) for p, s, e in pieces if s < duration]
     return ps.snap_labels(segments, duration) if segments else [Segment(SILENCE, 0, duration)]
 
 

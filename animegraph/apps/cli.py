@@ -584,6 +584,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                              f"(the exact search), not {method}")
     if args.k_best is not None and args.k_best < 1:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
+    k_best, path = _synth_path(args)
     t0 = time.perf_counter()
     model = Model.load(args.db)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
@@ -609,8 +610,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
               file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
-                     tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best,
+                     tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine)
+    if args.text is not None and out.segmentation == "recognized":
+        path += " (transcript alignment failed: fell back to phone recognition)"
+    print(f"animegraph: path: {path}", file=sys.stderr)
     write_motion(out, model, args.output)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -627,8 +631,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
-          + (f" (k-best {args.k_best}: each phone the mean of up to {args.k_best} animes)"
-             if args.k_best else "") + f"; wrote {args.output}", file=sys.stderr)
+          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes)"
+             if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:
         print(f"animegraph: phones missing from the database, backed off: "
@@ -638,11 +642,39 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
         from animegraph.apps.tabular import format_table
 
+        print(f"path: {path}")
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
     if args.explain_json:
         write_explain(out, args.explain_json)
     return 0
+
+
+#: ``synth`` on audio alone (no --text, no --labels, no search option): each phone the
+#: mean of this many best animes (k-best). Recognised phones are unreliable and the paper's
+#: single-anime search trusts them; k-best 20 measured best on real speech without a
+#: transcript (FACEGOOD, GRID: docs/results.md, issues 12 and 13).
+AUDIO_ONLY_K_BEST = 20
+
+
+def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
+    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
+    engine = args.phones_engine or "auto"
+    if args.labels is not None:
+        given = "phone labels given"
+    elif args.text is not None:
+        given = f"transcript given (aligned by the {engine} phone engine)"
+    else:
+        given = f"audio only (phones recognised by the {engine} phone engine)"
+    searched = args.exact or args.window is not None or args.search is not None
+    if args.k_best is not None:
+        return args.k_best, f"{given}; k-best {args.k_best} as asked"
+    if args.labels is None and args.text is None and not searched:
+        return AUDIO_ONLY_K_BEST, (
+            f"{given}: each phone the mean of its {AUDIO_ONLY_K_BEST} best animes "
+            "(k-best measured best on real speech without a transcript; --exact for the "
+            "paper's search)")
+    return None, f"{given}: the paper's search (one anime a phone, §4)"
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
