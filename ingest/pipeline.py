@@ -54,6 +54,7 @@ class IngestConfig:
     #                           the highest among the new clips)
     correct_lag: bool = True  # shift landmark / Live Link motion by its estimated lip-audio lag
     random_state: int = 0  # FastICA seed
+    phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
 
 
 @dataclass(frozen=True)
@@ -122,13 +123,14 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag, reference = args
+    source, known, fps, correct_lag, reference, engine = args
     try:
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
         clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
-                            head_reference=reference if _has_head(raw.schema) else None)
+                            head_reference=reference if _has_head(raw.schema) else None,
+                            phones_engine=engine)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
@@ -250,7 +252,8 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, config.correct_lag, reference) for s in found]
+    jobs = [(s, known, fps, config.correct_lag, reference, config.phones_engine)
+            for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)

@@ -84,6 +84,7 @@ def prepare_clip(
     correct_lag: bool = True,
     head_reference: np.ndarray | None = None,
     prosody_config: RastaPlpConfig | None = None,
+    phones_engine: str | None = None,
 ) -> PreparedClip:
     """Turn a clip read from disk into a :class:`PreparedClip`.
 
@@ -99,6 +100,8 @@ def prepare_clip(
     head_reference : np.ndarray, shape (n_head_points, 3), optional
         Head-group positions of the database: points of a clip with a rigid head group
         are expressed in the head's frame (:func:`ingest.motion.stabilize_points`).
+    phones_engine : str, optional
+        Phone engine for clips without labels (:data:`ingest.speech.segment.ENGINES`).
 
     Raises
     ------
@@ -123,7 +126,8 @@ def prepare_clip(
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent")
     phones, method = segment(audio, raw.sample_rate, text=raw.text or None,
-                             labels=list(raw.phones) if raw.phones else None)
+                             labels=list(raw.phones) if raw.phones else None,
+                             engine=phones_engine)
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)

@@ -3,6 +3,7 @@
 Usage::
 
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
+                                [--phones-engine auto|hama|pocketsphinx] [--k-best K]
 
 Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
@@ -28,6 +29,10 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--segmentation", choices=("recognized", "aligned", "labels"),
                         default="recognized")
+    parser.add_argument("--phones-engine", default=None,
+                        help="phone engine (ingest.speech.engines.ENGINES; default auto)")
+    parser.add_argument("--k-best", type=int, default=None,
+                        help="k-best blending (synth's default on audio only: 20)")
     args = parser.parse_args()
 
     from animegraph.synthesis import Model, synthesize
@@ -42,13 +47,13 @@ def main() -> int:
     utt = speak(TEXT)
     seconds = len(utt.audio) / utt.sample_rate
     model = Model.load(args.db)
-    kwargs = {}
+    kwargs = {"phones_engine": args.phones_engine, "k_best": args.k_best}
     if args.segmentation == "aligned":
         kwargs["text"] = TEXT
     elif args.segmentation == "labels":
         kwargs["labels"] = [Segment(p.phone, p.start, p.end) for p in utt.phones]
     print(f"# {seconds:.2f} s of speech, {model.graph.n_nodes} animes, phones "
-          f"{args.segmentation}")
+          f"{args.segmentation} ({args.phones_engine or 'auto'}), k-best {args.k_best}")
     for k in range(args.repeats):
         t = time.perf_counter()
         out = synthesize(model, utt.audio, utt.sample_rate, **kwargs)

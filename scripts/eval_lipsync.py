@@ -26,8 +26,14 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
   long clips (first 70 % as the database, last 30 % synthesized) and leave one clip out
   across the other eleven.
 
-Real clips have no transcripts: phones come from PocketSphinx phone recognition, as at
-ingest. Each clip is prepared once; every fold's database is built from prepared clips
+Every table has two reference rows (issue 13; :mod:`animegraph.baselines.reference`):
+``loudness``, the speech's smoothed RMS envelope mapped to every channel by least squares
+on the fold's training clips, and ``mean-pose``, the training motion's mean. A method
+that does not beat loudness is not lip-sync.
+
+Real clips have no transcripts: phones come from phone recognition by the default phone
+engine (``ingest.speech.engines``: hama), as at ingest; ``--phones-engine`` picks
+another. Each clip is prepared once; every fold's database is built from prepared clips
 (PCA/ICA refitted without the held-out data). Synthesized motion is compared with the
 recording in the database's space (head-stabilised markers, normalised landmarks).
 """
@@ -47,13 +53,15 @@ import numpy as np
 from animegraph.apps import evaluate
 from animegraph.apps.plots import plot_heldout, plot_systems
 from animegraph.baselines import BASELINES, METHODS, make_estimator
+from animegraph.baselines.reference import Loudness, MeanPose
 from animegraph.motion import measures
 from animegraph.synthesis import Model
 from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
-from ingest.pipeline import build_database, prepare_sources
+from ingest.pipeline import IngestConfig, build_database, prepare_sources
 from ingest.prepare import slice_clip
 from ingest.readers import discover
+from ingest.speech.engines import ENGINES
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -61,6 +69,10 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 PLOTS: dict[str, Path] = {}
 SYSTEMS: list[str] = list(METHODS)
 PARAMS: dict[str, dict] = {}
+#: The Anime Graph's rows (``animegraph.apps.evaluate.METHODS``; ``--graph-methods``).
+GRAPH_METHODS: list[str] = list(evaluate.METHODS)
+#: IngestConfig settings of every prepared clip (the phone engine).
+INGEST: dict[str, object] = {}
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
 PLOT_SECONDS = 12.0
 
@@ -110,8 +122,12 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
+    for key, reference_row in (("loudness", Loudness), ("mean-pose", MeanPose)):
+        t0 = time.perf_counter()  # reference rows in every table (issue 13)
+        estimators[key] = reference_row().fit(train)
+        train_s[key] = time.perf_counter() - t0
     norm = measures.displacement_scale(np.concatenate([c.motion for c in train]))
-    methods = evaluate.METHODS if "anime-graph" in SYSTEMS else ()
+    methods = GRAPH_METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
     rows = []
     for k, clip in enumerate(test):
@@ -139,7 +155,8 @@ def synthetic(tmp: Path, corpus: Path | None, workers: int) -> list[dict]:
         corpus = tmp / "corpus"
         generate_corpus(corpus, CorpusConfig(), workers=workers)
     meta = json.loads((corpus / "corpus.json").read_text())
-    clips, reference = prepare_sources(discover([corpus]), workers=workers)
+    clips, reference = prepare_sources(discover([corpus]), IngestConfig(**INGEST),
+                                         workers=workers)
     parallel = meta["parallel_sentences"][-2:]
     singles = sorted({c.sentence_id for c in clips} - set(meta["parallel_sentences"]))[-6:]
     held = set(parallel) | set(singles)
@@ -151,7 +168,8 @@ def synthetic(tmp: Path, corpus: Path | None, workers: int) -> list[dict]:
 
 
 def facegood(tmp: Path, workers: int) -> list[dict]:
-    clips, reference = prepare_sources(discover([SHARED / "facegood"]), workers=workers)
+    clips, reference = prepare_sources(discover([SHARED / "facegood"]), IngestConfig(**INGEST),
+                                         workers=workers)
     out = []
     for k, held in enumerate(clips):
         print(f"# facegood fold {k + 1}/{len(clips)}: hold out {held.clip_id}", flush=True)
@@ -160,7 +178,8 @@ def facegood(tmp: Path, workers: int) -> list[dict]:
 
 
 def talkingface(tmp: Path, workers: int) -> list[dict]:
-    clips, reference = prepare_sources(discover([SHARED / "talkingface"]), workers=workers)
+    clips, reference = prepare_sources(discover([SHARED / "talkingface"]), IngestConfig(**INGEST),
+                                         workers=workers)
     long_ids = ("dfrf_cnn2", "edtalk_pose_source2")
     out = []
     for clip in clips:
@@ -204,6 +223,10 @@ def main() -> int:
                         help="systems to compare (default: all four)")
     parser.add_argument("--corpus", type=Path, help="synthetic corpus (default: generate one)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--graph-methods", nargs="+", default=list(evaluate.METHODS),
+                        choices=evaluate.METHODS, help="the Anime Graph's rows (default all)")
+    parser.add_argument("--phones-engine", choices=ENGINES, default=None,
+                        help="phone engine for clips without labels (default: auto)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
@@ -212,6 +235,8 @@ def main() -> int:
                         help="a baseline hyper-parameter, e.g. av-hmm:n_states=8 (repeatable)")
     args = parser.parse_args()
     SYSTEMS[:] = args.systems
+    INGEST["phones_engine"] = args.phones_engine
+    GRAPH_METHODS[:] = args.graph_methods
     for method, name, value in args.param:
         PARAMS.setdefault(method, {})[name] = value
     if args.plots:

@@ -241,7 +241,7 @@ def test_segment_falls_back_to_recognition(caplog):
         segments, method = segment(np.zeros(32000), 16000, text="hello world")
     assert method == "recognized"
     assert segments == [Segment(SILENCE, 0.0, 2.0)]
-    assert "falling back" in caplog.text
+    assert "fell back to phone recognition" in caplog.text
 
 
 def test_segment_50ms_clip():

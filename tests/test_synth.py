@@ -110,6 +110,29 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
         assert exact["motion"].shape == tol["motion"].shape == k3["motion"].shape
 
 
+def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, capsys):
+    """Labels: the paper's search; audio only: k-best 20 on recognised phones, said on
+    stderr and in --explain; --exact brings the paper's search back."""
+    stem, _ = held_out
+    base = ["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0])]
+    assert main([*base, "--labels", f"{stem}.phones.csv", "-o", str(tmp_path / "a.npz"),
+                 "--explain"]) == 0
+    captured = capsys.readouterr()
+    assert "path: phone labels given: the paper's search" in captured.err
+    assert "path: phone labels given" in captured.out
+    assert main([*base, "-o", str(tmp_path / "b.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "path: audio only (phones recognised by the auto phone engine)" in err
+    assert "mean of its 20 best animes" in err and "(recognized)" in err
+    assert main([*base, "--exact", "--phones-engine", "pocketsphinx",
+                 "-o", str(tmp_path / "c.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "audio only (phones recognised by the pocketsphinx phone engine): the paper's" in err
+    assert main([*base, "--text", "nothing like what is said in it at all", "-o",
+                 str(tmp_path / "d.npz"), "--phones-engine", "hama"]) == 0
+    assert "fell back to phone recognition" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("extra, needle", [
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),

@@ -19,6 +19,7 @@ from pathlib import Path
 from animegraph import __version__
 from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
+from ingest.speech.engines import ENGINES
 
 #: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
 SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), any "
@@ -127,6 +128,11 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark and iPhone (Live Link) motion where it is "
                      "instead of shifting it by the estimated lip-audio lag")
+    ing.add_argument("--phones-engine", choices=ENGINES, default=None,
+                     help="phone engine when there are no labels: auto (default: PocketSphinx "
+                     "aligns a transcript, hama recognises phones without one: each measured "
+                     "best at it), "
+                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
@@ -195,6 +201,11 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
+    syn.add_argument("--phones-engine", choices=ENGINES, default=None,
+                     help="phone engine when there are no labels: auto (default: PocketSphinx "
+                     "aligns a --text, hama recognises phones without one: each measured "
+                     "best at it), "
+                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
@@ -582,7 +593,8 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
 
     config = IngestConfig(variance=args.variance, fps=args.fps,
-                          correct_lag=not args.no_lag_correction)
+                          correct_lag=not args.no_lag_correction,
+                          phones_engine=args.phones_engine)
     report = ingest(args.sources, args.db, config, workers=args.workers,
                     progress=lambda total: _progress(total, args.quiet, "clip",
                                                      "ingest: reading clips"),
@@ -643,6 +655,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                              f"(the exact search), not {method}")
     if args.k_best is not None and args.k_best < 1:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
+    if args.labels is None and args.text is None:
+        args.labels = _sidecar_labels(args.audio)
+        if args.labels is not None:
+            print(f"animegraph: using the phone labels beside the speech, {args.labels} "
+                  "(--labels or --text to use others)", file=sys.stderr)
+    k_best, path = _synth_path(args)
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -653,11 +671,6 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
-    if args.labels is None and args.text is None:
-        args.labels = _sidecar_labels(args.audio)
-        if args.labels is not None:
-            print(f"animegraph: using the phone labels beside the speech, {args.labels} "
-                  "(--labels or --text to use others)", file=sys.stderr)
     labels = read_labels(args.labels) if args.labels else None
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
@@ -679,7 +692,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         print(f"animegraph: {notice}", file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
-                     tolerance=args.tolerance or 0.0, options=options, k_best=args.k_best)
+                     tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
+                     phones_engine=args.phones_engine)
+    if args.text is not None and out.segmentation == "recognized":
+        path += " (transcript alignment failed: fell back to phone recognition)"
+    print(f"animegraph: path: {path}", file=sys.stderr)
     write_motion(out, model, args.output, timecode=args.timecode)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -696,8 +713,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
-          + (f" (k-best {args.k_best}: each phone the mean of up to {args.k_best} animes)"
-             if args.k_best else "") + f"; wrote {args.output}", file=sys.stderr)
+          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes)"
+             if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:
         print(f"animegraph: phones missing from the database, backed off: "
@@ -707,6 +724,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
         from animegraph.apps.tabular import format_table
 
+        print(f"path: {path}")
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
     if args.explain_json:
@@ -754,6 +772,33 @@ def _sidecar_labels(audio: Path) -> Path | None:
         if beside.is_file():
             return beside
     return None
+
+
+#: ``synth`` on audio alone (no --text, no --labels, no search option): each phone the
+#: mean of this many best animes (k-best). Recognised phones are unreliable and the paper's
+#: single-anime search trusts them; k-best 20 measured best on real speech without a
+#: transcript (FACEGOOD, GRID: docs/results.md, issues 12 and 13).
+AUDIO_ONLY_K_BEST = 20
+
+
+def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
+    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
+    engine = args.phones_engine or "auto"
+    if args.labels is not None:
+        given = "phone labels given"
+    elif args.text is not None:
+        given = f"transcript given (aligned by the {engine} phone engine)"
+    else:
+        given = f"audio only (phones recognised by the {engine} phone engine)"
+    searched = args.exact or args.window is not None or args.search is not None
+    if args.k_best is not None:
+        return args.k_best, f"{given}; k-best {args.k_best} as asked"
+    if args.labels is None and args.text is None and not searched:
+        return AUDIO_ONLY_K_BEST, (
+            f"{given}: each phone the mean of its {AUDIO_ONLY_K_BEST} best animes "
+            "(k-best measured best on real speech without a transcript; --exact for the "
+            "paper's search)")
+    return None, f"{given}: the paper's search (one anime a phone, §4)"
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:

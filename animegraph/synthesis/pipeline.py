@@ -77,6 +77,7 @@ def synthesize(
     method: str = "exact", window: int | None = None, tolerance: float = 0.0,
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
+    phones_engine: str | None = None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -108,6 +109,9 @@ def synthesize(
         paper's synthesis. On real data with recognized phones 20 measured best; with
         exact phone labels (the synthetic corpus) the paper's synthesis is better
         (docs/results.md). ``joins`` is then empty.
+    phones_engine : str, optional
+        The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
+        default, PocketSphinx alignment of a transcript, hama recognition without one).
 
     Returns
     -------
@@ -129,7 +133,7 @@ def synthesize(
                              sample_rate)
     emotion = choice.search
     phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
-                                       prosody_config=prosody_config)
+                                       prosody_config=prosody_config, engine=phones_engine)
     timings["segment_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -187,7 +191,8 @@ def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
 
 def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None,
                  labels: list[Segment] | None = None,
-                 prosody_config: RastaPlpConfig | None = None) -> tuple[tuple[Phone, ...], str]:
+                 prosody_config: RastaPlpConfig | None = None,
+                 engine: str | None = None) -> tuple[tuple[Phone, ...], str]:
     """The search nodes of an utterance: its phones with their prosody curves.
 
     Returns the phones and how they were found (``labels``, ``aligned``, ``recognized``).
@@ -197,7 +202,7 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
         raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent: there is no speech to animate")
-    segments, method = segment(audio, sample_rate, text=text, labels=labels)
+    segments, method = segment(audio, sample_rate, text=text, labels=labels, engine=engine)
     if all(s.phone == "SIL" for s in segments):
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()

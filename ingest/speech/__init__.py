@@ -8,6 +8,9 @@ compares unlike things (Cao et al. 2005, §4.1-4.2):
 * :mod:`.espeak` -- eSpeak NG speech synthesis with its phoneme events;
 * :mod:`.segment` -- phones from speech: given labels, forced alignment of a transcript
   or phone recognition (PocketSphinx), and their error measures;
+* :mod:`.ctc` -- the second phone engine, a CTC phone recogniser shipped in the ``hama``
+  wheel: recognition, CTC-Viterbi forced alignment, per-frame phone posteriors;
+* :mod:`.engines` -- the engines' names and which does what by default;
 * :mod:`.features` -- RASTA-PLP prosody curves and MFCCs.
 
 Imports: ``db`` and the file formats of ``ingest``.

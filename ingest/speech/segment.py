@@ -90,6 +90,7 @@ from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
+from ingest.speech.engines import aligner, check_engine, recognizer
 from ingest.speech.g2p import g2p, transcript_words
 from ingest.speech.phones import PHONE_SET, SILENCE
 
@@ -713,13 +714,17 @@ def segment(
     *,
     text: str | None = None,
     labels: Sequence[Segment] | None = None,
+    engine: str | None = None,
 ) -> tuple[list[Segment], str]:
     """Phone segments of speech by the best means at hand.
 
     In order of preference: ``labels`` (checked and snapped to the audio by
-    :func:`snap_labels`), forced alignment of ``text`` (:func:`align`), phone
-    recognition (:func:`recognize`). If the alignment fails (:class:`~db.errors.DataError`
-    from :func:`align`) a warning is logged and recognition is used instead.
+    :func:`snap_labels`), forced alignment of ``text``, phone recognition, by the phone
+    engine ``engine`` (:mod:`ingest.speech.engines`: PocketSphinx's :func:`align` and
+    :func:`recognize`, the CTC model of :mod:`ingest.speech.ctc`, or each task by the
+    engine that measured better at it). If the alignment
+    fails (:class:`~db.errors.DataError`) a warning is logged ("transcript alignment
+    failed: ...; fell back to phone recognition") and recognition is used instead.
 
     Parameters
     ----------
@@ -731,6 +736,8 @@ def segment(
         The transcript.
     labels : sequence of Segment, optional
         Known phone labels (seconds).
+    engine : str, optional
+        One of :data:`ingest.speech.engines.ENGINES`; default ``"auto"``.
 
     Returns
     -------
@@ -747,15 +754,18 @@ def segment(
         If PocketSphinx is unusable.
     """
     samples, sample_rate = _check_audio(audio, sample_rate)
+    engine = check_engine(engine)
     if labels is not None:
         return snap_labels(labels, len(samples) / sample_rate), "labels"
+    do_align, do_recognize = aligner(engine), recognizer(engine)
     if text is not None:
         _check_text(text)
         try:
-            return align(samples, sample_rate, text), "aligned"
+            return do_align(samples, sample_rate, text), "aligned"
         except DataError as exc:
-            logger.warning("%s; falling back to phone recognition", exc)
-    return recognize(samples, sample_rate), "recognized"
+            logger.warning("transcript alignment failed: %s; fell back to phone recognition",
+                           exc)
+    return do_recognize(samples, sample_rate), "recognized"
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,136 @@
+"""Reference rows for lip-sync tables: the training mean pose and the audio's loudness.
+
+Not published methods but the floor every lip-sync method must clear (issue 13): a system
+that does not beat the *loudness* of the audio, mapped linearly onto the face, is not
+doing lip-sync, and one that does not beat showing the *mean pose* adds nothing.
+
+* :class:`MeanPose` -- every frame is the mean of the training motion.
+* :class:`Loudness` -- the RMS envelope of the speech (:data:`RMS_WINDOW` windows at the
+  motion's frame times, smoothed by a centred moving average of :data:`SMOOTH_SECONDS`),
+  mapped to every channel by least squares on the training clips: motion ≈ a + b · env,
+  per channel. Mouth opening then follows the loudness with the scale and offset the
+  training mouth has.
+
+Both follow the contract of :mod:`animegraph.baselines` (``fit`` on prepared clips,
+``predict(audio, sample_rate, n_frames=...)``), but are not selectable by ``synth
+--method``: they are yardsticks for ``scripts/eval_lipsync.py``.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from animegraph.baselines.base import BaselineModel, check_enough
+from animegraph.baselines.data import TrainingSet
+from db.errors import ParameterError
+
+__all__ = ["RMS_WINDOW", "SMOOTH_SECONDS", "Loudness", "MeanPose", "rms_envelope"]
+
+#: Length (s) of the window each RMS value is taken over, centred on its frame.
+RMS_WINDOW = 0.04
+#: Length (s) of the moving average smoothing the envelope (the issue's 80 ms).
+SMOOTH_SECONDS = 0.08
+
+
+def rms_envelope(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
+                 window: float = RMS_WINDOW, smooth: float = SMOOTH_SECONDS) -> np.ndarray:
+    """Smoothed RMS loudness of ``audio`` at ``times``.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (n_samples,)
+        Mono speech, float.
+    sample_rate : int
+        Hz.
+    times : np.ndarray, shape (n_frames,)
+        Seconds.
+    window, smooth : float
+        RMS window and moving-average length (s).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames,), float64
+    """
+    x = np.asarray(audio, dtype=np.float64)
+    if x.size == 0:
+        return np.zeros(len(times))
+    power = np.concatenate(([0.0], np.cumsum(x * x)))
+    half = max(1, int(round(window * sample_rate / 2)))
+    centre = np.clip(np.round(np.asarray(times) * sample_rate).astype(np.int64), 0, len(x))
+    lo, hi = np.clip(centre - half, 0, len(x)), np.clip(centre + half, 0, len(x))
+    env = np.sqrt((power[hi] - power[lo]) / np.maximum(hi - lo, 1))
+    if len(times) > 1 and smooth > 0:
+        step = float(np.median(np.diff(times)))
+        width = max(1, int(round(smooth / step)))
+        if width > 1:
+            kernel = np.ones(width) / width
+            env = np.convolve(np.pad(env, (width // 2, width - 1 - width // 2), mode="edge"),
+                              kernel, mode="valid")
+    return env
+
+
+class MeanPose(BaselineModel):
+    """Every frame the training motion's mean (a reference row, not a method)."""
+
+    method: ClassVar[str] = "mean-pose"
+
+    def _fit(self, data: TrainingSet) -> None:
+        check_enough(data.n_frames, 1, "the mean pose")
+        self.mean_ = np.mean(np.concatenate([c.motion for c in data.clips]), axis=0)
+
+    def _predict(self, audio, sample_rate, times, emotion):
+        return np.repeat(self.mean_[None], len(times), axis=0)
+
+    def _arrays(self):
+        return {"mean": self.mean_}
+
+    def _restore(self, arrays):
+        self.mean_ = arrays["mean"]
+
+
+class Loudness(BaselineModel):
+    """Motion as a per-channel affine function of the speech's smoothed RMS envelope.
+
+    Parameters
+    ----------
+    window : float
+        RMS window (s), default :data:`RMS_WINDOW`.
+    smooth : float
+        Moving-average length (s), default :data:`SMOOTH_SECONDS`.
+    """
+
+    method: ClassVar[str] = "loudness"
+
+    def __init__(self, window: float = RMS_WINDOW, smooth: float = SMOOTH_SECONDS):
+        self.window = window
+        self.smooth = smooth
+
+    def _fit(self, data: TrainingSet) -> None:
+        if not (self.window > 0 and self.smooth >= 0):
+            raise ParameterError(f"window must be > 0 and smooth >= 0, got {self.window}, "
+                                 f"{self.smooth}")
+        env, motion = [], []
+        for clip in data.clips:
+            times = np.arange(clip.n_frames) / clip.fps
+            env.append(self._envelope(clip.audio, clip.sample_rate, times))
+            motion.append(clip.motion)
+        x = np.concatenate(env)
+        y = np.concatenate(motion)
+        check_enough(len(x), 2, "the loudness mapping")
+        design = np.column_stack([np.ones_like(x), x])
+        self.coef_, *_ = np.linalg.lstsq(design, y, rcond=None)  # (2, n_channels)
+
+    def _envelope(self, audio, sample_rate, times):
+        return rms_envelope(audio, sample_rate, times, window=self.window, smooth=self.smooth)
+
+    def _predict(self, audio, sample_rate, times, emotion):
+        env = self._envelope(audio, sample_rate, times)
+        return np.column_stack([np.ones_like(env), env]) @ self.coef_
+
+    def _arrays(self):
+        return {"coef": self.coef_}
+
+    def _restore(self, arrays):
+        self.coef_ = arrays["coef"]

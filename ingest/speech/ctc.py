@@ -1,0 +1,528 @@
+"""Phones from speech with a CTC phone recogniser whose model ships in its wheel (``hama``).
+
+The second phonetic engine beside PocketSphinx (:mod:`ingest.speech.segment`). ``hama``
+(Apache-2.0, on PyPI) ships a 4.7 MB waveform-to-IPA CTC acoustic model and the small
+native library that runs it (numpy and ctypes, no onnxruntime, no download at run time).
+Its output is one distribution over 191 symbols (IPA phones, diacritics, a word-boundary
+symbol and the CTC *blank*) every 20 ms (:data:`FRAME_RATE`). From it:
+
+* :func:`posteriors` -- per-frame phone posteriors over the project's phone set
+  (:data:`ingest.speech.phones.PHONES`): the probability of each IPA symbol is added to the
+  ARPAbet phone it maps to (:data:`IPA_TO_ARPABET`); the blank, the word boundary and the
+  symbols that carry no phone of their own (length, aspiration and tone marks, the glottal
+  stop) go to ``SIL``, which therefore reads "no phone starts here", as CTC's blank does.
+* :func:`recognize` -- phone recognition: best class per frame, repeats collapsed,
+  blanks removed (CTC greedy decoding, Graves et al., ICML 2006, §3.2), then timed as
+  :func:`align` times a transcript's phones.
+* :func:`align` -- forced alignment of a transcript by CTC Viterbi: the transcript's words
+  are pronounced by the project's CMUdict/eSpeak NG (:func:`ingest.speech.g2p.pronounce`;
+  the model's own English letter-to-sound is weak), and the best path through
+  ``blank, p1, blank, p2, ..., blank`` (a phone may repeat, a blank may be skipped
+  between different phones; Graves et al. 2006 §4.1) is found by dynamic programming over
+  the log posteriors. Phone ``k`` starts at the first frame of its state.
+
+Timing
+------
+CTC posteriors are *peaky*: a phone shows as one or two frames of high probability
+near its start, then blanks. A segment therefore runs from its phone's first frame (less
+:data:`ONSET_SHIFT`, the median lead measured on the synthetic corpus, see
+``scripts/eval_segmentation.py``) to the next phone's start. Pauses come from the audio:
+a run of at least :data:`MIN_PAUSE` seconds of quiet 20 ms frames (``_quiet_frames``:
+:data:`PAUSE_DB` below the clip's loud frames, or nearer its noise floor) lying between
+two phones is ``SIL``; so are the edges before the first phone and after the last phone's
+frames when they are quiet.
+
+Failures
+--------
+An alignment whose mean per-frame log posterior falls more than :data:`MAX_ALIGN_LOSS`
+nats below that of the unconstrained best path, or a transcript with more phones than
+the audio has frames, raises :class:`~db.errors.DataError` (the transcript does not match
+the audio): :func:`ingest.speech.segment.segment` then warns and recognises instead.
+``hama`` missing or unusable raises :class:`~db.errors.DataError` with one line saying so.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import resample_poly
+
+from db.errors import DataError
+from ingest.formats.phones_csv import Segment
+from ingest.speech.g2p import pronounce, transcript_words
+from ingest.speech.phones import PHONES, SILENCE
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "FRAME_RATE",
+    "IPA_TO_ARPABET",
+    "MAX_ALIGN_LOSS",
+    "MIN_PAUSE",
+    "ONSET_SHIFT",
+    "PAUSE_DB",
+    "align",
+    "available",
+    "posteriors",
+    "recognize",
+]
+
+#: Sampling rate of the model's input (Hz).
+SAMPLE_RATE = 16000
+#: Output frames per second: 160-sample hop, subsampled by 2 (20 ms frames).
+FRAME_RATE = 50
+#: Seconds a phone's segment starts before its first frame: the median lead of the true
+#: onset on the synthetic corpus (``scripts/eval_segmentation.py --engine hama``).
+ONSET_SHIFT = 0.06
+#: Boundaries move to the largest spectral change this near (seconds; the 20 ms frames'
+#: quantisation), as PocketSphinx's do within 10 ms (:func:`ingest.speech.segment._refine`).
+REFINE_WINDOW = 0.02
+#: Shortest quiet run (seconds) between two phones taken as a pause (``SIL``).
+MIN_PAUSE = 0.1
+#: A 20 ms frame is quiet when this many dB below the clip's loud (95th percentile) frames.
+PAUSE_DB = 30.0
+#: ... or this fraction of the way from the clip's noise floor to its loud frames, if higher.
+PAUSE_FRACTION = 0.35
+#: Frames (20 ms) over which frame levels are median-smoothed before the quiet test.
+PAUSE_SMOOTH = 5
+#: Largest drop (nats per frame) of an alignment's log posterior below the free best
+#: path before the transcript is judged not to match the audio. Measured: 0.11-0.29 with
+#: the right transcript (eSpeak speech, GRID), 0.9-1.9 with another sentence of the
+#: synthetic corpus; GRID's look-alike sentences (same grammar) 0.21-0.51 are not caught.
+MAX_ALIGN_LOSS = 0.6
+#: Audio is fed to the model in pieces of at most this many seconds, each with
+#: :data:`CHUNK_CONTEXT` seconds of context either side (the model gives at most 1,500
+#: frames, 30 s, per call: longer input is cut short).
+CHUNK_SECONDS = 20.0
+CHUNK_CONTEXT = 1.0
+
+#: The model's IPA symbols -> ARPAbet. Symbols of other languages go to the nearest
+#: English phone (aspirated and tense Korean stops to the plain stop, front rounded vowels
+#: to the nearest rounded or central vowel, the alveolar flap to D); glide-vowel symbols
+#: (``ja``, ``wa`` ...) to their glide. Symbols absent here carry no phone (blank).
+IPA_TO_ARPABET: dict[str, str] = {
+    "a": "AA", "aɪ": "AY", "aʊ": "AW", "b": "B", "c": "K", "d": "D", "d͡ʒ": "JH",
+    "e": "EH", "eə": "EH", "eɪ": "EY", "f": "F", "g": "G", "h": "HH", "i": "IY", "j": "Y",
+    "ja": "Y", "je": "Y", "jo": "Y", "ju": "Y", "jʌ": "Y", "k": "K", "kʰ": "K", "k͈": "K",
+    "l": "L", "m": "M", "n": "N", "o": "OW", "oʊ": "OW", "p": "P", "pʰ": "P", "p͈": "P",
+    "r": "R", "s": "S", "s͈": "S", "t": "T", "tʰ": "T", "t͈": "T", "t͡ɕ": "CH",
+    "t͡ɕʰ": "CH", "t͡ɕ͈": "CH", "t͡ʃ": "CH", "u": "UW", "v": "V", "w": "W", "wa": "W",
+    "we": "W", "wi": "W", "wʌ": "W", "x": "HH", "y": "UW", "z": "Z", "à": "AA", "ã": "AA",
+    "ä": "AA", "å": "AO", "æ": "AE", "ç": "HH", "ì": "IY", "ð": "DH", "ñ": "N", "õ": "OW",
+    "ø": "ER", "ħ": "HH", "ĩ": "IY", "ŋ": "NG", "œ": "ER", "ũ": "UW", "ǐ": "IY", "ɐ": "AH",
+    "ɑ": "AA", "ɒ": "AA", "ɓ": "B", "ɔ": "AO", "ɔɪ": "OY", "ɕ": "SH", "ɖ": "D", "ɗ": "D",
+    "ɘ": "AH", "ə": "AH", "ɚ": "ER", "ɛ": "EH", "ɜ": "ER", "ɝ": "ER", "ɟ": "JH", "ɡ": "G",
+    "ɣ": "G", "ɤ": "AH", "ɥ": "Y", "ɦ": "HH", "ɨ": "IH", "ɪ": "IH", "ɪə": "IH", "ɫ": "L",
+    "ɮ": "L", "ɯ": "UW", "ɯi": "IY", "ɰ": "W", "ɱ": "M", "ɲ": "N", "ɴ": "NG", "ɵ": "UH",
+    "ɸ": "F", "ɹ": "R", "ɻ": "R", "ɽ": "R", "ɾ": "D", "ʀ": "R", "ʁ": "R", "ʂ": "SH",
+    "ʃ": "SH", "ʈ": "T", "ʉ": "UW", "ʊ": "UH", "ʋ": "V", "ʌ": "AH", "ʎ": "L", "ʏ": "UH",
+    "ʐ": "ZH", "ʑ": "ZH", "ʒ": "ZH", "ʙ": "B", "ʝ": "Y", "β": "V", "θ": "TH", "χ": "HH",
+    "ẑ": "Z", "ẽ": "EH",
+}
+
+_INDEX = {p: k for k, p in enumerate(PHONES)}
+_SIL = _INDEX[SILENCE]
+
+
+# ---------------------------------------------------------------------------------------------
+# The model
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Model:
+    session: object
+    merge: np.ndarray  # (n_symbols, n_phones) 0/1: symbol -> PHONES column
+    lock: threading.Lock
+
+
+_MODEL: _Model | None = None
+_MODEL_LOCK = threading.Lock()
+
+
+def _reset_after_fork() -> None:  # pragma: no cover - exercised only in forked children
+    global _MODEL, _MODEL_LOCK
+    _MODEL = None
+    _MODEL_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_reset_after_fork)
+
+
+def available() -> bool:
+    """True if the ``hama`` package and its native library can be loaded."""
+    try:
+        from hama import _engine
+    except ImportError:
+        return False
+    return bool(_engine.available())
+
+
+def _model() -> _Model:
+    global _MODEL
+    with _MODEL_LOCK:
+        if _MODEL is not None:
+            return _MODEL
+        try:
+            from hama import ASRModel
+        except ImportError as exc:
+            raise DataError(f"the hama phone engine is not installed ({exc}); "
+                            "pip install hama, or use --phones-engine pocketsphinx") from exc
+        start = time.perf_counter()
+        try:
+            asr = ASRModel()
+        except (RuntimeError, OSError, ValueError) as exc:
+            raise DataError(f"cannot load the hama phone model: {exc}") from exc
+        symbols = asr.decoder_tokens
+        merge = np.zeros((len(symbols), len(PHONES)), dtype=np.float32)
+        for k, symbol in enumerate(symbols):
+            merge[k, _INDEX[IPA_TO_ARPABET.get(symbol, SILENCE)]] = 1.0
+        logger.debug("hama model loaded in %.2f s", time.perf_counter() - start)
+        _MODEL = _Model(asr.session, merge, threading.Lock())
+        return _MODEL
+
+
+def _log_probs(samples: np.ndarray) -> np.ndarray:
+    """16 kHz float audio -> the model's log posteriors, shape (n_frames, n_symbols)."""
+    model = _model()
+    size = int(CHUNK_SECONDS * SAMPLE_RATE)
+    context = int(CHUNK_CONTEXT * SAMPLE_RATE)
+    hop = SAMPLE_RATE // FRAME_RATE
+    pieces = []
+    for a in range(0, max(len(samples), 1), size):
+        lo, hi = max(0, a - context), min(len(samples), a + size + context)
+        wav = np.ascontiguousarray(samples[lo:hi], dtype=np.float32)
+        with model.lock:
+            try:
+                log_probs, lengths = model.session.run(
+                    ["log_probs", "out_lengths"],
+                    {"waveform": wav[None], "waveform_lengths": np.array([len(wav)])})
+            except RuntimeError as exc:
+                raise DataError(f"hama phone recognition failed: {exc}") from exc
+        out = np.asarray(log_probs[0][: int(np.asarray(lengths).reshape(-1)[0])])
+        first = (a - lo) // hop
+        count = int(math.ceil(min(size, len(samples) - a) / hop))
+        piece = out[first: first + count]
+        if 0 < len(piece) < count:  # the model's last frame may fall short of the end
+            piece = np.concatenate([piece, np.repeat(piece[-1:], count - len(piece), axis=0)])
+        pieces.append(piece)
+    return np.concatenate(pieces) if pieces else np.zeros((0, model.merge.shape[0]))
+
+
+def _resample(samples: np.ndarray, sample_rate: int) -> np.ndarray:
+    if sample_rate != SAMPLE_RATE:
+        g = math.gcd(SAMPLE_RATE, sample_rate)
+        samples = resample_poly(samples, SAMPLE_RATE // g, sample_rate // g)
+    peak = float(np.max(np.abs(samples))) if samples.size else 0.0
+    if peak > 0:
+        samples = samples * (0.9 / peak)  # the model hears every clip at one level
+    return samples.astype(np.float32)
+
+
+def posteriors(audio: np.ndarray, sample_rate: int) -> np.ndarray:
+    """Per-frame phone posteriors (a *posteriorgram*), 50 frames per second.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray, shape (n_samples,)
+        Mono audio, float in [-1, 1] or integer PCM.
+    sample_rate : int
+        Its sampling rate in Hz.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_frames, len(PHONES)), float32
+        Row ``t`` (audio from ``t / FRAME_RATE`` s) holds the probability of each phone of
+        :data:`ingest.speech.phones.PHONES`; rows sum to 1; the ``SIL`` column holds the
+        CTC blank (no phone starts here) and the symbols without a phone.
+
+    Raises
+    ------
+    ParameterError
+        Bad audio or sample rate.
+    DataError
+        If the model cannot be loaded or run.
+    """
+    from ingest.speech.segment import _check_audio
+
+    samples, sample_rate = _check_audio(audio, sample_rate)
+    return _phone_log_probs(_resample(samples, sample_rate))[0]
+
+
+def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
+    log_probs = _log_probs(samples16)
+    probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
+    probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+    return probs.astype(np.float32), np.log(np.maximum(probs, 1e-30))
+
+
+# ---------------------------------------------------------------------------------------------
+# CTC Viterbi
+# ---------------------------------------------------------------------------------------------
+
+
+def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int) -> tuple[np.ndarray, float]:
+    """The best CTC path of a label sequence through frame log posteriors.
+
+    States are ``blank, l1, blank, l2, ..., lL, blank`` (``2L + 1``); a path starts in the
+    first blank or ``l1``, ends in ``lL`` or the last blank, and at each frame stays, moves
+    one state on, or skips a blank between two different labels (Graves et al. 2006, §4.1).
+
+    Parameters
+    ----------
+    log_probs : numpy.ndarray, shape (n_frames, n_classes)
+        Per-frame log posteriors.
+    labels : numpy.ndarray, shape (n_labels,), int
+        Class indices of the sequence (none equal to ``blank``), at least one.
+    blank : int
+        Class index of the blank.
+
+    Returns
+    -------
+    starts : numpy.ndarray, shape (n_labels,), int
+        First frame of each label on the best path.
+    score : float
+        Log probability of that path.
+
+    Raises
+    ------
+    DataError
+        If there are fewer frames than the sequence needs.
+    """
+    n_frames, n_labels = len(log_probs), len(labels)
+    states = np.full(2 * n_labels + 1, blank, dtype=np.int64)
+    states[1::2] = labels
+    n_states = len(states)
+    needed = n_labels + int(np.sum(labels[1:] == labels[:-1]))
+    if n_frames < needed:
+        raise DataError(f"{n_labels} phones need at least {needed} frames of "
+                        f"{1000 // FRAME_RATE} ms, the audio has {n_frames}")
+    can_skip = np.zeros(n_states, dtype=bool)
+    can_skip[3::2] = labels[1:] != labels[:-1]
+    score = np.full(n_states, -np.inf)
+    score[:2] = log_probs[0, states[:2]]
+    back = np.zeros((n_frames, n_states), dtype=np.int8)
+    for t in range(1, n_frames):
+        stay = score
+        step = np.concatenate(([-np.inf], score[:-1]))
+        skip = np.where(can_skip, np.concatenate(([-np.inf, -np.inf], score[:-2])), -np.inf)
+        best = np.maximum(stay, np.maximum(step, skip))
+        move = np.where(best == stay, 0, np.where(best == step, 1, 2)).astype(np.int8)
+        back[t] = move
+        score = best + log_probs[t, states]
+    end = n_states - 1 if n_states == 1 or score[-1] >= score[-2] else n_states - 2
+    total = float(score[end])
+    if not math.isfinite(total):
+        raise DataError("no CTC path through the transcript")
+    path = np.empty(n_frames, dtype=np.int64)
+    s = end
+    for t in range(n_frames - 1, -1, -1):
+        path[t] = s
+        s -= int(back[t, s])
+    starts = np.empty(n_labels, dtype=np.int64)
+    label_frames = path % 2 == 1
+    first = np.full(n_states, -1, dtype=np.int64)
+    frames = np.flatnonzero(label_frames)
+    for t in frames[::-1]:
+        first[path[t]] = t
+    starts[:] = first[1::2]
+    return starts, total
+
+
+# ---------------------------------------------------------------------------------------------
+# Timing
+# ---------------------------------------------------------------------------------------------
+
+
+def _quiet_frames(samples16: np.ndarray, n_frames: int) -> np.ndarray:
+    """True for quiet 20 ms frames.
+
+    Frame levels (dB, median-smoothed over :data:`PAUSE_SMOOTH` frames) are quiet below
+    the higher of: :data:`PAUSE_DB` under the clip's loud frames (95th percentile), or
+    :data:`PAUSE_FRACTION` of the way from its noise floor (5th percentile) to them (a
+    recording's noise floor may lie only 30 dB under its speech).
+    """
+    from scipy.ndimage import median_filter
+
+    hop = SAMPLE_RATE // FRAME_RATE
+    padded = np.zeros(n_frames * hop, dtype=np.float64)
+    m = min(len(samples16), len(padded))
+    padded[:m] = samples16[:m]
+    energy = np.mean(padded.reshape(n_frames, hop) ** 2, axis=1)
+    level = median_filter(10 * np.log10(energy + 1e-12), size=PAUSE_SMOOTH, mode="nearest")
+    if not n_frames:
+        return np.zeros(0, dtype=bool)
+    loud, floor = np.percentile(level, 95), np.percentile(level, 5)
+    threshold = max(loud - PAUSE_DB, floor + PAUSE_FRACTION * (loud - floor))
+    return level < threshold
+
+
+def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, samples16: np.ndarray,
+           n_frames: int, duration: float, refine: bool) -> list[Segment]:
+    """Phones with their first and last frames -> segments tiling ``[0, duration]``."""
+    from ingest.speech.segment import _refine, _tile
+
+    quiet = _quiet_frames(samples16, n_frames)
+
+    frame = 1.0 / FRAME_RATE
+    min_run = max(1, int(round(MIN_PAUSE * FRAME_RATE)))
+    onsets: list[tuple[str, float]] = [(SILENCE, 0.0)]
+    n = len(quiet)
+    for k, phone in enumerate(phones):
+        onsets.append((phone, max(0.0, starts[k] * frame - ONSET_SHIFT)))
+        lo = int(last[k]) + 1
+        if k + 1 == len(phones):  # trailing silence: the quiet frames that reach the end
+            tail = quiet[lo:n]
+            count = len(tail) - int(np.flatnonzero(~tail)[-1]) - 1 if (~tail).any() else len(tail)
+            if count:
+                onsets.append((SILENCE, (n - count) * frame))
+            break
+        run = _longest_run(quiet[lo: int(starts[k + 1])])
+        if run is not None and run[1] - run[0] >= min_run:
+            onsets.append((SILENCE, (lo + run[0]) * frame))
+    if refine:
+        onsets = _refine(onsets, samples16 * 32767.0, REFINE_WINDOW)
+    return _tile(onsets, duration)
+
+
+def _longest_run(mask: np.ndarray) -> tuple[int, int] | None:
+    """(start, end) of the longest run of True in ``mask``, or None."""
+    if not mask.any():
+        return None
+    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    runs = edges.reshape(-1, 2)
+    k = int(np.argmax(runs[:, 1] - runs[:, 0]))
+    return int(runs[k, 0]), int(runs[k, 1])
+
+
+def _last_frames(path_starts: np.ndarray, log_probs: np.ndarray, labels: np.ndarray
+                 ) -> np.ndarray:
+    """Last frame of each phone: its start, extended while the phone stays most likely."""
+    last = path_starts.copy()
+    n = len(log_probs)
+    best = np.argmax(log_probs, axis=1)
+    for k, start in enumerate(path_starts):
+        stop = path_starts[k + 1] if k + 1 < len(path_starts) else n
+        t = int(start)
+        while t + 1 < stop and best[t + 1] == labels[k]:
+            t += 1
+        last[k] = t
+    return last
+
+
+# ---------------------------------------------------------------------------------------------
+# Recognition and alignment
+# ---------------------------------------------------------------------------------------------
+
+
+def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> list[Segment]:
+    """Recognise phones without a transcript (CTC greedy decoding of :func:`posteriors`).
+
+    Parameters
+    ----------
+    audio : numpy.ndarray, shape (n_samples,)
+        Mono audio, float or integer PCM, any level.
+    sample_rate : int
+        Its sampling rate in Hz.
+    refine : bool, optional
+        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
+
+    Returns
+    -------
+    list of Segment
+        ARPAbet phones and ``SIL`` tiling ``[0, len(audio) / sample_rate]``; one ``SIL``
+        segment when nothing is recognised.
+
+    Raises
+    ------
+    ParameterError
+        Bad audio or sample rate.
+    DataError
+        If the model cannot be loaded or run.
+    """
+    from ingest.speech.segment import MIN_DURATION, SILENCE_PEAK, _check_audio, _silence
+
+    samples, sample_rate = _check_audio(audio, sample_rate)
+    duration = len(samples) / sample_rate
+    peak = float(np.max(np.abs(samples))) if samples.size else 0.0
+    if duration < MIN_DURATION or peak < SILENCE_PEAK:
+        return _silence(duration)
+    samples16 = _resample(samples, sample_rate)
+    _, log_probs = _phone_log_probs(samples16)
+    best = np.argmax(log_probs, axis=1)
+    change = np.concatenate(([True], best[1:] != best[:-1]))
+    starts = np.flatnonzero(change & (best != _SIL))
+    if starts.size == 0:
+        return _silence(duration)
+    labels = best[starts]
+    last = _last_frames(starts, log_probs, labels)
+    return _timed([PHONES[i] for i in labels], starts, last, samples16, len(log_probs),
+                  duration, refine)
+
+
+def transcript_phones(text: str) -> list[str]:
+    """The ARPAbet phones of a transcript (CMUdict, else eSpeak NG letter-to-sound)."""
+    phones: list[str] = []
+    for word in transcript_words(text):
+        phones += [p for p in pronounce(word) if p in _INDEX and p != SILENCE]
+    return phones
+
+
+def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
+          ) -> list[Segment]:
+    """Forced alignment of a transcript by CTC Viterbi over :func:`posteriors`.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray, shape (n_samples,)
+        Mono audio.
+    sample_rate : int
+        Its sampling rate in Hz.
+    text : str
+        What is said (English; numbers and symbols are spelled out).
+    refine : bool, optional
+        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
+
+    Returns
+    -------
+    list of Segment
+        The transcript's phones and pauses tiling ``[0, len(audio) / sample_rate]``.
+
+    Raises
+    ------
+    ParameterError
+        Bad audio, sample rate or an empty transcript.
+    DataError
+        If the transcript has no pronounceable word, needs more frames than the audio
+        has, or fits the audio much worse than recognition does (:data:`MAX_ALIGN_LOSS`):
+        it does not match the audio.
+    """
+    from ingest.speech.segment import MIN_DURATION, _check_audio, _check_text, _silence
+
+    text = _check_text(text)
+    samples, sample_rate = _check_audio(audio, sample_rate)
+    duration = len(samples) / sample_rate
+    if duration < MIN_DURATION:
+        return _silence(duration)
+    phones = transcript_phones(text)
+    if not phones:
+        raise DataError(f"the transcript {text[:60]!r} has no pronounceable word")
+    samples16 = _resample(samples, sample_rate)
+    _, log_probs = _phone_log_probs(samples16)
+    labels = np.asarray([_INDEX[p] for p in phones], dtype=np.int64)
+    starts, score = ctc_viterbi(log_probs, labels, _SIL)
+    free = float(np.sum(np.max(log_probs, axis=1)))
+    loss = (free - score) / max(len(log_probs), 1)
+    if loss > MAX_ALIGN_LOSS:
+        raise DataError(f"the transcript {text[:60]!r} does not match the audio "
+                        f"(alignment {loss:.2f} nats/frame below recognition)")
+    last = _last_frames(starts, log_probs, labels)
+    return _timed(phones, starts, last, samples16, len(log_probs), duration, refine)

@@ -1,0 +1,146 @@
+"""Tests of the CTC phone engine (ingest.speech.ctc, the model the hama wheel ships) and
+the engine choice (ingest.speech.engines). Real model, real eSpeak NG speech, no mocks."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from db.errors import DataError, ParameterError
+from ingest.formats.phones_csv import Segment
+from ingest.speech import ctc
+from ingest.speech.engines import ENGINES, aligner, check_engine, recognizer
+from ingest.speech.espeak import Voice, speak
+from ingest.speech.phones import PHONE_SET, PHONES, SILENCE
+from ingest.speech.segment import boundary_errors, phone_error_rate, segment
+
+pytestmark = pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
+
+SENTENCES = (
+    "Please move the boxes off the porch.",
+    "The young boy took a brown bag of fresh cheese to the village market.",
+)
+#: Measured: 0.22 on average over 80 eSpeak clips (scripts/eval_segmentation.py).
+RECOGNITION_PER_LIMIT = 0.45
+
+
+@pytest.fixture(scope="module")
+def spoken():
+    return [speak(text, Voice()) for text in SENTENCES]
+
+
+def _reference(utterance) -> list[Segment]:
+    return [Segment(p.phone, p.start, p.end) for p in utterance.phones]
+
+
+def _check_tiling(segments, duration):
+    assert segments[0].start == 0.0
+    assert segments[-1].end == pytest.approx(duration)
+    for prev, cur in zip(segments, segments[1:], strict=False):
+        assert prev.end == cur.start
+        assert not (prev.phone == SILENCE == cur.phone)
+    assert all(s.phone in PHONE_SET and s.end > s.start for s in segments)
+
+
+def test_ipa_map_targets_the_phone_set():
+    assert set(ctc.IPA_TO_ARPABET.values()) <= PHONE_SET - {SILENCE}
+    # every vowel and consonant of the project is reachable from some IPA symbol
+    assert set(ctc.IPA_TO_ARPABET.values()) == PHONE_SET - {SILENCE}
+
+
+def test_posteriors(spoken):
+    u = spoken[0]
+    post = ctc.posteriors(u.audio, u.sample_rate)
+    duration = len(u.audio) / u.sample_rate
+    assert post.shape[1] == len(PHONES)
+    assert abs(len(post) - duration * ctc.FRAME_RATE) <= 2
+    assert np.all(post >= 0)
+    np.testing.assert_allclose(post.sum(axis=1), 1.0, atol=1e-4)
+    # speech frames: some phone other than SIL is most likely somewhere
+    assert np.sum(np.argmax(post, axis=1) != PHONES.index(SILENCE)) >= 10
+
+
+def test_recognize_is_roughly_right(spoken):
+    for u in spoken:
+        segments = ctc.recognize(u.audio, u.sample_rate)
+        _check_tiling(segments, len(u.audio) / u.sample_rate)
+        assert phone_error_rate(_reference(u), segments) < RECOGNITION_PER_LIMIT
+
+
+def test_align_recovers_timing(spoken):
+    errors = []
+    for u in spoken:
+        segments = ctc.align(u.audio, u.sample_rate, u.text)
+        _check_tiling(segments, len(u.audio) / u.sample_rate)
+        assert phone_error_rate(_reference(u), segments) < 0.2  # CMUdict vs eSpeak phones
+        errors.append(boundary_errors(_reference(u), segments))
+    errors = np.concatenate(errors)
+    assert errors.size >= 40
+    assert np.median(errors) < 0.02
+
+
+@pytest.mark.parametrize("rate", [8000, 44100])
+def test_other_sample_rates(spoken, rate):
+    from scipy.signal import resample_poly
+
+    u = spoken[0]
+    audio = resample_poly(u.audio, rate, u.sample_rate)
+    segments = ctc.align(audio, rate, u.text)
+    _check_tiling(segments, len(audio) / rate)
+    assert phone_error_rate(_reference(u), segments) < 0.3
+
+
+def test_wrong_transcript_is_a_data_error(spoken):
+    u = spoken[0]
+    with pytest.raises(DataError, match="does not match"):
+        ctc.align(u.audio, u.sample_rate, SENTENCES[1])
+
+
+def test_too_long_transcript_is_a_data_error(spoken):
+    u = spoken[0]
+    short = u.audio[: int(0.3 * u.sample_rate)]
+    with pytest.raises(DataError):
+        ctc.align(short, u.sample_rate, SENTENCES[1])
+
+
+def test_silence_and_short_clips():
+    assert ctc.recognize(np.zeros(32000), 16000) == [Segment(SILENCE, 0.0, 2.0)]
+    assert ctc.recognize(np.zeros(800), 16000) == [Segment(SILENCE, 0.0, 0.05)]
+    with pytest.raises(ParameterError):
+        ctc.align(np.zeros(32000), 16000, "   ")
+
+
+def test_ctc_viterbi_finds_the_known_path():
+    # classes: 0 blank, 1 A, 2 B; frames: A A blank B B blank A
+    best = [1, 1, 0, 2, 2, 0, 1]
+    log_probs = np.full((len(best), 3), np.log(0.05))
+    log_probs[np.arange(len(best)), best] = np.log(0.9)
+    starts, score = ctc.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0)
+    assert starts.tolist() == [0, 3, 6]
+    assert score == pytest.approx(7 * np.log(0.9))
+    # a repeated label needs a blank between its two copies
+    starts, _ = ctc.ctc_viterbi(log_probs, np.array([1, 1]), blank=0)
+    assert starts[1] > starts[0] + 1
+    with pytest.raises(DataError, match="frames"):
+        ctc.ctc_viterbi(log_probs[:2], np.array([1, 1, 2]), blank=0)
+
+
+def test_engine_choice(spoken, caplog):
+    u = spoken[0]
+    assert check_engine(None) == "auto"
+    assert set(ENGINES) == {"auto", "hama", "pocketsphinx"}
+    with pytest.raises(ParameterError, match="phone engine"):
+        check_engine("festival")
+    with pytest.raises(ParameterError, match="phone engine"):
+        segment(u.audio, u.sample_rate, engine="festival")
+    assert recognizer("auto") is ctc.recognize
+    assert aligner("hama") is ctc.align
+    assert aligner("auto") is not ctc.align  # PocketSphinx aligns by default
+    hama, method = segment(u.audio, u.sample_rate, engine="hama")
+    assert method == "recognized" and hama == ctc.recognize(u.audio, u.sample_rate)
+    with caplog.at_level(logging.WARNING, logger="ingest.speech.segment"):
+        segments, method = segment(u.audio, u.sample_rate, text=SENTENCES[1], engine="hama")
+    assert method == "recognized"
+    assert "transcript alignment failed" in caplog.text and "fell back" in caplog.text
