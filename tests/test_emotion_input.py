@@ -159,3 +159,11 @@ def test_emodb_default_pipeline_on_unseen_speakers():
     acc = model.score([utt[i] for i in test], labels[test], speakers=speakers[test])
     paper = EmotionClassifier.paper().fit([utt[i] for i in train], labels[train])
     assert acc >= 0.6 and acc > paper.score([utt[i] for i in test], labels[test]) + 0.1
+
+
+def test_opensmile_blocks(rng):
+    pytest.importorskip("opensmile", reason="openSMILE is the optional extra "
+                        "animegraph[opensmile]")
+    f = block_features(_voice(rng, 1.0, sr=22050), 22050, "egemaps+compare")
+    assert f["egemaps"].shape == (88,) and f["compare"].shape == (6373,)
+    assert np.all(np.isfinite(f["compare"]))
