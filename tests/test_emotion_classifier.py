@@ -224,10 +224,10 @@ def test_estimator_contract_and_errors(toy):
 def test_sklearn_common_checks():
     from sklearn.utils.estimator_checks import check_estimator
 
-    results = check_estimator(EmotionClassifier(probability=True, calibration_cv=2),
-                              on_fail=None)
-    failed = [r["check_name"] for r in results if r["status"] == "failed"]
-    assert failed == []
+    for model in (EmotionClassifier(), EmotionClassifier(probability=True, calibration_cv=2)):
+        results = check_estimator(model, on_fail=None)
+        failed = [r["check_name"] for r in results if r["status"] == "failed"]
+        assert failed == []
 
 
 # ----------------------------------------------------------------- EmoDB

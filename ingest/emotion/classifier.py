@@ -28,6 +28,7 @@ from sklearn.model_selection import StratifiedKFold
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler
 from sklearn.svm import SVC
+from sklearn.utils.metaestimators import available_if
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
@@ -349,6 +350,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         F = self._checked(X, speakers)
         return self.pipeline_.predict(F)
 
+    @available_if(lambda self: self.probability)
     def predict_proba(self, X, speakers=None) -> np.ndarray:
         """Calibrated class probabilities (columns in the order of ``classes_``).
 
@@ -362,15 +364,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         np.ndarray, shape (n, n_classes)
             Rows sum to 1.
 
-        Raises
-        ------
-        ParameterError
-            Fitted without ``probability=True``.
+        Only available with ``probability=True``.
         """
         F = self._checked(X, speakers)
-        if self.calibrator_ is None:
-            raise ParameterError("predict_proba needs the classifier fitted with "
-                                 "probability=True")
         d = self.pipeline_.decision_function(F)
         return self.calibrator_.predict_proba(self._as_2d(d))
 
