@@ -9,6 +9,7 @@ from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
 from db.errors import DataError, ParameterError
+from ingest.emotion.audio import LEVEL_PERCENTILE
 from ingest.emotion.classifier import (
     EMODB_EMOTIONS,
     EmotionClassifier,
@@ -61,9 +62,10 @@ def test_feature_shape_stats_and_resampling(rng):
     x = 0.1 + 0.3 * rng.standard_normal(SR)
     f = emotion_features(x, SR)
     assert f.shape == (503,) and np.all(np.isfinite(f))
-    assert f[0] == pytest.approx(x.mean())
-    assert f[1] == pytest.approx(x.var())
-    assert f[2] == pytest.approx(np.sqrt(np.mean(x**2)))
+    level = np.percentile(np.abs(x), LEVEL_PERCENTILE)  # the level is normalised first
+    assert f[0] == pytest.approx(x.mean() / level)
+    assert f[1] == pytest.approx(x.var() / level**2)
+    assert f[2] == pytest.approx(np.sqrt(np.mean(x**2)) / level)
     assert emotion_features(x, SR, n_cepstrum=50).shape == (53,)
     fr = emotion_features(x, SR, n_cepstrum=1000, cepstrum="frames")
     assert fr.shape == (1003,) and np.all(np.isfinite(fr))
@@ -86,12 +88,12 @@ def test_rich_features_shape(rng):
 def test_feature_errors(func, rng):
     with pytest.raises(DataError, match="too short"):
         func(rng.standard_normal(int(0.2 * SR)), SR)
-    with pytest.raises(DataError, match="silent"):
+    with pytest.raises(DataError, match="silence"):
         func(np.zeros(SR), SR)
     with pytest.raises(DataError, match="NaN"):
         func(np.full(SR, np.nan), SR)
-    with pytest.raises(ParameterError, match="mono"):
-        func(rng.standard_normal((SR, 2)), SR)
+    with pytest.raises(ParameterError, match="n_channels"):
+        func(rng.standard_normal((2, SR)), SR)
     with pytest.raises(ParameterError, match="sample_rate"):
         func(rng.standard_normal(SR), 0)
 
@@ -135,7 +137,7 @@ def toy():
 
 def test_classifier_learns_toy_problem(toy):
     (Xtr, ytr), (Xte, yte) = toy
-    model = EmotionClassifier(n_cepstrum=100)
+    model = EmotionClassifier.paper(n_cepstrum=100, probability=True)
     assert model.fit(Xtr, ytr) is model
     assert list(model.classes_) == ["high", "low", "noise"]
     assert model.n_features_in_ == 103
@@ -151,7 +153,8 @@ def test_classifier_feature_matrix_and_round_trip(toy, tmp_path):
     Ftr = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])
     Fte = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xte])
     for kernel in ("linear", "rbf"):
-        model = EmotionClassifier(n_cepstrum=50, kernel=kernel).fit(Ftr, ytr)
+        model = EmotionClassifier.paper(n_cepstrum=50, kernel=kernel,
+                                        probability=True).fit(Ftr, ytr)
         np.testing.assert_array_equal(model.predict(Fte), model.predict(Xte))
         np.savez(tmp_path / "m.npz", **model.to_arrays())
         with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
@@ -167,7 +170,7 @@ def test_binary_round_trip(toy):
     (Xtr, ytr), _ = toy
     keep = ytr != "noise"
     F = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])[keep]
-    model = EmotionClassifier(n_cepstrum=50).fit(F, ytr[keep])
+    model = EmotionClassifier.paper(n_cepstrum=50, probability=True).fit(F, ytr[keep])
     back = EmotionClassifier.from_arrays(model.to_arrays())
     np.testing.assert_array_equal(back.predict(F), model.predict(F))
     np.testing.assert_allclose(back.predict_proba(F), model.predict_proba(F), atol=1e-12)
@@ -176,14 +179,15 @@ def test_binary_round_trip(toy):
 
 def test_rich_classifier(toy):
     (Xtr, ytr), (Xte, yte) = toy
-    model = EmotionClassifier(features="rich", kernel="rbf").fit(Xtr, ytr)
+    model = EmotionClassifier(features="rich", normalize="none", kernel="rbf",
+                              C=1.0).fit(Xtr, ytr)
     assert model.n_features_in_ == 121
     assert model.score(Xte, yte) >= 0.9
 
 
 def test_estimator_contract_and_errors(toy):
     (Xtr, ytr), _ = toy
-    model = EmotionClassifier(n_cepstrum=50)
+    model = EmotionClassifier.paper(n_cepstrum=50, probability=True)
     assert clone(model).get_params() == model.get_params()
     with pytest.raises(NotFittedError):
         model.predict(Xtr)
@@ -210,17 +214,20 @@ def test_estimator_contract_and_errors(toy):
     model.fit(Xtr, ytr)
     with pytest.raises(ParameterError, match="expecting 53 features"):
         model.predict(np.zeros((2, 10)))
-    with pytest.raises(DataError, match="lacks array"):
+    with pytest.raises(DataError, match="re-ingest"):
         EmotionClassifier.from_arrays({"kernel": np.array("linear")})
+    with pytest.raises(DataError, match="lacks array"):
+        EmotionClassifier.from_arrays({"format": np.array(2), "kernel": np.array("linear")})
 
 
 @pytest.mark.filterwarnings("ignore")
 def test_sklearn_common_checks():
     from sklearn.utils.estimator_checks import check_estimator
 
-    results = check_estimator(EmotionClassifier(calibration_cv=2), on_fail=None)
-    failed = [r["check_name"] for r in results if r["status"] == "failed"]
-    assert failed == []
+    for model in (EmotionClassifier(), EmotionClassifier(probability=True, calibration_cv=2)):
+        results = check_estimator(model, on_fail=None)
+        failed = [r["check_name"] for r in results if r["status"] == "failed"]
+        assert failed == []
 
 
 # ----------------------------------------------------------------- EmoDB
@@ -235,7 +242,7 @@ def test_emodb_smoke():
     sub = np.arange(0, len(utterances), 9)
     X = [utterances[i] for i in sub]
     y = labels[sub]
-    model = EmotionClassifier().fit(X, y)
+    model = EmotionClassifier.paper(probability=True).fit(X, y)
     assert model.score(X, y) >= 0.9  # Table I: linear kernel, 500 coefficients
     proba = model.predict_proba(X[:5])
     np.testing.assert_allclose(proba.sum(axis=1), 1.0)

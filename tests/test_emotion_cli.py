@@ -190,3 +190,68 @@ def test_synthesize_api_emotion_forms(tiny_db, tiny_corpus):
     e = model.emotion_model.split.emotion_components
     sad = synthesize(model, audio, sr, labels=labels, emotion="sad")
     assert np.abs(plain.ics[:, e] - sad.ics[:, e]).mean() > 0.5
+
+
+@pytest.fixture(scope="module")
+def few_clips_db(tiny_db, tmp_path_factory):
+    """Every neutral clip, and one clip of each other emotion: too few for a classifier."""
+    seen = set()
+
+    def keep(c):
+        if c.emotion == "neutral":
+            return True
+        if c.emotion in seen:
+            return False
+        seen.add(c.emotion)
+        return True
+
+    return _subset_db(tiny_db, tmp_path_factory.mktemp("few") / "db", keep)
+
+
+def test_too_few_clips_per_emotion_still_ingests(few_clips_db, tiny_corpus, tmp_path, capsys):
+    model = Model.load(few_clips_db).emotion_model
+    assert model.classifier is None
+    assert any("no emotion classifier: it needs two emotions with at least 2" in n
+               for n in model.notes)
+    stem = _clip(tiny_corpus, "sad")
+    assert main(["synth", str(stem.with_suffix(".wav")), "--db", str(few_clips_db),
+                 "--labels", f"{stem}.phones.csv", "--emotion", "auto", "-o",
+                 str(tmp_path / "o.npz")]) == 1
+    _one_error_line(capsys, "no emotion classifier")
+    assert not (tmp_path / "o.npz").exists()
+
+
+def test_classify_silence_and_stereo(tiny_db, tiny_corpus, tmp_path, capsys):
+    write_wav(tmp_path / "hush.wav", np.zeros(16000, np.float32), 16000)
+    assert main(["classify", str(tmp_path / "hush.wav"), "--db", str(tiny_db[0])]) == 1
+    _one_error_line(capsys, "audio is silence")
+    audio, sr = read_wav(_clip(tiny_corpus, "sad").with_suffix(".wav"))
+    from ingest.emotion.classifier import EmotionClassifier
+
+    clf = Model.load(tiny_db[0]).emotion_model.classifier
+    assert isinstance(clf, EmotionClassifier) and clf.normalize == "speaker"
+    mono = clf.predict_proba([(audio, sr)])
+    stereo = clf.predict_proba([(np.stack([audio, audio], 1), float(sr))])
+    np.testing.assert_allclose(stereo, mono, atol=1e-6)
+
+
+def test_old_stored_classifier_says_reingest(tiny_db, tiny_corpus):
+    from animegraph.emotion.control import classify_speech
+    from ingest.emotion.model import EmotionModel
+
+    db = Database.open(tiny_db[0])
+
+    class OldDatabase:  # the real database, its classifier as an older animegraph stored it
+        root, manifest = db.root, db.manifest
+
+        def table(self, name):
+            return db.table(name)
+
+        def arrays(self):
+            return {k: v for k, v in db.arrays().items() if k != "emotion/classifier/format"}
+
+    model = EmotionModel.from_database(OldDatabase())
+    assert model.classifier is None and model.mappings  # the rest still loads
+    audio, sr = read_wav(_clip(tiny_corpus, "sad").with_suffix(".wav"))
+    with pytest.raises(DataError, match="re-ingest the database"):
+        classify_speech(model, audio, sr)

@@ -81,7 +81,8 @@ def info_lines(info: dict) -> list[str]:
                      + (": " + ", ".join(emotion["mappings"]) if emotion["mappings"] else ""))
         clf = emotion.get("classifier")
         lines.append("classifier: " + (f"SVM ({clf['kernel']} kernel, {clf['features']} "
-                                       f"features) over {', '.join(clf['classes'])}"
+                                       f"features, {clf.get('normalize', 'no')} "
+                                       f"normalisation) over {', '.join(clf['classes'])}"
                                        if clf else "none"))
         for note in emotion.get("notes", []):
             lines.append(f"note:       {note}")

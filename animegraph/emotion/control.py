@@ -96,10 +96,10 @@ def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int) ->
         No classifier in the database; audio too short (< 0.25 s), silent or non-finite.
     """
     if model.classifier is None:
-        raise DataError("the database has no emotion classifier (it needs two emotions with "
-                        "two clips each): give the emotion instead of 'auto'")
-    audio = np.asarray(audio, dtype=np.float32)
-    proba = model.classifier.predict_proba([(audio, int(sample_rate))])[0]
+        raise DataError(model.classifier_note or "the database has no emotion classifier (it "
+                        "needs two emotions with enough clips each): give the emotion instead "
+                        "of 'auto'")
+    proba = model.classifier.predict_proba([(audio, sample_rate)])[0]
     order = np.argsort(-proba)
     return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
 

@@ -1,54 +1,54 @@
-"""Emotion classification of speech (Cao et al. 2005, §6, Table I).
+"""Emotion classification of speech: one estimator from audio to emotion (Cao et al. 2005,
+§6, Table I; issue #16).
 
-The paper classifies an utterance with a Support Vector Machine (Libsvm, C-SVC) on a
-feature vector made of the **mean, variance and RMS of the speech signal and the first
-500 coefficients of its real cepstrum**, scaled to ``[-1, 1]``; a linear kernel and 500
-coefficients are "sufficient" (Table I). This module provides
+:class:`EmotionClassifier` holds the whole pipeline -- input handling
+(:mod:`ingest.emotion.audio`), features (:mod:`ingest.emotion.features`), per-speaker
+normalisation (:mod:`ingest.emotion.speakers`), scaling to ``[-1, 1]`` and a Support Vector
+Machine (Libsvm's C-SVC, one-vs-one, as the paper) -- and stores it as plain arrays.
 
-* :func:`real_cepstrum` -- ``IFFT(log |FFT(x)|)``;
-* :func:`emotion_features` -- the paper's feature vector (``features="paper"``) or an
-  opt-in richer prosodic/spectral set (:func:`rich_features`);
-* :class:`EmotionClassifier` -- a scikit-learn classifier: a
-  ``Pipeline(MinMaxScaler((-1, 1)), SVC)`` whose probabilities come from a multinomial
-  logistic regression fitted on *out-of-fold* SVM decision values (stacked Platt scaling;
-  ``SVC(probability=True)`` is deprecated), storable as plain arrays;
-* :func:`load_emodb` -- the Berlin Emotional Speech Database (EmoDB) reader.
+Defaults are what measures best on EmoDB with every choice nested inside the training
+folds (``scripts/eval_emotion.py``, ``docs/results.md`` "Emotion classification (issue
+#16)"); the paper's configuration stays one call away, :meth:`EmotionClassifier.paper`:
+mean, variance and RMS of the signal and its first 500 real-cepstrum coefficients, a
+linear kernel, no speaker normalisation.
 
-Choices where the paper is silent
----------------------------------
-* Audio is resampled to 16 kHz first, so coefficient ``k`` always means a quefrency of
-  ``k / 16000`` s whatever the input rate.
-* ``cepstrum="utterance"`` (default, paper-literal): one real cepstrum of the whole
-  utterance (FFT length = number of samples). ``cepstrum="frames"``: the mean real
-  cepstrum of 2048-sample Hann frames (hop 512), frames more than 60 dB below the
-  loudest dropped -- less sensitive to utterance length. Both are measured by
-  ``scripts/eval_emotion.py``.
-* "RMS error" of the signal is read as the root mean square of the (16 kHz) samples.
-* The SVM uses Libsvm's default RBF width ``gamma = 1 / n_features`` (``gamma="auto"``),
-  as the paper keeps "the default value".
+Probabilities (``probability=True``, what ``ingest`` stores for ``classify`` and
+``synth --emotion auto``) come from a multinomial logistic regression fitted on
+*out-of-fold* SVM decision values (stacked Platt scaling; ``SVC(probability=True)`` is
+deprecated); without them :meth:`~EmotionClassifier.fit` fits the SVM once.
 """
 
 from __future__ import annotations
 
-import re
-from math import gcd
-from pathlib import Path
-
 import numpy as np
-from scipy.signal import resample_poly
 from scipy.sparse import issparse
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.linear_model import LogisticRegression
-from sklearn.model_selection import StratifiedKFold, cross_val_predict
+from sklearn.model_selection import StratifiedKFold
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler
 from sklearn.svm import SVC
+from sklearn.utils.metaestimators import available_if
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
 from db.errors import DataError, ParameterError
+from ingest.emotion.audio import FEATURE_SAMPLE_RATE, MIN_DURATION, utterances
+from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
+from ingest.emotion.features import (
+    N_CEPSTRUM,
+    block_features,
+    emotion_features,
+    parse_features,
+    real_cepstrum,
+    rich_features,
+)
+from ingest.emotion.speakers import SpeakerNormalizer, speaker_normalize
 
 __all__ = [
+    "CLASSIFIER_FORMAT",
+    "DEFAULT_C",
+    "DEFAULT_FEATURES",
     "EMODB_EMOTIONS",
     "FEATURE_SAMPLE_RATE",
     "MIN_DURATION",
@@ -61,412 +61,171 @@ __all__ = [
     "speaker_normalize",
 ]
 
-#: Cepstrum coefficients in the paper's feature vector (§6).
-N_CEPSTRUM = 500
-#: Kernel the paper settles on (§6, Table I).
+#: Kernel the paper settles on (§6, Table I); also the best measured with the default
+#: features.
 KERNEL = "linear"
-#: Every signal is resampled to this rate (Hz) before features are computed.
-FEATURE_SAMPLE_RATE = 16000
-#: Shortest utterance accepted, in seconds.
-MIN_DURATION = 0.25
-#: Frame length and hop (samples at 16 kHz) of the frame-averaged cepstrum.
-CEPSTRUM_FRAME = 2048
-CEPSTRUM_HOP = 512
-#: EmoDB file-name emotion letters (German initials) to English names.
-EMODB_EMOTIONS = {
-    "W": "anger",
-    "L": "boredom",
-    "E": "disgust",
-    "A": "fear",
-    "F": "happiness",
-    "T": "sadness",
-    "N": "neutral",
-}
+#: Feature blocks of the default pipeline (measured best, docs/results.md issue #16).
+DEFAULT_FEATURES = "rich+cepstrum"
+#: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
+DEFAULT_C = 0.1
+#: Version of the stored arrays; older databases hold none and must be re-ingested.
+CLASSIFIER_FORMAT = 2
 
-_FEATURE_SETS = ("paper", "rich")
-_CEPSTRA = ("utterance", "frames")
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
-_LOG_FLOOR = 1e-10  # |FFT| floor relative to its peak before the log (-200 dB)
-_SILENCE_RMS = 1e-6
-_EMODB_NAME = re.compile(r"^(\d\d)([a-z]\d\d)([WLEAFTN])([a-z])$")
+_NORMALIZE = ("speaker", "none")
 
-
-# --------------------------------------------------------------------------- features
-def real_cepstrum(x: np.ndarray, n_fft: int | None = None) -> np.ndarray:
-    """Real cepstrum ``IFFT(log |FFT(x)|)`` of a signal (§6).
-
-    Parameters
-    ----------
-    x : np.ndarray, shape (n_samples,)
-        Signal.
-    n_fft : int, optional
-        FFT length (zero-padding or truncating ``x``); defaults to ``len(x)``.
-
-    Returns
-    -------
-    np.ndarray, shape (n_fft,)
-        The real cepstrum, float64; ``c[0]`` is the mean log magnitude. Magnitudes are
-        floored at ``1e-10`` times their peak before the log so that spectral zeros do
-        not produce ``-inf``.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    if x.ndim != 1 or x.size == 0:
-        raise ParameterError(f"x must be a non-empty 1-D signal, got shape {x.shape}")
-    n = x.size if n_fft is None else int(n_fft)
-    if n < 1:
-        raise ParameterError(f"n_fft must be positive, got {n_fft}")
-    mag = np.abs(np.fft.rfft(x, n))
-    peak = mag.max()
-    if not np.isfinite(peak) or peak <= 0:
-        raise DataError("cannot take the cepstrum of an all-zero or non-finite signal")
-    return np.fft.irfft(np.log(np.maximum(mag, _LOG_FLOOR * peak)), n)
-
-
-def _prepare(audio: np.ndarray, sample_rate: int) -> np.ndarray:
-    """Validate ``audio`` and resample it to :data:`FEATURE_SAMPLE_RATE` (float64)."""
-    if isinstance(sample_rate, bool) or not isinstance(sample_rate, (int, np.integer)) \
-            or sample_rate < 1000:
-        raise ParameterError(f"sample_rate must be an integer >= 1000 Hz, got {sample_rate!r}")
-    x = np.asarray(audio)
-    if x.ndim != 1:
-        raise ParameterError(f"audio must be mono with shape (n_samples,), got {x.shape}")
-    x = x.astype(np.float64)
-    if not np.all(np.isfinite(x)):
-        raise DataError("audio contains NaN or infinite samples")
-    if x.size < MIN_DURATION * sample_rate:
-        raise DataError(
-            f"audio too short: {x.size / sample_rate:.3f} s < {MIN_DURATION} s needed"
-        )
-    sample_rate = int(sample_rate)
-    if sample_rate != FEATURE_SAMPLE_RATE:
-        g = gcd(FEATURE_SAMPLE_RATE, sample_rate)
-        x = resample_poly(x, FEATURE_SAMPLE_RATE // g, sample_rate // g)
-    if np.sqrt(np.mean(x * x)) < _SILENCE_RMS:
-        raise DataError("audio is silent (RMS < 1e-6)")
-    return x
-
-
-def _frame_cepstrum(x: np.ndarray, n_cepstrum: int) -> np.ndarray:
-    if x.size < CEPSTRUM_FRAME:
-        x = np.pad(x, (0, CEPSTRUM_FRAME - x.size))
-    n_frames = 1 + (x.size - CEPSTRUM_FRAME) // CEPSTRUM_HOP
-    idx = np.arange(CEPSTRUM_FRAME)[None, :] + CEPSTRUM_HOP * np.arange(n_frames)[:, None]
-    frames = x[idx] * np.hanning(CEPSTRUM_FRAME)
-    energy = np.sum(frames * frames, axis=1)
-    frames = frames[energy >= 1e-6 * energy.max()]
-    mag = np.abs(np.fft.rfft(frames, axis=1))
-    logmag = np.log(np.maximum(mag, _LOG_FLOOR * mag.max(axis=1, keepdims=True)))
-    return np.fft.irfft(logmag, CEPSTRUM_FRAME, axis=1).mean(axis=0)[:n_cepstrum]
-
-
-def emotion_features(
-    audio: np.ndarray,
-    sample_rate: int,
-    *,
-    n_cepstrum: int = N_CEPSTRUM,
-    cepstrum: str = "utterance",
-) -> np.ndarray:
-    """The paper's emotion feature vector of one utterance (§6).
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (n_samples,)
-        Mono speech, any scale; resampled to 16 kHz first.
-    sample_rate : int
-        Sampling rate of ``audio`` in Hz.
-    n_cepstrum : int, optional
-        Number of real-cepstrum coefficients, ``c[0] .. c[n_cepstrum - 1]`` (paper: 500).
-    cepstrum : {"utterance", "frames"}, optional
-        ``"utterance"`` (paper-literal): one cepstrum of the whole signal;
-        ``"frames"``: the mean cepstrum of 2048-sample Hann frames (``n_cepstrum`` at most
-        1024).
-
-    Returns
-    -------
-    np.ndarray, shape (3 + n_cepstrum,)
-        ``[mean, variance, RMS, c[0], ..., c[n_cepstrum - 1]]``, float64.
-
-    Raises
-    ------
-    DataError
-        Audio shorter than 0.25 s, silent, or non-finite.
-    ParameterError
-        Bad ``n_cepstrum``, ``cepstrum``, ``sample_rate`` or audio shape.
-    """
-    if cepstrum not in _CEPSTRA:
-        raise ParameterError(f"cepstrum must be one of {_CEPSTRA}, got {cepstrum!r}")
-    limit = CEPSTRUM_FRAME // 2 if cepstrum == "frames" else None
-    if isinstance(n_cepstrum, bool) or not isinstance(n_cepstrum, (int, np.integer)) \
-            or n_cepstrum < 1 or (limit is not None and n_cepstrum > limit):
-        raise ParameterError(
-            f"n_cepstrum must be an integer in [1, {limit or 'n_samples // 2'}], "
-            f"got {n_cepstrum!r}"
-        )
-    x = _prepare(audio, sample_rate)
-    if cepstrum == "utterance":
-        if n_cepstrum > x.size // 2:
-            raise DataError(
-                f"audio too short for n_cepstrum={n_cepstrum}: {x.size} samples at 16 kHz"
-            )
-        ceps = real_cepstrum(x)[:n_cepstrum]
-    else:
-        ceps = _frame_cepstrum(x, n_cepstrum)
-    stats = [x.mean(), x.var(), np.sqrt(np.mean(x * x))]
-    return np.concatenate([stats, ceps])
-
-
-def _stats(v: np.ndarray) -> list[float]:
-    if v.size == 0:
-        return [0.0] * 5
-    p10, p90 = np.percentile(v, [10, 90])
-    return [float(v.mean()), float(v.std()), float(p10), float(p90), float(p90 - p10)]
-
-
-def rich_features(audio: np.ndarray, sample_rate: int) -> np.ndarray:
-    """An opt-in richer utterance-level feature set (not in the paper).
-
-    Computed at 16 kHz with 32 ms frames (hop 10 ms): 20 MFCCs (mean and standard
-    deviation of the coefficients, of their deltas and delta-deltas), log-F0 from
-    :func:`librosa.yin` (60-500 Hz) over voiced frames (statistics, delta spread and the
-    voiced fraction), log energy (statistics and delta spread), spectral centroid,
-    bandwidth, roll-off, flatness, zero-crossing rate (mean, std) and 7-band spectral
-    contrast (mean, std), the paper's mean/variance/RMS, and the duration.
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (n_samples,)
-        Mono speech.
-    sample_rate : int
-        Its sampling rate in Hz.
-
-    Returns
-    -------
-    np.ndarray, shape (n_rich,)
-        ``n_rich`` = 121 (fixed); float64, finite.
-
-    Raises
-    ------
-    DataError
-        Audio shorter than 0.25 s, silent, or non-finite.
-    """
-    import librosa
-
-    x = _prepare(audio, sample_rate)
-    sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
-    xf = x.astype(np.float32)
-    spec = np.abs(librosa.stft(xf, n_fft=n_fft, hop_length=hop))
-    power = spec**2
-    mel = librosa.feature.melspectrogram(S=power, sr=sr, n_mels=40)
-    mfcc = librosa.feature.mfcc(S=librosa.power_to_db(mel), n_mfcc=20)
-    d1 = librosa.feature.delta(mfcc, width=5)
-    d2 = librosa.feature.delta(mfcc, order=2, width=5)
-    parts = [mfcc.mean(1), mfcc.std(1), d1.std(1), d2.std(1)]
-
-    rms = librosa.feature.rms(S=spec, frame_length=n_fft, hop_length=hop)[0]
-    log_e = np.log(rms + 1e-8)
-    parts.append(_stats(log_e) + [float(np.diff(log_e).std()) if log_e.size > 1 else 0.0])
-
-    f0 = librosa.yin(xf, fmin=60, fmax=500, sr=sr, frame_length=1024, hop_length=hop)
-    n = min(f0.size, rms.size)
-    f0, r = f0[:n], rms[:n]
-    voiced = (r > 0.1 * np.percentile(r, 95)) & (f0 > 62) & (f0 < 490)
-    lf0 = np.log(f0[voiced])
-    dlf0 = np.diff(np.log(f0))[voiced[1:] & voiced[:-1]]
-    parts.append(_stats(lf0) + [float(dlf0.std()) if dlf0.size else 0.0,
-                                float(voiced.mean())])
-
-    for feat in (
-        librosa.feature.spectral_centroid(S=spec, sr=sr),
-        librosa.feature.spectral_bandwidth(S=spec, sr=sr),
-        librosa.feature.spectral_rolloff(S=spec, sr=sr),
-        librosa.feature.spectral_flatness(S=spec),
-        librosa.feature.zero_crossing_rate(xf, frame_length=n_fft, hop_length=hop),
-        librosa.feature.spectral_contrast(S=spec, sr=sr, n_bands=6),
-    ):
-        parts += [feat.mean(1), feat.std(1)]
-    parts.append([x.mean(), x.var(), np.sqrt(np.mean(x * x)), x.size / sr])
-    out = np.concatenate([np.ravel(np.asarray(p, dtype=np.float64)) for p in parts])
-    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
-
-
-def speaker_normalize(features: np.ndarray, speakers) -> np.ndarray:
-    """Z-normalise each feature within each speaker (not in the paper).
-
-    Uses only the speaker's own utterances and no labels, so it can be applied to an
-    unseen test speaker with enough audio; it removes speaker identity (pitch level,
-    voice quality) that otherwise dominates speaker-independent evaluation.
-
-    Parameters
-    ----------
-    features : np.ndarray, shape (n, n_features)
-        Feature matrix.
-    speakers : array-like, shape (n,)
-        Speaker of each row.
-
-    Returns
-    -------
-    np.ndarray, shape (n, n_features)
-        Zero mean, unit variance per speaker (constant features become 0).
-    """
-    F = np.asarray(features, dtype=np.float64)
-    speakers = np.asarray(speakers)
-    if F.ndim != 2 or speakers.shape != (F.shape[0],):
-        raise ParameterError(
-            f"speakers must have shape ({F.shape[0] if F.ndim else 0},), got {speakers.shape}"
-        )
-    out = np.empty_like(F)
-    for s in np.unique(speakers):
-        m = speakers == s
-        sd = F[m].std(axis=0)
-        out[m] = (F[m] - F[m].mean(axis=0)) / np.where(sd > 0, sd, 1.0)
-    return out
-
-
-# --------------------------------------------------------------------------- classifier
-def _is_pair(item) -> bool:
-    """Whether ``item`` looks like an ``(audio, sample_rate)`` pair."""
-    try:
-        audio, sr = item
-    except (TypeError, ValueError):
-        return False
-    return np.ndim(audio) >= 1 and np.ndim(sr) == 0
 
 class EmotionClassifier(ClassifierMixin, BaseEstimator):
-    """Support-vector emotion classifier of utterances (§6, Table I).
+    """Speech emotion classifier: audio -> features -> speaker normalisation -> SVM.
 
-    ``Pipeline(MinMaxScaler(feature_range=(-1, 1)), SVC(kernel, C, gamma="auto"))``
-    -- Libsvm's C-SVC, one-vs-one, as in the paper -- on :func:`emotion_features`
-    (``features="paper"``) or :func:`rich_features` (``features="rich"``).
-
-    Probabilities: ``SVC(probability=True)`` is deprecated, so :meth:`fit` computes
-    out-of-fold SVM decision values (``decision_function_shape="ovr"``, stratified
-    ``calibration_cv``-fold, seeded) and fits a multinomial
-    :class:`~sklearn.linear_model.LogisticRegression` on them (stacked Platt scaling);
-    :meth:`predict_proba` applies it to the decision values of the SVM refitted on all
-    the data. :meth:`predict` is the SVM's own one-vs-one vote, as in Libsvm, which can
-    differ from ``argmax(predict_proba)`` near class boundaries.
+    ``X`` is a sequence (list, generator, object array) of ``(audio, sample_rate)`` pairs
+    -- any rate, mono or ``(n_samples, n_channels)``, integer or float PCM -- or an
+    already computed feature matrix (used as given). ``speakers`` (shape (n,)), passed to
+    :meth:`fit` and optionally to the prediction methods, groups utterances by speaker
+    for per-speaker normalisation; without it (a lone utterance of an unknown speaker)
+    the training population's statistics are used.
 
     Parameters
     ----------
+    features : str, optional
+        Feature blocks joined by ``+`` (``paper``, ``rich``, ``cepstrum``, ``egemaps``,
+        ``compare``; see :mod:`ingest.emotion.features`).
     n_cepstrum : int, optional
-        Real-cepstrum coefficients in the paper's features (500); ignored for ``"rich"``.
+        Real-cepstrum coefficients of the ``paper`` block (500).
+    cepstrum : {"utterance", "frames"}, optional
+        Cepstrum variant of the ``paper`` block.
+    normalize : {"speaker", "none"}, optional
+        Per-speaker z-normalisation before scaling (not in the paper).
     kernel : {"linear", "rbf", "poly", "sigmoid"}, optional
         SVM kernel (paper: linear).
     C : float, optional
         SVM penalty.
-    features : {"paper", "rich"}, optional
-        Feature set computed from audio passed to :meth:`fit` / :meth:`predict`.
-    cepstrum : {"utterance", "frames"}, optional
-        Cepstrum variant of the paper's features (see :func:`emotion_features`).
+    probability : bool, optional
+        Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
+        :meth:`predict_proba` needs it.
     calibration_cv : int, optional
-        Folds for the out-of-fold decision values of the probability calibration
-        (reduced to the smallest class size when needed, at least 2).
+        Folds for the out-of-fold decision values of the calibration (reduced to the
+        smallest class size when needed, at least 2).
     random_state : int, optional
         Seed of the calibration folds.
 
     Attributes
     ----------
     classes_ : np.ndarray, shape (n_classes,)
-        Class labels.
     n_features_in_ : int
-        Width of the feature matrix.
+        Feature width.
+    normalizer_ : SpeakerNormalizer or None
     pipeline_ : sklearn.pipeline.Pipeline
-        The fitted scaler + SVC.
-    calibrator_ : sklearn.linear_model.LogisticRegression
-        Maps decision values, shape (n, n_classes) (or (n, 1) for two classes), to
-        probabilities.
+        ``MinMaxScaler((-1, 1))`` then ``SVC``.
+    calibrator_ : LogisticRegression or None
 
     Notes
     -----
-    ``fit``, ``predict`` and ``predict_proba`` accept either a feature matrix, shape
-    ``(n_utterances, n_features)``, or a sequence of ``(audio, sample_rate)`` pairs whose
-    features are then computed (see :meth:`featurize`). Malformed matrices and labels
-    raise ``ValueError`` subclasses (scikit-learn's, or :class:`ParameterError`) so that
-    the estimator passes scikit-learn's common checks; bad audio raises
-    :class:`DataError`.
+    Parameter errors are ``ValueError`` subclasses (scikit-learn's, or
+    :class:`ParameterError`) so that the estimator passes scikit-learn's common checks;
+    bad audio raises :class:`DataError`.
+
+    Examples
+    --------
+    >>> model = EmotionClassifier(probability=True).fit(clips, labels, speakers=who)
+    >>> model.predict([(audio, 48000.0)])          # an unknown speaker
+    >>> EmotionClassifier.paper().fit(clips, labels)  # Cao et al. §6 as printed
     """
 
     def __init__(
         self,
+        features: str = DEFAULT_FEATURES,
         n_cepstrum: int = N_CEPSTRUM,
-        kernel: str = KERNEL,
-        C: float = 1.0,
-        features: str = "paper",
         cepstrum: str = "utterance",
+        normalize: str = "speaker",
+        kernel: str = KERNEL,
+        C: float = DEFAULT_C,
+        probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
     ):
+        self.features = features
         self.n_cepstrum = n_cepstrum
+        self.cepstrum = cepstrum
+        self.normalize = normalize
         self.kernel = kernel
         self.C = C
-        self.features = features
-        self.cepstrum = cepstrum
+        self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
 
+    @classmethod
+    def paper(cls, **overrides) -> EmotionClassifier:
+        """The paper's classifier (§6, Table I): its features, linear kernel, C = 1, no
+        speaker normalisation (``overrides`` change any parameter)."""
+        params = dict(features="paper", normalize="none", kernel="linear", C=1.0)
+        return cls(**{**params, **overrides})
+
     # ------------------------------------------------------------------ helpers
     def _check_params(self) -> None:
-        if self.features not in _FEATURE_SETS:
-            raise ParameterError(f"features must be one of {_FEATURE_SETS}, got {self.features!r}")
+        parse_features(self.features)
         if self.kernel not in _KERNELS:
             raise ParameterError(f"kernel must be one of {_KERNELS}, got {self.kernel!r}")
-        if isinstance(self.C, bool) or not isinstance(self.C, (int, float, np.number)) \
+        if self.normalize not in _NORMALIZE:
+            raise ParameterError(f"normalize must be one of {_NORMALIZE}, "
+                                 f"got {self.normalize!r}")
+        if isinstance(self.C, bool) or not isinstance(self.C, int | float | np.number) \
                 or not float(self.C) > 0:
             raise ParameterError(f"C must be a positive number, got {self.C!r}")
-        if self.cepstrum not in _CEPSTRA:
-            raise ParameterError(f"cepstrum must be one of {_CEPSTRA}, got {self.cepstrum!r}")
+        if self.cepstrum not in ("utterance", "frames"):
+            raise ParameterError(f"cepstrum must be one of ('utterance', 'frames'), "
+                                 f"got {self.cepstrum!r}")
         if isinstance(self.calibration_cv, bool) or not isinstance(
-                self.calibration_cv, (int, np.integer)) or self.calibration_cv < 2:
+                self.calibration_cv, int | np.integer) or self.calibration_cv < 2:
             raise ParameterError(
                 f"calibration_cv must be an integer >= 2, got {self.calibration_cv!r}"
             )
 
     def featurize(self, X) -> np.ndarray:
-        """Feature matrix of ``X`` (a 2-D numeric array passes through ``check_array``).
+        """Raw (unnormalised) feature matrix of ``X``.
 
-        A feature matrix is used as given: its width is not checked against
-        ``n_cepstrum``/``features``, which only govern features computed from audio.
+        A feature matrix (2-D numeric array or nested lists of numbers) is used as given:
+        its width is not checked against ``features``, which only governs features
+        computed from audio.
 
         Parameters
         ----------
         X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
-            Features, or utterances.
+            Features, or utterances (a list, tuple, generator or object array of pairs).
 
         Returns
         -------
         np.ndarray, shape (n, n_features)
             float64 features.
+
+        Raises
+        ------
+        DataError
+            An utterance that is too short, silent or non-finite (naming it).
         """
         if issparse(X):
             raise ParameterError("X must be dense: sparse input is not supported")
-        if isinstance(X, (list, tuple)):
-            items = list(X)
-            if items and not _is_pair(items[0]):
-                return check_array(items, dtype=np.float64)  # nested lists of numbers
-        else:
+        items = utterances(X)
+        if items is None:
+            if isinstance(X, list | tuple):
+                return check_array(X, dtype=np.float64)  # nested lists of numbers
             arr = np.asarray(X)
             if arr.ndim != 2:
                 raise ParameterError(
                     f"X must be a 2-D feature matrix or a sequence of (audio, sample_rate) "
                     f"pairs, got an array of shape {arr.shape}. Reshape your data"
                 )
-            # sklearn's own checks: finite, non-empty, numeric (ValueError subclasses).
-            return check_array(arr, dtype=np.float64)
-        rows = []
-        for i, item in enumerate(X):
-            try:
-                audio, sr = item
-            except (TypeError, ValueError):
-                raise ParameterError(
-                    f"X[{i}] must be an (audio, sample_rate) pair, got {type(item).__name__}"
-                ) from None
-            if self.features == "paper":
-                rows.append(emotion_features(audio, sr, n_cepstrum=self.n_cepstrum,
-                                             cepstrum=self.cepstrum))
-            else:
-                rows.append(rich_features(audio, sr))
-        if not rows:
+            return check_array(arr, dtype=np.float64)  # sklearn's checks (ValueError)
+        if not items:
             raise DataError("X holds no utterances")
+        rows = []
+        for i, (audio, sr) in enumerate(items):
+            try:
+                blocks = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
+                                        cepstrum=self.cepstrum)
+            except DataError as exc:
+                raise DataError(f"utterance {i}: {exc}") from exc
+            rows.append(np.concatenate(list(blocks.values())))
         return np.vstack(rows)
 
     def _make_pipeline(self) -> Pipeline:
@@ -480,16 +239,23 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
     def _as_2d(d: np.ndarray) -> np.ndarray:
         return d[:, None] if d.ndim == 1 else d
 
+    def _normalized(self, F: np.ndarray, speakers) -> np.ndarray:
+        if self.normalizer_ is None:
+            return F
+        return self.normalizer_.transform(F, speakers)
+
     # ------------------------------------------------------------------ API
-    def fit(self, X, y):
-        """Fit the scaler, the SVM and the probability calibration.
+    def fit(self, X, y, speakers=None):
+        """Fit the normalisation, the scaler, the SVM (and the probability calibration).
 
         Parameters
         ----------
         X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
-            Training utterances or their features.
+            Training utterances or their raw features.
         y : array-like, shape (n,)
             Emotion labels (at least two classes).
+        speakers : array-like, shape (n,), optional
+            Speaker of each utterance (None: one speaker, or unknown).
 
         Returns
         -------
@@ -514,72 +280,101 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 f"y has {classes.size} class; need at least two emotion classes, "
                 f"got {classes.tolist()}"
             )
-        folds = min(int(self.calibration_cv), int(counts.min()))
-        if folds < 2:
-            raise ParameterError(
-                f"every class needs at least 2 utterances for calibration, got {counts.min()}"
-            )
-        cv = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
-        oof = cross_val_predict(self._make_pipeline(), F, y, cv=cv, method="decision_function")
-        self.calibrator_ = LogisticRegression(C=1.0, max_iter=1000).fit(self._as_2d(oof), y)
-        self.pipeline_ = self._make_pipeline().fit(F, y)
+        self.normalizer_ = None
+        if self.normalize == "speaker":
+            self.normalizer_ = SpeakerNormalizer().fit(F, speakers)
+        Fn = self._normalized(F, speakers)
+        self.calibrator_ = None
+        if self.probability:
+            self.calibrator_ = self._fit_calibration(Fn, y, int(counts.min()))
+        self.pipeline_ = self._make_pipeline().fit(Fn, y)
         self.classes_ = self.pipeline_.classes_
         self.n_features_in_ = F.shape[1]
         return self
 
-    def _checked(self, X) -> np.ndarray:
-        check_is_fitted(self, ["pipeline_", "calibrator_"])
+    def _fit_calibration(self, F: np.ndarray, y: np.ndarray, smallest: int):
+        folds = min(int(self.calibration_cv), smallest)
+        if folds < 2:
+            raise ParameterError(f"every class needs at least 2 utterances for "
+                                 f"probabilities, got {smallest}")
+        oof = None
+        for train, test in StratifiedKFold(folds, shuffle=True,
+                                           random_state=self.random_state).split(F, y):
+            d = self._as_2d(self._make_pipeline().fit(F[train], y[train])
+                            .decision_function(F[test]))
+            if oof is None:
+                oof = np.zeros((F.shape[0], d.shape[1]))
+            oof[test] = d
+        return LogisticRegression(C=1.0, max_iter=1000).fit(oof, y)
+
+    def _checked(self, X, speakers) -> np.ndarray:
+        check_is_fitted(self, ["pipeline_"])
         F = self.featurize(X)
         if F.shape[1] != self.n_features_in_:
             raise ParameterError(
                 f"X has {F.shape[1]} features, but EmotionClassifier is expecting "
                 f"{self.n_features_in_} features as input"
             )
-        return F
+        return self._normalized(F, speakers)
 
-    def decision_function(self, X) -> np.ndarray:
+    def decision_function(self, X, speakers=None) -> np.ndarray:
         """SVM decision values (one-vs-rest shape, from Libsvm's one-vs-one votes).
 
         Parameters
         ----------
         X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
+        speakers : array-like, shape (n,), optional
 
         Returns
         -------
         np.ndarray, shape (n, n_classes), or (n,) for two classes
         """
-        F = self._checked(X)
+        F = self._checked(X, speakers)
         return self.pipeline_.decision_function(F)
 
-    def predict(self, X) -> np.ndarray:
+    def predict(self, X, speakers=None) -> np.ndarray:
         """Most likely emotion of each utterance (the SVM's one-vs-one vote).
 
         Parameters
         ----------
         X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
+        speakers : array-like, shape (n,), optional
+            Speakers of the utterances: one with at least
+            :data:`~ingest.emotion.speakers.MIN_SPEAKER_UTTERANCES` utterances here is
+            normalised by their own statistics.
 
         Returns
         -------
         np.ndarray, shape (n,)
         """
-        F = self._checked(X)
+        F = self._checked(X, speakers)
         return self.pipeline_.predict(F)
 
-    def predict_proba(self, X) -> np.ndarray:
+    @available_if(lambda self: self.probability)
+    def predict_proba(self, X, speakers=None) -> np.ndarray:
         """Calibrated class probabilities (columns in the order of ``classes_``).
 
         Parameters
         ----------
         X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
+        speakers : array-like, shape (n,), optional
 
         Returns
         -------
         np.ndarray, shape (n, n_classes)
             Rows sum to 1.
+
+        Only available with ``probability=True``.
         """
-        F = self._checked(X)
+        F = self._checked(X, speakers)
         d = self.pipeline_.decision_function(F)
         return self.calibrator_.predict_proba(self._as_2d(d))
+
+    def score(self, X, y, sample_weight=None, speakers=None) -> float:
+        """Accuracy of :meth:`predict` (``speakers`` as there)."""
+        from sklearn.metrics import accuracy_score
+
+        return float(accuracy_score(y, self.predict(X, speakers), sample_weight=sample_weight))
 
     # ------------------------------------------------------------------ storage
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -588,22 +383,26 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Returns
         -------
         dict of str to np.ndarray
-            Hyper-parameters (``n_cepstrum``, ``kernel``, ``C``, ``features``,
-            ``cepstrum``, ``gamma``), the scaler's ``scale_min``/``scale_scale``
-            (shape (n_features,)), the SVM's ``classes`` (n_classes,),
-            ``support_vectors`` (n_sv, n_features), ``support`` (n_sv,), ``n_support``
-            (n_classes,), ``dual_coef`` (n_classes - 1, n_sv), ``intercept``
-            (n_classes * (n_classes - 1) / 2,), and the calibration's ``calib_coef``
-            and ``calib_intercept``.
+            ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
+            ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
+            ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
+            ``norm_mean``/``norm_scale`` (n_features,) and ``norm_min_utterances`` (when
+            ``normalize="speaker"``), the scaler's ``scale_min``/``scale_scale``
+            (n_features,), the SVM's ``classes`` (n_classes,), ``support_vectors``
+            (n_sv, n_features), ``support`` (n_sv,), ``n_support`` (n_classes,),
+            ``dual_coef`` (n_classes - 1, n_sv), ``intercept`` (n_classes * (n_classes -
+            1) / 2,), and, with probabilities, ``calib_coef`` and ``calib_intercept``.
         """
-        check_is_fitted(self, ["pipeline_", "calibrator_"])
+        check_is_fitted(self, ["pipeline_"])
         scaler, svm = self.pipeline_["scale"], self.pipeline_["svm"]
-        return {
+        out = {
+            "format": np.array(CLASSIFIER_FORMAT),
+            "features": np.array(self.features),
             "n_cepstrum": np.array(self.n_cepstrum),
+            "cepstrum": np.array(self.cepstrum),
+            "normalize": np.array(self.normalize),
             "kernel": np.array(self.kernel),
             "C": np.array(float(self.C)),
-            "features": np.array(self.features),
-            "cepstrum": np.array(self.cepstrum),
             "calibration_cv": np.array(self.calibration_cv),
             "random_state": np.array(self.random_state),
             "gamma": np.array(svm._gamma),
@@ -615,9 +414,13 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             "n_support": svm.n_support_.copy(),
             "dual_coef": svm.dual_coef_.copy(),
             "intercept": svm.intercept_.copy(),
-            "calib_coef": self.calibrator_.coef_.copy(),
-            "calib_intercept": self.calibrator_.intercept_.copy(),
         }
+        if self.normalizer_ is not None:
+            out.update(self.normalizer_.to_arrays())
+        if self.calibrator_ is not None:
+            out["calib_coef"] = self.calibrator_.coef_.copy()
+            out["calib_intercept"] = self.calibrator_.intercept_.copy()
+        return out
 
     @classmethod
     def from_arrays(cls, arrays) -> EmotionClassifier:
@@ -625,7 +428,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
 
         The SVC is restored by setting the attributes Libsvm's prediction reads
         (including scikit-learn's private ``_dual_coef_``, ``_intercept_``, ``_n_support``,
-        ``_gamma``); checked against scikit-learn 1.9 by the test suite.
+        ``_gamma``); checked against the installed scikit-learn by the test suite.
 
         Parameters
         ----------
@@ -636,17 +439,32 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         -------
         EmotionClassifier
             Predicting exactly as the stored model.
+
+        Raises
+        ------
+        DataError
+            Arrays missing, or stored by an older animegraph (no ``format``; its features
+            were not level-normalised): re-ingest.
         """
+        if "format" not in arrays or int(np.asarray(arrays["format"])) != CLASSIFIER_FORMAT:
+            raise DataError("the stored emotion classifier is from an older animegraph: "
+                            "re-ingest the database (animegraph ingest SRC --db DB) to "
+                            "replace it")
+        needed = ["features", "n_cepstrum", "cepstrum", "normalize", "kernel", "C",
+                  "calibration_cv", "random_state", "gamma", "scale_min", "scale_scale",
+                  "classes", "support_vectors", "support", "n_support", "dual_coef",
+                  "intercept"]
+        if str(np.asarray(arrays.get("normalize", ""))) == "speaker":
+            needed += ["norm_mean", "norm_scale", "norm_speakers", "norm_means",
+                       "norm_scales", "norm_min_utterances"]
         try:
-            a = {k: np.asarray(arrays[k]) for k in (
-                "n_cepstrum", "kernel", "C", "features", "cepstrum", "calibration_cv",
-                "random_state", "gamma", "scale_min", "scale_scale", "classes",
-                "support_vectors", "support", "n_support", "dual_coef", "intercept",
-                "calib_coef", "calib_intercept")}
+            a = {k: np.asarray(arrays[k]) for k in needed}
         except KeyError as exc:
             raise DataError(f"stored emotion classifier lacks array {exc.args[0]!r}") from None
-        model = cls(n_cepstrum=int(a["n_cepstrum"]), kernel=str(a["kernel"]), C=float(a["C"]),
-                    features=str(a["features"]), cepstrum=str(a["cepstrum"]),
+        probability = "calib_coef" in arrays and "calib_intercept" in arrays
+        model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
+                    cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
+                    kernel=str(a["kernel"]), C=float(a["C"]), probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
         model._check_params()
@@ -661,12 +479,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         scaler.data_range_ = np.where(scaler.scale_ != 0, 2.0 / scaler.scale_, 1.0)
         scaler.data_min_ = (-1.0 - scaler.min_) / scaler.scale_
         scaler.data_max_ = scaler.data_min_ + scaler.data_range_
-        sv = np.ascontiguousarray(a["support_vectors"], dtype=np.float64)
+        sign = -1.0 if classes.size == 2 else 1.0  # sklearn flips the public binary signs
         dual = np.ascontiguousarray(a["dual_coef"], dtype=np.float64)
         intercept = np.ascontiguousarray(a["intercept"], dtype=np.float64)
-        sign = -1.0 if classes.size == 2 else 1.0  # sklearn flips the public binary signs
         svm.classes_ = classes
-        svm.support_vectors_ = sv
+        svm.support_vectors_ = np.ascontiguousarray(a["support_vectors"], dtype=np.float64)
         svm.support_ = np.ascontiguousarray(a["support"], dtype=np.int32)
         svm._n_support = np.ascontiguousarray(a["n_support"], dtype=np.int32)
         svm._dual_coef_ = sign * dual
@@ -683,54 +500,16 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         svm.n_features_in_ = n_features
         svm.n_iter_ = np.zeros(classes.size * (classes.size - 1) // 2, dtype=np.int32)
         model.pipeline_ = pipe
-        calib = LogisticRegression(C=1.0, max_iter=1000)
-        calib.classes_ = classes
-        calib.coef_ = a["calib_coef"].astype(np.float64)
-        calib.intercept_ = a["calib_intercept"].astype(np.float64)
-        calib.n_features_in_ = calib.coef_.shape[1]
-        model.calibrator_ = calib
+        model.normalizer_ = (SpeakerNormalizer.from_arrays(a) if model.normalize == "speaker"
+                             else None)
+        model.calibrator_ = None
+        if probability:
+            calib = LogisticRegression(C=1.0, max_iter=1000)
+            calib.classes_ = classes
+            calib.coef_ = np.asarray(arrays["calib_coef"], dtype=np.float64)
+            calib.intercept_ = np.asarray(arrays["calib_intercept"], dtype=np.float64)
+            calib.n_features_in_ = calib.coef_.shape[1]
+            model.calibrator_ = calib
         model.classes_ = classes
         model.n_features_in_ = n_features
         return model
-
-
-# --------------------------------------------------------------------------- EmoDB
-def load_emodb(root) -> tuple[list[tuple[np.ndarray, int]], np.ndarray, np.ndarray]:
-    """Read the Berlin Emotional Speech Database (EmoDB).
-
-    File names are ``SSTTTEV.wav``: speaker (2 digits), text code (3), emotion letter
-    (W anger, L boredom, E disgust, A fear, F happiness, T sadness, N neutral) and
-    version letter.
-
-    Parameters
-    ----------
-    root : path-like
-        The EmoDB folder (holding ``wav/``) or the ``wav`` folder itself.
-
-    Returns
-    -------
-    utterances : list of (np.ndarray, int)
-        ``(audio, sample_rate)`` per file in sorted file-name order; audio float32, shape
-        (n_samples,).
-    labels : np.ndarray of str, shape (n_files,)
-        English emotion names.
-    speakers : np.ndarray of str, shape (n_files,)
-        Two-digit speaker codes.
-    """
-    import soundfile as sf
-
-    root = Path(root)
-    wav = root / "wav" if (root / "wav").is_dir() else root
-    files = sorted(wav.glob("*.wav"))
-    if not files:
-        raise DataError(f"no EmoDB .wav files in {wav}")
-    utterances, labels, speakers = [], [], []
-    for f in files:
-        m = _EMODB_NAME.match(f.stem)
-        if m is None:
-            raise DataError(f"not an EmoDB file name: {f.name}")
-        audio, sr = sf.read(f, dtype="float32", always_2d=True)
-        utterances.append((audio.mean(axis=1), int(sr)))
-        labels.append(EMODB_EMOTIONS[m.group(3)])
-        speakers.append(m.group(1))
-    return utterances, np.array(labels), np.array(speakers)

@@ -8,8 +8,9 @@ components:
    recorded in both, the mapping F_ij (§5.2, :class:`ingest.emotion.mapping.EmotionMapping`)
    from the correspondences of their emotion components, time-aligned by DTW on the speech
    components (:func:`correspondences`), and the mean offset e_j - e_i (a baseline);
-3. the emotion classifier of speech (§6) on the clips' audio, if at least two emotions have
-   two clips each;
+3. the emotion classifier of speech (§6, the measured-best pipeline of issue #16) on the
+   clips' audio, if at least two emotions have :data:`MIN_CLASSIFIER_CLIPS` usable clips
+   each;
 4. each emotion's mean emotion components (to guess the emotion of a motion).
 
 :meth:`EmotionModel.to_database` turns it into model arrays (``emotion/...``), columns of the
@@ -29,7 +30,7 @@ import numpy as np
 
 from db.errors import AnimeGraphError, DataError, ParameterError
 from ingest.emotion.align import sample_at
-from ingest.emotion.classifier import MIN_DURATION, EmotionClassifier
+from ingest.emotion.classifier import EmotionClassifier
 from ingest.emotion.components import (
     Aligner,
     ComponentSplit,
@@ -46,7 +47,11 @@ logger = logging.getLogger(__name__)
 MIN_PARALLEL = 2
 #: Prefix of the emotion model's arrays in the database.
 PREFIX = "emotion/"
-_CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "classes")
+#: Fewest usable clips of an emotion for the classifier to learn it (its probability
+#: calibration needs two per class in every out-of-fold split).
+MIN_CLASSIFIER_CLIPS = 2
+_CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "normalize", "classes",
+                       "norm_speakers")
 
 
 @dataclass(frozen=True)
@@ -107,6 +112,9 @@ class EmotionModel:
     classifier : EmotionClassifier or None
     notes : tuple of str
         What could not be learned and why.
+    classifier_note : str
+        Why there is no classifier when the database holds one that cannot be used (one
+        stored by an older animegraph: re-ingest), else "".
     """
 
     emotions: tuple[str, ...]
@@ -117,6 +125,7 @@ class EmotionModel:
     parallel: dict = field(default_factory=dict)
     classifier: EmotionClassifier | None = None
     notes: tuple[str, ...] = ()
+    classifier_note: str = ""
 
     # ------------------------------------------------------------------ use
     def check_emotion(self, name: str) -> str:
@@ -213,7 +222,7 @@ class EmotionModel:
         classifier = None
         if self.classifier is not None:
             raw = self.classifier.to_arrays()
-            classifier = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS}
+            classifier = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS if k in raw}
             for key, value in raw.items():
                 if key not in _CLASSIFIER_STRINGS:
                     arrays[f"{PREFIX}classifier/{key}"] = np.asarray(value, dtype=np.float64)
@@ -257,18 +266,21 @@ class EmotionModel:
             key = f"{PREFIX}centroid/{name}"
             if key in arrays:
                 centroids[name] = arrays[key]
-        classifier = None
+        classifier, classifier_note = None, ""
         if entry.get("classifier"):
             prefix = PREFIX + "classifier/"
             stored = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
             stored.update({k: np.array(v) for k, v in entry["classifier"].items()})
             for key in ("support", "n_support"):
                 stored[key] = stored[key].astype(np.int64)
-            classifier = EmotionClassifier.from_arrays(stored)
+            try:
+                classifier = EmotionClassifier.from_arrays(stored)
+            except DataError as exc:  # an older format: the rest of the model still loads
+                classifier_note = str(exc)
         return cls(emotions=tuple(entry["emotions"]), split=split, mappings=mappings,
                    offsets=offsets, centroids=centroids,
                    parallel=dict(entry["parallel_sentences"]), classifier=classifier,
-                   notes=tuple(entry.get("notes", ())))
+                   notes=tuple(entry.get("notes", ())), classifier_note=classifier_note)
 
 
 def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
@@ -295,6 +307,7 @@ def fit_emotion_model(
     n_centres: int = N_CENTRES,
     kernel: str = KERNEL,
     random_state: int = 0,
+    speakers: Sequence[str | None] | None = None,
 ) -> EmotionModel:
     """Learn a database's emotion model (see the module docstring).
 
@@ -315,6 +328,9 @@ def fit_emotion_model(
     fps : float
     n_centres, kernel, random_state
         Of the mappings (:class:`EmotionMapping`).
+    speakers : sequence of str or None, optional
+        Speaker of each clip, for the classifier's per-speaker normalisation (None: one
+        speaker).
     """
     mouth = np.array([g == "lips" for g in groups])
     if not mouth.any():
@@ -360,32 +376,50 @@ def fit_emotion_model(
                 random_state=random_state)
     classifier = None
     if audio is not None:
-        classifier = _fit_classifier(audio, emotions, notes)
+        classifier = _fit_classifier(audio, emotions, speakers, notes)
     return EmotionModel(emotions=present, split=split, mappings=mappings, offsets=offsets,
                         centroids=centroids, parallel=parallel, classifier=classifier,
                         notes=tuple(notes))
 
 
-def _fit_classifier(audio, emotions, notes) -> EmotionClassifier | None:
-    keep = [i for i, (a, sr) in enumerate(audio)
-            if emotions[i] != "unknown" and len(a) >= MIN_DURATION * sr]
-    labels = np.array([emotions[i] for i in keep])
-    names, counts = np.unique(labels, return_counts=True)
-    usable = set(names[counts >= 2])
-    keep = [i for i in keep if emotions[i] in usable]
+def _fit_classifier(audio, emotions, speakers, notes) -> EmotionClassifier | None:
+    """The default :class:`EmotionClassifier` (with probabilities) on the labelled clips.
+
+    Clips whose audio is unusable (too short, silent) are left out with a note; emotions
+    with fewer than :data:`MIN_CLASSIFIER_CLIPS` usable clips too. Never raises for data:
+    what could not be done is a note.
+    """
+    model = EmotionClassifier(probability=True)
+    rows, labels, who, dropped = [], [], [], []
+    for i, (a, sr) in enumerate(audio):
+        if emotions[i] == "unknown":
+            continue
+        try:
+            rows.append(model.featurize([(a, sr)])[0])
+        except AnimeGraphError as exc:
+            dropped.append(f"clip {i} ({exc})")
+            continue
+        labels.append(emotions[i])
+        who.append(speakers[i] if speakers is not None and speakers[i] else "unknown")
+    if dropped:
+        notes.append(f"emotion classifier: {len(dropped)} clip(s) left out: "
+                     + "; ".join(dropped[:3]) + (" ..." if len(dropped) > 3 else ""))
+    labels = np.array(labels, dtype=object)
+    names, counts = np.unique(labels.astype(str), return_counts=True)
+    usable = set(names[counts >= MIN_CLASSIFIER_CLIPS])
     if len(usable) < 2:
-        notes.append("the emotion classifier needs two emotions with two clips each: none")
+        have = ", ".join(f"{n} {c}" for n, c in zip(names, counts, strict=True)) or "none"
+        notes.append(f"no emotion classifier: it needs two emotions with at least "
+                     f"{MIN_CLASSIFIER_CLIPS} usable clips each (clips per emotion: {have})")
         return None
-    pairs = [(_float_audio(audio[i][0]), int(audio[i][1])) for i in keep]
+    keep = [k for k, lab in enumerate(labels) if lab in usable]
+    if len(usable) < names.size:
+        notes.append("emotion classifier: left out emotions with fewer than "
+                     f"{MIN_CLASSIFIER_CLIPS} clips: "
+                     + ", ".join(sorted(set(names) - usable)))
     try:
-        return EmotionClassifier().fit(pairs, [emotions[i] for i in keep])
-    except AnimeGraphError as exc:  # e.g. clips too short for the paper's 500 coefficients
+        return model.fit(np.vstack([rows[k] for k in keep]), labels[keep].astype(str),
+                         speakers=np.array([who[k] for k in keep]))
+    except AnimeGraphError as exc:
         notes.append(f"the emotion classifier could not be trained: {exc}")
         return None
-
-
-def _float_audio(a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a)
-    if a.dtype == np.int16:
-        return a.astype(np.float32) / 32768.0
-    return a.astype(np.float32)
