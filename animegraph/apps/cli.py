@@ -658,11 +658,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                              f"(the exact search), not {method}")
     if args.k_best is not None and args.k_best < 1:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
-    if args.labels is None and args.text is None:
-        args.labels = _sidecar_labels(args.audio)
-        if args.labels is not None:
-            print(f"animegraph: using the phone labels beside the speech, {args.labels} "
-                  "(--labels or --text to use others)", file=sys.stderr)
+    sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
+    args.labels = sidecar or args.labels
     k_best, path = _synth_path(args)
     t0 = time.perf_counter()
     model = Model.load(args.db)
@@ -674,6 +671,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_wav(args.audio)
+    if sidecar is not None:
+        print(f"animegraph: using the phone labels beside the speech, {sidecar} "
+              "(--labels or --text to use others)", file=sys.stderr)
     labels = read_labels(args.labels) if args.labels else None
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
