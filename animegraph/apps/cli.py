@@ -119,7 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     sql = sub.add_parser(
         "sql", help="run a read-only SQL query on a database",
         description="Run SQL (DuckDB) over the database's tables: clips, animes, frames, "
-        "audio, channels, model_arrays, components. Only SELECT queries run.",
+        "audio, channels, model_arrays, components. Only SELECT queries run, in DuckDB's "
+        "sandbox (no file outside the database, no network, no extensions); several "
+        "statements separated by ';' each print their result.",
     )
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
@@ -129,6 +131,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
                      help="rows shown in table format (default 50)")
+    sql.add_argument("--limit", type=_whole_number, default=None,
+                     help="rows fetched per statement; the rest is never read "
+                     "(default 100000)")
+    sql.add_argument("--timeout", type=_number, default=None,
+                     help="seconds before the query is interrupted (default 60)")
     sql.set_defaults(func=_cmd_sql)
 
     syn = sub.add_parser(
@@ -526,15 +533,26 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
 def _cmd_sql(args: argparse.Namespace) -> int:
     from animegraph.apps.tabular import format_table
-    from db.sql import query
+    from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
     if args.format == "parquet" and args.output is None:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
-    result = query(Database.open(args.db), args.query)
-    text = format_table(result, args.format, max_rows=args.max_rows, output=args.output)
-    if text is not None:
-        sys.stdout.write(text)
+    limit = args.limit or ROW_LIMIT
+    results = run(Database.open(args.db), args.query, row_limit=limit,
+                  timeout=args.timeout or TIMEOUT_S)
+    if args.output is not None and len(results) > 1:
+        raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
+    for i, result in enumerate(results):
+        if i and args.format == "table":
+            sys.stdout.write("\n")
+        text = format_table(result.table, args.format, max_rows=args.max_rows,
+                            output=args.output)
+        if text is not None:
+            sys.stdout.write(text)
+        if result.truncated:
+            print(f"animegraph sql: only the first {limit} rows were read (raise --limit)",
+                  file=sys.stderr)
     return 0
 
 
