@@ -261,21 +261,21 @@ def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
     return text, phones
 
 
-def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
-    """Load a ``.npy`` array without pickles.
+def load_npy(path: Path) -> np.ndarray:
+    """Load a ``.npy`` array; never unpickles.
+
+    Unpickling runs code from the file, so an array of Python objects is refused, also
+    in the FACEGOOD layout (its shipped files are plain arrays that load without it).
 
     Parameters
     ----------
     path : Path
         The file.
-    legacy_pickle : bool
-        Fall back to unpickling (``encoding="latin1"``, for arrays saved by Python 2)
-        if the array holds Python objects. Only for files of a known corpus (FACEGOOD).
 
     Raises
     ------
     DataError
-        If the file is missing, truncated or not a ``.npy`` array.
+        If the file is missing, truncated, not a ``.npy`` array, or needs unpickling.
     """
     if not path.is_file():
         raise DataError(f"array file not found: {path}")
@@ -285,14 +285,10 @@ def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
         try:
             array = np.load(path, allow_pickle=False)
         except ValueError as exc:
-            if not (legacy_pickle and "allow_pickle" in str(exc)):
-                raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
-            try:
-                array = np.load(path, allow_pickle=True, encoding="latin1")
-            except Exception as exc2:  # unpickling a corrupt file can raise anything
-                raise DataError(
-                    f"corrupt array file {path}: {type(exc2).__name__}: {exc2}"
-                ) from None
+            if "allow_pickle" in str(exc):
+                raise DataError(f"{path} holds Python objects (a pickle); refused: only "
+                                f"plain numeric arrays are read") from None
+            raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
         except (OSError, EOFError) as exc:
             raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
     if not isinstance(array, np.ndarray):
