@@ -39,6 +39,7 @@ import pyarrow.parquet as pq
 
 from db.atomic import atomic_write
 from db.errors import DataError
+from db.lock import pid_alive, writer_lock
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +52,13 @@ FOLDER_TABLES = ("audio",)
 FILE_TABLES = ("channels", "model_arrays", "components")
 TABLES = PARTITIONED + FOLDER_TABLES + FILE_TABLES
 
+#: Seconds a writer waits for another one to finish (``animegraph ingest --wait``).
+WRITE_WAIT_S = 600.0
+#: ``based_on`` default of :func:`write_version`: do not check the live version.
+ANY_VERSION = object()
+
 _VERSION = re.compile(r"^v(\d{6})$")
+_STAGING = re.compile(r"^\.v\d{6}\.partial-(?:(\d+)-)?[0-9a-f]+$")
 _CURRENT = "CURRENT"
 
 
@@ -60,8 +67,15 @@ def is_database(path: str | os.PathLike) -> bool:
     return (Path(path) / _CURRENT).is_file()
 
 
-def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict) -> Path:
+def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict, *,
+                  based_on: str | None | object = ANY_VERSION, wait: float = WRITE_WAIT_S,
+                  ) -> Path:
     """Write a new version of the database at ``path`` and make it the live one.
+
+    The database's writer lock (:func:`db.lock.writer_lock`) is held throughout (a
+    caller may hold it already), and the switch of ``CURRENT`` checks that the live
+    version is still ``based_on``: a version built from an older state is refused
+    rather than silently dropping what another writer added.
 
     Parameters
     ----------
@@ -72,25 +86,43 @@ def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest
     manifest : dict
         Summary to store (JSON-serialisable); the schema and database versions and
         the table list are added here.
+    based_on : str or None, optional
+        The live version (None: no database yet) the tables were built from; checked
+        under the lock before anything is written. By default not checked.
+    wait : float
+        Seconds to wait for another writer.
 
     Returns
     -------
     Path
         The new version's folder.
+
+    Raises
+    ------
+    DataError
+        If another writer holds the database longer than ``wait``, or the live version
+        moved away from ``based_on``.
     """
-    root = Path(path)
+    with writer_lock(path, wait=wait, what="database"):
+        return _write_version(Path(path), tables, manifest, based_on)
+
+
+def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
+                   based_on) -> Path:
     missing = set(TABLES) - set(tables)
     if missing:
         raise ValueError(f"missing tables: {sorted(missing)}")
     for name in PARTITIONED:
         if "emotion" not in tables[name].column_names:
             raise ValueError(f"table {name} needs an emotion column to be partitioned by")
-    root.mkdir(parents=True, exist_ok=True)
     previous = current_version(root) if is_database(root) else None
+    if based_on is not ANY_VERSION and previous != based_on:
+        raise DataError(f"database {root} changed while this write was prepared (it is now "
+                        f"{previous or 'empty'}, was {based_on or 'empty'}); nothing written")
     number = 1 + max([_number(p.name) for p in root.iterdir() if _VERSION.match(p.name)],
                      default=0)
     name = f"v{number:06d}"
-    staging = root / f".{name}.partial-{secrets.token_hex(4)}"
+    staging = root / f".{name}.partial-{os.getpid()}-{secrets.token_hex(4)}"
     try:
         staging.mkdir()
         for table_name, table in tables.items():
@@ -140,7 +172,11 @@ def _fsync_tree(folder: Path) -> None:
 def _prune(root: Path, keep: set[str]) -> None:
     for child in root.iterdir():
         stale_version = _VERSION.match(child.name) and child.name not in keep
-        stale_staging = child.name.startswith(".v") and ".partial-" in child.name
+        staging = _STAGING.match(child.name)
+        # A staging folder is removed only once its writer is gone (a killed ingest);
+        # one of a live writer (e.g. an older animegraph ignoring the lock) is left alone.
+        stale_staging = staging is not None and not (
+            staging.group(1) and pid_alive(int(staging.group(1))))
         if child.is_dir() and (stale_version or stale_staging):
             shutil.rmtree(child, ignore_errors=True)
 

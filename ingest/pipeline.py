@@ -34,7 +34,8 @@ import numpy as np
 
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
-from db.store import Database, is_database, write_version
+from db.lock import LOCK_NAME, writer_lock
+from db.store import ANY_VERSION, WRITE_WAIT_S, Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
@@ -145,6 +146,7 @@ def ingest(
     *,
     workers: int = 1,
     progress: Callable[[int], Callable] | None = None,
+    wait: float = WRITE_WAIT_S,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -159,12 +161,18 @@ def ingest(
         Processes preparing clips in parallel.
     progress : callable, optional
         ``progress(total)`` returns a wrapper for an iterable of finished clips.
+    wait : float
+        Seconds to wait for another writer of the database to finish. The database's
+        writer lock is held for the whole ingest, so that two ingests into one
+        database run one after the other and neither loses the other's clips.
 
     Raises
     ------
     ParameterError
         If a source does not exist, nothing ingestable is found, ``db_path`` is
         something else than a database, or every clip is rejected.
+    DataError
+        If another process is still writing the database after ``wait`` seconds.
     """
     config = config or IngestConfig()
     started = time.perf_counter()
@@ -174,11 +182,21 @@ def ingest(
             raise ParameterError(f"source {s} does not exist")
     if workers < 1:
         raise ParameterError(f"workers must be >= 1, got {workers}")
+    if db_path.exists() and not is_database(db_path) and (
+            not db_path.is_dir() or any(p.name != LOCK_NAME for p in db_path.iterdir())):
+        raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+    with writer_lock(db_path, wait=wait, what="database"):
+        return _ingest_locked(sources, db_path, config, workers, progress, started)
+
+
+def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, progress,
+                   started: float) -> IngestReport:
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
-    elif db_path.exists() and (not db_path.is_dir() or any(db_path.iterdir())):
+    elif any(p.name != LOCK_NAME for p in db_path.iterdir()):
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+    based_on = existing.version_dir.name if existing is not None else None
 
     found = discover([Path(s) for s in sources])
     if not found:
@@ -213,10 +231,11 @@ def ingest(
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report, reference)
+            _write(db_path, everything, config, target_fps, report, reference, based_on)
     elif existing is not None and "emotion" not in existing.manifest:
         # Written before emotion models existed: learn it now from the stored clips.
-        _write(db_path, prepared_from_database(existing), config, fps, report, reference)
+        _write(db_path, prepared_from_database(existing), config, fps, report, reference,
+               based_on)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
@@ -311,8 +330,9 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
-           report: IngestReport, reference: np.ndarray | None) -> None:
-    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference)
+           report: IngestReport, reference: np.ndarray | None, based_on: str | None) -> None:
+    summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference,
+                                          based_on=based_on)
     report.written = True
     report.version = version_dir.name
     report.summary = summary
@@ -321,12 +341,14 @@ def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: 
 def build_database(
     db_path: str | os.PathLike, clips: Sequence[PreparedClip], config: IngestConfig | None = None,
     *, fps: float | None = None, reference: np.ndarray | None = None,
+    based_on: str | None | object = ANY_VERSION,
 ) -> tuple[dict, Path]:
     """Decompose prepared clips together and write them as a new database version.
 
     The corpus-wide half of an ingest (PCA keeping ``config.variance`` then FastICA over
     all clips, §4.1/§5.1.2; per-component cutoffs, §4.3; anime nodes), usable on its own
     to build databases from clips prepared once (e.g. the folds of an evaluation).
+    ``based_on`` is passed to :func:`db.store.write_version`.
 
     Returns
     -------
@@ -368,11 +390,11 @@ def build_database(
         "ica_converged": bool(model.ica_converged_),
         "emotion": emotion_entry,
     }
-    return summary, write_version(db_path, tables, summary)
+    return summary, write_version(db_path, tables, summary, based_on=based_on)
 
 
 def _save_report(db_path: Path, report: IngestReport) -> None:
-    if not db_path.is_dir():
+    if not is_database(db_path):  # nothing written into a new folder: leave it empty
         return
     folder = db_path / "reports"
     folder.mkdir(exist_ok=True)

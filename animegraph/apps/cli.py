@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark motion where it is instead of shifting it by the "
                      "estimated lip-audio lag")
+    ing.add_argument("--wait", type=_number, default=None,
+                     help="seconds to wait for another ingest into the same --db to finish "
+                     "(default 600); one writer at a time")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
@@ -524,8 +527,9 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction)
+    wait = {} if args.wait is None else {"wait": args.wait}
     report = ingest(args.sources, args.db, config, workers=args.workers,
-                    progress=lambda total: _progress(total, args.quiet, "clip"))
+                    progress=lambda total: _progress(total, args.quiet, "clip"), **wait)
     for line in report.lines():
         print(line)
     return 1 if report.count("rejected") else 0
