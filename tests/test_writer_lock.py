@@ -11,12 +11,11 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from test_sql_sandbox import _tiny_db
 
 from db.errors import DataError
 from db.lock import LOCK_NAME, writer_lock
 from db.store import Database, current_version, write_version
-
-from test_sql_sandbox import _tiny_db
 
 _HOLD = textwrap.dedent("""
     import sys, time
