@@ -2,8 +2,10 @@
 
 1. Find the clips under the sources (:func:`ingest.readers.discover`).
 2. Per clip, in worker processes: read it, skip it if the database already has it with
-   the same checksum, else prepare it (:func:`ingest.prepare.prepare_clip`). A clip that
-   fails is rejected with its reason; the others go on.
+   the same checksum, else check that it is plausible (labels, phones, motion:
+   :mod:`ingest.plausible`; implausible samples become dropouts or the clip is rejected)
+   and prepare it (:func:`ingest.prepare.prepare_clip`). A clip that fails is rejected
+   with its reason; the others go on.
 3. If anything was added or changed: the clips already in the database and the new ones
    are decomposed together (PCA keeping 95 % of the variance, then FastICA over the
    whole corpus, Cao et al. §4.1 and §5.1.2), the per-component low-pass cutoffs are
@@ -39,6 +41,7 @@ from db.store import ANY_VERSION, WRITE_WAIT_S, Database, is_database, write_ver
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
+from ingest.plausible import Limits, check_clip
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.tables import build_tables, prepared_from_database
@@ -56,6 +59,7 @@ class IngestConfig:
     #                           the highest among the new clips)
     correct_lag: bool = True  # shift landmark motion by its estimated lip-audio lag
     random_state: int = 0  # FastICA seed
+    limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,7 @@ class ClipReport:
     n_animes: int = 0
     segmentation: str = ""
     duration_s: float = 0.0
+    note: str = ""  # e.g. implausible samples filled as dropouts (ingest.plausible)
 
 
 @dataclass
@@ -94,6 +99,8 @@ class IngestReport:
         for c in self.clips:
             if c.status == "rejected":
                 out.append(f"  rejected {c.source}: {c.reason}")
+            elif c.note:
+                out.append(f"  {c.status} {c.source}: {c.note}")
         if self.written:
             s = self.summary
             out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
@@ -124,16 +131,18 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag, reference = args
+    source, known, fps, correct_lag, reference, limits = args
     try:
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
+        raw, note = check_clip(raw, limits)
         clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
                             head_reference=reference if _has_head(raw.schema) else None)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
-                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
+                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
+                            note=note)
         return report, clip
     except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
@@ -213,7 +222,7 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
             raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")
 
     if reference is None:
-        reference = _head_reference(found)
+        reference = _head_reference(found, config.limits)
     report = IngestReport(db=db_path)
     results = _run(found, known, fps, config, workers, progress, reference)
     new: list[PreparedClip] = []
@@ -252,7 +261,7 @@ def prepare_sources(
     Rejected clips are logged and left out.
     """
     config = config or IngestConfig()
-    reference = _head_reference(list(found))
+    reference = _head_reference(list(found), config.limits)
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
     clips = [c for r, c in results if c is not None]
     for r, _ in results:
@@ -265,7 +274,7 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, config.correct_lag, reference) for s in found]
+    jobs = [(s, known, fps, config.correct_lag, reference, config.limits) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
@@ -279,15 +288,15 @@ def _has_head(schema) -> bool:
     return schema.kind in ("markers", "landmarks") and head_points(schema.groups) >= 3
 
 
-def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
-    """The head frame of a new database: its first readable clip's mean head pose.
+def _head_reference(found: list[ClipSource], limits: Limits) -> np.ndarray | None:
+    """The head frame of a new database: its first plausible clip's mean head pose.
 
     Rest positions from the corpus' ``markers.csv`` would do as well; the mean pose of
     one clip needs nothing but the clip.
     """
     for source in found:
         try:
-            raw = load(source)
+            raw, _ = check_clip(load(source), limits)
         except DataError:
             continue
         if not _has_head(raw.schema):

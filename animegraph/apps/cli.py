@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark motion where it is instead of shifting it by the "
                      "estimated lip-audio lag")
+    ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
+                     help="fastest plausible marker motion in mm/s (default 5000); a faster "
+                     "jump is a dropout, or rejects the clip if it lasts")
     ing.add_argument("--wait", type=_number, default=None,
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")
@@ -524,9 +527,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
+    from ingest.plausible import Limits
 
+    limits = Limits() if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
     config = IngestConfig(variance=args.variance, fps=args.fps,
-                          correct_lag=not args.no_lag_correction)
+                          correct_lag=not args.no_lag_correction, limits=limits)
     wait = {} if args.wait is None else {"wait": args.wait}
     report = ingest(args.sources, args.db, config, workers=args.workers,
                     progress=lambda total: _progress(total, args.quiet, "clip"), **wait)
