@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import re
 import secrets
@@ -52,6 +53,11 @@ FOLDER_TABLES = ("audio",)
 FILE_TABLES = ("channels", "model_arrays", "components")
 TABLES = PARTITIONED + FOLDER_TABLES + FILE_TABLES
 
+#: Largest manifest read, bytes, and its deepest nesting.
+MAX_MANIFEST_BYTES = 16 << 20
+MAX_MANIFEST_DEPTH = 32
+#: Most dimensions of a model array.
+MAX_ARRAY_DIMS = 8
 #: Seconds a writer waits for another one to finish (``animegraph ingest --wait``).
 WRITE_WAIT_S = 600.0
 #: ``based_on`` default of :func:`write_version`: do not check the live version.
@@ -197,9 +203,17 @@ def current_version(path: str | os.PathLike) -> str:
     """Name of the live version of the database at ``path``."""
     root = Path(path)
     try:
-        name = (root / _CURRENT).read_text().strip()
+        with open(root / _CURRENT, "rb") as handle:
+            raw = handle.read(64)
     except FileNotFoundError:
         raise DataError(f"{root} is not an animegraph database (no {_CURRENT} file)") from None
+    except OSError as exc:
+        raise DataError(f"database {root} is damaged: cannot read {_CURRENT}: "
+                        f"{exc.strerror or exc}") from None
+    try:
+        name = raw.decode("ascii").strip()
+    except UnicodeDecodeError:
+        raise DataError(f"database {root} is damaged: {root / _CURRENT} is not text") from None
     if not _VERSION.match(name) or not (root / name).is_dir():
         raise DataError(f"database {root} is damaged: {_CURRENT} names {name!r}, not a version")
     return name
@@ -236,16 +250,18 @@ class Database:
         if not root.exists():
             raise DataError(f"database {root} does not exist")
         version_dir = root / current_version(root)
-        try:
-            manifest = json.loads((version_dir / "manifest.json").read_text())
-        except (OSError, ValueError) as exc:
-            raise DataError(f"database {root} is damaged: cannot read its manifest") from exc
+        manifest = _read_manifest(version_dir / "manifest.json")
         if manifest.get("schema_version") != SCHEMA_VERSION:
             raise DataError(
                 f"database {root} has schema version {manifest.get('schema_version')}, "
                 f"this animegraph reads version {SCHEMA_VERSION}"
             )
         return cls(root=root, version_dir=version_dir, manifest=manifest)
+
+    def damaged(self, name: str, problem: str) -> DataError:
+        """The error for a table (or file) of this version that does not hold up."""
+        where = self.table_path(name) if name in TABLES else self.version_dir / name
+        return DataError(f"database {self.root} is damaged: {where}: {problem}")
 
     def table_path(self, name: str) -> Path:
         """Where the table ``name`` lives (a folder, or one file)."""
@@ -267,12 +283,18 @@ class Database:
             raise DataError(f"database {self.root} is damaged: cannot read {name}: {exc}") from exc
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...)."""
+        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...).
+
+        Raises
+        ------
+        DataError
+            If the table is not (name, shape, values) rows whose shapes fit their values,
+            or a value is not finite.
+        """
         try:
             return arrays_from_table(self.table("model_arrays"))
-        except (KeyError, ValueError) as exc:
-            raise DataError(f"database {self.root} is damaged: unreadable model arrays "
-                            f"({exc})") from exc
+        except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
+            raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
 
 
 def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:
@@ -287,12 +309,66 @@ def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:
 
 
 def arrays_from_table(table: pa.Table) -> dict[str, np.ndarray]:
-    """Inverse of :func:`arrays_to_table`."""
+    """Inverse of :func:`arrays_to_table`; checks every row (ValueError if one is bad)."""
     out = {}
     names = table.column("name").to_pylist()
     shapes = table.column("shape").to_pylist()
     values = table.column("values")
+    if not (pa.types.is_list(values.type) or pa.types.is_large_list(values.type)) or not (
+            pa.types.is_floating(values.type.value_type)
+            or pa.types.is_integer(values.type.value_type)):
+        raise ValueError(f"values must be lists of numbers, not {values.type}")
     for i, (name, shape) in enumerate(zip(names, shapes, strict=True)):
-        flat = values[i].values.to_numpy(zero_copy_only=False)
+        if not isinstance(name, str) or name in out:
+            raise ValueError(f"row {i}: missing or repeated name {name!r}")
+        if (not isinstance(shape, list) or len(shape) > MAX_ARRAY_DIMS
+                or not all(isinstance(d, int) and 0 <= d for d in shape)):
+            raise ValueError(f"{name}: bad shape {shape!r}")
+        if values[i].values is None:
+            raise ValueError(f"{name}: no values")
+        flat = values[i].values.to_numpy(zero_copy_only=False).astype(np.float64)
+        if flat.size != math.prod(shape):
+            raise ValueError(f"{name}: {flat.size} values for shape {tuple(shape)}")
+        if not np.isfinite(flat).all():
+            raise ValueError(f"{name}: values not finite")
         out[name] = flat.reshape(shape)
     return out
+
+
+def _read_manifest(path: Path) -> dict:
+    """A version's manifest: a JSON object of bounded size and depth, or DataError."""
+    try:
+        if path.stat().st_size > MAX_MANIFEST_BYTES:
+            raise DataError(f"database {path.parent.parent} is damaged: {path} is larger "
+                            f"than {MAX_MANIFEST_BYTES} bytes")
+        manifest = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        problem = "nested too deeply" if isinstance(exc, RecursionError) else "unreadable"
+        raise DataError(f"database {path.parent.parent} is damaged: {path} is "
+                        f"{problem}") from None
+    if not isinstance(manifest, dict):
+        raise DataError(f"database {path.parent.parent} is damaged: {path} is not a JSON "
+                        f"object")
+    stack, depth_of = [(manifest, 1)], 0
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            depth_of = max(depth_of, depth)
+            if depth_of > MAX_MANIFEST_DEPTH:
+                raise DataError(f"database {path.parent.parent} is damaged: {path} is nested "
+                                f"deeper than {MAX_MANIFEST_DEPTH} levels")
+            stack.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict)
+                                                   else item))
+    for key in ("fps",):
+        value = manifest.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+                                  or not math.isfinite(value) or value <= 0):
+            raise DataError(f"database {path.parent.parent} is damaged: {path}: {key} is "
+                            f"{value!r}")
+    for key in ("n_channels", "n_pcs", "n_clips", "n_animes", "n_frames"):
+        value = manifest.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 0):
+            raise DataError(f"database {path.parent.parent} is damaged: {path}: {key} is "
+                            f"{value!r}")
+    return manifest
