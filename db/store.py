@@ -280,7 +280,8 @@ class Database:
                 dataset = ds.dataset(self.table_path(name), format="parquet")
             return dataset.to_table(columns=columns, filter=filter)
         except (OSError, pa.ArrowException) as exc:
-            raise DataError(f"database {self.root} is damaged: cannot read {name}: {exc}") from exc
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise self.damaged(name, f"cannot be read: {first}") from None
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...).
@@ -361,7 +362,7 @@ def _read_manifest(path: Path) -> dict:
                                                    else item))
     for key in ("fps",):
         value = manifest.get(key)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+        if (isinstance(value, bool) or not isinstance(value, int | float)
                                   or not math.isfinite(value) or value <= 0):
             raise DataError(f"database {path.parent.parent} is damaged: {path}: {key} is "
                             f"{value!r}")
