@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pyarrow as pa
 import pytest
+from crafted import sql_escapes
 
 from db.errors import ParameterError
 from db.sql import connect, query, run
@@ -34,31 +35,10 @@ def db(tmp_path):
     return _tiny_db(tmp_path / "db")
 
 
-def _escapes(db, outside):
-    """Statements that would write, reach outside the version, or undo the sandbox."""
-    live = db.version_dir
-    return [
-        f"COPY (SELECT * FROM clips) TO '{outside}/stolen.csv'",
-        f"EXPLAIN ANALYZE COPY (SELECT * FROM clips) TO '{outside}/stolen.csv'",
-        f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{live}/model_arrays.parquet'",
-        f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{db.root}/CURRENT'",
-        f"EXPORT DATABASE '{outside}/export'",
-        "EXPLAIN ANALYZE INSTALL httpfs", "INSTALL httpfs", "LOAD httpfs",
-        f"ATTACH '{outside}/other.db'", "SET enable_external_access = true",
-        "SET allowed_directories = ['/']", "SET lock_configuration = false",
-        "SELECT * FROM read_text('/etc/passwd')", "SELECT * FROM read_csv('/etc/passwd')",
-        "SELECT * FROM read_blob('/etc/passwd')", "SELECT * FROM glob('/etc/*')",
-        f"SELECT * FROM read_text('{live}/../../outside.txt')",
-        f"SELECT * FROM glob('{db.root}/*')",
-        "SELECT * FROM read_parquet('https://example.com/x.parquet')",
-        "SELECT 1; CREATE TABLE t AS SELECT 1", "PRAGMA version",
-    ]
-
-
 def test_every_escape_is_refused_with_one_line(db, tmp_path):
     (tmp_path / "outside.txt").write_text("secret")
     before = {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()}
-    for sql in _escapes(db, tmp_path):
+    for sql in sql_escapes(db.version_dir, db.root, tmp_path):
         with pytest.raises(ParameterError) as err:
             run(db, sql)
         assert "\n" not in str(err.value), sql
