@@ -46,7 +46,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from crafted import DATABASE_MUTATIONS, crafted_database, sql_escapes  # noqa: E402
+from crafted import (  # noqa: E402
+    DATABASE_MUTATIONS,
+    PicklePayload,
+    crafted_database,
+    sql_escapes,
+)
 
 from db.errors import AnimeGraphError  # noqa: E402
 
@@ -213,14 +218,6 @@ def _named_poisons(corpus: Path, stem: str, work: Path) -> dict[str, Path]:
     return out
 
 
-class _Payload:
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (Path.touch, (Path(self.marker),))
-
-
 def probe_clips(corpus: Path, work: Path, flips: int, seed: int) -> dict:
     from ingest.plausible import Limits, check_clip
     from ingest.readers import discover, load
@@ -271,7 +268,7 @@ def probe_clips(corpus: Path, work: Path, flips: int, seed: int) -> dict:
     (fg / "bsname.txt").write_text("2\njaw\nbrow\n")
     marker = work / "payload-ran"
     marker.unlink(missing_ok=True)
-    np.save(fg / "bs_value" / "bs_value_c1.npy", np.array([_Payload(marker)], dtype=object),
+    np.save(fg / "bs_value" / "bs_value_c1.npy", np.array([PicklePayload(marker)], dtype=object),
             allow_pickle=True)
     ok, _ = judge(fg)
     pickle_held = ok and not marker.exists()

@@ -180,6 +180,16 @@ def _symlink(path: Path, target: str) -> None:
     path.symlink_to(target)
 
 
+class PicklePayload:
+    """Unpickling this creates the file ``marker``: proof that code from the data ran."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.marker),))
+
+
 def crafted_database(good: Path, dest: Path, mutation: str) -> Path:
     """A copy of the database ``good`` at ``dest`` damaged by ``mutation``."""
     shutil.copytree(good, dest, symlinks=True)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import require_shared
+from crafted import PicklePayload
 from scipy.spatial.transform import Rotation
 
 from db.errors import DataError, ParameterError
@@ -260,7 +261,7 @@ def test_facegood_layout_never_unpickles(tmp_path):
     write_wav(root / "wav" / "c1.wav", np.zeros(32000, np.float32), 16000)
     # A crafted .npy whose unpickling would run code: it must be refused, not run.
     marker = tmp_path / "payload-ran"
-    np.save(root / "bs_value" / "bs_value_c1.npy", np.array([_Payload(marker)], dtype=object),
+    np.save(root / "bs_value" / "bs_value_c1.npy", np.array([PicklePayload(marker)], dtype=object),
             allow_pickle=True)
     source = _one([root])
     assert (source.layout, source.clip_id) == ("facegood", "c1")
@@ -282,16 +283,6 @@ def test_facegood_layout_never_unpickles(tmp_path):
     (root / "bsname.txt").write_text("4\njaw\nbrow_raise_c\neye_blink1_l\n")
     with pytest.raises(DataError, match="says 4 names but lists 3"):
         load(source)
-
-
-class _Payload:
-    """Unpickling this creates a file: proof that code from the data ran."""
-
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (Path.touch, (Path(self.marker),))
 
 
 def test_shared_facegood_files_load_without_pickle():
