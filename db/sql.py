@@ -4,11 +4,14 @@ Each table of :mod:`db.store` is a view of the same name (``clips``, ``animes``,
 ``frames``, ``audio``, ``channels``, ``model_arrays``, ``components``). The SQL is
 untrusted input (a database is shared, a query is pasted), so two fences hold it:
 
-1. **DuckDB's own sandbox**: each query runs on a fresh in-memory connection whose
-   file access is limited to the live version's folder (``allowed_directories``) and a
-   private spill folder, with ``enable_external_access = false`` (no other file, no
-   URL, no ``ATTACH``, no extension installed or loaded, no ``COPY``/``EXPORT`` outside
-   those folders) and ``lock_configuration = true`` (no ``SET`` can undo it).
+1. **DuckDB's own sandbox**: each query runs on a fresh in-memory connection with
+   ``enable_external_access = false`` and ``lock_configuration = true`` (no ``SET`` can
+   undo it). The tables are the live version's Parquet files opened by pyarrow
+   (``pyarrow.dataset``) and registered as Arrow scans, so DuckDB itself needs no file
+   at all: its only allowed directory (``allowed_directories``) is a private spill
+   folder, deleted after the query. Any other file, URL, ``ATTACH``, extension
+   (``INSTALL``/``LOAD``), ``COPY``/``EXPORT`` is refused by DuckDB, also into the
+   database's own folder.
 2. **Only reading statements**: ``SELECT`` (with ``WITH``, ``FROM``, ``VALUES``,
    ``DESCRIBE``, ``SHOW``, ``SUMMARIZE``) and ``EXPLAIN [ANALYZE]`` of one of those;
    anything else (``COPY`` into the version's own folder, ``CREATE``, ``SET`` ...) is
@@ -29,9 +32,10 @@ from dataclasses import dataclass
 
 import duckdb
 import pyarrow as pa
+import pyarrow.dataset as ds
 
 from db.errors import DataError, ParameterError
-from db.store import FILE_TABLES, PARTITIONED, TABLES, Database
+from db.store import PARTITIONED, TABLES, Database
 
 #: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
 ROW_LIMIT = 100_000
@@ -66,14 +70,15 @@ class Result:
 def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.DuckDBPyConnection:
     """An in-memory, sandboxed DuckDB connection with a view per table of ``db``.
 
-    Only ``db``'s live version folder (and ``spill_dir``, for DuckDB's temporary files)
-    can be opened; the configuration is locked.
+    The tables are Arrow scans of ``db``'s live version (opened by pyarrow); DuckDB may
+    open no file but in ``spill_dir`` (its temporary files), and its configuration is
+    locked.
     """
     con = duckdb.connect(":memory:", config={
         "autoinstall_known_extensions": False, "autoload_known_extensions": False,
     })
     try:
-        allowed = [str(db.version_dir.resolve()) + os.sep]
+        allowed = []
         if spill_dir is not None:
             allowed.append(str(spill_dir) + os.sep)
             con.execute("SET temp_directory = ?", [str(spill_dir)])
@@ -81,21 +86,20 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
         con.execute("SET enable_external_access = false")
         con.execute("SET lock_configuration = true")
         for name in TABLES:
-            path = db.version_dir.resolve() / db.table_path(name).relative_to(db.version_dir)
-            if name in FILE_TABLES:
-                source = f"read_parquet('{_quote(path)}')"
-            else:
-                hive = ", hive_partitioning = true" if name in PARTITIONED else ""
-                source = f"read_parquet('{_quote(path)}/**/*.parquet'{hive})"
-            con.execute(f'CREATE VIEW "{name}" AS SELECT * FROM {source}')
+            con.register(name, _dataset(db, name))
     except BaseException:
         con.close()
         raise
     return con
 
 
-def _quote(path: os.PathLike) -> str:
-    return str(path).replace("'", "''")
+def _dataset(db: Database, name: str) -> ds.Dataset:
+    try:
+        if name in PARTITIONED:
+            return ds.dataset(db.table_path(name), format="parquet", partitioning="hive")
+        return ds.dataset(db.table_path(name), format="parquet")
+    except (OSError, pa.ArrowException) as exc:
+        raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
 
 
 def check_read_only(sql: str) -> list[str]:

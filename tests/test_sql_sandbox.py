@@ -48,13 +48,17 @@ def test_every_escape_is_refused_with_one_line(db, tmp_path):
 
 
 def test_duckdb_itself_refuses_without_the_statement_filter(db, tmp_path):
-    # The sandbox does not rest on the statement filter: the bare connection refuses too.
+    # The sandbox does not rest on the statement filter: the bare connection refuses too,
+    # also writes into the database's own folder (DuckDB opens no file of it).
     import duckdb
 
+    before = {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()}
     (tmp_path / "outside.txt").write_text("secret")
     con = connect(db)
     try:
         for sql in [f"COPY (SELECT 1) TO '{tmp_path}/x.csv'",
+                    f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{db.version_dir}/model_arrays.parquet'",
+                    f"COPY (SELECT 1) TO '{db.root}/CURRENT'",
                     f"SELECT * FROM read_text('{tmp_path}/outside.txt')",
                     "SELECT * FROM read_csv('/etc/passwd')", "INSTALL httpfs",
                     f"ATTACH '{tmp_path}/a.db'", "SET enable_external_access = true",
@@ -65,6 +69,7 @@ def test_duckdb_itself_refuses_without_the_statement_filter(db, tmp_path):
     finally:
         con.close()
     assert not (tmp_path / "x.csv").exists() and not (tmp_path / "a.db").exists()
+    assert {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()} == before
 
 
 def test_results_stop_at_the_row_cap(db):
