@@ -73,6 +73,11 @@ def is_database(path: str | os.PathLike) -> bool:
     return (Path(path) / _CURRENT).is_file()
 
 
+def is_staging(name: str) -> bool:
+    """True if ``name`` is a writer's staging folder (a version being written)."""
+    return _STAGING.match(name) is not None
+
+
 def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict, *,
                   based_on: str | None | object = ANY_VERSION, wait: float = WRITE_WAIT_S,
                   ) -> Path:

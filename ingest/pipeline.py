@@ -37,7 +37,14 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.lock import LOCK_NAME, writer_lock
-from db.store import ANY_VERSION, WRITE_WAIT_S, Database, is_database, write_version
+from db.store import (
+    ANY_VERSION,
+    WRITE_WAIT_S,
+    Database,
+    is_database,
+    is_staging,
+    write_version,
+)
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
@@ -191,8 +198,10 @@ def ingest(
             raise ParameterError(f"source {s} does not exist")
     if workers < 1:
         raise ParameterError(f"workers must be >= 1, got {workers}")
+    # Checked before the lock is taken (not to leave a lock file in a folder of something
+    # else), and again under it; a folder holding our lock file is a database being made.
     if db_path.exists() and not is_database(db_path) and (
-            not db_path.is_dir() or any(p.name != LOCK_NAME for p in db_path.iterdir())):
+            not db_path.is_dir() or not (db_path / LOCK_NAME).exists() and _foreign(db_path)):
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
     with writer_lock(db_path, wait=wait, what="database"):
         return _ingest_locked(sources, db_path, config, workers, progress, started)
@@ -203,7 +212,7 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
-    elif any(p.name != LOCK_NAME for p in db_path.iterdir()):
+    elif _foreign(db_path):
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
     based_on = existing.version_dir.name if existing is not None else None
 
@@ -251,6 +260,11 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
         raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
                              f"{report.clips[0].source}: {report.clips[0].reason}")
     return report
+
+
+def _foreign(folder: Path) -> bool:
+    """True if ``folder`` holds anything but a writer's lock and staging folders."""
+    return any(p.name != LOCK_NAME and not is_staging(p.name) for p in folder.iterdir())
 
 
 def prepare_sources(
