@@ -108,3 +108,12 @@ def test_cli_prints_each_statement_and_one_line_errors(db, tmp_path):
                             capture_output=True, text=True)
     assert capped.returncode == 0 and "(5 rows)" in capped.stdout
     assert "first 5 rows" in capped.stderr
+
+
+def test_a_result_repeating_a_column_name_prints(db, tmp_path):
+    from animegraph.apps.tabular import format_table
+
+    [result] = run(db, "SELECT a.node_id, b.node_id FROM animes a, animes b ORDER BY 1, 2")
+    assert format_table(result.table, "csv").splitlines()[:2] == ["\"node_id\",\"node_id\"",
+                                                                  "0,0"]
+    assert "node_id  node_id" in format_table(result.table, "table")
