@@ -191,3 +191,14 @@ def test_bad_clips_do_not_change_the_model_of_the_good_ones(tiny_corpus, tmp_pat
 def test_discovered_clips_of_the_tiny_corpus_all_pass(tiny_corpus):
     for source in discover([tiny_corpus])[:8]:
         assert check_clip(load(source))[1] == ""
+
+
+def test_the_speed_limit_is_an_option_and_checked():
+    from animegraph.apps.cli import build_parser
+    from db.errors import ParameterError
+
+    args = build_parser().parse_args(["ingest", "src", "--db", "db", "--max-speed", "800",
+                                      "--wait", "5"])
+    assert (args.max_speed, args.wait) == (800.0, 5.0)
+    with pytest.raises(ParameterError, match="max_speed_mm_s"):
+        Limits(max_speed_mm_s=-1)
