@@ -27,6 +27,9 @@ present), then prints, section by section:
 4. **Concurrent writers**: ``--trials`` times, two ``animegraph ingest`` processes of
    different clips into one new database at once: clips lost = clips reported added but
    missing from the final database.
+6. **Real data** (``--shared``, default ``../shared/data``): the synthetic corpus, the
+   FACEGOOD and talking-face clips through the plausibility checks: passed, passed with
+   samples filled, rejected, and the fastest point.
 5. **Kills**: ``--kills`` times, an ingest into the database killed with SIGKILL at a
    seeded moment: survived = the database still opens at a complete version and the next
    writer gets the lock at once.
@@ -367,6 +370,46 @@ def probe_kills(corpus: Path, db: Path, work: Path, kills: int, seed: int) -> di
     return {"kills": kills, "kills_survived": survived}
 
 
+def probe_real(shared: Path, corpus: Path) -> dict:
+    """The plausibility checks on real data: how many good clips they would touch."""
+    from ingest.plausible import check_clip
+    from ingest.readers import discover, load
+
+    out = {}
+    for name, folder in (("synthetic", corpus), ("facegood", shared / "facegood"),
+                         ("talkingface", shared / "talkingface")):
+        if not folder.exists():
+            print(f"  {folder} absent: skipped")
+            continue
+        found = discover([folder])
+        passed = filled = rejected = 0
+        fastest = 0.0
+        for source in found:
+            try:
+                raw = load(source)
+                clip, note = check_clip(raw)
+            except AnimeGraphError as exc:
+                rejected += 1
+                print(f"  {name} {source.clip_id}: rejected: {exc}")
+                continue
+            passed += 1
+            filled += bool(note)
+            names = list(raw.schema.names)
+            cols = [i for i, n in enumerate(names) if n.endswith(".x")
+                    and names[i + 1:i + 3] == [n[:-2] + ".y", n[:-2] + ".z"]]
+            if cols:
+                idx = np.concatenate([np.arange(i, i + 3) for i in cols])
+                pts = raw.motion[:, idx].reshape(len(raw.motion), -1, 3)
+                speed = np.linalg.norm(np.diff(pts, axis=0), axis=2) * raw.fps
+                fastest = max(fastest, float(np.nanmax(speed)))
+        out[f"{name}_clips"] = len(found)
+        out[f"{name}_passed"] = passed
+        out[f"{name}_filled"] = filled
+        out[f"{name}_rejected"] = rejected
+        out[f"{name}_fastest_point_mm_s"] = round(fastest)
+    return out
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=None)
@@ -374,8 +417,10 @@ def main(argv=None) -> int:
     parser.add_argument("--flips", type=int, default=200)
     parser.add_argument("--kills", type=int, default=5)
     parser.add_argument("--seed", type=int, default=18)
+    parser.add_argument("--shared", type=Path,
+                        default=Path(__file__).resolve().parents[2] / "shared" / "data")
     parser.add_argument("--skip", nargs="*", default=[],
-                        choices=["sql", "databases", "clips", "writers", "kills"])
+                        choices=["sql", "databases", "clips", "writers", "kills", "real"])
     args = parser.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="probe-security-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -385,7 +430,8 @@ def main(argv=None) -> int:
              ("clips", lambda: probe_clips(corpus, work, args.flips, args.seed)),
              ("writers", lambda: probe_writers(corpus, work, args.trials)),
              ("kills", lambda: probe_kills(corpus, db, work, args.kills, args.seed)),
-             ("databases", lambda: probe_databases(corpus, db, work))]
+             ("databases", lambda: probe_databases(corpus, db, work)),
+             ("real", lambda: probe_real(args.shared, corpus))]
     for name, step in steps:
         if name in args.skip:
             continue
