@@ -64,6 +64,13 @@ def test_absurd_phones_are_rejected(rng):
         check_clip(_clip(motion, phones=many))
     fine = (Segment("SIL", 0.0, 0.5), Segment("AA", 0.5, 0.6), Segment("SIL", 0.6, 3.0))
     assert check_clip(_clip(motion, phones=fine))[1] == ""
+    # eSpeak NG's occasional 6 ms phone among normal ones is speech, not an attack.
+    speech = tuple(Segment("AA", 0.1 * i, 0.1 * i + (0.006 if i == 5 else 0.1))
+                   for i in range(20))
+    assert check_clip(_clip(motion, phones=speech))[1] == ""
+    one_us = speech[:5] + (Segment("B", 0.5, 0.500001),) + speech[6:]
+    with pytest.raises(DataError, match="shorter than one analysis frame"):
+        check_clip(_clip(motion, phones=one_us))
 
 
 @pytest.mark.parametrize("value", [4.4e6, 3e38, -2e5])
