@@ -1,83 +1,224 @@
 """SQL over the motion database: DuckDB views on the live version's Parquet files.
 
 Each table of :mod:`db.store` is a view of the same name (``clips``, ``animes``,
-``frames``, ``audio``, ``channels``, ``model_arrays``, ``components``). Queries are
-read-only: only ``SELECT`` (with ``WITH``, ``DESCRIBE``, ``SHOW``, ``SUMMARIZE``) and
-``EXPLAIN`` statements run; anything that could write (``COPY``, ``CREATE``,
-``INSERT``, ``ATTACH``, ``SET`` ...) is refused before it is executed.
+``frames``, ``audio``, ``channels``, ``model_arrays``, ``components``). The SQL is
+untrusted input (a database is shared, a query is pasted), so two fences hold it:
+
+1. **DuckDB's own sandbox**: each query runs on a fresh in-memory connection with
+   ``enable_external_access = false`` and ``lock_configuration = true`` (no ``SET`` can
+   undo it). The tables are the live version's Parquet files opened by pyarrow
+   (``pyarrow.dataset``) and registered as Arrow scans, so DuckDB itself needs no file
+   at all: its only allowed directory (``allowed_directories``) is a private spill
+   folder, deleted after the query. Any other file, URL, ``ATTACH``, extension
+   (``INSTALL``/``LOAD``), ``COPY``/``EXPORT`` is refused by DuckDB, also into the
+   database's own folder.
+2. **Only reading statements**: ``SELECT`` (with ``WITH``, ``FROM``, ``VALUES``,
+   ``DESCRIBE``, ``SHOW``, ``SUMMARIZE``) and ``EXPLAIN [ANALYZE]`` of one of those;
+   anything else (``COPY`` into the version's own folder, ``CREATE``, ``SET`` ...) is
+   refused before it is executed.
+
+Results are streamed in Arrow batches and stop at a row cap (:data:`ROW_LIMIT`), and a
+timer interrupts a query still running after :data:`TIMEOUT_S` seconds; both can be
+raised. Several statements separated by ``;`` each run, in order.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import tempfile
+import threading
+from dataclasses import dataclass
 
 import duckdb
 import pyarrow as pa
+import pyarrow.dataset as ds
 
 from db.errors import DataError, ParameterError
-from db.store import FILE_TABLES, PARTITIONED, TABLES, Database
+from db.store import PARTITIONED, TABLES, Database
 
-_ALLOWED = {duckdb.StatementType.SELECT, duckdb.StatementType.EXPLAIN}
+#: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
+ROW_LIMIT = 100_000
+#: Seconds a query may run before it is interrupted (``animegraph sql --timeout``).
+TIMEOUT_S = 60.0
+#: Rows per streamed Arrow batch.
+BATCH_ROWS = 8192
+
+_ALLOWED = {duckdb.StatementType.SELECT}
+_EXPLAIN = re.compile(r"^\s*EXPLAIN\s+(?:ANALY[SZ]E\s+|\([^)]*\)\s*)?", re.IGNORECASE)
 
 
-def connect(db: Database) -> duckdb.DuckDBPyConnection:
-    """An in-memory DuckDB connection with a view per table of ``db``."""
-    con = duckdb.connect(":memory:")
-    for name in TABLES:
-        path = db.table_path(name)
-        if name in FILE_TABLES:
-            source = f"read_parquet('{_quote(path)}')"
-        else:
-            hive = ", hive_partitioning = true" if name in PARTITIONED else ""
-            source = f"read_parquet('{_quote(path)}/**/*.parquet'{hive})"
-        con.execute(f'CREATE VIEW "{name}" AS SELECT * FROM {source}')
+@dataclass(frozen=True)
+class Result:
+    """One statement's result.
+
+    Attributes
+    ----------
+    sql : str
+        The statement.
+    table : pyarrow.Table
+        Its rows, at most the row cap.
+    truncated : bool
+        True if the statement had more rows than the cap (they were not fetched).
+    """
+
+    sql: str
+    table: pa.Table
+    truncated: bool
+
+
+def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.DuckDBPyConnection:
+    """An in-memory, sandboxed DuckDB connection with a view per table of ``db``.
+
+    The tables are Arrow scans of ``db``'s live version (opened by pyarrow); DuckDB may
+    open no file but in ``spill_dir`` (its temporary files), and its configuration is
+    locked.
+    """
+    con = duckdb.connect(":memory:", config={
+        "autoinstall_known_extensions": False, "autoload_known_extensions": False,
+    })
+    try:
+        allowed = []
+        if spill_dir is not None:
+            allowed.append(str(spill_dir) + os.sep)
+            con.execute("SET temp_directory = ?", [str(spill_dir)])
+        con.execute("SET allowed_directories = ?", [allowed])
+        con.execute("SET enable_external_access = false")
+        con.execute("SET lock_configuration = true")
+        for name in TABLES:
+            con.register(name, _dataset(db, name))
+    except BaseException:
+        con.close()
+        raise
     return con
 
 
-def _quote(path: os.PathLike) -> str:
-    return str(path).replace("'", "''")
-
-
-def check_read_only(sql: str) -> None:
-    """Raise ParameterError unless every statement of ``sql`` only reads."""
+def _dataset(db: Database, name: str) -> ds.Dataset:
     try:
-        statements = duckdb.extract_statements(sql)
-    except duckdb.Error as exc:
-        raise ParameterError(f"SQL does not parse: {_first_line(exc)}") from None
+        if name in PARTITIONED:
+            return ds.dataset(db.table_path(name), format="parquet", partitioning="hive")
+        return ds.dataset(db.table_path(name), format="parquet")
+    except (OSError, pa.ArrowException) as exc:
+        raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+
+
+def check_read_only(sql: str) -> list[str]:
+    """The statements of ``sql``; ParameterError unless every one only reads.
+
+    ``EXPLAIN ANALYZE`` executes its statement, so an ``EXPLAIN`` is allowed only
+    around a statement that is allowed itself.
+    """
+    statements = _parse(sql)
     if not statements:
         raise ParameterError("SQL is empty")
     for statement in statements:
-        if statement.type not in _ALLOWED:
-            kind = statement.type.name
+        kind = statement.type
+        if kind == duckdb.StatementType.EXPLAIN:
+            inner = _EXPLAIN.sub("", statement.query, count=1)
+            try:
+                inner_statements = _parse(inner)
+            except ParameterError:
+                inner_statements = []
+            if len(inner_statements) == 1 and inner_statements[0].type in _ALLOWED:
+                continue
+            kind = inner_statements[0].type if len(inner_statements) == 1 else kind
             raise ParameterError(f"only SELECT queries run here (the database is read-only); "
-                                 f"got a {kind} statement")
+                                 f"got EXPLAIN {kind.name}")
+        if kind not in _ALLOWED:
+            raise ParameterError(f"only SELECT queries run here (the database is read-only); "
+                                 f"got {kind.name}")
+    return [s.query for s in statements]
 
 
-def query(db: Database, sql: str) -> pa.Table:
-    """Run a read-only query; the result of its last statement as an Arrow table.
+def _parse(sql: str) -> list:
+    try:
+        return duckdb.extract_statements(sql)
+    except duckdb.Error as exc:
+        raise ParameterError(f"SQL does not parse: {_first_line(exc)}") from None
+
+
+def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
+        timeout: float = TIMEOUT_S) -> list[Result]:
+    """Run read-only SQL (one or more statements); one :class:`Result` per statement.
+
+    Parameters
+    ----------
+    db : Database
+    sql : str
+        One or more statements separated by ``;``.
+    row_limit : int
+        Rows kept per statement; the rest is never fetched (``Result.truncated``).
+    timeout : float
+        Seconds the whole run may take before DuckDB is interrupted.
 
     Raises
     ------
     ParameterError
-        If the SQL writes, or fails (unknown column, type error ...): the message is
-        DuckDB's first line.
+        If the SQL writes, reaches outside the database, fails (unknown column, type
+        error ...) or runs out of time: DuckDB's first line.
     """
-    check_read_only(sql)
-    con = connect(db)
+    if row_limit < 1:
+        raise ParameterError(f"the row limit must be >= 1, got {row_limit}")
+    if not timeout > 0:
+        raise ParameterError(f"the time limit must be > 0 s, got {timeout}")
+    statements = check_read_only(sql)
+    timer = None
+    with tempfile.TemporaryDirectory(prefix="animegraph-sql-") as spill:
+        try:
+            con = connect(db, spill)
+        except duckdb.Error as exc:
+            raise DataError(f"database {db.root} could not be opened: {_first_line(exc)}") from None
+        try:
+            timer = threading.Timer(timeout, con.interrupt)
+            timer.daemon = True
+            timer.start()
+            return [_fetch(con, statement, row_limit) for statement in statements]
+        except duckdb.InterruptException:
+            raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
+                                 f"--timeout)") from None
+        except duckdb.Error as exc:
+            raise ParameterError(f"query failed: {_first_line(exc)}") from None
+        except OSError as exc:
+            raise DataError(f"database {db.root} could not be read: {exc}") from exc
+        finally:
+            if timer is not None:
+                timer.cancel()
+            con.close()
+
+
+def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Result:
+    relation = con.sql(statement)
+    if relation is None:  # pragma: no cover - only reading statements get here
+        return Result(statement, pa.table({}), False)
+    reader = relation.to_arrow_reader(BATCH_ROWS)
+    batches, rows, truncated = [], 0, False
     try:
-        statements = duckdb.extract_statements(sql)
-        for statement in statements[:-1]:
-            con.execute(statement.query)
-        relation = con.sql(statements[-1].query)
-        # DuckDB 2 renamed a relation's arrow() to to_arrow_table().
-        fetch = getattr(relation, "to_arrow_table", None) or relation.arrow
-        return fetch()
-    except duckdb.Error as exc:
-        raise ParameterError(f"query failed: {_first_line(exc)}") from None
-    except OSError as exc:
-        raise DataError(f"database {db.root} could not be read: {exc}") from exc
+        for batch in reader:
+            if rows + batch.num_rows > row_limit:
+                batches.append(batch.slice(0, row_limit - rows))
+                truncated = True
+                break
+            batches.append(batch)
+            rows += batch.num_rows
     finally:
-        con.close()
+        reader.close()
+    return Result(statement, pa.Table.from_batches(batches, schema=reader.schema), truncated)
+
+
+def query(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
+          timeout: float = TIMEOUT_S) -> pa.Table:
+    """Run read-only SQL; the result of its last statement as an Arrow table.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`run`, and if the result has more than ``row_limit`` rows.
+    """
+    last = run(db, sql, row_limit=row_limit, timeout=timeout)[-1]
+    if last.truncated:
+        raise ParameterError(f"the query returns more than {row_limit} rows; narrow it or "
+                             f"raise the limit")
+    return last.table
 
 
 def _first_line(exc: Exception) -> str:

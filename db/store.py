@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import re
 import secrets
@@ -39,6 +40,7 @@ import pyarrow.parquet as pq
 
 from db.atomic import atomic_write
 from db.errors import DataError
+from db.lock import pid_alive, writer_lock
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +53,18 @@ FOLDER_TABLES = ("audio",)
 FILE_TABLES = ("channels", "model_arrays", "components")
 TABLES = PARTITIONED + FOLDER_TABLES + FILE_TABLES
 
+#: Largest manifest read, bytes, and its deepest nesting.
+MAX_MANIFEST_BYTES = 16 << 20
+MAX_MANIFEST_DEPTH = 32
+#: Most dimensions of a model array.
+MAX_ARRAY_DIMS = 8
+#: Seconds a writer waits for another one to finish (``animegraph ingest --wait``).
+WRITE_WAIT_S = 600.0
+#: ``based_on`` default of :func:`write_version`: do not check the live version.
+ANY_VERSION = object()
+
 _VERSION = re.compile(r"^v(\d{6})$")
+_STAGING = re.compile(r"^\.v\d{6}\.partial-(?:(\d+)-)?[0-9a-f]+$")
 _CURRENT = "CURRENT"
 
 
@@ -60,8 +73,20 @@ def is_database(path: str | os.PathLike) -> bool:
     return (Path(path) / _CURRENT).is_file()
 
 
-def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict) -> Path:
+def is_staging(name: str) -> bool:
+    """True if ``name`` is a writer's staging folder (a version being written)."""
+    return _STAGING.match(name) is not None
+
+
+def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest: dict, *,
+                  based_on: str | None | object = ANY_VERSION, wait: float = WRITE_WAIT_S,
+                  ) -> Path:
     """Write a new version of the database at ``path`` and make it the live one.
+
+    The database's writer lock (:func:`db.lock.writer_lock`) is held throughout (a
+    caller may hold it already), and the switch of ``CURRENT`` checks that the live
+    version is still ``based_on``: a version built from an older state is refused
+    rather than silently dropping what another writer added.
 
     Parameters
     ----------
@@ -72,25 +97,43 @@ def write_version(path: str | os.PathLike, tables: dict[str, pa.Table], manifest
     manifest : dict
         Summary to store (JSON-serialisable); the schema and database versions and
         the table list are added here.
+    based_on : str or None, optional
+        The live version (None: no database yet) the tables were built from; checked
+        under the lock before anything is written. By default not checked.
+    wait : float
+        Seconds to wait for another writer.
 
     Returns
     -------
     Path
         The new version's folder.
+
+    Raises
+    ------
+    DataError
+        If another writer holds the database longer than ``wait``, or the live version
+        moved away from ``based_on``.
     """
-    root = Path(path)
+    with writer_lock(path, wait=wait, what="database"):
+        return _write_version(Path(path), tables, manifest, based_on)
+
+
+def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
+                   based_on) -> Path:
     missing = set(TABLES) - set(tables)
     if missing:
         raise ValueError(f"missing tables: {sorted(missing)}")
     for name in PARTITIONED:
         if "emotion" not in tables[name].column_names:
             raise ValueError(f"table {name} needs an emotion column to be partitioned by")
-    root.mkdir(parents=True, exist_ok=True)
     previous = current_version(root) if is_database(root) else None
+    if based_on is not ANY_VERSION and previous != based_on:
+        raise DataError(f"database {root} changed while this write was prepared (it is now "
+                        f"{previous or 'empty'}, was {based_on or 'empty'}); nothing written")
     number = 1 + max([_number(p.name) for p in root.iterdir() if _VERSION.match(p.name)],
                      default=0)
     name = f"v{number:06d}"
-    staging = root / f".{name}.partial-{secrets.token_hex(4)}"
+    staging = root / f".{name}.partial-{os.getpid()}-{secrets.token_hex(4)}"
     try:
         staging.mkdir()
         for table_name, table in tables.items():
@@ -140,7 +183,11 @@ def _fsync_tree(folder: Path) -> None:
 def _prune(root: Path, keep: set[str]) -> None:
     for child in root.iterdir():
         stale_version = _VERSION.match(child.name) and child.name not in keep
-        stale_staging = child.name.startswith(".v") and ".partial-" in child.name
+        staging = _STAGING.match(child.name)
+        # A staging folder is removed only once its writer is gone (a killed ingest);
+        # one of a live writer (e.g. an older animegraph ignoring the lock) is left alone.
+        stale_staging = staging is not None and not (
+            staging.group(1) and pid_alive(int(staging.group(1))))
         if child.is_dir() and (stale_version or stale_staging):
             shutil.rmtree(child, ignore_errors=True)
 
@@ -161,9 +208,17 @@ def current_version(path: str | os.PathLike) -> str:
     """Name of the live version of the database at ``path``."""
     root = Path(path)
     try:
-        name = (root / _CURRENT).read_text().strip()
+        with open(root / _CURRENT, "rb") as handle:
+            raw = handle.read(64)
     except FileNotFoundError:
         raise DataError(f"{root} is not an animegraph database (no {_CURRENT} file)") from None
+    except OSError as exc:
+        raise DataError(f"database {root} is damaged: cannot read {_CURRENT}: "
+                        f"{exc.strerror or exc}") from None
+    try:
+        name = raw.decode("ascii").strip()
+    except UnicodeDecodeError:
+        raise DataError(f"database {root} is damaged: {root / _CURRENT} is not text") from None
     if not _VERSION.match(name) or not (root / name).is_dir():
         raise DataError(f"database {root} is damaged: {_CURRENT} names {name!r}, not a version")
     return name
@@ -200,16 +255,18 @@ class Database:
         if not root.exists():
             raise DataError(f"database {root} does not exist")
         version_dir = root / current_version(root)
-        try:
-            manifest = json.loads((version_dir / "manifest.json").read_text())
-        except (OSError, ValueError) as exc:
-            raise DataError(f"database {root} is damaged: cannot read its manifest") from exc
+        manifest = _read_manifest(version_dir / "manifest.json")
         if manifest.get("schema_version") != SCHEMA_VERSION:
             raise DataError(
                 f"database {root} has schema version {manifest.get('schema_version')}, "
                 f"this animegraph reads version {SCHEMA_VERSION}"
             )
         return cls(root=root, version_dir=version_dir, manifest=manifest)
+
+    def damaged(self, name: str, problem: str) -> DataError:
+        """The error for a table (or file) of this version that does not hold up."""
+        where = self.table_path(name) if name in TABLES else self.version_dir / name
+        return DataError(f"database {self.root} is damaged: {where}: {problem}")
 
     def table_path(self, name: str) -> Path:
         """Where the table ``name`` lives (a folder, or one file)."""
@@ -228,15 +285,22 @@ class Database:
                 dataset = ds.dataset(self.table_path(name), format="parquet")
             return dataset.to_table(columns=columns, filter=filter)
         except (OSError, pa.ArrowException) as exc:
-            raise DataError(f"database {self.root} is damaged: cannot read {name}: {exc}") from exc
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise self.damaged(name, f"cannot be read: {first}") from None
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...)."""
+        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...).
+
+        Raises
+        ------
+        DataError
+            If the table is not (name, shape, values) rows whose shapes fit their values,
+            or a value is not finite.
+        """
         try:
             return arrays_from_table(self.table("model_arrays"))
-        except (KeyError, ValueError) as exc:
-            raise DataError(f"database {self.root} is damaged: unreadable model arrays "
-                            f"({exc})") from exc
+        except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
+            raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
 
 
 def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:
@@ -251,12 +315,66 @@ def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:
 
 
 def arrays_from_table(table: pa.Table) -> dict[str, np.ndarray]:
-    """Inverse of :func:`arrays_to_table`."""
+    """Inverse of :func:`arrays_to_table`; checks every row (ValueError if one is bad)."""
     out = {}
     names = table.column("name").to_pylist()
     shapes = table.column("shape").to_pylist()
     values = table.column("values")
+    if not (pa.types.is_list(values.type) or pa.types.is_large_list(values.type)) or not (
+            pa.types.is_floating(values.type.value_type)
+            or pa.types.is_integer(values.type.value_type)):
+        raise ValueError(f"values must be lists of numbers, not {values.type}")
     for i, (name, shape) in enumerate(zip(names, shapes, strict=True)):
-        flat = values[i].values.to_numpy(zero_copy_only=False)
+        if not isinstance(name, str) or name in out:
+            raise ValueError(f"row {i}: missing or repeated name {name!r}")
+        if (not isinstance(shape, list) or len(shape) > MAX_ARRAY_DIMS
+                or not all(isinstance(d, int) and 0 <= d for d in shape)):
+            raise ValueError(f"{name}: bad shape {shape!r}")
+        if values[i].values is None:
+            raise ValueError(f"{name}: no values")
+        flat = values[i].values.to_numpy(zero_copy_only=False).astype(np.float64)
+        if flat.size != math.prod(shape):
+            raise ValueError(f"{name}: {flat.size} values for shape {tuple(shape)}")
+        if not np.isfinite(flat).all():
+            raise ValueError(f"{name}: values not finite")
         out[name] = flat.reshape(shape)
     return out
+
+
+def _read_manifest(path: Path) -> dict:
+    """A version's manifest: a JSON object of bounded size and depth, or DataError."""
+    try:
+        if path.stat().st_size > MAX_MANIFEST_BYTES:
+            raise DataError(f"database {path.parent.parent} is damaged: {path} is larger "
+                            f"than {MAX_MANIFEST_BYTES} bytes")
+        manifest = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        problem = "nested too deeply" if isinstance(exc, RecursionError) else "unreadable"
+        raise DataError(f"database {path.parent.parent} is damaged: {path} is "
+                        f"{problem}") from None
+    if not isinstance(manifest, dict):
+        raise DataError(f"database {path.parent.parent} is damaged: {path} is not a JSON "
+                        f"object")
+    stack, depth_of = [(manifest, 1)], 0
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            depth_of = max(depth_of, depth)
+            if depth_of > MAX_MANIFEST_DEPTH:
+                raise DataError(f"database {path.parent.parent} is damaged: {path} is nested "
+                                f"deeper than {MAX_MANIFEST_DEPTH} levels")
+            stack.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict)
+                                                   else item))
+    for key in ("fps",):
+        value = manifest.get(key)
+        if (isinstance(value, bool) or not isinstance(value, int | float)
+                                  or not math.isfinite(value) or value <= 0):
+            raise DataError(f"database {path.parent.parent} is damaged: {path}: {key} is "
+                            f"{value!r}")
+    for key in ("n_channels", "n_pcs", "n_clips", "n_animes", "n_frames"):
+        value = manifest.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 0):
+            raise DataError(f"database {path.parent.parent} is damaged: {path}: {key} is "
+                            f"{value!r}")
+    return manifest

@@ -2,8 +2,10 @@
 
 1. Find the clips under the sources (:func:`ingest.readers.discover`).
 2. Per clip, in worker processes: read it, skip it if the database already has it with
-   the same checksum, else prepare it (:func:`ingest.prepare.prepare_clip`). A clip that
-   fails is rejected with its reason; the others go on.
+   the same checksum, else check that it is plausible (labels, phones, motion:
+   :mod:`ingest.plausible`; implausible samples become dropouts or the clip is rejected)
+   and prepare it (:func:`ingest.prepare.prepare_clip`). A clip that fails is rejected
+   with its reason; the others go on.
 3. If anything was added or changed: the clips already in the database and the new ones
    are decomposed together (PCA keeping 95 % of the variance, then FastICA over the
    whole corpus, Cao et al. §4.1 and §5.1.2), the per-component low-pass cutoffs are
@@ -32,10 +34,19 @@ import numpy as np
 
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
-from db.store import Database, is_database, write_version
+from db.lock import LOCK_NAME, writer_lock
+from db.store import (
+    ANY_VERSION,
+    WRITE_WAIT_S,
+    Database,
+    is_database,
+    is_staging,
+    write_version,
+)
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
 from ingest.motion import fill_gaps, head_points
+from ingest.plausible import Limits, check_clip
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.tables import build_tables, prepared_from_database
@@ -55,6 +66,7 @@ class IngestConfig:
     correct_lag: bool = True  # shift landmark / Live Link motion by its estimated lip-audio lag
     random_state: int = 0  # FastICA seed
     phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
+    limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
 
 
 @dataclass(frozen=True)
@@ -68,6 +80,7 @@ class ClipReport:
     n_animes: int = 0
     segmentation: str = ""
     duration_s: float = 0.0
+    note: str = ""  # e.g. implausible samples filled as dropouts (ingest.plausible)
 
 
 @dataclass
@@ -93,6 +106,8 @@ class IngestReport:
         for c in self.clips:
             if c.status == "rejected":
                 out.append(f"  rejected {c.source}: {c.reason}")
+            elif c.note:
+                out.append(f"  {c.status} {c.source}: {c.note}")
         if self.written:
             s = self.summary
             out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
@@ -123,17 +138,19 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag, reference, engine = args
+    source, known, fps, correct_lag, reference, engine, limits = args
     try:
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
+        raw, note = check_clip(raw, limits)
         clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
                             head_reference=reference if _has_head(raw.schema) else None,
                             phones_engine=engine)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
-                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3))
+                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
+                            note=note)
         return report, clip
     except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
@@ -147,6 +164,7 @@ def ingest(
     workers: int = 1,
     progress: Callable[[int], Callable] | None = None,
     say: Callable[[str], object] | None = None,
+    wait: float = WRITE_WAIT_S,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -164,12 +182,18 @@ def ingest(
     say : callable, optional
         Receives a line naming each corpus-wide step after the clips are read
         (decomposition, emotion model, writing), which take most of a large ingest.
+    wait : float
+        Seconds to wait for another writer of the database to finish. The database's
+        writer lock is held for the whole ingest, so that two ingests into one
+        database run one after the other and neither loses the other's clips.
 
     Raises
     ------
     ParameterError
         If a source does not exist, nothing ingestable is found, ``db_path`` is
         something else than a database, or every clip is rejected.
+    DataError
+        If another process is still writing the database after ``wait`` seconds.
     """
     config = config or IngestConfig()
     started = time.perf_counter()
@@ -179,11 +203,23 @@ def ingest(
             raise ParameterError(f"source {s} does not exist")
     if workers < 1:
         raise ParameterError(f"workers must be >= 1, got {workers}")
+    # Checked before the lock is taken (not to leave a lock file in a folder of something
+    # else), and again under it; a folder holding our lock file is a database being made.
+    if db_path.exists() and not is_database(db_path) and (
+            not db_path.is_dir() or not (db_path / LOCK_NAME).exists() and _foreign(db_path)):
+        raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+    with writer_lock(db_path, wait=wait, what="database"):
+        return _ingest_locked(sources, db_path, config, workers, progress, started, say)
+
+
+def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, progress,
+                   started: float, say: Callable[[str], object] | None) -> IngestReport:
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
-    elif db_path.exists() and (not db_path.is_dir() or any(db_path.iterdir())):
+    elif _foreign(db_path):
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+    based_on = existing.version_dir.name if existing is not None else None
 
     found = discover([Path(s) for s in sources])
     if not found:
@@ -200,7 +236,7 @@ def ingest(
             raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")
 
     if reference is None:
-        reference = _head_reference(found)
+        reference = _head_reference(found, config.limits)
     report = IngestReport(db=db_path)
     results = _run(found, known, fps, config, workers, progress, reference)
     new: list[PreparedClip] = []
@@ -218,17 +254,23 @@ def ingest(
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report, reference, say)
+            _write(db_path, everything, config, target_fps, report, reference, based_on,
+                   say)
     elif existing is not None and "emotion" not in existing.manifest:
         # Written before emotion models existed: learn it now from the stored clips.
         _write(db_path, prepared_from_database(existing), config, fps, report, reference,
-               say)
+               based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):
         raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
                              f"{report.clips[0].source}: {report.clips[0].reason}")
     return report
+
+
+def _foreign(folder: Path) -> bool:
+    """True if ``folder`` holds anything but a writer's lock and staging folders."""
+    return any(p.name != LOCK_NAME and not is_staging(p.name) for p in folder.iterdir())
 
 
 def prepare_sources(
@@ -239,7 +281,7 @@ def prepare_sources(
     Rejected clips are logged and left out.
     """
     config = config or IngestConfig()
-    reference = _head_reference(list(found))
+    reference = _head_reference(list(found), config.limits)
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
     clips = [c for r, c in results if c is not None]
     for r, _ in results:
@@ -252,8 +294,8 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, config.correct_lag, reference, config.phones_engine)
-            for s in found]
+    jobs = [(s, known, fps, config.correct_lag, reference, config.phones_engine,
+             config.limits) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
@@ -265,8 +307,8 @@ def _has_head(schema) -> bool:
     return schema.kind in ("markers", "landmarks") and head_points(schema.groups) >= 3
 
 
-def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
-    """The head frame of a new database: its first readable clip's mean head pose.
+def _head_reference(found: list[ClipSource], limits: Limits) -> np.ndarray | None:
+    """The head frame of a new database: its first plausible clip's mean head pose.
 
     Rest positions from the corpus' ``markers.csv`` would do as well; the mean pose of
     one clip needs nothing but the clip.
@@ -275,7 +317,7 @@ def _head_reference(found: list[ClipSource]) -> np.ndarray | None:
         if source.kind == "curves":  # no points, no head frame: not worth reading
             return None
         try:
-            raw = load(source)
+            raw, _ = check_clip(load(source), limits)
         except DataError:
             continue
         if not _has_head(raw.schema):
@@ -317,10 +359,10 @@ def _consistent(kept: list[PreparedClip], new: list[PreparedClip],
 
 
 def _write(db_path: Path, clips: list[PreparedClip], config: IngestConfig, fps: float,
-           report: IngestReport, reference: np.ndarray | None,
+           report: IngestReport, reference: np.ndarray | None, based_on: str | None,
            say: Callable[[str], object] | None = None) -> None:
     summary, version_dir = build_database(db_path, clips, config, fps=fps, reference=reference,
-                                          say=say)
+                                          based_on=based_on, say=say)
     report.written = True
     report.version = version_dir.name
     report.summary = summary
@@ -330,12 +372,14 @@ def build_database(
     db_path: str | os.PathLike, clips: Sequence[PreparedClip], config: IngestConfig | None = None,
     *, fps: float | None = None, reference: np.ndarray | None = None,
     say: Callable[[str], object] | None = None,
+    based_on: str | None | object = ANY_VERSION,
 ) -> tuple[dict, Path]:
     """Decompose prepared clips together and write them as a new database version.
 
     The corpus-wide half of an ingest (PCA keeping ``config.variance`` then FastICA over
     all clips, §4.1/§5.1.2; per-component cutoffs, §4.3; anime nodes), usable on its own
     to build databases from clips prepared once (e.g. the folds of an evaluation).
+    ``based_on`` is passed to :func:`db.store.write_version`.
 
     Returns
     -------
@@ -381,11 +425,11 @@ def build_database(
         "ica_converged": bool(model.ica_converged_),
         "emotion": emotion_entry,
     }
-    return summary, write_version(db_path, tables, summary)
+    return summary, write_version(db_path, tables, summary, based_on=based_on)
 
 
 def _save_report(db_path: Path, report: IngestReport) -> None:
-    if not db_path.is_dir():
+    if not is_database(db_path):  # nothing written into a new folder: leave it empty
         return
     folder = db_path / "reports"
     folder.mkdir(exist_ok=True)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import require_shared
+from crafted import PicklePayload
 from scipy.spatial.transform import Rotation
 
 from db.errors import DataError, ParameterError
@@ -36,6 +37,7 @@ from ingest.readers import (
     normalise_landmarks,
     shift_motion,
 )
+from ingest.readers.common import load_npy
 from ingest.readers.curves import curve_group
 from ingest.readers.landmarks import (
     HEAD_RADIUS_MM,
@@ -243,25 +245,36 @@ def test_curve_clip_failures(tmp_path):
     with pytest.raises(DataError, match=r"expected a 2-D \(n_frames, n_channels\)"):
         load(_one([tmp_path / "a"]))
     np.save(stem.with_suffix(".npy"), np.array([{"a": 1}], dtype=object))
-    with pytest.raises(DataError, match="unreadable or truncated array file"):
-        load(_one([tmp_path / "a"]))  # generic .npy files are never unpickled
+    with pytest.raises(DataError, match=r"holds Python objects \(a pickle\); refused"):
+        load(_one([tmp_path / "a"]))  # .npy files are never unpickled
     np.save(stem.with_suffix(".npy"), np.zeros((90, 4)))
     stem.with_suffix(".npy").write_bytes(stem.with_suffix(".npy").read_bytes()[:-100])
     with pytest.raises(DataError, match="unreadable or truncated array file"):
         load(_one([tmp_path / "a"]))
 
 
-def test_facegood_layout_reads_legacy_object_arrays(tmp_path):
+def test_facegood_layout_never_unpickles(tmp_path):
     root = tmp_path / "fg"
     (root / "bs_value").mkdir(parents=True)
     (root / "wav").mkdir()
-    rows = [[0.1 * i, 0.5, 0.0] for i in range(60)]
-    np.save(root / "bs_value" / "bs_value_c1.npy", np.array(rows, dtype=object),
-            allow_pickle=True)  # a pickled object array, as old FACEGOOD tools might write
     (root / "bsname.txt").write_text("3\njaw\nbrow_raise_c\neye_blink1_l\n")
     write_wav(root / "wav" / "c1.wav", np.zeros(32000, np.float32), 16000)
+    # A crafted .npy whose unpickling would run code: it must be refused, not run.
+    marker = tmp_path / "payload-ran"
+    np.save(root / "bs_value" / "bs_value_c1.npy", np.array([PicklePayload(marker)], dtype=object),
+            allow_pickle=True)
     source = _one([root])
-    assert (source.layout, source.clip_id, source.corpus) == ("facegood", "c1", "fg")
+    assert (source.layout, source.clip_id) == ("facegood", "c1")
+    with pytest.raises(DataError, match="holds Python objects .*refused"):
+        load(source)
+    assert not marker.exists()
+    # A pickled object array of plain numbers is refused too: nothing is unpickled.
+    np.save(root / "bs_value" / "bs_value_c1.npy",
+            np.array([[0.1 * i, 0.5, 0.0] for i in range(60)], dtype=object), allow_pickle=True)
+    with pytest.raises(DataError, match="refused"):
+        load(source)
+    rows = [[0.1 * i, 0.5, 0.0] for i in range(60)]
+    np.save(root / "bs_value" / "bs_value_c1.npy", np.array(rows))
     clip = load(source)
     # FACEGOOD's columns sit one after their names (see facegood_column_names).
     assert clip.schema.names == ("unnamed_0", "jaw", "brow_raise_c")
@@ -270,6 +283,14 @@ def test_facegood_layout_reads_legacy_object_arrays(tmp_path):
     (root / "bsname.txt").write_text("4\njaw\nbrow_raise_c\neye_blink1_l\n")
     with pytest.raises(DataError, match="says 4 names but lists 3"):
         load(source)
+
+
+def test_shared_facegood_files_load_without_pickle():
+    folder = require_shared("facegood")
+    files = sorted(folder.rglob("*.npy"))
+    assert files
+    for path in files:
+        assert not load_npy(path).dtype.hasobject, path
 
 
 # --------------------------------------------------------------------------- bad input

@@ -22,7 +22,8 @@ bytes, the database version and the options that change its outputs) is skipped 
 re-run unless ``force``. Every file is written to a temporary name and renamed; the old
 ``done.json`` is removed before a line is redone, so an interrupted batch never leaves a
 line that looks finished but is not. A failing line records its reason in
-``OUT/report.csv`` and the others go on.
+``OUT/report.csv`` and the others go on. One batch at a time writes into an output
+folder (an OS lock, :func:`db.lock.writer_lock`); a second one fails with one line.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from animegraph import __version__
 from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
+from db.lock import writer_lock
 from db.store import Database, current_version
 from ingest.workers import sigint_ignored_by_children
 
@@ -163,7 +165,7 @@ def run_batch(
         The script is malformed (nothing runs).
     AnimeGraphError
         The database cannot be opened, rendering is unavailable, the scheduler cannot be
-        reached: nothing runs.
+        reached, another batch is writing into ``options.out``: nothing runs.
     """
     say = say or (lambda _line: None)
     if options.render not in RENDER_MODES:
@@ -182,7 +184,13 @@ def run_batch(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ParameterError(f"cannot create --out {out}: {exc.strerror or exc}") from None
+    # One batch per output folder: a second one would delete the first's temporaries.
+    with writer_lock(out, wait=0, what="batch output folder"):
+        return _run_locked(lines, options, db, version, identity, out, progress, say)
 
+
+def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: Path,
+                progress, say) -> BatchResult:
     rows: dict[str, dict] = {}
     tasks: list[LineTask] = []
     for line in lines:

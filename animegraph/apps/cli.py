@@ -133,13 +133,21 @@ def build_parser() -> argparse.ArgumentParser:
                      "aligns a transcript, hama recognises phones without one: each measured "
                      "best at it), "
                      "hama (CTC phone model shipped in its wheel) or pocketsphinx")
+    ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
+                     help="fastest plausible marker motion in mm/s (default 5000); a faster "
+                     "jump is a dropout, or rejects the clip if it lasts")
+    ing.add_argument("--wait", type=_number, default=None,
+                     help="seconds to wait for another ingest into the same --db to finish "
+                     "(default 600); one writer at a time")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_cmd_ingest)
 
     sql = sub.add_parser(
         "sql", help="run a read-only SQL query on a database",
         description="Run SQL (DuckDB) over the database's tables: clips, animes, frames, "
-        "audio, channels, model_arrays, components. Only SELECT queries run.",
+        "audio, channels, model_arrays, components. Only SELECT queries run, in DuckDB's "
+        "sandbox (no file outside the database, no network, no extensions); several "
+        "statements separated by ';' each print their result.",
     )
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
@@ -149,6 +157,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
                      help="rows shown in table format (default 50)")
+    sql.add_argument("--limit", type=_whole_number, default=None,
+                     help="rows fetched per statement; the rest is never read "
+                     "(default 100000)")
+    sql.add_argument("--timeout", type=_number, default=None,
+                     help="seconds before the query is interrupted (default 60)")
     sql.set_defaults(func=_cmd_sql)
 
     syn = sub.add_parser(
@@ -594,14 +607,17 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
+    from ingest.plausible import Limits
 
+    limits = Limits() if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction,
-                          phones_engine=args.phones_engine)
+                          phones_engine=args.phones_engine, limits=limits)
+    wait = {} if args.wait is None else {"wait": args.wait}
     report = ingest(args.sources, args.db, config, workers=args.workers,
                     progress=lambda total: _progress(total, args.quiet, "clip",
                                                      "ingest: reading clips"),
-                    say=None if args.quiet else _say)
+                    say=None if args.quiet else _say, **wait)
     for line in report.lines():
         print(line)
     return 1 if report.count("rejected") else 0
@@ -609,15 +625,26 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
 def _cmd_sql(args: argparse.Namespace) -> int:
     from animegraph.apps.tabular import format_table
-    from db.sql import query
+    from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
     if args.format == "parquet" and args.output is None:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
-    result = query(Database.open(args.db), args.query)
-    text = format_table(result, args.format, max_rows=args.max_rows, output=args.output)
-    if text is not None:
-        sys.stdout.write(text)
+    limit = args.limit or ROW_LIMIT
+    results = run(Database.open(args.db), args.query, row_limit=limit,
+                  timeout=args.timeout or TIMEOUT_S)
+    if args.output is not None and len(results) > 1:
+        raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
+    for i, result in enumerate(results):
+        if i and args.format == "table":
+            sys.stdout.write("\n")
+        text = format_table(result.table, args.format, max_rows=args.max_rows,
+                            output=args.output)
+        if text is not None:
+            sys.stdout.write(text)
+        if result.truncated:
+            print(f"animegraph sql: only the first {limit} rows were read (raise --limit)",
+                  file=sys.stderr)
     return 0
 
 

@@ -10,7 +10,22 @@ from ingest.speech.phones import PHONES
 
 
 def database_info(db: Database) -> dict:
-    """A JSON-able summary of ``db``: manifest, phones, segmentation, components."""
+    """A JSON-able summary of ``db``: manifest, phones, segmentation, components.
+
+    Raises
+    ------
+    DataError
+        If the manifest or a table lacks what the summary reads (one line naming it).
+    """
+    try:
+        info = _database_info(db)
+        info_lines(info)  # every field it prints has the type it needs
+        return info
+    except (KeyError, TypeError, AttributeError, ValueError) as exc:
+        raise db.damaged("manifest.json", f"it lacks or mistypes {exc}") from None
+
+
+def _database_info(db: Database) -> dict:
     m = db.manifest
     animes = db.table("animes", columns=["phoneme"]).column("phoneme").to_pylist()
     clips = db.table("clips", columns=["segmentation", "speaker"]).to_pylist()

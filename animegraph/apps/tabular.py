@@ -35,7 +35,10 @@ def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
         return None
     if fmt == "csv":
         buffer = io.BytesIO()
-        flat = pa.table({n: _csv_safe(table.column(n)) for n in table.column_names})
+        # By position: a join may repeat a column name (SELECT a.x, b.x ...).
+        flat = pa.Table.from_arrays([_csv_safe(table.column(i))
+                                     for i in range(table.num_columns)],
+                                    names=table.column_names)
         pacsv.write_csv(flat, buffer)
         text = buffer.getvalue().decode()
     elif fmt == "json":
@@ -71,8 +74,9 @@ def _json(value):
 
 def _pretty(table: pa.Table, max_rows: int) -> str:
     names = table.column_names
-    rows = table.slice(0, max_rows).to_pylist()
-    cells = [[_shorten(r[n]) for n in names] for r in rows]
+    shown = table.slice(0, max_rows)
+    columns = [shown.column(i).to_pylist() for i in range(shown.num_columns)]
+    cells = [[_shorten(c[r]) for c in columns] for r in range(shown.num_rows)]
     widths = [max([len(n)] + [len(c[i]) for c in cells]) for i, n in enumerate(names)]
     widths = [min(w, 60) for w in widths]
 

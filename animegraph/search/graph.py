@@ -110,11 +110,24 @@ class AnimeGraph:
     def from_database(cls, db: Database) -> AnimeGraph:
         """Load the graph of ``db`` (its animes table, sorted by node id).
 
+        Every array is checked before the graph exists (the compiled search kernels
+        index with them unchecked): links in [-1, n) and joining consecutive nodes of
+        one recording, frame ranges and row counts that fit the stored curves, finite
+        values, a known phoneme per node.
+
         Raises
         ------
         DataError
-            If the database has no animes or its node ids are not 0..n-1.
+            If the database has no animes or its animes table does not hold up (the
+            message names the file and the problem).
         """
+        try:
+            return cls._from_database(db)
+        except (KeyError, IndexError, TypeError, ValueError, pa.ArrowException) as exc:
+            raise db.damaged("animes", f"{type(exc).__name__}: {exc}") from None
+
+    @classmethod
+    def _from_database(cls, db: Database) -> AnimeGraph:
         t = db.table("animes", columns=[
             "node_id", "clip_id", "emotion", "position", "phoneme", "start_frame",
             "end_frame", "start_time", "end_time", "prosody_frames", "prosody", "n_frames",
@@ -150,12 +163,12 @@ class AnimeGraph:
         by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)
                          for p in range(len(PHONES)))
         manifest = db.manifest
-        return cls(
+        graph = cls(
             node_phone=node_phone, node_emotion=emotion_codes.astype(np.int16),
-            node_clip=clip_codes, position=t.column("position").to_numpy().astype(np.int32),
+            node_clip=clip_codes, position=_ints(t, "position", np.int32),
             next_node=_links(t.column("next_node")), prev_node=_links(t.column("prev_node")),
-            start_frame=t.column("start_frame").to_numpy().astype(np.int32),
-            end_frame=t.column("end_frame").to_numpy().astype(np.int32),
+            start_frame=_ints(t, "start_frame", np.int32),
+            end_frame=_ints(t, "end_frame", np.int32),
             start_time=t.column("start_time").to_numpy().astype(np.float32),
             end_time=t.column("end_time").to_numpy().astype(np.float32),
             prosody_offsets=prosody_offsets, prosody_values=prosody_values,
@@ -164,24 +177,79 @@ class AnimeGraph:
             emotions=emotions, fps=float(manifest["fps"]),
             n_channels=int(manifest["n_channels"]),
         )
+        graph.check()
+        return graph
+
+    def check(self) -> None:
+        """ValueError unless every array is in range and consistent (see from_database)."""
+        n = self.n_nodes
+        for name in ("next_node", "prev_node"):
+            links = getattr(self, name)
+            if links.shape != (n,) or ((links < -1) | (links >= n)).any():
+                raise ValueError(f"{name} outside [-1, {n})")
+        nxt = np.flatnonzero(self.next_node >= 0)
+        if (self.prev_node[self.next_node[nxt]] != nxt).any() or (
+                self.node_clip[self.next_node[nxt]] != self.node_clip[nxt]).any():
+            raise ValueError("next_node and prev_node do not link one recording's nodes")
+        if (self.prev_node >= 0).sum() != nxt.size:
+            raise ValueError("next_node and prev_node disagree")
+        if ((self.start_frame < 0) | (self.end_frame <= self.start_frame)).any():
+            raise ValueError("frame ranges are empty or negative")
+        if np.diff(self.motion_offsets).min(initial=1) < 1 or np.diff(
+                self.prosody_offsets).min(initial=1) < 1:
+            raise ValueError("a node without motion or prosody frames")
+        for name in ("prosody_values", "motion_values", "first_pcs", "last_pcs",
+                     "start_time", "end_time"):
+            if not np.isfinite(getattr(self, name)).all():
+                raise ValueError(f"{name} not finite")
+        if self.first_pcs.shape != self.last_pcs.shape or self.first_pcs.shape[0] != n:
+            raise ValueError("first_pcs and last_pcs shapes differ")
+        if not (np.isfinite(self.fps) and self.fps > 0 and self.n_channels > 0):
+            raise ValueError(f"fps {self.fps} / n_channels {self.n_channels} in the manifest")
 
 
 def _links(column: pa.ChunkedArray) -> np.ndarray:
+    if not pa.types.is_integer(column.type):
+        raise TypeError(f"links must be integers, not {column.type}")
     return column.combine_chunks().fill_null(-1).to_numpy().astype(np.int64)
+
+
+def _ints(t: pa.Table, name: str, dtype) -> np.ndarray:
+    column = t.column(name)
+    if not pa.types.is_integer(column.type) or column.null_count:
+        raise TypeError(f"{name} must be integers without nulls, not {column.type}")
+    values = column.to_numpy().astype(np.int64)
+    info = np.iinfo(dtype)
+    if ((values < info.min) | (values > info.max)).any():
+        raise ValueError(f"{name} outside the range of {np.dtype(dtype).name}")
+    return values.astype(dtype)
 
 
 def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Flattened list column -> (values of shape (total_rows, width), row offsets)."""
     flat = column.combine_chunks()
-    values = flat.values.to_numpy(zero_copy_only=False).astype(np.float32)
+    if flat.null_count:
+        raise ValueError(f"{column.type} column has nulls")
+    values = flat.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
     rows = rows_per_node.astype(np.int64)
+    if (rows < 1).any():
+        raise ValueError("a node with no frames")
     total = int(rows.sum())
     width = values.size // total if total else 0
+    if width < 1 or total * width != values.size:
+        raise ValueError(f"{values.size} values do not fill {total} frames")
+    lengths = np.diff(flat.offsets.to_numpy())
+    if not np.array_equal(lengths, rows * width):
+        raise ValueError("a node's list does not hold its frames")
     offsets = np.zeros(len(rows) + 1, dtype=np.int64)
     np.cumsum(rows, out=offsets[1:])
     return values.reshape(total, width), offsets
 
 
 def _fixed(column: pa.ChunkedArray, n: int) -> np.ndarray:
-    values = column.combine_chunks().values.to_numpy(zero_copy_only=False)
+    flat = column.combine_chunks()
+    values = flat.flatten().to_numpy(zero_copy_only=False)
+    lengths = np.diff(flat.offsets.to_numpy())
+    if flat.null_count or (len(lengths) and (lengths != lengths[0]).any()) or values.size == 0:
+        raise ValueError("rows of unequal length")
     return values.astype(np.float32).reshape(n, -1)

@@ -30,18 +30,40 @@ class Model:
 
     @classmethod
     def load(cls, path) -> Model:
+        """Load what synthesis needs from the database at ``path``, checked.
+
+        Raises
+        ------
+        DataError
+            If the database is missing or does not hold up: one line naming the file
+            (a database is shared between people, so it is untrusted input).
+        """
         db = Database.open(path)
         arrays = db.arrays()
-        channels = db.table("channels").to_pylist()
+        graph = AnimeGraph.from_database(db)
+        try:
+            channels = db.table("channels").to_pylist()
+            names = tuple(str(c["name"]) for c in channels)
+            groups = tuple(str(c["group"]) for c in channels)
+            kind = str(channels[0]["kind"])
+        except (KeyError, IndexError, TypeError) as exc:
+            raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None
+        try:
+            decomposer = MotionDecomposer.from_arrays(arrays)
+            cutoffs = np.asarray(arrays["ic_cutoff_hz"], dtype=np.float64)
+            _check_shapes(graph, decomposer, cutoffs, names, arrays.get("head_reference"))
+        except (KeyError, IndexError, TypeError, ValueError) as exc:
+            raise db.damaged("model_arrays", f"{type(exc).__name__}: {exc}") from None
         try:
             emotion_model = EmotionModel.from_database(db)
         except DataError:
             emotion_model = None
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+            raise db.damaged("model_arrays", f"emotion model: {type(exc).__name__}: "
+                             f"{exc}") from None
         return cls(
-            db=db, graph=AnimeGraph.from_database(db),
-            decomposer=MotionDecomposer.from_arrays(arrays), cutoffs=arrays["ic_cutoff_hz"],
-            names=tuple(c["name"] for c in channels), groups=tuple(c["group"] for c in channels),
-            kind=channels[0]["kind"], head_reference=arrays.get("head_reference"),
+            db=db, graph=graph, decomposer=decomposer, cutoffs=cutoffs, names=names,
+            groups=groups, kind=kind, head_reference=arrays.get("head_reference"),
             emotion_model=emotion_model,
         )
 
@@ -63,6 +85,26 @@ class Model:
         if self.rigid_head:
             return stabilize_points(filled, self.groups, self.head_reference)
         return filled
+
+
+def _check_shapes(graph: AnimeGraph, decomposer: MotionDecomposer, cutoffs: np.ndarray,
+                  names: tuple[str, ...], head_reference: np.ndarray | None) -> None:
+    """ValueError unless the graph, the PCA/ICA model and the channels fit together."""
+    n_pcs, n_channels = decomposer.components_.shape
+    if len(names) != n_channels or graph.n_channels != n_channels:
+        raise ValueError(f"{len(names)} channels, {n_channels} in the PCA model, "
+                         f"{graph.n_channels} in the manifest")
+    if decomposer.mean_.shape != (n_channels,) or n_pcs < 1:
+        raise ValueError("the channel mean does not fit the PCA components")
+    if decomposer.ica_mean_.shape != (n_pcs,) or not np.isfinite(decomposer.mixing_).all():
+        raise ValueError("the ICA model does not fit the PCA components")
+    if graph.motion_values.shape[1] != n_pcs or graph.first_pcs.shape[1] != n_pcs:
+        raise ValueError(f"anime motion has {graph.motion_values.shape[1]} components, the "
+                         f"model {n_pcs}")
+    if cutoffs.shape != (n_pcs,) or not (cutoffs > 0).all():
+        raise ValueError("ic_cutoff_hz does not give one positive cutoff per component")
+    if head_reference is not None and (head_reference.ndim != 2 or head_reference.shape[1] != 3):
+        raise ValueError(f"head_reference has shape {head_reference.shape}")
 
 
 def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:

@@ -53,6 +53,11 @@ GROUPS = ("head", "upper_face", "lips", "pose", "other")
 DURATION_TOLERANCE_S = 0.2
 DURATION_TOLERANCE_REL = 0.02
 
+#: Largest JSON side file (metadata, settings) read, bytes.
+MAX_JSON_BYTES = 1 << 20
+#: Deepest nesting of a JSON side file (a clip's metadata is two or three levels deep).
+MAX_JSON_DEPTH = 32
+
 #: Metadata keys copied onto a :class:`ingest.clip.RawClip`.
 META_KEYS = ("text", "emotion", "speaker", "sentence_id")
 
@@ -177,16 +182,39 @@ def check_motion(motion: np.ndarray, channel_names, where: Path, what: str = "ch
 
 
 def read_json_object(path: Path) -> dict:
-    """Read a JSON file holding an object; DataError naming the file otherwise."""
+    """Read a JSON file holding an object; DataError naming the file otherwise.
+
+    A side file larger than :data:`MAX_JSON_BYTES` or nested deeper than
+    :data:`MAX_JSON_DEPTH` is refused (one clip rejected, not a ``RecursionError``).
+    """
     try:
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise DataError(f"{path}: JSON side file larger than {MAX_JSON_BYTES} bytes")
         value = json.loads(path.read_bytes().decode("utf-8-sig"))
     except FileNotFoundError:
         raise DataError(f"metadata file not found: {path}") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"corrupt JSON in {path}: {exc}") from None
+    except RecursionError:
+        raise DataError(f"{path}: JSON nested too deeply") from None
+    if _depth(value) > MAX_JSON_DEPTH:
+        raise DataError(f"{path}: JSON nested deeper than {MAX_JSON_DEPTH} levels")
     if not isinstance(value, dict):
         raise DataError(f"{path}: expected a JSON object, got {type(value).__name__}")
     return value
+
+
+def _depth(value, limit: int = MAX_JSON_DEPTH + 1) -> int:
+    """Nesting depth of a parsed JSON value (counted up to ``limit``, iteratively)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            deepest = max(deepest, depth)
+            if depth < limit:
+                children = item.values() if isinstance(item, dict) else item
+                stack.extend((child, depth + 1) for child in children)
+    return deepest
 
 
 def metadata_fields(meta: dict, path: Path) -> dict[str, str | None]:
@@ -288,21 +316,21 @@ def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: 
     return audio, sample_rate, fields, phones
 
 
-def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
-    """Load a ``.npy`` array without pickles.
+def load_npy(path: Path) -> np.ndarray:
+    """Load a ``.npy`` array; never unpickles.
+
+    Unpickling runs code from the file, so an array of Python objects is refused, also
+    in the FACEGOOD layout (its shipped files are plain arrays that load without it).
 
     Parameters
     ----------
     path : Path
         The file.
-    legacy_pickle : bool
-        Fall back to unpickling (``encoding="latin1"``, for arrays saved by Python 2)
-        if the array holds Python objects. Only for files of a known corpus (FACEGOOD).
 
     Raises
     ------
     DataError
-        If the file is missing, truncated or not a ``.npy`` array.
+        If the file is missing, truncated, not a ``.npy`` array, or needs unpickling.
     """
     if not path.is_file():
         raise DataError(f"array file not found: {path}")
@@ -312,14 +340,10 @@ def load_npy(path: Path, *, legacy_pickle: bool = False) -> np.ndarray:
         try:
             array = np.load(path, allow_pickle=False)
         except ValueError as exc:
-            if not (legacy_pickle and "allow_pickle" in str(exc)):
-                raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
-            try:
-                array = np.load(path, allow_pickle=True, encoding="latin1")
-            except Exception as exc2:  # unpickling a corrupt file can raise anything
-                raise DataError(
-                    f"corrupt array file {path}: {type(exc2).__name__}: {exc2}"
-                ) from None
+            if "allow_pickle" in str(exc):
+                raise DataError(f"{path} holds Python objects (a pickle); refused: only "
+                                f"plain numeric arrays are read") from None
+            raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
         except (OSError, EOFError) as exc:
             raise DataError(f"unreadable or truncated array file {path}: {exc}") from None
     if not isinstance(array, np.ndarray):

@@ -180,16 +180,10 @@ def load_curves(source: ClipSource) -> RawClip:
     if motion_path.name.lower().endswith(".csv"):
         motion, csv_names, csv_rate = read_curves_csv(motion_path)
     else:
-        # FACEGOOD's bs_value files were saved by Python 2. They hold plain float64
-        # arrays, which load without unpickling; only if one held Python objects would
-        # load_npy unpickle it, and only here, for this known corpus (README: load with
-        # allow_pickle=True, encoding="latin1"). Generic .npy files are never unpickled.
-        motion = load_npy(motion_path, legacy_pickle=facegood)
-        if motion.dtype == object:
-            try:
-                motion = np.asarray(motion.tolist(), dtype=np.float64)
-            except (TypeError, ValueError):
-                raise DataError(f"{motion_path}: array of objects, not numbers") from None
+        # FACEGOOD's bs_value files were saved by Python 2 but hold plain float64
+        # arrays, which load without unpickling; nothing is ever unpickled (a crafted
+        # .npy would run code), so a file of Python objects is refused.
+        motion = load_npy(motion_path)
         if motion.ndim != 2 or not np.issubdtype(motion.dtype, np.number):
             raise DataError(f"{motion_path}: expected a 2-D (n_frames, n_channels) numeric "
                             f"array, got {motion.dtype} {motion.shape}")

@@ -82,7 +82,7 @@ def _synthetic_root(folder: Path) -> bool:
         return False
     try:
         return json.loads(corpus.read_text(encoding="utf-8")).get("format") == CORPUS_FORMAT
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, RecursionError):
         logger.warning("%s: unreadable corpus.json; not read as a synthetic corpus", corpus)
         return False
 

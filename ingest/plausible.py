@@ -1,0 +1,313 @@
+"""Plausibility checks on one clip, before anything is fitted to it (issue #18).
+
+A clip's files are untrusted: one flipped byte in a C3D (a marker at 4.4e6 mm for one
+frame), a coordinate of 3e38, a dead (all-zero) marker or a phone file of a million
+4 µs phones is accepted by every file format, and once in the corpus it wrecks the
+PCA/ICA model every other clip shares (Cao et al. §4.1, §5.1.2 fit one decomposition
+to the whole database). So each clip is checked on its own, as it is read:
+
+- **labels** (emotion, speaker, sentence id, clip id, corpus): at most
+  :data:`MAX_LABEL_CHARS` printable characters (:data:`MAX_EMOTION_CHARS` for the
+  emotion), no control character (NUL included), no path separator, not ``.``/``..``,
+  nothing starting ``__``; the emotion, which names a partition folder of the store,
+  also not a value the store reads back as missing (:data:`RESERVED_EMOTIONS`:
+  ``__HIVE_DEFAULT_PARTITION__``, ``NULL`` ...) and only letters, digits, ``_``, ``-``,
+  ``.``, ``+`` and spaces;
+  the transcript at most :data:`MAX_TEXT_CHARS`, no NUL;
+- **phones**: at most :data:`MAX_SHORT_PHONE_SHARE` of them shorter than one analysis
+  frame (:data:`MIN_PHONE_S`, the 10 ms hop of the prosody features, §4.1), none
+  shorter than :data:`MIN_PHONE_FLOOR_S`, at most :data:`MAX_PHONE_RATE` per second;
+- **motion**: values finite; point coordinates within :data:`MAX_COORDINATE_MM` of the
+  origin (animation curves within :data:`MAX_CURVE_VALUE`); no point moving faster than
+  :data:`MAX_SPEED_MM_S` between two valid samples (a physical limit, configurable); no
+  point that never moves (a constant or all-zero track), and not a motion that never
+  moves at all.
+
+Implausible samples of a point (out of range, or cut off from the rest of its track by
+an impossible jump) become dropouts, filled like any other
+(:func:`ingest.motion.fill_gaps`), as long as each run of them is at most
+:data:`MAX_DROPOUT_S` long and they are at most :data:`MAX_DROPOUT_SHARE` of the clip's
+frames; otherwise the clip is rejected with its reason. The note says which.
+"""
+
+from __future__ import annotations
+
+import re
+import unicodedata
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from db.errors import DataError, ParameterError
+from ingest.clip import RawClip
+
+#: Longest label (speaker, sentence id, clip id, corpus), in characters (the shared
+#: talking-face clips describe speakers in up to 99).
+MAX_LABEL_CHARS = 200
+#: Longest emotion, in characters: it names a partition folder of the store.
+MAX_EMOTION_CHARS = 64
+#: Longest transcript, in characters.
+MAX_TEXT_CHARS = 10_000
+#: Emotions the storage layout reads back as missing (a hive partition value of
+#: ``__HIVE_DEFAULT_PARTITION__`` or ``NULL``); every label starting ``__`` is refused too.
+RESERVED_EMOTIONS = frozenset({"__hive_default_partition__", "null", "none", "nan"})
+#: One analysis frame of the prosody features (10 ms hop, §4.1): at most
+#: :data:`MAX_SHORT_PHONE_SHARE` of a clip's phones may be shorter (eSpeak NG itself
+#: makes an occasional 5.5-6.5 ms phone: 6 of the default corpus' 240 clips have one).
+MIN_PHONE_S = 0.010
+MAX_SHORT_PHONE_SHARE = 0.10
+#: No phone may be shorter than this (no articulation is; a 4 µs phone is an attack).
+MIN_PHONE_FLOOR_S = 0.001
+#: Most phones per second of speech (fast read speech has 12-15).
+MAX_PHONE_RATE = 40.0
+#: Fastest plausible motion of a face or head marker, mm/s (a fast head shake moves the
+#: forehead at about 1 m/s; speech articulators at well under 0.5 m/s).
+MAX_SPEED_MM_S = 5_000.0
+#: Farthest plausible coordinate from the capture volume's origin, mm.
+MAX_COORDINATE_MM = 10_000.0
+#: Largest plausible animation-curve value (blendshape weights are 0-1 or 0-100).
+MAX_CURVE_VALUE = 1_000.0
+#: Longest run of implausible samples filled as a dropout (the corpus' dropouts are
+#: at most 0.25 s).
+MAX_DROPOUT_S = 0.25
+#: Largest share of a point's frames that may be filled as dropouts.
+MAX_DROPOUT_SHARE = 0.05
+#: Smallest range (mm, or curve units) of a moving track.
+MIN_RANGE = 1e-6
+
+_EMOTION = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+ -]*$")
+_SEPARATORS = ("/", "\\")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The physical limits of the motion checks (``animegraph ingest --max-speed``)."""
+
+    max_speed_mm_s: float = MAX_SPEED_MM_S
+    max_coordinate_mm: float = MAX_COORDINATE_MM
+    max_curve_value: float = MAX_CURVE_VALUE
+    max_dropout_s: float = MAX_DROPOUT_S
+    max_dropout_share: float = MAX_DROPOUT_SHARE
+
+    def __post_init__(self):
+        for name in ("max_speed_mm_s", "max_coordinate_mm", "max_curve_value",
+                     "max_dropout_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ParameterError(f"{name} must be a number > 0, got {value!r}")
+        if not 0 <= self.max_dropout_share < 1:
+            raise ParameterError(f"max_dropout_share must be in [0, 1), got "
+                                 f"{self.max_dropout_share!r}")
+
+
+def check_label(value: str | None, what: str, *, emotion: bool = False) -> None:
+    """Raise DataError (one line, the value shortened) unless ``value`` is a safe label."""
+    if value is None:
+        return
+    shown = repr(value[:20] + ("..." if len(value) > 20 else ""))
+    longest = MAX_EMOTION_CHARS if emotion else MAX_LABEL_CHARS
+    if len(value) > longest:
+        raise DataError(f"{what} {shown} is {len(value)} characters long (at most {longest})")
+    if any(unicodedata.category(c)[0] == "C" for c in value):
+        raise DataError(f"{what} {shown} holds a control character (NUL, newline ...)")
+    if any(s in value for s in _SEPARATORS) or value.strip() in ("", ".", ".."):
+        raise DataError(f"{what} {shown} is empty or holds a path separator")
+    if value.startswith("__") or (emotion and value.strip().lower() in RESERVED_EMOTIONS):
+        raise DataError(f"{what} {shown} is a name the database storage reserves")
+    if emotion and not _EMOTION.match(value):
+        raise DataError(f"{what} {shown} may only hold letters, digits, spaces and _ - . +")
+
+
+def check_clip_labels(clip: RawClip) -> None:
+    """Check every label and the transcript of ``clip``; DataError naming the first bad one."""
+    where = clip.source
+    try:
+        check_label(clip.corpus, "corpus name")
+        check_label(clip.clip_id, "clip id")
+        check_label(clip.emotion, "emotion", emotion=True)
+        check_label(clip.speaker, "speaker")
+        check_label(clip.sentence_id, "sentence id")
+    except DataError as exc:
+        raise DataError(f"{where}: {exc}") from None
+    if clip.text is not None:
+        if len(clip.text) > MAX_TEXT_CHARS:
+            raise DataError(f"{where}: transcript of {len(clip.text)} characters (at most "
+                            f"{MAX_TEXT_CHARS})")
+        if "\x00" in clip.text:
+            raise DataError(f"{where}: transcript holds a NUL character")
+
+
+def check_phones(clip: RawClip) -> None:
+    """Reject absurd phone labels: too short (see the module doc), or too many a second."""
+    if not clip.phones:
+        return
+    starts = np.array([p.start for p in clip.phones])
+    ends = np.array([p.end for p in clip.phones])
+    durations = ends - starts
+    short = np.flatnonzero(~(durations >= MIN_PHONE_S - 1e-6))
+    absurd = np.flatnonzero(~(durations >= MIN_PHONE_FLOOR_S))
+    if absurd.size or short.size > MAX_SHORT_PHONE_SHARE * len(durations):
+        p = clip.phones[(absurd if absurd.size else short)[0]]
+        raise DataError(f"{clip.source}: {short.size} of {len(durations)} phone labels "
+                        f"shorter than one analysis frame ({1000 * MIN_PHONE_S:g} ms), first "
+                        f"{p.phone} at {p.start:.6f} s lasting {1000 * (p.end - p.start):.3f} "
+                        f"ms")
+    seconds = max(float(ends.max() - starts.min()), MIN_PHONE_S)
+    if len(clip.phones) > MAX_PHONE_RATE * max(seconds, clip.duration):
+        raise DataError(f"{clip.source}: {len(clip.phones)} phone labels in {seconds:.2f} s "
+                        f"(at most {MAX_PHONE_RATE:g} per second)")
+
+
+def check_motion(clip: RawClip, limits: Limits) -> tuple[RawClip, str]:
+    """Implausible samples as dropouts, or DataError; returns (clip, note for the report).
+
+    Parameters
+    ----------
+    clip : RawClip
+        Motion ``(n_frames, n_channels)`` with NaN for dropouts. Channels named
+        ``<p>.x``, ``<p>.y``, ``<p>.z`` in a row are a point (speed and range checked);
+        any other channel is checked for its range only.
+    limits : Limits
+
+    Returns
+    -------
+    (RawClip, str)
+        The clip with implausible samples set to NaN (unchanged if there were none) and a
+        note saying how many were (empty if none).
+    """
+    motion = np.array(clip.motion, dtype=np.float64)
+    if motion.ndim != 2 or not np.isfinite(motion[~np.isnan(motion)]).all():
+        raise DataError(f"{clip.source}: motion has infinite values")
+    n = len(motion)
+    names, columns = _tracks(clip.schema.names)
+    is_point = np.array([len(c) == 3 for c in columns], bool)
+    bad = np.zeros((n, len(columns)), bool)
+    reason = np.full(bad.shape, "", dtype=object)
+    if is_point.any():
+        cols = np.concatenate([columns[j] for j in np.flatnonzero(is_point)])
+        bad[:, is_point], reason[:, is_point] = _implausible_points(motion[:, cols], clip.fps,
+                                                                    limits)
+    limit = limits.max_coordinate_mm if clip.schema.units == "mm" else limits.max_curve_value
+    for j in np.flatnonzero(~is_point):
+        with np.errstate(invalid="ignore"):
+            far = np.abs(motion[:, columns[j][0]]) > limit
+        bad[far, j] = True
+        reason[far, j] = f"beyond {limit:g} {clip.schema.units}"
+    budget = max(int(limits.max_dropout_share * n), 0)
+    longest = int(round(limits.max_dropout_s * clip.fps))
+    for j in np.flatnonzero(bad.any(axis=0)):
+        count, run = int(bad[:, j].sum()), _longest_run(bad[:, j])
+        first = int(np.flatnonzero(bad[:, j])[0])
+        if count > budget or run > longest:
+            raise DataError(
+                f"{clip.source}: {names[j]} implausible in {count} frame(s) (longest run "
+                f"{run / clip.fps:.3f} s, first at frame {first}: {reason[first, j]}); "
+                f"rejected, more than a dropout")
+    for j in np.flatnonzero(bad.any(axis=0)):
+        motion[np.ix_(bad[:, j], columns[j])] = np.nan
+    _check_moves(motion, [(names[j], columns[j]) for j in np.flatnonzero(is_point)], clip)
+    if not bad.any():
+        return clip, ""
+    tracks = np.flatnonzero(bad.any(axis=0))
+    note = (f"{int(bad.sum())} implausible sample(s) of {len(tracks)} track(s) (first: "
+            f"{names[tracks[0]]}, {reason[bad[:, tracks[0]], tracks[0]][0]}) filled as "
+            f"dropouts")
+    return replace(clip, motion=motion), note
+
+
+def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
+    """Points (``p.x, p.y, p.z`` in a row) and single channels: (names, column indices)."""
+    names, columns, i = [], [], 0
+    channel_names = list(channel_names)
+    while i < len(channel_names):
+        stem = channel_names[i].removesuffix(".x")
+        if (channel_names[i].endswith(".x") and channel_names[i + 1:i + 3]
+                == [f"{stem}.y", f"{stem}.z"]):
+            names.append(stem)
+            columns.append(np.arange(i, i + 3))
+            i += 3
+        else:
+            names.append(channel_names[i])
+            columns.append(np.array([i]))
+            i += 1
+    return names, columns
+
+
+def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
+    """(bad (n_frames, n_points), reason per sample) of x/y/z point tracks.
+
+    A point's valid samples are cut into segments wherever it moves faster than the
+    limit from one sample to the next. The longest segment is trusted; going outwards
+    from it, a segment is trusted too if the point could have travelled to it from the
+    trusted samples within the limit, and is implausible otherwise (a spike, a plateau
+    of a few frames, the far side of a step).
+    """
+    n = len(motion)
+    pts = motion.reshape(n, -1, 3)
+    with np.errstate(invalid="ignore", over="ignore"):
+        far = np.abs(pts).max(axis=2) > limits.max_coordinate_mm
+    far &= ~np.isnan(pts).any(axis=2)
+    bad = far.copy()
+    reason = np.where(far, f"beyond {limits.max_coordinate_mm:g} mm", "").astype(object)
+    for j in range(pts.shape[1]):
+        p = pts[:, j]
+        idx = np.flatnonzero(~np.isnan(p).any(axis=1) & ~bad[:, j])
+        if len(idx) < 2:
+            continue
+        speed = _speeds(p, idx[:-1], idx[1:], fps)
+        cuts = np.flatnonzero(~(speed <= limits.max_speed_mm_s)) + 1
+        if not cuts.size:
+            continue
+        segments = np.split(np.arange(len(idx)), cuts)
+        k = int(np.argmax([len(seg) for seg in segments]))
+        for order, edge in ((range(k - 1, -1, -1), 0), (range(k + 1, len(segments)), -1)):
+            anchor = idx[segments[k][edge]]
+            for i in order:
+                near = idx[segments[i][-1 - edge]]  # the segment's end facing the anchor
+                step = float(_speeds(p, np.array([near]), np.array([anchor]), fps)[0])
+                if step <= limits.max_speed_mm_s:
+                    anchor = idx[segments[i][edge]]
+                    continue
+                frames = idx[segments[i]]
+                bad[frames, j] = True
+                reason[frames, j] = (f"moves at {step:.3g} mm/s, above "
+                                     f"{limits.max_speed_mm_s:g} mm/s")
+    return bad, reason
+
+
+def _speeds(p: np.ndarray, a: np.ndarray, b: np.ndarray, fps: float) -> np.ndarray:
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.linalg.norm(p[b] - p[a], axis=1) * fps / np.abs(b - a)
+
+
+def _longest_run(flags: np.ndarray) -> int:
+    if not flags.any():
+        return 0
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return int((np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)).max())
+
+
+def _check_moves(motion: np.ndarray, points, clip: RawClip) -> None:
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN column
+        span = np.nanmax(motion, axis=0) - np.nanmin(motion, axis=0)
+    if not (span > MIN_RANGE).any():
+        raise DataError(f"{clip.source}: the motion never moves (every channel constant)")
+    for name, cols in points:
+        if not (span[cols] > MIN_RANGE).any():
+            raise DataError(f"{clip.source}: {name} never moves (a constant or all-zero "
+                            f"track: a dead marker)")
+
+
+def check_clip(clip: RawClip, limits: Limits | None = None) -> tuple[RawClip, str]:
+    """Every check of this module on one clip: (the clip, a note for the report).
+
+    Raises
+    ------
+    DataError
+        The clip is rejected; the message says why.
+    """
+    check_clip_labels(clip)
+    check_phones(clip)
+    return check_motion(clip, limits or Limits())

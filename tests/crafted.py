@@ -1,0 +1,228 @@
+"""Crafted and damaged databases, crafted clips: the inputs of the security fuzz tests.
+
+Shared by ``tests/test_fuzz.py`` and ``scripts/probe_security.py`` (which puts this
+folder on ``sys.path``). Each database mutation takes a copy of a good database and
+damages its live version in one way a careless or hostile sharer could.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+
+def _live(root: Path) -> Path:
+    return root / (root / "CURRENT").read_text().strip()
+
+
+def _first_part(folder: Path) -> Path:
+    return sorted(folder.rglob("*.parquet"))[0]
+
+
+def _rewrite(path: Path, change: Callable[[pa.Table], pa.Table]) -> None:
+    table = pq.read_table(path, partitioning=None)
+    pq.write_table(change(table), path)
+
+
+def _set(name: str, row: int, value, type_=None):
+    def change(t: pa.Table) -> pa.Table:
+        values = t.column(name).to_pylist()
+        values[row] = value
+        i = t.column_names.index(name)
+        return t.set_column(i, name, pa.array(values, type_ or t.schema.field(name).type))
+    return change
+
+
+def _replace_column(name: str, make):
+    def change(t: pa.Table) -> pa.Table:
+        i = t.column_names.index(name)
+        return t.set_column(i, name, make(t))
+    return change
+
+
+def _animes(root: Path, change) -> None:
+    _rewrite(_first_part(_live(root) / "animes"), change)
+
+
+def _arrays(root: Path, change: Callable[[dict], dict]) -> None:
+    path = _live(root) / "model_arrays.parquet"
+    t = pq.read_table(path)
+    rows = {r["name"]: r for r in t.to_pylist()}
+    rows = change(rows)
+    names = sorted(rows)
+    pq.write_table(pa.table({
+        "name": pa.array(names, pa.string()),
+        "shape": pa.array([rows[n]["shape"] for n in names], pa.list_(pa.int64())),
+        "values": pa.array([rows[n]["values"] for n in names], pa.list_(pa.float64())),
+    }), path)
+
+
+def _array_edit(name: str, **fields):
+    def change(rows: dict) -> dict:
+        rows[name] = {**rows[name], **fields}
+        return rows
+    return change
+
+
+def _drop_array(name: str):
+    def change(rows: dict) -> dict:
+        rows.pop(name)
+        return rows
+    return change
+
+
+def _manifest(root: Path, edit: Callable[[dict], object]) -> None:
+    path = _live(root) / "manifest.json"
+    value = edit(json.loads(path.read_text()))
+    path.write_text(value if isinstance(value, str) else json.dumps(value))
+
+
+def _bytes(path_of: Callable[[Path], Path], data: Callable[[bytes], bytes]):
+    def mutate(root: Path) -> None:
+        path = path_of(root)
+        path.write_bytes(data(path.read_bytes()))
+    return mutate
+
+
+def _nan_list(t: pa.Table, name: str) -> pa.Array:
+    values = t.column(name).to_pylist()
+    values[0] = [float("nan")] * len(values[0])
+    return pa.array(values, t.schema.field(name).type)
+
+
+def _short_list(t: pa.Table, name: str) -> pa.Array:
+    values = t.column(name).to_pylist()
+    values[0] = values[0][:-1]
+    return pa.array(values, t.schema.field(name).type)
+
+
+#: name -> mutation of a database folder (the live version is damaged in place).
+DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
+    "current_binary": lambda r: (r / "CURRENT").write_bytes(b"\xff\xfe\x00\x9c" * 8),
+    "current_huge": lambda r: (r / "CURRENT").write_bytes(b"v" * 10_000_000),
+    "current_traversal": lambda r: (r / "CURRENT").write_text("../../etc"),
+    "current_missing_version": lambda r: (r / "CURRENT").write_text("v999999"),
+    "manifest_deep": lambda r: _manifest(r, lambda m: "[" * 100_000 + "]" * 100_000),
+    "manifest_not_json": lambda r: _manifest(r, lambda m: "{not json"),
+    "manifest_list": lambda r: _manifest(r, lambda m: [m]),
+    "manifest_binary": _bytes(lambda r: _live(r) / "manifest.json", lambda b: b"\xff" + b[1:]),
+    "manifest_fps_negative": lambda r: _manifest(r, lambda m: {**m, "fps": -30}),
+    "manifest_fps_text": lambda r: _manifest(r, lambda m: {**m, "fps": "fast"}),
+    "manifest_no_fps": lambda r: _manifest(r, lambda m: {k: v for k, v in m.items()
+                                                       if k != "fps"}),
+    "manifest_channels_wrong": lambda r: _manifest(r, lambda m: {**m, "n_channels": 3}),
+    "manifest_schema": lambda r: _manifest(r, lambda m: {**m, "schema_version": 99}),
+    "next_node_huge": lambda r: _animes(r, _set("next_node", 0, 10**9)),
+    "next_node_negative": lambda r: _animes(r, _set("next_node", 0, -5)),
+    "prev_node_huge": lambda r: _animes(r, _set("prev_node", 1, 2**40)),
+    "next_node_wrong_clip": lambda r: _animes(r, _set("next_node", 0, 0)),
+    "next_node_text": lambda r: _animes(r, _replace_column(
+        "next_node", lambda t: pa.array([str(v) for v in t.column("next_node").to_pylist()]))),
+    "node_id_duplicate": lambda r: _animes(r, _set("node_id", 1, 0)),
+    "n_frames_zero": lambda r: _animes(r, _set("n_frames", 0, 0)),
+    "n_frames_huge": lambda r: _animes(r, _set("n_frames", 0, 10**9)),
+    "prosody_frames_negative": lambda r: _animes(r, _set("prosody_frames", 0, -3)),
+    "start_after_end": lambda r: _animes(r, _set("start_frame", 0, 10**6)),
+    "frame_overflow": lambda r: _animes(r, _set("end_frame", 0, 2**40)),
+    "motion_nan": lambda r: _animes(r, _replace_column("motion",
+                                                       lambda t: _nan_list(t, "motion"))),
+    "motion_short": lambda r: _animes(r, _replace_column("motion",
+                                                         lambda t: _short_list(t, "motion"))),
+    "first_pcs_ragged": lambda r: _animes(r, _replace_column(
+        "first_pcs", lambda t: _short_list(t, "first_pcs"))),
+    "prosody_nan": lambda r: _animes(r, _replace_column("prosody",
+                                                        lambda t: _nan_list(t, "prosody"))),
+    "phoneme_unknown": lambda r: _animes(r, _set("phoneme", 0, "XYZ")),
+    "animes_column_missing": lambda r: _animes(r, lambda t: t.drop_columns(["next_node"])),
+    "animes_truncated": _bytes(lambda r: _first_part(_live(r) / "animes"),
+                               lambda b: b[: len(b) // 2]),
+    "animes_random": _bytes(lambda r: _first_part(_live(r) / "animes"),
+                            lambda b: np.random.default_rng(0).bytes(len(b))),
+    "animes_empty": lambda r: [p.unlink() for p in (_live(r) / "animes").rglob("*.parquet")],
+    "arrays_shape_mismatch": lambda r: _arrays(r, _array_edit("pca_components", shape=[999])),
+    "arrays_shape_negative": lambda r: _arrays(r, _array_edit("channel_mean", shape=[-1])),
+    "arrays_shape_deep": lambda r: _arrays(r, _array_edit("ica_mean", shape=[1] * 40)),
+    "arrays_missing_pca": lambda r: _arrays(r, _drop_array("pca_components")),
+    "arrays_missing_params": lambda r: _arrays(r, _drop_array("decomposer_params")),
+    "arrays_nan_mixing": lambda r: _arrays(r, lambda rows: _array_edit(
+        "ica_mixing", values=[float("nan")] * len(rows["ica_mixing"]["values"]))(rows)),
+    "arrays_wrong_size_mixing": lambda r: _arrays(r, lambda rows: _array_edit(
+        "ica_mixing", values=[1.0], shape=[1])(rows)),
+    "arrays_zero_cutoffs": lambda r: _arrays(r, lambda rows: _array_edit(
+        "ic_cutoff_hz", values=[0.0] * len(rows["ic_cutoff_hz"]["values"]))(rows)),
+    "arrays_head_reference_shape": lambda r: _arrays(r, _array_edit(
+        "head_reference", values=[1.0, 2.0], shape=[2])),
+    "arrays_random": _bytes(lambda r: _live(r) / "model_arrays.parquet",
+                            lambda b: np.random.default_rng(1).bytes(len(b))),
+    "channels_empty": lambda r: pq.write_table(
+        pq.read_table(_live(r) / "channels.parquet").slice(0, 0), _live(r) / "channels.parquet"),
+    "channels_no_name": lambda r: pq.write_table(
+        pq.read_table(_live(r) / "channels.parquet").drop_columns(["name"]),
+        _live(r) / "channels.parquet"),
+    "components_missing": lambda r: (_live(r) / "components.parquet").unlink(),
+    "frames_missing": lambda r: shutil.rmtree(_live(r) / "frames"),
+    "hive_default_partition": lambda r: os.rename(
+        sorted((_live(r) / "clips").iterdir())[0],
+        _live(r) / "clips" / "emotion=__HIVE_DEFAULT_PARTITION__"),
+    "symlink_out": lambda r: _symlink(_live(r) / "channels.parquet", "/etc/passwd"),
+}
+
+
+def _symlink(path: Path, target: str) -> None:
+    path.unlink()
+    path.symlink_to(target)
+
+
+class PicklePayload:
+    """Unpickling this creates the file ``marker``: proof that code from the data ran."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.marker),))
+
+
+def crafted_database(good: Path, dest: Path, mutation: str) -> Path:
+    """A copy of the database ``good`` at ``dest`` damaged by ``mutation``."""
+    shutil.copytree(good, dest, symlinks=True)
+    DATABASE_MUTATIONS[mutation](dest)
+    return dest
+
+
+def sql_escapes(version_dir: Path, root: Path, outside: Path) -> list[str]:
+    """Statements that would write, reach outside the version, or undo the sandbox."""
+    return [
+        f"COPY (SELECT * FROM clips) TO '{outside}/stolen.csv'",
+        f"EXPLAIN ANALYZE COPY (SELECT * FROM clips) TO '{outside}/stolen.csv'",
+        f"explain analyse copy (select 1) to '{version_dir}/model_arrays.parquet'",
+        f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{root}/CURRENT'",
+        f"EXPLAIN (FORMAT json) COPY (SELECT 1) TO '{outside}/stolen.json'",
+        f"EXPORT DATABASE '{outside}/export'",
+        f"IMPORT DATABASE '{outside}'",
+        "EXPLAIN ANALYZE INSTALL httpfs", "INSTALL httpfs", "LOAD httpfs", "FORCE INSTALL x",
+        f"ATTACH '{outside}/other.db' AS o", "DETACH memory",
+        "SET enable_external_access = true", "SET allowed_directories = ['/']",
+        "SET lock_configuration = false", "RESET lock_configuration",
+        "PRAGMA enable_profiling", "CALL pragma_version()",
+        "SELECT * FROM read_text('/etc/passwd')", "SELECT * FROM read_csv('/etc/passwd')",
+        "SELECT * FROM read_csv_auto('/etc/passwd')", "SELECT * FROM read_blob('/etc/passwd')",
+        "SELECT * FROM read_json('/etc/passwd')", "SELECT * FROM glob('/etc/*')",
+        "SELECT * FROM glob('/root/**')", "SELECT * FROM '/etc/passwd'",
+        f"SELECT * FROM read_text('{version_dir}/../../outside.txt')",
+        f"SELECT * FROM read_text('{outside}/outside.txt')",
+        f"SELECT * FROM glob('{root}/*')",
+        "SELECT * FROM read_parquet('https://example.com/x.parquet')",
+        "SELECT * FROM read_parquet('s3://bucket/x.parquet')",
+        "SELECT 1; CREATE TABLE t AS SELECT 1", "SELECT 1; DROP VIEW clips",
+        "CREATE MACRO m() AS 1", "CREATE SECRET s (TYPE s3)", "INSERT INTO clips VALUES (1)",
+        "UPDATE clips SET emotion = 'x'", "DELETE FROM clips", "CHECKPOINT", "VACUUM",
+        "BEGIN TRANSACTION", "USE memory", "SELECT getenv('HOME')",
+    ]

@@ -1,0 +1,92 @@
+"""Seeded fuzzing of what comes in: crafted databases, flipped bytes in clips (issue #18).
+
+Every crafted database is either read correctly or refused with one line naming the
+damage (a :class:`db.errors.AnimeGraphError`), never a traceback, never a crash; every
+clip with a flipped byte is either rejected with one line or accepted with plausible
+motion.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+from crafted import DATABASE_MUTATIONS, crafted_database
+
+from db.errors import AnimeGraphError, DataError
+
+_READERS = ("open", "model", "info", "sql")
+
+
+def _read_all(path) -> None:
+    from animegraph.apps.info import database_info
+    from animegraph.synthesis.model import Model
+    from db.sql import query
+    from db.store import Database
+
+    db = Database.open(path)
+    database_info(db)
+    query(db, "SELECT count(*) AS n, max(next_node) AS m FROM animes")
+    model = Model.load(path)
+    graph = model.graph
+    assert ((graph.next_node >= -1) & (graph.next_node < graph.n_nodes)).all()
+
+
+@pytest.mark.parametrize("mutation", sorted(DATABASE_MUTATIONS))
+def test_crafted_databases_are_read_or_refused_in_one_line(tiny_db, tmp_path, mutation):
+    good, _ = tiny_db
+    path = crafted_database(good, tmp_path / "db", mutation)
+    try:
+        _read_all(path)
+    except AnimeGraphError as exc:
+        assert "\n" not in str(exc).strip(), str(exc)
+        if isinstance(exc, DataError):  # it names the damaged database
+            assert str(path) in str(exc), str(exc)
+
+
+def test_every_crafted_model_problem_is_refused(tiny_db, tmp_path):
+    # Those that would crash a kernel or poison a synthesis must not load at all.
+    from animegraph.synthesis.model import Model
+
+    good, _ = tiny_db
+    for mutation in ("next_node_huge", "next_node_negative", "prev_node_huge",
+                     "next_node_wrong_clip", "n_frames_huge", "motion_short", "motion_nan",
+                     "first_pcs_ragged", "arrays_shape_mismatch", "arrays_nan_mixing",
+                     "arrays_wrong_size_mixing", "arrays_zero_cutoffs", "current_binary",
+                     "manifest_deep", "manifest_channels_wrong", "frame_overflow"):
+        path = crafted_database(good, tmp_path / mutation, mutation)
+        with pytest.raises(DataError, match="damaged|not an animegraph"):
+            Model.load(path)
+
+
+def test_flipped_bytes_in_a_c3d_are_rejected_or_plausible(tiny_corpus, tmp_path):
+    from ingest.plausible import Limits, check_clip
+    from ingest.readers import discover, load
+
+    stem = sorted(p.stem for p in (tiny_corpus / "clips").glob("*.c3d"))[0]
+    folder = tmp_path / "clip"
+    folder.mkdir()
+    for suffix in (".c3d", ".wav", ".phones.csv", ".json"):
+        shutil.copy(tiny_corpus / "clips" / f"{stem}{suffix}", folder / f"{stem}{suffix}")
+    original = (folder / f"{stem}.c3d").read_bytes()
+    rng = np.random.default_rng(18)
+    limits = Limits()
+    outcomes = {"rejected": 0, "accepted": 0}
+    for _ in range(40):
+        data = bytearray(original)
+        data[int(rng.integers(len(data)))] ^= 1 << int(rng.integers(8))
+        (folder / f"{stem}.c3d").write_bytes(bytes(data))
+        [source] = discover([folder])
+        try:
+            clip, _ = check_clip(load(source), limits)
+        except AnimeGraphError as exc:
+            assert "\n" not in str(exc)
+            outcomes["rejected"] += 1
+            continue
+        outcomes["accepted"] += 1
+        pts = clip.motion.reshape(len(clip.motion), -1, 3)
+        assert np.nanmax(np.abs(pts)) <= limits.max_coordinate_mm
+        steps = np.linalg.norm(np.diff(pts, axis=0), axis=2) * clip.fps
+        assert not (steps > limits.max_speed_mm_s).any()
+    assert outcomes["accepted"] > 0  # most bytes are sample values: flips are absorbed

@@ -1,0 +1,119 @@
+"""SQL is untrusted: DuckDB's own sandbox keeps it inside the database version (issue #18)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from crafted import sql_escapes
+
+from db.errors import ParameterError
+from db.sql import connect, query, run
+from db.store import Database, arrays_to_table, write_version
+
+
+def _tiny_db(path):
+    tables = {
+        "clips": pa.table({"clip_id": ["a0", "a1"], "emotion": ["happy", "sad"]}),
+        "animes": pa.table({"node_id": pa.array([0, 1], pa.int64()), "clip_id": ["a0", "a1"],
+                            "emotion": ["happy", "sad"]}),
+        "frames": pa.table({"clip_id": ["a0"], "emotion": ["happy"], "jaw": [0.5]}),
+        "audio": pa.table({"clip_id": ["a0"], "pcm16": [b"\x00\x01"]}),
+        "channels": pa.table({"name": ["jaw"]}),
+        "model_arrays": arrays_to_table({"m": np.arange(3.0)}),
+        "components": pa.table({"component": [0]}),
+    }
+    write_version(path, tables, {"fps": 30.0})
+    return Database.open(path)
+
+
+@pytest.fixture
+def db(tmp_path):
+    return _tiny_db(tmp_path / "db")
+
+
+def test_every_escape_is_refused_with_one_line(db, tmp_path):
+    (tmp_path / "outside.txt").write_text("secret")
+    before = {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()}
+    for sql in sql_escapes(db.version_dir, db.root, tmp_path):
+        with pytest.raises(ParameterError) as err:
+            run(db, sql)
+        assert "\n" not in str(err.value), sql
+    assert not (tmp_path / "stolen.csv").exists() and not (tmp_path / "export").exists()
+    assert {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()} == before
+    assert query(db, "SELECT count(*) AS n FROM clips").column("n")[0].as_py() == 2
+
+
+def test_duckdb_itself_refuses_without_the_statement_filter(db, tmp_path):
+    # The sandbox does not rest on the statement filter: the bare connection refuses too,
+    # also writes into the database's own folder (DuckDB opens no file of it).
+    import duckdb
+
+    before = {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()}
+    (tmp_path / "outside.txt").write_text("secret")
+    con = connect(db)
+    try:
+        for sql in [f"COPY (SELECT 1) TO '{tmp_path}/x.csv'",
+                    f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{db.version_dir}/model_arrays.parquet'",
+                    f"COPY (SELECT 1) TO '{db.root}/CURRENT'",
+                    f"SELECT * FROM read_text('{tmp_path}/outside.txt')",
+                    "SELECT * FROM read_csv('/etc/passwd')", "INSTALL httpfs",
+                    f"ATTACH '{tmp_path}/a.db'", "SET enable_external_access = true",
+                    "SET allowed_directories = ['/']"]:
+            with pytest.raises(duckdb.Error):
+                con.sql(sql).fetchall() if con.sql(sql) is not None else None
+        assert con.sql("SELECT count(*) FROM animes").fetchall() == [(2,)]
+    finally:
+        con.close()
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "a.db").exists()
+    assert {p: p.read_bytes() for p in db.root.rglob("*") if p.is_file()} == before
+
+
+def test_results_stop_at_the_row_cap(db):
+    [result] = run(db, "SELECT * FROM range(100000000000) a, range(10) b", row_limit=1000)
+    assert result.truncated and result.table.num_rows == 1000
+    [small] = run(db, "SELECT * FROM range(7)", row_limit=7)
+    assert not small.truncated and small.table.num_rows == 7
+    with pytest.raises(ParameterError, match="more than 10 rows"):
+        query(db, "SELECT * FROM range(11)", row_limit=10)
+
+
+def test_a_runaway_query_is_interrupted(db):
+    with pytest.raises(ParameterError, match="stopped after 0.5 s"):
+        run(db, "SELECT count(*) FROM range(100000000000000) a", timeout=0.5)
+
+
+def test_several_selects_each_run(db):
+    results = run(db, "SELECT 1 AS a; SELECT emotion FROM clips ORDER BY 1")
+    assert [r.table.to_pylist() for r in results] == [
+        [{"a": 1}], [{"emotion": "happy"}, {"emotion": "sad"}]]
+
+
+def test_explain_of_a_select_runs(db):
+    assert run(db, "EXPLAIN ANALYZE SELECT count(*) FROM animes")[0].table.num_rows >= 1
+
+
+def test_cli_prints_each_statement_and_one_line_errors(db, tmp_path):
+    cmd = [sys.executable, "-m", "animegraph", "sql", "--db", str(db.root)]
+    ok = subprocess.run(cmd + ["SELECT 41 AS x; SELECT 42 AS y"], capture_output=True, text=True)
+    assert ok.returncode == 0 and "41" in ok.stdout and "42" in ok.stdout
+    bad = subprocess.run(cmd + [f"EXPLAIN ANALYZE COPY (SELECT 1) TO '{tmp_path}/x'"],
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and len(bad.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+    capped = subprocess.run(cmd + ["--limit", "5", "--max-rows", "10", "SELECT * FROM range(9)"],
+                            capture_output=True, text=True)
+    assert capped.returncode == 0 and "(5 rows)" in capped.stdout
+    assert "first 5 rows" in capped.stderr
+
+
+def test_a_result_repeating_a_column_name_prints(db, tmp_path):
+    from animegraph.apps.tabular import format_table
+
+    [result] = run(db, "SELECT a.node_id, b.node_id FROM animes a, animes b ORDER BY 1, 2")
+    assert format_table(result.table, "csv").splitlines()[:2] == ["\"node_id\",\"node_id\"",
+                                                                  "0,0"]
+    assert "node_id  node_id" in format_table(result.table, "table")
