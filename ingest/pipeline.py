@@ -37,6 +37,7 @@ from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, is_database, write_version
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
+from ingest.lag import decide_lags
 from ingest.motion import fill_gaps, head_points
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
@@ -53,7 +54,8 @@ class IngestConfig:
     energy: float = ENERGY_KEPT  # energy below each component's cutoff (§4.3: 99 %)
     fps: float | None = None  # database frame rate (default: the existing database's, else
     #                           the highest among the new clips)
-    correct_lag: bool = True  # shift landmark motion by its estimated lip-audio lag
+    correct_lag: bool = True  # shift landmark motion by its lip-audio lag where identifiable
+    pool_lag: bool = True  # lag per speaker/session, pooled (ingest.lag); False: per clip
     random_state: int = 0  # FastICA seed
 
 
@@ -68,6 +70,10 @@ class ClipReport:
     n_animes: int = 0
     segmentation: str = ""
     duration_s: float = 0.0
+    lag_estimate_s: float | None = None  # lip-audio lag found (s, + = lips lead), ingest.lag
+    lag_confidence: float | None = None  # correlation at its peak
+    lag_basis: str = ""  # pooled over N clips | own | not identifiable
+    lag_applied_s: float | None = None  # the shift applied (0: none)
 
 
 @dataclass
@@ -93,6 +99,7 @@ class IngestReport:
         for c in self.clips:
             if c.status == "rejected":
                 out.append(f"  rejected {c.source}: {c.reason}")
+        out += self._lag_lines()
         if self.written:
             s = self.summary
             out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
@@ -111,6 +118,28 @@ class IngestReport:
             out.append(f"database {self.db} unchanged")
         return out
 
+    def _lag_lines(self) -> list[str]:
+        """One line per lip-audio lag decision shared by clips (ingest.lag)."""
+        groups: dict[tuple, int] = {}
+        for c in self.clips:
+            if c.lag_basis:
+                pooled = c.lag_basis.startswith("pooled")
+                key = ((c.lag_basis, c.lag_estimate_s, c.lag_confidence, c.lag_applied_s)
+                       if pooled else (c.lag_basis, bool(c.lag_applied_s)))
+                groups[key] = groups.get(key, 0) + 1
+        out = []
+        for key, n in groups.items():
+            if key[0].startswith("pooled"):
+                basis, lag, r, applied = key
+                out.append(f"lip-audio lag {lag:+.3f} s (r {r:.2f}, {basis}) "
+                           + (f"applied to {n} clips" if applied else f"not applied ({n} clips: "
+                              "under the smallest lag corrected or correction off)"))
+            else:
+                basis, applied = key
+                out.append(f"lip-audio lag {basis}: {n} clips, "
+                           + ("applied" if applied else "not applied"))
+        return out
+
     def to_csv(self) -> str:
         buffer = io.StringIO()
         names = list(ClipReport.__dataclass_fields__)
@@ -123,12 +152,12 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag, reference = args
+    source, known, fps, reference = args
     try:
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
-        clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
+        clip = prepare_clip(raw, fps=fps,
                             head_reference=reference if _has_head(raw.schema) else None)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
@@ -209,6 +238,8 @@ def ingest(
         if existing is not None:
             replaced = {c.key for c in new}
             kept = [c for c in prepared_from_database(existing) if c.key not in replaced]
+        new = decide_lags(new, kept, correct=config.correct_lag, pooled=config.pool_lag)
+        _report_lags(report, new)
         target_fps = fps or max(c.fps for c in new)
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
@@ -235,7 +266,8 @@ def prepare_sources(
     config = config or IngestConfig()
     reference = _head_reference(list(found))
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
-    clips = [c for r, c in results if c is not None]
+    clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
+                        pooled=config.pool_lag)
     for r, _ in results:
         if r.status == "rejected":
             logger.warning("rejected %s: %s", r.source, r.reason)
@@ -246,7 +278,7 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, config.correct_lag, reference) for s in found]
+    jobs = [(s, known, fps, reference) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
@@ -254,6 +286,20 @@ def _run(found, known, fps, config, workers, progress, reference):
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         results = pool.map(_work, jobs, chunksize=4)
         return list(progress(len(jobs))(results) if progress else results)
+
+
+def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:
+    """Copy each clip's lag decision (:func:`ingest.lag.decide_lags`) into its report row."""
+    from dataclasses import replace
+
+    decided = {(c.source, c.clip_id): c.extra for c in clips if "lag_basis" in c.extra}
+    for k, row in enumerate(report.clips):
+        extra = decided.get((row.source, row.clip_id))
+        if extra is not None:
+            report.clips[k] = replace(
+                row, lag_estimate_s=extra["lag_estimate_s"],
+                lag_confidence=extra["lag_estimate_confidence"], lag_basis=extra["lag_basis"],
+                lag_applied_s=extra["lag_corrected_s"])
 
 
 def _has_head(schema) -> bool:

@@ -15,8 +15,9 @@ Kinds and layouts (see each module):
   ``.c3d``/``.trc``/marker ``.csv`` + ``.wav``);
 - ``"curves"``: :mod:`ingest.readers.curves` (FACEGOOD; generic ``.npy``/``.curves.csv``);
 - ``"landmarks"``: :mod:`ingest.readers.landmarks` (talking-face clip folders; head pose
-  removed by Procrustes to the canonical mesh, lip-audio lag estimated, not applied:
-  :func:`shift_motion` applies it).
+  removed by Procrustes to the canonical mesh, lip-audio lag evidence kept, not applied:
+  :mod:`ingest.lag` decides it over a speaker's clips) and :mod:`ingest.readers.video`
+  (videos, the face tracked on every frame, the tracking cached).
 
 Checks common to all kinds, and their tolerances, are in :mod:`ingest.readers.common`.
 """
@@ -38,6 +39,7 @@ from ingest.readers.discovery import discover
 from ingest.readers.landmarks import load_talkingface, normalise_landmarks
 from ingest.readers.markers import load_markers
 from ingest.readers.sync import estimate_lag, lip_audio_lag, shift_motion
+from ingest.readers.video import load_video
 
 logger = logging.getLogger(__name__)
 
@@ -47,6 +49,7 @@ _LOADERS = {
     "facegood": load_curves,
     "curves": load_curves,
     "talkingface": load_talkingface,
+    "video": load_video,
 }
 
 

@@ -252,13 +252,14 @@ def load_curves(source: ClipSource) -> RawClip:
     check_durations(len(motion), fps, audio_seconds, motion_path)
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
         ("text", "emotion", "speaker", "sentence_id"))
-    text, phones = transcript_and_labels(source, audio_seconds)
+    text, phones, words = transcript_and_labels(source, audio_seconds)
     if text is not None:
         fields["text"] = text
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
         fps=fps, schema=schema, audio=audio, sample_rate=sample_rate,
         checksum=checksum_files(source.paths), text=fields["text"], phones=phones,
+        words=words,
         emotion=fields["emotion"], speaker=fields["speaker"],
         sentence_id=fields["sentence_id"],
         extra={"layout": source.layout,
