@@ -72,6 +72,7 @@ class ClipReport:
     duration_s: float = 0.0
     lag_estimate_s: float | None = None  # lip-audio lag found (s, + = lips lead), ingest.lag
     lag_confidence: float | None = None  # correlation at its peak
+    lag_margin: float | None = None  # ... minus the best side peak's
     lag_basis: str = ""  # pooled over N clips | own | not identifiable
     lag_applied_s: float | None = None  # the shift applied (0: none)
 
@@ -120,24 +121,20 @@ class IngestReport:
 
     def _lag_lines(self) -> list[str]:
         """One line per lip-audio lag decision shared by clips (ingest.lag)."""
-        groups: dict[tuple, int] = {}
+        groups: dict[tuple, list[ClipReport]] = {}
         for c in self.clips:
             if c.lag_basis:
-                pooled = c.lag_basis.startswith("pooled")
-                key = ((c.lag_basis, c.lag_estimate_s, c.lag_confidence, c.lag_applied_s)
-                       if pooled else (c.lag_basis, bool(c.lag_applied_s)))
-                groups[key] = groups.get(key, 0) + 1
+                groups.setdefault((c.lag_basis, bool(c.lag_applied_s)), []).append(c)
         out = []
-        for key, n in groups.items():
-            if key[0].startswith("pooled"):
-                basis, lag, r, applied = key
-                out.append(f"lip-audio lag {lag:+.3f} s (r {r:.2f}, {basis}) "
-                           + (f"applied to {n} clips" if applied else f"not applied ({n} clips: "
-                              "under the smallest lag corrected or correction off)"))
-            else:
-                basis, applied = key
-                out.append(f"lip-audio lag {basis}: {n} clips, "
-                           + ("applied" if applied else "not applied"))
+        for (basis, applied), rows in groups.items():
+            lags = sorted(r.lag_estimate_s for r in rows)
+            found = (f"{lags[0]:+.3f} s" if lags[0] == lags[-1]
+                     else f"{lags[0]:+.3f} to {lags[-1]:+.3f} s")
+            first = rows[0]
+            detail = (f", r {first.lag_confidence:.2f}, margin {first.lag_margin:.2f}"
+                      if len(rows) == 1 or lags[0] == lags[-1] else "")
+            out.append(f"lip-audio lag {found} ({basis}{detail}): "
+                       + ("applied to" if applied else "not applied to") + f" {len(rows)} clips")
         return out
 
     def to_csv(self) -> str:
@@ -212,6 +209,7 @@ def ingest(
     found = discover([Path(s) for s in sources])
     if not found:
         raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
+    _check_tracker(found)
     known: dict[tuple[str, str], str] = {}
     fps = config.fps
     reference = None
@@ -256,6 +254,19 @@ def ingest(
     return report
 
 
+def _check_tracker(found: Sequence[ClipSource]) -> None:
+    """One line, not one rejection a clip, when videos need the tracker and it is absent."""
+    from ingest.readers.video import TRACKER_HINT, cache_path, tracker_available
+
+    videos = [s for s in found if s.layout == "video"]
+    if not videos or tracker_available():
+        return
+    from ingest.clip import checksum_files
+
+    if any(not cache_path(checksum_files([s.source])).is_file() for s in videos):
+        raise ParameterError(TRACKER_HINT)
+
+
 def prepare_sources(
     found: Sequence[ClipSource], config: IngestConfig | None = None, *, workers: int = 1,
 ) -> tuple[list[PreparedClip], np.ndarray | None]:
@@ -264,6 +275,7 @@ def prepare_sources(
     Rejected clips are logged and left out.
     """
     config = config or IngestConfig()
+    _check_tracker(found)
     reference = _head_reference(list(found))
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
     clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
@@ -298,7 +310,8 @@ def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:
         if extra is not None:
             report.clips[k] = replace(
                 row, lag_estimate_s=extra["lag_estimate_s"],
-                lag_confidence=extra["lag_estimate_confidence"], lag_basis=extra["lag_basis"],
+                lag_confidence=extra["lag_estimate_confidence"],
+                lag_margin=extra["lag_estimate_margin"], lag_basis=extra["lag_basis"],
                 lag_applied_s=extra["lag_corrected_s"])
 
 
