@@ -26,33 +26,33 @@ from ingest.speech.words import align_words
 GRID_ALIGN = (b"0 23750 sil\r\n23750 29500 bin\r\n29500 34000 blue\r\n34000 35500 at\r\n"
               b"35500 41000 f\r\n41000 47250 two\r\n47250 53000 now\r\n53000 74500 sil\r\n")
 
+#: A one-tier TextGrid in Praat's short text format: a pause, then "open window".
 WORD_TEXTGRID = '''File type = "ooTextFile"
 Object class = "TextGrid"
 
-xmin = 0
-xmax = 1.5
-tiers? <exists>
-size = 1
-item []:
-    item [1]:
-        class = "IntervalTier"
-        name = "words"
-        xmin = 0
-        xmax = 1.5
-        intervals: size = 3
-        intervals [1]:
-            xmin = 0
-            xmax = 0.4
-            text = ""
-        intervals [2]:
-            xmin = 0.4
-            xmax = 0.9
-            text = "open"
-        intervals [3]:
-            xmin = 0.9
-            xmax = 1.5
-            text = "window"
+0
+1.5
+<exists>
+1
+"IntervalTier"
+"Words"
+0
+1.5
+3
+0
+0.4
+""
+0.4
+0.9
+"open"
+0.9
+1.5
+"window"
 '''
+
+
+def _word_textgrid(path):
+    path.write_text(WORD_TEXTGRID)
 
 
 def test_grid_align(tmp_path):
@@ -66,27 +66,28 @@ def test_grid_align(tmp_path):
     assert words[2].start * 25 == pytest.approx(29.5)
 
 
-@pytest.mark.parametrize("content, message", [
-    (b"", "empty"),
-    (b"0 100 sil\r\n100 90 bin\r\n", "not before"),
-    (b"0 100 sil\r\n50 200 bin\r\n", "overlaps"),
-    (b"0 100\r\n", "expected 'start end word'"),
-    (b"0 1.5 bin\r\n", "integers"),
-    (b"0 100 sil\r\n", "no words"),
-])
-def test_grid_align_errors(tmp_path, content, message):
+def test_grid_align_errors(tmp_path):
+    bad = {
+        "empty": b"",
+        "not before": b"0 100 sil\r\n100 90 bin\r\n",
+        "overlaps": b"0 100 sil\r\n50 200 bin\r\n",
+        "expected 'start end word'": b"0 100\r\n",
+        "integers": b"0 1.5 bin\r\n",
+        "no words": b"0 100 sil\r\n",
+    }
     path = tmp_path / "bad.align"
-    path.write_bytes(content)
-    with pytest.raises(DataError, match=message):
-        read_grid_align(path)
+    for message, content in bad.items():
+        path.write_bytes(content)
+        with pytest.raises(DataError, match=message):
+            read_grid_align(path)
     with pytest.raises(DataError, match="not found"):
         read_grid_align(tmp_path / "absent.align")
 
 
 def test_textgrid_word_tier(tmp_path):
     path = tmp_path / "clip.TextGrid"
-    path.write_text(WORD_TEXTGRID)
-    assert word_tier(path) == "words"
+    _word_textgrid(path)
+    assert word_tier(path) == "Words"
     words = read_textgrid_words(path)
     assert words == [WordSegment(None, 0.0, 0.4), WordSegment("open", 0.4, 0.9),
                      WordSegment("window", 0.9, 1.5)]
@@ -168,7 +169,7 @@ def test_landmark_clip_reads_its_side_files(tmp_path):
     (folder / "transcript.txt").unlink()
     (tmp_path / "corpus" / "clip.phones.csv").write_text(
         "start,end,phone\n0.0,0.5,SIL\n0.5,1.0,OW\n1.0,2.0,SIL\n")
-    (tmp_path / "corpus" / "clip.TextGrid").write_text(WORD_TEXTGRID)
+    _word_textgrid(tmp_path / "corpus" / "clip.TextGrid")
     source = discover([folder])[0]
     assert source.file("labels").name == "clip.phones.csv"
     clip = load(source)

@@ -155,13 +155,17 @@ def estimate_lag(
         if a.std() > 0 and b.std() > 0:
             corr[k] = float(np.corrcoef(a, b)[0, 1])
     best = int(np.argmax(corr))
-    offset = 0.0
-    if 0 < best < len(lags) - 1:
+    return float((lags[best] + _peak_offset(corr, best)) / fps), float(corr[best])
+
+
+def _peak_offset(corr: np.ndarray, best: int) -> float:
+    """Offset (in steps, within +-0.5) of the top of a parabola through ``corr``'s peak."""
+    if 0 < best < len(corr) - 1:
         left, mid, right = corr[best - 1], corr[best], corr[best + 1]
         curvature = left - 2 * mid + right
         if curvature < 0:
-            offset = 0.5 * (left - right) / curvature
-    return float((lags[best] + offset) / fps), float(corr[best])
+            return float(0.5 * (left - right) / curvature)
+    return 0.0
 
 
 def lip_audio_lag(
@@ -336,12 +340,7 @@ def lag_from_evidence(evidence: Sequence[np.ndarray], seconds: float) -> LagEsti
     corr = np.divide(total[0], denom, out=np.zeros(len(LAG_GRID_S)), where=denom > 0)
     best = int(np.argmax(corr))
     step = float(LAG_GRID_S[1] - LAG_GRID_S[0])
-    offset = 0.0
-    if 0 < best < len(corr) - 1:
-        left, mid, right = corr[best - 1], corr[best], corr[best + 1]
-        curvature = left - 2 * mid + right
-        if curvature < 0:
-            offset = 0.5 * (left - right) / curvature
+    offset = _peak_offset(corr, best)
     # side peaks: local maxima (edges included) outside the main lobe
     padded = np.concatenate(([-np.inf], corr, [-np.inf]))
     local = (corr >= padded[:-2]) & (corr >= padded[2:])
