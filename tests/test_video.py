@@ -111,7 +111,7 @@ def test_bad_videos_are_rejected_with_their_reason(grid_clip, tmp_path):
         load(discover([other])[0])
 
 
-def test_missing_tracker_is_one_line(monkeypatch, tmp_path):
+def _hide_mediapipe(monkeypatch):
     import builtins
 
     real_import = builtins.__import__
@@ -122,9 +122,24 @@ def test_missing_tracker_is_one_line(monkeypatch, tmp_path):
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_mediapipe)
-    assert not tracker_available()
+
+
+def test_missing_tracker_is_one_line(monkeypatch, tmp_path, capsys):
+    from animegraph.apps.cli import main
     from ingest.readers.video import track_video
 
+    video = tmp_path / "clips" / "grey.mp4"
+    video.parent.mkdir()
+    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=64x48:r=25:d=1", "-f", "lavfi", "-i",
+            "sine=frequency=200:sample_rate=16000:duration=1", "-c:v", "libx264",
+            "-c:a", "aac", "-shortest", str(video))
+    _hide_mediapipe(monkeypatch)
+    assert not tracker_available()
     with pytest.raises(DataError) as info:
-        track_video(tmp_path / "any.mp4")
+        track_video(video)
     assert str(info.value) == TRACKER_HINT and "\n" not in TRACKER_HINT
+    capsys.readouterr()
+    assert main(["ingest", str(video.parent), "--db", str(tmp_path / "db")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(TRACKER_HINT) and len(err.splitlines()) == 1
+    assert not (tmp_path / "db").exists() or not any((tmp_path / "db").iterdir())
