@@ -138,3 +138,27 @@ def test_talkingface_lags_pooled_per_speaker():
     for speaker in ("Fei-Fei Li", "Andrew Ng", "Ronald Reagan", "CNN"):
         estimate = next(e for s, e in by_speaker.items() if s.startswith(speaker))
         assert estimate.identifiable() and abs(estimate.lag_s) < 0.06, speaker
+
+
+@pytest.mark.shared
+def test_ingest_reports_and_applies_the_pooled_lag(tmp_path):
+    import shutil
+
+    from ingest.pipeline import ingest
+
+    root = require_shared("talkingface")
+    corpus = tmp_path / "talkingface"
+    for name in ("styletalk_Obama_clip1", "styletalk_Obama_clip3", "styletalk_feifeili_clip3"):
+        shutil.copytree(root / name, corpus / name)
+    report = ingest([corpus], tmp_path / "db")
+    rows = {c.clip_id: c for c in report.clips}
+    for name in ("styletalk_Obama_clip1", "styletalk_Obama_clip3"):
+        row = rows[name]
+        assert row.status == "added" and row.lag_basis == "pooled over 2 clips"
+        assert row.lag_applied_s == row.lag_estimate_s == pytest.approx(0.21, abs=0.04)
+        assert row.lag_margin > 0.05 and row.lag_confidence > 0.4
+    lone = rows["styletalk_feifeili_clip3"]  # 7 s of its speaker: not identifiable
+    assert lone.lag_basis == "not identifiable" and lone.lag_applied_s == 0.0
+    text = "\n".join(report.lines())
+    assert "(pooled over 2 clips, r " in text and "applied to 2 clips" in text
+    assert "lag_basis" in report.to_csv().splitlines()[0]
