@@ -96,6 +96,12 @@ def test_bad_videos_are_rejected_with_their_reason(grid_clip, tmp_path):
             str(blank))
     with pytest.raises(DataError, match="a face in only 0 of"):
         load(discover([blank])[0])
+    # two faces: the clip beside itself
+    two = tmp_path / "two.mp4"
+    _ffmpeg("-i", str(video), "-i", str(video), "-filter_complex", "[0:v][1:v]hstack[v]",
+            "-map", "[v]", "-map", "0:a", "-c:v", "libx264", "-c:a", "aac", str(two))
+    with pytest.raises(DataError, match="two faces in"):
+        load(discover([two])[0])
     # a corrupt file
     broken = tmp_path / "broken.mp4"
     broken.write_bytes(video.read_bytes()[:2000])
