@@ -149,3 +149,25 @@ def test_missing_tracker_is_one_line(monkeypatch, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.endswith(TRACKER_HINT) and len(err.splitlines()) == 1
     assert not (tmp_path / "db").exists() or not any((tmp_path / "db").iterdir())
+
+
+def test_synth_takes_its_speech_from_a_video(tiny_corpus, tiny_db, tmp_path, capsys):
+    from animegraph.apps.cli import main
+    from ingest.formats.wav import read_wav
+    from ingest.readers.video import read_speech
+
+    wav = sorted((tiny_corpus / "clips").glob("*.wav"))[0]
+    video = tmp_path / "take.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=64x48:r=25", "-i", str(wav), "-shortest",
+            "-c:v", "libx264", "-c:a", "aac", str(video))
+    speech, rate = read_speech(video)
+    original, original_rate = read_wav(wav)
+    assert rate == 16000 == original_rate
+    assert abs(len(speech) - len(original)) < 0.05 * rate  # codec padding only
+    n = min(len(speech), len(original)) - 2048
+    assert np.corrcoef(speech[1024:n], original[1024:n])[0, 1] > 0.9
+    out = tmp_path / "out.npz"
+    assert main(["synth", str(video), "--db", str(tiny_db[0]), "-o", str(out)]) == 0
+    assert out.is_file()
+    with pytest.raises(DataError, match="not found"):
+        read_speech(tmp_path / "absent.mp4")

@@ -137,7 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
         "matching anime sequence (Cao et al. 2005, Eq. 2: jump matches, jump cost, DTW "
         "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
     )
-    syn.add_argument("audio", type=Path, metavar="AUDIO", help="speech (WAV, any rate)")
+    syn.add_argument("audio", type=Path, metavar="AUDIO",
+                     help="speech (WAV, any rate, or a video: its audio track)")
     syn.add_argument("--db", required=True, type=Path, help="database folder")
     given = syn.add_mutually_exclusive_group()
     given.add_argument("--text", default=None, help="transcript (forced alignment)")
@@ -552,8 +553,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         write_explain,
         write_motion,
     )
-    from ingest.formats.wav import read_wav
     from ingest.readers.common import read_labels
+    from ingest.readers.video import read_speech
 
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
         raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
@@ -580,7 +581,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
-    audio, sample_rate = read_wav(args.audio)
+    audio, sample_rate = read_speech(args.audio)  # a WAV, or a video's audio track
     labels = read_labels(args.labels) if args.labels else None
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
@@ -643,7 +644,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
     from db.store import Database
-    from ingest.formats.wav import read_wav
+    from ingest.readers.video import read_speech
 
     search_only = [flag for flag, on in (
         ("--text", args.text is not None), ("--labels", args.labels is not None),
@@ -666,7 +667,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     db = Database.open(args.db)
     check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
                 .to_pylist())
-    audio, sample_rate = read_wav(args.audio)
+    audio, sample_rate = read_speech(args.audio)  # a WAV, or a video's audio track
     t0 = time.perf_counter()
     model = fitted_model(args.db, args.method, refit=args.refit)
     t1 = time.perf_counter()

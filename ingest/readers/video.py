@@ -308,3 +308,19 @@ def load_video(source: ClipSource) -> RawClip:
         height=float(tracking.height), audio=audio, sample_rate=sample_rate,
         text=text or fields["text"], phones=phones, words=words, fields=fields, extra=extra,
         where=video)
+
+
+def read_speech(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
+    """Speech from a WAV file or a video's audio track: (mono float32 audio, rate).
+
+    A video (:data:`ingest.readers.discovery.VIDEO_SUFFIXES`) is decoded to
+    :data:`AUDIO_RATE`; anything else is read as WAV (:func:`ingest.formats.wav.read_wav`).
+    """
+    from ingest.readers.discovery import VIDEO_SUFFIXES
+
+    path = Path(path)
+    if path.suffix.lower() in VIDEO_SUFFIXES:
+        if not path.is_file():
+            raise DataError(f"video not found: {path}")
+        return video_audio(path), AUDIO_RATE
+    return read_wav(path)
