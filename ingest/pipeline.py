@@ -35,6 +35,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.store import Database, is_database, write_version
+from ingest.clip import checksum_files
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
 from ingest.lag import decide_lags
@@ -151,6 +152,11 @@ def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
     source, known, fps, reference = args
     try:
+        # Every reader's checksum is that of the clip's files in role order: an unchanged
+        # clip is known before it is read (a video is not decoded, nor its audio aligned).
+        key = (source.corpus, source.clip_id)
+        if key in known and known[key] == _checksum(source):
+            return ClipReport(str(source.path), source.clip_id, "unchanged"), None
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
@@ -162,6 +168,13 @@ def _work(args):
         return report, clip
     except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
+
+
+def _checksum(source: ClipSource) -> str | None:
+    try:
+        return checksum_files(source.paths)
+    except OSError:
+        return None  # load() says what is wrong with the file
 
 
 def ingest(
@@ -261,8 +274,6 @@ def _check_tracker(found: Sequence[ClipSource]) -> None:
     videos = [s for s in found if s.layout == "video"]
     if not videos or tracker_available():
         return
-    from ingest.clip import checksum_files
-
     if any(not cache_path(checksum_files([s.source])).is_file() for s in videos):
         raise ParameterError(TRACKER_HINT)
 
