@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from db.errors import DataError
 from ingest.prepare import MIN_LAG_CORRECTED_S
 from ingest.readers import discover, load
 from ingest.readers.sync import audio_envelope, lag_evidence, lag_from_evidence
@@ -50,7 +51,11 @@ def evidence_of(clip) -> np.ndarray:
 def report(name: str, sources) -> None:
     rows = []
     for source in sources:
-        clip = load(source)
+        try:
+            clip = load(source)
+        except DataError as exc:
+            print(f"# rejected: {exc}")
+            continue
         evidence = evidence_of(clip)
         own = lag_from_evidence([evidence], clip.duration)
         rows.append((clip.speaker or clip.corpus, clip.clip_id, clip.duration, evidence, own))

@@ -162,3 +162,21 @@ def test_ingest_reports_and_applies_the_pooled_lag(tmp_path):
     text = "\n".join(report.lines())
     assert "(pooled over 2 clips, r " in text and "applied to 2 clips" in text
     assert "lag_basis" in report.to_csv().splitlines()[0]
+
+
+def test_prepared_clips_read_back_from_the_database(tiny_db, tiny_corpus):
+    """prepared_from_database (row group by row group) gives back each clip's frames."""
+    from db.store import Database
+    from ingest.pipeline import prepare_sources
+    from ingest.tables import prepared_from_database
+
+    db = Database.open(tiny_db[0])
+    clips = {c.clip_id: c for c in prepared_from_database(db)}
+    frames = db.table("frames")
+    assert len(clips) == 34 and sum(len(c.motion) for c in clips.values()) == frames.num_rows
+    first = sorted((tiny_corpus / "clips").glob("*.c3d"))[0]
+    original = prepare_sources(discover([first]))[0][0]
+    back = clips[first.stem]
+    np.testing.assert_allclose(back.motion, original.motion, atol=1e-3)
+    np.testing.assert_array_equal(back.missing, original.missing)
+    assert back.phones == original.phones and back.extra == original.extra
