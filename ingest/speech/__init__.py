@@ -8,6 +8,7 @@ compares unlike things (Cao et al. 2005, §4.1-4.2):
 * :mod:`.espeak` -- eSpeak NG speech synthesis with its phoneme events;
 * :mod:`.segment` -- phones from speech: given labels, forced alignment of a transcript
   or phone recognition (PocketSphinx), and their error measures;
+* :mod:`.words` -- phones aligned inside the words of a known word alignment;
 * :mod:`.features` -- RASTA-PLP prosody curves and MFCCs.
 
 Imports: ``db`` and the file formats of ``ingest``.
