@@ -297,7 +297,10 @@ def _add_animator_commands(sub) -> None:
     ren.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
     ren.add_argument("-o", "--output", required=True, type=Path,
                      help=".mp4, .gif, .png, .glb, or a folder name for OBJ frames")
-    ren.add_argument("--audio", type=Path, default=None, help="speech to mux into an MP4")
+    ren.add_argument("--audio", type=Path, default=None,
+                     help="speech to mux into an MP4 (a WAV, or a video: its audio track)")
+    ren.add_argument("--beside", type=Path, default=None, metavar="VIDEO",
+                     help="put this video (the actor) left of the face in the MP4")
     ren.add_argument("--db", type=Path, default=None,
                      help="database the motion came from (checks its channels match)")
     ren.add_argument("--mesh", type=Path, default=None,
@@ -389,7 +392,7 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
 def _cmd_render(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.face.render import deformer_for, render_motion
+    from animegraph.face.render import deformer_for, place_beside, render_motion
     from animegraph.motion.files import read_motion
 
     size = _size(args.size)
@@ -397,6 +400,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph render: --fps must be > 0, got {args.fps}")
     if args.audio is not None and not args.audio.is_file():
         raise UsageError(f"animegraph render: --audio {args.audio} does not exist")
+    if args.beside is not None and not args.beside.is_file():
+        raise UsageError(f"animegraph render: --beside {args.beside} does not exist")
+    if args.beside is not None and args.output.suffix.lower() != ".mp4":
+        raise UsageError("animegraph render: --beside needs an .mp4 output")
     phones = _phone_track(args)
     t0 = time.perf_counter()
     motion = read_motion(args.motion)
@@ -407,6 +414,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
                         fps=args.fps, phones=phones, size=size, force=args.force,
                         progress=lambda total: _progress(total, args.quiet, "frame"))
+    if args.beside is not None:
+        place_beside(out, args.beside)
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
     print(f"animegraph: rendered {motion.duration:.2f} s of motion ({what}) in "
