@@ -15,6 +15,7 @@ import numpy as np
 
 from db.errors import DataError
 from ingest.formats.phones_csv import Segment
+from ingest.formats.words import WordSegment
 
 #: Kinds of motion a clip can carry.
 KINDS = ("markers", "curves", "landmarks")
@@ -115,6 +116,9 @@ class RawClip:
         Transcript, if any.
     phones : tuple of ingest.formats.phones_csv.Segment, or None
         Phone labels (ARPAbet, seconds) shipped with the clip, if any.
+    words : tuple of ingest.formats.words.WordSegment, or None
+        A word alignment shipped with the clip (GRID ``.align``, a TextGrid word tier),
+        if any: phones are then aligned inside each word.
     emotion, speaker, sentence_id : str or None
         Metadata, if known.
     checksum : str
@@ -134,6 +138,7 @@ class RawClip:
     checksum: str
     text: str | None = None
     phones: tuple[Segment, ...] | None = None
+    words: tuple[WordSegment, ...] | None = None
     emotion: str | None = None
     speaker: str | None = None
     sentence_id: str | None = None

@@ -43,8 +43,10 @@ from db.store import (
     is_staging,
     write_version,
 )
+from ingest.clip import checksum_files
 from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
 from ingest.emotion.model import fit_emotion_model
+from ingest.lag import decide_lags
 from ingest.motion import fill_gaps, head_points
 from ingest.plausible import Limits, check_clip
 from ingest.prepare import PreparedClip, prepare_clip
@@ -63,7 +65,9 @@ class IngestConfig:
     energy: float = ENERGY_KEPT  # energy below each component's cutoff (§4.3: 99 %)
     fps: float | None = None  # database frame rate (default: the existing database's, else
     #                           the highest among the new clips)
-    correct_lag: bool = True  # shift landmark / Live Link motion by its estimated lip-audio lag
+    # Shift landmark / Live Link motion by its lip-audio lag where identifiable.
+    correct_lag: bool = True
+    pool_lag: bool = True  # lag per speaker/session, pooled (ingest.lag); False: per clip
     random_state: int = 0  # FastICA seed
     phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
     limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
@@ -81,6 +85,11 @@ class ClipReport:
     segmentation: str = ""
     duration_s: float = 0.0
     note: str = ""  # e.g. implausible samples filled as dropouts (ingest.plausible)
+    lag_estimate_s: float | None = None  # lip-audio lag found (s, + = lips lead), ingest.lag
+    lag_confidence: float | None = None  # correlation at its peak
+    lag_margin: float | None = None  # ... minus the best side peak's
+    lag_basis: str = ""  # pooled over N clips | own | not identifiable
+    lag_applied_s: float | None = None  # the shift applied (0: none)
 
 
 @dataclass
@@ -108,6 +117,7 @@ class IngestReport:
                 out.append(f"  rejected {c.source}: {c.reason}")
             elif c.note:
                 out.append(f"  {c.status} {c.source}: {c.note}")
+        out += self._lag_lines()
         if self.written:
             s = self.summary
             out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
@@ -126,6 +136,24 @@ class IngestReport:
             out.append(f"database {self.db} unchanged")
         return out
 
+    def _lag_lines(self) -> list[str]:
+        """One line per lip-audio lag decision shared by clips (ingest.lag)."""
+        groups: dict[tuple, list[ClipReport]] = {}
+        for c in self.clips:
+            if c.lag_basis:
+                groups.setdefault((c.lag_basis, bool(c.lag_applied_s)), []).append(c)
+        out = []
+        for (basis, applied), rows in groups.items():
+            lags = sorted(r.lag_estimate_s for r in rows)
+            found = (f"{lags[0]:+.3f} s" if lags[0] == lags[-1]
+                     else f"{lags[0]:+.3f} to {lags[-1]:+.3f} s")
+            first = rows[0]
+            detail = (f", r {first.lag_confidence:.2f}, margin {first.lag_margin:.2f}"
+                      if len(rows) == 1 or lags[0] == lags[-1] else "")
+            out.append(f"lip-audio lag {found} ({basis}{detail}): "
+                       + ("applied to" if applied else "not applied to") + f" {len(rows)} clips")
+        return out
+
     def to_csv(self) -> str:
         buffer = io.StringIO()
         names = list(ClipReport.__dataclass_fields__)
@@ -138,13 +166,18 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, correct_lag, reference, engine, limits = args
+    source, known, fps, reference, engine, limits = args
     try:
+        # Every reader's checksum is that of the clip's files in role order: an unchanged
+        # clip is known before it is read (a video is not decoded, nor its audio aligned).
+        key = (source.corpus, source.clip_id)
+        if key in known and known[key] == _checksum(source):
+            return ClipReport(str(source.path), source.clip_id, "unchanged"), None
         raw = load(source)
         if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
             return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
         raw, note = check_clip(raw, limits)
-        clip = prepare_clip(raw, fps=fps, correct_lag=correct_lag,
+        clip = prepare_clip(raw, fps=fps,
                             head_reference=reference if _has_head(raw.schema) else None,
                             phones_engine=engine)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
@@ -154,6 +187,13 @@ def _work(args):
         return report, clip
     except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
+
+
+def _checksum(source: ClipSource) -> str | None:
+    try:
+        return checksum_files(source.paths)
+    except OSError:
+        return None  # load() says what is wrong with the file
 
 
 def ingest(
@@ -224,6 +264,7 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
     found = discover([Path(s) for s in sources])
     if not found:
         raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
+    _check_tracker(found)
     known: dict[tuple[str, str], str] = {}
     fps = config.fps
     reference = None
@@ -250,6 +291,8 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
         if existing is not None:
             replaced = {c.key for c in new}
             kept = [c for c in prepared_from_database(existing) if c.key not in replaced]
+        new = decide_lags(new, kept, correct=config.correct_lag, pooled=config.pool_lag)
+        _report_lags(report, new)
         target_fps = fps or max(c.fps for c in new)
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
@@ -273,6 +316,17 @@ def _foreign(folder: Path) -> bool:
     return any(p.name != LOCK_NAME and not is_staging(p.name) for p in folder.iterdir())
 
 
+def _check_tracker(found: Sequence[ClipSource]) -> None:
+    """One line, not one rejection a clip, when videos need the tracker and it is absent."""
+    from ingest.readers.video import TRACKER_HINT, cache_path, tracker_available
+
+    videos = [s for s in found if s.layout == "video"]
+    if not videos or tracker_available():
+        return
+    if any(not cache_path(checksum_files([s.source])).is_file() for s in videos):
+        raise ParameterError(TRACKER_HINT)
+
+
 def prepare_sources(
     found: Sequence[ClipSource], config: IngestConfig | None = None, *, workers: int = 1,
 ) -> tuple[list[PreparedClip], np.ndarray | None]:
@@ -281,9 +335,11 @@ def prepare_sources(
     Rejected clips are logged and left out.
     """
     config = config or IngestConfig()
+    _check_tracker(found)
     reference = _head_reference(list(found), config.limits)
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
-    clips = [c for r, c in results if c is not None]
+    clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
+                        pooled=config.pool_lag)
     for r, _ in results:
         if r.status == "rejected":
             logger.warning("rejected %s: %s", r.source, r.reason)
@@ -294,13 +350,28 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, config.correct_lag, reference, config.phones_engine,
-             config.limits) for s in found]
+    jobs = [(s, known, fps, reference, config.phones_engine, config.limits)
+            for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
     return map_in_processes(_work, jobs, workers=workers, chunksize=4,
                             progress=progress(len(jobs)) if progress else None)
+
+
+def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:
+    """Copy each clip's lag decision (:func:`ingest.lag.decide_lags`) into its report row."""
+    from dataclasses import replace
+
+    decided = {(c.source, c.clip_id): c.extra for c in clips if "lag_basis" in c.extra}
+    for k, row in enumerate(report.clips):
+        extra = decided.get((row.source, row.clip_id))
+        if extra is not None:
+            report.clips[k] = replace(
+                row, lag_estimate_s=extra["lag_estimate_s"],
+                lag_confidence=extra["lag_estimate_confidence"],
+                lag_margin=extra["lag_estimate_margin"], lag_basis=extra["lag_basis"],
+                lag_applied_s=extra["lag_corrected_s"])
 
 
 def _has_head(schema) -> bool:

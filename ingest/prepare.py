@@ -1,8 +1,9 @@
 """Per-clip ingest work: everything that does not need the rest of the corpus.
 
 A clip is read, its dropouts filled, its motion brought to the database's frame rate,
-its speech segmented into phones (given labels, else forced alignment of the
-transcript, else phone recognition) and its prosody curve computed (RASTA-PLP,
+its speech segmented into phones (given labels, else alignment inside the words of a
+given word alignment, else forced alignment of the transcript, else phone recognition)
+and its prosody curve computed (RASTA-PLP,
 Cao et al. §4.1). The result, a :class:`PreparedClip`, is what the corpus-wide steps
 (PCA/ICA, anime nodes, tables) work from; it is also what the database keeps of a
 clip, so a later ingest can rebuild the model without re-reading the sources.
@@ -18,9 +19,9 @@ from db.errors import DataError, ParameterError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.formats.phones_csv import Segment
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
-from ingest.readers import shift_motion
 from ingest.speech.features import RastaPlpConfig, rasta_plp
 from ingest.speech.segment import segment
+from ingest.speech.words import align_words
 
 #: Emotion label of clips that come without one.
 UNKNOWN_EMOTION = "unknown"
@@ -81,7 +82,6 @@ def prepare_clip(
     raw: RawClip,
     *,
     fps: float | None = None,
-    correct_lag: bool = True,
     head_reference: np.ndarray | None = None,
     prosody_config: RastaPlpConfig | None = None,
     phones_engine: str | None = None,
@@ -94,9 +94,6 @@ def prepare_clip(
         The clip as read.
     fps : float, optional
         Frame rate of the database (default: the clip's own).
-    correct_lag : bool
-        Shift motion by the lip-audio lag a reader estimated (``extra["lip_audio_lag_s"]``),
-        so lips and speech line up.
     head_reference : np.ndarray, shape (n_head_points, 3), optional
         Head-group positions of the database: points of a clip with a rigid head group
         are expressed in the head's frame (:func:`ingest.motion.stabilize_points`).
@@ -111,12 +108,7 @@ def prepare_clip(
     filled, missing = fill_gaps(raw.motion, raw.schema.names)
     if head_reference is not None:
         filled = stabilize_points(filled, raw.schema.groups, head_reference)
-    extra = dict(raw.extra)
-    lag = extra.get("lip_audio_lag_s")
-    if correct_lag and lag is not None and abs(lag) >= MIN_LAG_CORRECTED_S:
-        filled = shift_motion(filled, float(lag), raw.fps)
-        missing = shift_motion(missing.astype(np.float64), float(lag), raw.fps) > 0.5
-        extra["lag_corrected_s"] = float(lag)
+    extra = dict(raw.extra)  # the lip-audio lag is decided over many clips: ingest.lag
     target = raw.fps if fps is None else float(fps)
     if target != raw.fps:
         filled = resample_motion(filled, raw.fps, target)
@@ -125,9 +117,15 @@ def prepare_clip(
     audio = np.asarray(raw.audio, dtype=np.float32)
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent")
-    phones, method = segment(audio, raw.sample_rate, text=raw.text or None,
-                             labels=list(raw.phones) if raw.phones else None,
-                             engine=phones_engine)
+    if raw.words and not raw.phones:
+        phones, n_even = align_words(audio, raw.sample_rate, raw.words)
+        method = "aligned-words"
+        if n_even:
+            extra["words_spread_evenly"] = n_even
+    else:
+        phones, method = segment(audio, raw.sample_rate, text=raw.text or None,
+                                 labels=list(raw.phones) if raw.phones else None,
+                                 engine=phones_engine)
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python scripts/eval_lipsync.py [--datasets synthetic facegood talkingface]
+    python scripts/eval_lipsync.py [--datasets synthetic facegood talkingface grid]
                                    [--systems anime-graph mu-mlp hier-pca av-hmm]
                                    [--corpus DIR] [--json OUT] [--plots DIR]
                                    [--param av-hmm:n_states=8 ...]
@@ -24,24 +24,37 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
 * facegood (real, animation curves, Mandarin): leave one clip out of five;
 * talkingface (real, English, landmarks from video): within-speaker splits of the two
   long clips (first 70 % as the database, last 30 % synthesized) and leave one clip out
-  across the other eleven.
+  across the other eleven;
+* grid (real, English, one speaker on video, with transcripts and word alignments; issue
+  #14): the 800 GRID s1 utterances, faces tracked (``pip install -e ".[video]"``; cached),
+  split within the speaker: in clip-id order every fifth clip is held out (160), the
+  other 640 are the database. The database's phones are aligned inside GRID's word
+  alignments (as ingest does); the held-out clips are synthesized (a) from those phones
+  and (b) from phones recognised in their audio alone (the phone engine, as for the other
+  real data). ``--grid-db``
+  reads the clips prepared by an ``animegraph ingest`` of ``grid/s1`` instead of preparing
+  them again.
 
 Every table has two reference rows (issue 13; :mod:`animegraph.baselines.reference`):
 ``loudness``, the speech's smoothed RMS envelope mapped to every channel by least squares
 on the fold's training clips, and ``mean-pose``, the training motion's mean. A method
 that does not beat loudness is not lip-sync.
 
-Real clips have no transcripts: phones come from phone recognition by the default phone
-engine (``ingest.speech.engines``: hama), as at ingest; ``--phones-engine`` picks
-another. Each clip is prepared once; every fold's database is built from prepared clips
-(PCA/ICA refitted without the held-out data). Synthesized motion is compared with the
+Talkingface and FACEGOOD clips have no transcripts: phones come from phone recognition by
+the default phone engine (``ingest.speech.engines``), as at ingest; ``--phones-engine``
+picks another. Held-out clips are scored one at a time and only their scores kept
+(``peak_rss_mb`` in the JSON says what the process held at most). Each clip is prepared
+once; every fold's database is built from prepared clips (PCA/ICA refitted without the
+held-out data). Synthesized motion is compared with the
 recording in the database's space (head-stabilised markers, normalised landmarks).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import resource
 import sys
 import tempfile
 import time
@@ -62,6 +75,8 @@ from ingest.pipeline import IngestConfig, build_database, prepare_sources
 from ingest.prepare import slice_clip
 from ingest.readers import discover
 from ingest.speech.engines import ENGINES
+from ingest.speech.segment import segment
+from ingest.tables import prepared_from_database
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -105,6 +120,11 @@ def parse_param(text: str) -> tuple[str, str, object]:
 
 
 def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
+    return score_fold(fit_fold(tmp, name, train, reference), name, test)
+
+
+def fit_fold(tmp: Path, name: str, train, reference=None) -> dict:
+    """Build the fold's database from ``train`` and fit every baseline on it."""
     db = tmp / f"db-{name}"
     t0 = time.perf_counter()
     build_database(db, train, reference=reference)
@@ -122,11 +142,19 @@ def run_fold(tmp: Path, name: str, train, test, reference=None) -> list[dict]:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
-    for key, reference_row in (("loudness", Loudness), ("mean-pose", MeanPose)):
-        t0 = time.perf_counter()  # reference rows in every table (issue 13)
-        estimators[key] = reference_row().fit(train)
-        train_s[key] = time.perf_counter() - t0
+    for cls in (Loudness, MeanPose):  # reference rows in every table (issue 13)
+        t0 = time.perf_counter()
+        estimators[cls.method] = cls().fit(train)
+        train_s[cls.method] = time.perf_counter() - t0
     norm = measures.displacement_scale(np.concatenate([c.motion for c in train]))
+    return {"model": model, "estimators": estimators, "train_s": train_s, "norm": norm,
+            "rng": rng}
+
+
+def score_fold(fold: dict, name: str, test) -> list[dict]:
+    """Score the held-out clips of ``test`` (any iterable: consumed one clip at a time)."""
+    model, estimators, train_s = fold["model"], fold["estimators"], fold["train_s"]
+    norm, rng = fold["norm"], fold["rng"]
     methods = GRAPH_METHODS if "anime-graph" in SYSTEMS else ()
     dataset = name.rstrip("0123456789").split("-")[0]
     rows = []
@@ -199,6 +227,47 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
     return out
 
 
+#: GRID: every GRID_HOLDOUT-th clip in clip-id order is held out (index % 5 == 4).
+GRID_HOLDOUT = 5
+
+
+def grid(tmp: Path, workers: int, db: Path | None) -> dict[str, list[dict]]:
+    if db is not None:
+        from db.store import Database
+
+        clips = sorted(prepared_from_database(Database.open(db)), key=lambda c: c.clip_id)
+        reference = Database.open(db).arrays().get("head_reference")
+    else:
+        clips, reference = prepare_sources(discover([SHARED / "grid" / "s1"]),
+                                           workers=workers)
+        clips = sorted(clips, key=lambda c: c.clip_id)
+    train = [c for k, c in enumerate(clips) if k % GRID_HOLDOUT != GRID_HOLDOUT - 1]
+    test = [c for k, c in enumerate(clips) if k % GRID_HOLDOUT == GRID_HOLDOUT - 1]
+    print(f"# grid: database {len(train)} clips, held out {len(test)} (every "
+          f"{GRID_HOLDOUT}th in clip-id order); phones: {sorted({c.segmentation for c in clips})}",
+          flush=True)
+    del clips
+    fold = fit_fold(tmp, "grid", train, reference)
+    del train
+
+    def recognised():
+        for clip in test:  # one at a time: recognised, scored, dropped
+            audio = clip.audio.astype(np.float32) / 32767.0
+            phones, _ = segment(audio, clip.sample_rate, engine=INGEST.get("phones_engine"))
+            phones = tuple(phones)
+            yield dataclasses.replace(clip, phones=phones, segmentation="recognized")
+
+    out = {"aligned": score_fold(fold, "grid", test)}
+    print(f"# grid: aligned phones scored; recognising phones of {len(test)} clips", flush=True)
+    out["recognized"] = score_fold(fold, "grid", recognised())
+    return out
+
+
+def peak_rss_mb() -> float:
+    """Largest resident memory of this process so far (MB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def summarise(name: str, rows: list[dict]) -> dict:
     methods = list(dict.fromkeys(m for r in rows for m in r["methods"]))
     keys = sorted({k for r in rows for m in r["methods"].values() for k in m})
@@ -227,6 +296,8 @@ def main() -> int:
                         choices=evaluate.METHODS, help="the Anime Graph's rows (default all)")
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help="phone engine for clips without labels (default: auto)")
+    parser.add_argument("--grid-db", type=Path,
+                        help="database ingested from grid/s1 (default: prepare the clips)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
@@ -248,8 +319,18 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for name in args.datasets:
-            if name != "synthetic" and not (SHARED / name).exists():
+            if name not in ("synthetic", "grid") and not (SHARED / name).exists() or (
+                    name == "grid" and args.grid_db is None and not (SHARED / name).exists()):
                 print(f"# {name}: skipped, {SHARED / name} is absent")
+                continue
+            if name == "grid":
+                parts = grid(tmp, args.workers, args.grid_db)
+                results[name] = {phones: {"summary": summarise(f"grid, phones {phones}", rows),
+                                          "clips": rows} for phones, rows in parts.items()}
+                results[name]["peak_rss_mb"] = peak_rss_mb()
+                print(f"# peak memory {peak_rss_mb():.0f} MB", flush=True)
+                if args.json:
+                    args.json.write_text(json.dumps(results, indent=1))
                 continue
             if name == "synthetic":
                 rows = synthetic(tmp, args.corpus, args.workers)

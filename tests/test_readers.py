@@ -593,7 +593,8 @@ def test_discover_the_shared_data():
     root = require_shared()
     sources = discover([root])  # EmoDB has no motion and the mesh folder no clips
     assert Counter(s.layout for s in sources) == {"talkingface": 13, "facegood": 5,
-                                                  "livelink": 1}
+                                                  "livelink": 1,
+                                                  "video": 800}  # GRID s1
     assert discover([root / "facegood" / "wav" / "1114_2_03.wav"]) == [
         s for s in sources if s.clip_id == "1114_2_03"]
 

@@ -62,6 +62,27 @@ def _no_leftovers(folder):
     return [p.name for p in folder.iterdir() if p.name.startswith(".")]
 
 
+def test_mp4_beside_the_actor_video(take, capsys):
+    actor = take / "actor.mp4"  # a 1 s "video of the actor", 160 x 120, red, with a tone
+    subprocess.run([ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-f", "lavfi", "-i",
+                    "color=c=red:s=160x120:r=25:d=1", "-f", "lavfi", "-i",
+                    "sine=frequency=300:sample_rate=16000:duration=1", "-c:v", "libx264",
+                    "-c:a", "aac", "-pix_fmt", "yuv420p", str(actor)], check=True)
+    out = take / "both.mp4"
+    assert main(["render", str(take / "take.c3d"), "--audio", str(actor), "--beside",
+                 str(actor), "-o", str(out), "--quiet", "--size", "240x270"]) == 0
+    # the video scaled to the face's height (160 x 120 -> 360 x 270) left of it, with sound
+    streams = _streams(out)
+    assert any("Video: h264" in s and "600x270" in s for s in streams), streams
+    assert any("Audio: aac" in s for s in streams)
+    frame = _decode(out, 600, 270)[5].astype(int)
+    assert frame[100:170, 20:340, 0].mean() > 180 > frame[100:170, 20:340, 1].mean() + 100
+    assert not _no_leftovers(take)
+    assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
+                 str(take / "face.gif"), "--quiet"]) == 2
+    assert "--beside needs an .mp4" in capsys.readouterr().err
+
+
 def test_mp4_with_audio(take, capsys):
     out = take / "face.mp4"
     assert main(["render", str(take / "take.c3d"), "--audio", str(take / "take.wav"),

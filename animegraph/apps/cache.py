@@ -5,17 +5,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-#: Overrides the cache folder (tests and CI point it at a temporary folder).
-CACHE_ENV = "ANIMEGRAPH_CACHE"
+from ingest.cache import CACHE_ENV, cache_dir
 
-
-def cache_dir() -> Path:
-    """The user's cache folder for animegraph (``$ANIMEGRAPH_CACHE`` if set)."""
-    if os.environ.get(CACHE_ENV):
-        return Path(os.environ[CACHE_ENV])
-    from platformdirs import user_cache_dir
-
-    return Path(user_cache_dir("animegraph"))
+__all__ = ["CACHE_ENV", "DB_ENV", "cache_dir", "default_corpus_dir", "default_database",
+           "default_db_dir"]
 
 
 def default_corpus_dir() -> Path:

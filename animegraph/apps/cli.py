@@ -22,8 +22,9 @@ from db.errors import AnimeGraphError
 from ingest.speech.engines import ENGINES
 
 #: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
-SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), any "
-                  "sample rate, channels averaged to mono")
+SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), or a "
+                  "video's sound track (.mp4, .mov, .mkv ...), any sample rate, channels "
+                  "averaged to mono")
 
 
 class UsageError(Exception):
@@ -376,7 +377,10 @@ def _add_animator_commands(sub) -> None:
     ren.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
     ren.add_argument("-o", "--output", required=True, type=Path,
                      help=".mp4, .gif, .png, .glb, or a folder name for OBJ frames")
-    ren.add_argument("--audio", type=Path, default=None, help="speech to mux into an MP4")
+    ren.add_argument("--audio", type=Path, default=None,
+                     help="speech to mux into an MP4 (a WAV, or a video: its audio track)")
+    ren.add_argument("--beside", type=Path, default=None, metavar="VIDEO",
+                     help="put this video (the actor) left of the face in the MP4")
     ren.add_argument("--db", type=Path, default=None,
                      help="database the motion came from (checks its channels match)")
     ren.add_argument("--mesh", type=Path, default=None,
@@ -470,7 +474,7 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
 def _cmd_render(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.face.render import deformer_for, render_motion
+    from animegraph.face.render import deformer_for, place_beside, render_motion
     from animegraph.motion.files import read_motion
     from ingest.formats.livelink import is_arkit
 
@@ -479,6 +483,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph render: --fps must be > 0, got {args.fps}")
     if args.audio is not None and not args.audio.is_file():
         raise UsageError(f"animegraph render: --audio {args.audio} does not exist")
+    if args.beside is not None and not args.beside.is_file():
+        raise UsageError(f"animegraph render: --beside {args.beside} does not exist")
+    if args.beside is not None and args.output.suffix.lower() != ".mp4":
+        raise UsageError("animegraph render: --beside needs an .mp4 output")
     phones = _phone_track(args)
     t0 = time.perf_counter()
     motion = read_motion(args.motion)
@@ -490,6 +498,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                         fps=args.fps, phones=phones, size=size, force=args.force,
                         progress=lambda total: _progress(total, args.quiet, "frame",
                                                               "rendering"))
+    if args.beside is not None:
+        place_beside(out, args.beside)
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
     if deformer is None and is_arkit(motion.names):
@@ -536,14 +546,14 @@ def _check_db_channels(db_path: Path, motion) -> None:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from animegraph.apps.plots import plot_motion
     from animegraph.motion.files import read_motion
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
 
     if args.output.suffix.lower() != ".png":
         raise UsageError(f"animegraph plot: -o must end in .png, got {args.output.name!r}")
     phones = _phone_track(args)
     motion = read_motion(args.motion)
     truth = read_motion(args.truth) if args.truth is not None else None
-    audio = read_wav(args.audio) if args.audio is not None else None
+    audio = read_audio(args.audio) if args.audio is not None else None
     plot_motion(motion, args.output, truth=truth, phones=phones, audio=audio,
                 title=args.title or args.motion.name)
     print(f"animegraph: wrote {args.output}", file=sys.stderr)
@@ -662,7 +672,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         write_explain,
         write_motion,
     )
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
     from ingest.readers.common import read_labels
 
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
@@ -697,7 +707,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
-    audio, sample_rate = read_wav(args.audio)
+    audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     if sidecar is not None:
         print(f"animegraph: using the phone labels beside the speech, {sidecar} "
               "(--labels or --text to use others)", file=sys.stderr)
@@ -842,7 +852,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
     from db.store import Database
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
 
     search_only = [flag for flag, on in (
         ("--text", args.text is not None), ("--labels", args.labels is not None),
@@ -866,7 +876,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
     check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
                 .to_pylist())
-    audio, sample_rate = read_wav(args.audio)
+    audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     t0 = time.perf_counter()
     model = fitted_model(args.db, args.method, refit=args.refit)
     t1 = time.perf_counter()
@@ -921,11 +931,11 @@ def _cmd_classify(args: argparse.Namespace) -> int:
     from db.errors import DataError
     from db.store import Database
     from ingest.emotion.model import EmotionModel
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
 
     db = Database.open(args.db)
     model = EmotionModel.from_database(db)
-    audio, sample_rate = read_wav(args.audio)
+    audio, sample_rate = read_audio(args.audio)
     if audio.ndim != 1:
         raise DataError(f"{args.audio}: expected mono speech")
     probabilities = classify_speech(model, audio, sample_rate)
@@ -943,7 +953,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     from animegraph.emotion.control import classify_speech, map_motion, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import Model, read_database_motion
-    from ingest.formats.wav import read_wav
+    from ingest.formats.media import read_audio
 
     if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
         raise UsageError(f"animegraph map-emotion: -o must end in .c3d, .csv or .npz, got "
@@ -971,7 +981,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
     motion, fps = read_database_motion(args.motion, model)
     how = "given"
     if source == "auto" and args.audio is not None:
-        audio, sample_rate = read_wav(args.audio)
+        audio, sample_rate = read_audio(args.audio)
         source = next(iter(classify_speech(emotions, audio, sample_rate)))
         how = f"classified from {args.audio.name}"
     elif source == "auto":

@@ -218,6 +218,50 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
     return path
 
 
+def place_beside(path: Path, video: Path) -> Path:
+    """Put ``video`` (the actor) left of the rendered MP4 ``path``, at its height; atomic.
+
+    The sound is the rendered file's if it has any, else the video's; the result ends
+    with the shorter of the two.
+
+    Raises
+    ------
+    ParameterError
+        If ``path`` is not an ``.mp4``.
+    DataError
+        If ``video`` is missing or ffmpeg cannot read or write either (its last line).
+    """
+    import imageio_ffmpeg
+
+    path, video = Path(path), Path(video)
+    if path.suffix.lower() != ".mp4":
+        raise ParameterError(f"--beside needs an .mp4 output, got {path.name!r}")
+    if not video.is_file():
+        raise DataError(f"video not found: {video}")
+    reader = imageio_ffmpeg.read_frames(str(path))
+    try:
+        meta = next(reader)
+    finally:
+        reader.close()
+    height = int(meta["size"][1])
+    sound = "1:a" if meta.get("audio_codec") else "0:a?"
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp.mp4"
+    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-i", str(video),
+           "-i", str(path), "-filter_complex",
+           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];[a][b]hstack=inputs=2[v]",
+           "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",
+           "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-c:a", "aac",
+           "-movflags", "+faststart", str(tmp)]
+    result = subprocess.run(cmd, capture_output=True, check=False)
+    if result.returncode != 0 or not tmp.exists():
+        tmp.unlink(missing_ok=True)
+        lines = [x for x in result.stderr.decode(errors="replace").splitlines() if x.strip()]
+        raise DataError(f"ffmpeg could not put {video.name} beside {path.name}: "
+                        f"{lines[-1] if lines else f'exit status {result.returncode}'}")
+    os.replace(tmp, path)
+    return path
+
+
 def write_obj_frames(animation: FaceAnimation, folder: Path, *, force: bool = False) -> Path:
     """One OBJ per frame (``frame_00000.obj`` ...) in a new folder, built aside and renamed."""
     from db.atomic import replace_dir

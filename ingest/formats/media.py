@@ -1,10 +1,11 @@
-"""The sound track of a video (``.mov``, ``.mp4``, ``.m4a``), through ffmpeg.
+"""The sound track of a video (``.mp4``, ``.mov``, ``.mkv`` ..., ``.m4a``), through ffmpeg.
 
 Live Link Face saves each take's speech only inside the take's video (``<take>.mov``
 beside ``<take>.csv``); :func:`read_audio` reads it as mono float32, so an iPhone take
 ingests as it comes off the phone. The ffmpeg binary is the one ``imageio-ffmpeg`` ships
-(a dependency, used for rendering too). WAV files go through :func:`ingest.formats.wav.
-read_wav` as everywhere else.
+(a dependency, used for rendering too). The same reads the speech of a video clip
+(:mod:`ingest.readers.video`) and a video given to ``synth``. WAV files go through
+:func:`ingest.formats.wav.read_wav` as everywhere else.
 """
 
 from __future__ import annotations
@@ -18,12 +19,24 @@ import numpy as np
 from db.errors import DataError
 from ingest.formats.wav import read_wav
 
-#: Extensions read through ffmpeg (lower case, with the dot).
-MEDIA_SUFFIXES = (".mov", ".mp4", ".m4a")
+#: Video containers (lower case, with the dot): their sound track is speech, and ingest
+#: tracks the face in their pictures (:mod:`ingest.readers.video`).
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mpg", ".mpeg", ".mkv", ".webm")
+#: Everything read through ffmpeg: videos and audio-only MPEG-4 (``.m4a``).
+MEDIA_SUFFIXES = VIDEO_SUFFIXES + (".m4a",)
 
 
-def read_audio(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
+def read_audio(path: str | os.PathLike[str],
+               sample_rate: int | None = None) -> tuple[np.ndarray, int]:
     """Mono float32 audio in [-1, 1] and its rate: a WAV, or a video's sound track.
+
+    Parameters
+    ----------
+    path : path
+        A WAV (read by :func:`ingest.formats.wav.read_wav`) or a file of
+        :data:`MEDIA_SUFFIXES` (its first sound track, decoded by ffmpeg).
+    sample_rate : int, optional
+        Decode a sound track at this rate (default: its own). WAV files keep theirs.
 
     Raises
     ------
@@ -38,14 +51,17 @@ def read_audio(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
         raise DataError(f"audio file not found: {path}")
     import imageio_ffmpeg
 
-    rate = _sample_rate(path)
+    rate = int(sample_rate) if sample_rate else _sample_rate(path)
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-i", str(path),
-           "-vn", "-map", "0:a:0", "-ac", "1", "-f", "f32le", "-acodec", "pcm_f32le", "-"]
+           "-vn", "-map", "0:a:0", "-ac", "1", "-ar", str(rate), "-f", "f32le",
+           "-acodec", "pcm_f32le", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:
         lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
-        reason = lines[-1] if lines else "no sound track"
-        raise DataError(f"cannot read the sound track of {path}: {reason}")
+        if not proc.stdout and (not lines or "matches no streams" in lines[-1]):
+            raise DataError(f"{path}: no audio track")
+        raise DataError(f"cannot read the sound track of {path}: "
+                        f"{lines[-1] if lines else proc.returncode}")
     audio = np.frombuffer(proc.stdout, dtype="<f4").astype(np.float32)
     return np.clip(audio, -1.0, 1.0), rate
 
@@ -61,5 +77,5 @@ def _sample_rate(path: Path) -> int:
     info = proc.stderr.decode(errors="replace")
     match = re.search(r"Stream #\S+.*?Audio: .*?(\d+) Hz", info)
     if not match:
-        raise DataError(f"{path}: no sound track")
+        raise DataError(f"{path}: no audio track")
     return int(match.group(1))

@@ -17,8 +17,9 @@ Kinds and layouts (see each module):
 - ``"curves"`` from an iPhone: :mod:`ingest.readers.livelink` (Live Link Face CSV, ARKit
   blendshapes; timecode gaps filled, lip-audio lag estimated);
 - ``"landmarks"``: :mod:`ingest.readers.landmarks` (talking-face clip folders; head pose
-  removed by Procrustes to the canonical mesh, lip-audio lag estimated, not applied:
-  :func:`shift_motion` applies it).
+  removed by Procrustes to the canonical mesh, lip-audio lag evidence kept, not applied:
+  :mod:`ingest.lag` decides it over a speaker's clips) and :mod:`ingest.readers.video`
+  (videos, the face tracked on every frame, the tracking cached).
 
 Checks common to all kinds, and their tolerances, are in :mod:`ingest.readers.common`.
 """
@@ -41,6 +42,7 @@ from ingest.readers.landmarks import load_talkingface, normalise_landmarks
 from ingest.readers.livelink import load_livelink
 from ingest.readers.markers import load_markers
 from ingest.readers.sync import estimate_lag, lip_audio_lag, shift_motion
+from ingest.readers.video import load_video
 
 logger = logging.getLogger(__name__)
 
@@ -51,6 +53,7 @@ _LOADERS = {
     "curves": load_curves,
     "talkingface": load_talkingface,
     "livelink": load_livelink,
+    "video": load_video,
 }
 
 

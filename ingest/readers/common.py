@@ -29,7 +29,8 @@ from db.errors import DataError
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
 from ingest.formats.text import read_utf8
-from ingest.formats.textgrid import read_textgrid
+from ingest.formats.textgrid import PHONE_TIER_NAMES, read_textgrid, read_tiers
+from ingest.formats.words import WORD_TIER_NAMES, read_grid_align, read_textgrid_words
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +45,7 @@ ROLES = (
     "channel_names",  # curve names: <stem>.channels.txt, FACEGOOD's names .npy
     "channel_list",  # FACEGOOD's bsname.txt (checked against the .npy names)
     "settings",  # curves.json: corpus-level frame rate / channel names
+    "words",  # a word alignment: <stem>.align (GRID); last, so older checksums stand
 )
 #: Motion groups a channel may belong to (:class:`ingest.clip.ChannelSchema`).
 GROUPS = ("head", "upper_face", "lips", "pose", "other")
@@ -275,25 +277,60 @@ def check_labels(phones: list[Segment], audio_seconds: float, where: Path) -> No
 
 def transcript_and_labels(source, audio_seconds: float) -> tuple[str | None,
                                                                   tuple[Segment, ...] | None]:
-    """The clip's transcript file and phone labels, if it has them (checked)."""
+    """The clip's transcript file, phone labels and word alignment, if it has them (checked).
+
+    A TextGrid with a word tier but no phone tier (``phones``/``phone``/``segments``) is
+    a word alignment; with both, its phones are read. Without a transcript file, the
+    transcript is the word alignment's words.
+    """
     text = None
     transcript_path = source.file("transcript")
     if transcript_path is not None:
         text = read_transcript(transcript_path)
-    phones = None
+    phones = words = None
     labels_path = source.file("labels")
-    if labels_path is not None:
+    if labels_path is not None and _word_textgrid(labels_path):
+        words = read_textgrid_words(labels_path)
+    elif labels_path is not None:
         segments = read_labels(labels_path)
         check_labels(segments, audio_seconds, labels_path)
         phones = tuple(segments)
-    return text, phones
+    words_path = source.file("words")
+    if words_path is not None and words is None:
+        words = read_grid_align(words_path)
+    if words is not None:
+        words = tuple(words)
+        if words[-1].end > audio_seconds + duration_tolerance(audio_seconds):
+            raise DataError(f"{words_path or labels_path}: words end at {words[-1].end:.3f} s, "
+                            f"after the audio ({audio_seconds:.3f} s)")
+        spoken = " ".join(w.word for w in words if w.word)
+        if text is None:
+            text = spoken
+        elif _normalised(text) != _normalised(spoken):
+            raise DataError(f"{words_path or labels_path}: its words {spoken[:60]!r} are not "
+                            f"the transcript's {text[:60]!r} (another utterance?)")
+    return text, phones, words
+
+
+def _normalised(text: str) -> list[str]:
+    words = (w.strip(".,;:!?'\"") for w in text.lower().replace("-", " ").split())
+    return [w for w in words if w]
+
+
+def _word_textgrid(path: Path) -> bool:
+    """A TextGrid whose only label tier is a word tier."""
+    if not path.name.lower().endswith(".textgrid"):
+        return False
+    tiers = [t.name.strip().lower() for t in read_tiers(path) if t.kind == "IntervalTier"]
+    return (any(t in WORD_TIER_NAMES for t in tiers)
+            and not any(t in PHONE_TIER_NAMES for t in tiers))
 
 
 def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: dict,
                           meta_path: Path | None):
     """A clip's audio (a WAV, or a video's sound track: :func:`ingest.formats.media.
-    read_audio`; its duration checked against the motion's), metadata fields and
-    transcript/labels.
+    read_audio`; its duration checked against the motion's), metadata fields,
+    transcript, phone labels and word alignment.
 
     Returns
     -------
@@ -303,6 +340,8 @@ def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: 
         :data:`META_KEYS` from ``meta`` (None if absent), ``"text"`` from a transcript
         file if there is one.
     phones : tuple of Segment or None
+    words : tuple of Word or None
+        A word alignment beside the clip (:func:`transcript_and_labels`).
     """
     from ingest.formats.media import read_audio
 
@@ -310,10 +349,10 @@ def speech_and_side_files(source, n_frames: int, fps: float, where: Path, meta: 
     audio_seconds = len(audio) / sample_rate
     check_durations(n_frames, fps, audio_seconds, where)
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(META_KEYS)
-    text, phones = transcript_and_labels(source, audio_seconds)
+    text, phones, words = transcript_and_labels(source, audio_seconds)
     if text is not None:
         fields["text"] = text
-    return audio, sample_rate, fields, phones
+    return audio, sample_rate, fields, phones, words
 
 
 def load_npy(path: Path) -> np.ndarray:

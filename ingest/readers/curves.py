@@ -231,13 +231,14 @@ def load_curves(source: ClipSource) -> RawClip:
     except DataError as exc:
         raise DataError(f"{motion_path}: {exc}") from None
 
-    audio, sample_rate, fields, phones = speech_and_side_files(
+    audio, sample_rate, fields, phones, words = speech_and_side_files(
         source, len(motion), fps, motion_path, meta, meta_path)
     audio_seconds = len(audio) / sample_rate
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
         fps=fps, schema=schema, audio=audio, sample_rate=sample_rate,
         checksum=checksum_files(source.paths), text=fields["text"], phones=phones,
+        words=words,
         emotion=fields["emotion"], speaker=fields["speaker"],
         sentence_id=fields["sentence_id"],
         extra={"layout": source.layout,

@@ -9,12 +9,16 @@ Per folder, the first layout that fits wins:
 1. **synthetic corpus**: ``corpus.json`` (format ``animegraph-corpus``), ``markers.csv``
    and ``clips/``: every ``clips/<id>.c3d`` (also when ``clips/`` itself is given);
 2. **FACEGOOD**: folders ``bs_value/`` (``bs_value_<clip>.npy``) and ``wav/``;
-3. **talking-face clip**: a folder with ``landmarks.npy``;
+3. **talking-face clip**: a folder with ``landmarks.npy``; its transcript, phone labels
+   and word alignment are ``transcript.txt`` / ``<clip>.txt``, ``phones.csv`` /
+   ``<clip>.phones.csv`` / ``<clip>.TextGrid`` / ``<clip>.lab`` and ``<clip>.align``,
+   in the folder or beside it;
 4. **generic**: per file stem, a marker file (``.c3d`` > ``.trc`` > marker ``.csv``),
    else a Live Link Face ``.csv`` (header ``Timecode,BlendshapeCount,...``: an iPhone
    capture, :mod:`ingest.readers.livelink`; its speech is ``<stem>.wav``, else the sound
    track of the app's ``<stem>.mov``/``.mp4``), else a curve file (``.npy`` >
-   ``.curves.csv``), with its side files.
+   ``.curves.csv``), else a video (:data:`VIDEO_SUFFIXES`, faces tracked by
+   :mod:`ingest.readers.video`), with its side files (``.align``: a GRID word alignment).
    A marker or Live Link file without ``<stem>.wav`` is still a clip (``load`` then
    rejects it);
    a ``.npy`` or ``.curves.csv`` without one is not taken for a clip.
@@ -30,7 +34,7 @@ from pathlib import Path
 
 from db.errors import ParameterError
 from ingest.formats.livelink import sniff_livelink
-from ingest.formats.media import MEDIA_SUFFIXES
+from ingest.formats.media import MEDIA_SUFFIXES, VIDEO_SUFFIXES
 from ingest.readers.common import ClipSource
 from ingest.readers.landmarks import AUDIO_NAMES
 
@@ -114,6 +118,7 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         livelink = files.get(".csv") if not markers and ".csv" in files else None
         if livelink is not None and not sniff_livelink(livelink):
             livelink = None
+        videos = [files[s] for s in VIDEO_SUFFIXES if s in files]
         if markers:
             kind, layout, motion = "markers", layout_markers, markers[0]
             ignored = markers[1:] + curves
@@ -124,7 +129,10 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
             audio = audio or next((files[s] for s in MEDIA_SUFFIXES if s in files), None)
         elif curves and (audio is not None or ".channels.txt" in files):
             kind, layout, motion = "curves", "curves", curves[0]
-            ignored = curves[1:]
+            ignored = curves[1:] + videos
+        elif videos:
+            kind, layout, motion = "landmarks", "video", videos[0]
+            ignored = videos[1:]
         else:
             if curves:
                 logger.debug("%s: no %s.wav; not a clip", curves[0], stem)
@@ -138,10 +146,11 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         role_files = {
             "motion": motion, "audio": audio, "labels": labels[0] if labels else None,
             "transcript": files.get(".txt"), "metadata": files.get(".json"),
+            "words": files.get(".align"),
         }
         if kind == "markers":
             role_files["marker_table"] = marker_table
-        elif layout != "livelink":
+        elif kind == "curves" and layout != "livelink":
             role_files["channel_names"] = files.get(".channels.txt")
             role_files["settings"] = settings
         sources.append(ClipSource.make(corpus, stem, kind, layout, motion, role_files))
@@ -167,9 +176,19 @@ def _facegood_clips(root: Path) -> list[ClipSource]:
 
 def _talkingface_clip(folder: Path) -> ClipSource:
     audio = _first_existing(*(folder / name for name in AUDIO_NAMES))
-    return ClipSource.make(folder.parent.name, folder.name, "landmarks", "talkingface", folder, {
+    name, parent = folder.name, folder.parent
+
+    def side(*names: str) -> Path | None:  # in the clip folder, then beside it
+        return _first_existing(*(folder / n for n in names),
+                               *(parent / n for n in names if n.startswith(name)))
+
+    labels = side("phones.csv", f"{name}.phones.csv", f"{name}.TextGrid", f"{name}.textgrid",
+                  f"{name}.lab")
+    return ClipSource.make(parent.name, name, "landmarks", "talkingface", folder, {
         "motion": folder / "landmarks.npy", "audio": audio,
         "metadata": _first_existing(folder / "meta.json"),
+        "transcript": side("transcript.txt", f"{name}.txt"), "labels": labels,
+        "words": side(f"{name}.align", "words.align"),
     })
 
 

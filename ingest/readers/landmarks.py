@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -49,8 +50,9 @@ from ingest.readers.common import (
     metadata_fields,
     read_fps,
     read_json_object,
+    transcript_and_labels,
 )
-from ingest.readers.sync import lip_audio_lag
+from ingest.readers.sync import audio_envelope, estimate_lag, lag_evidence, lip_activity
 
 logger = logging.getLogger(__name__)
 
@@ -277,6 +279,56 @@ def load_talkingface(source: ClipSource) -> RawClip:
             raise DataError(f"{meta_path}: {name!r} must be a number > 0, got {value!r}")
 
     raw = load_npy(lm_path)
+    audio, sample_rate = read_wav(audio_path)
+    text, phones, words = transcript_and_labels(source, len(audio) / sample_rate)
+    fields = metadata_fields(meta, meta_path)
+    extra: dict = {}
+    sync = meta.get("lip_audio_sync_estimate")
+    if isinstance(sync, dict) and isinstance(sync.get("best_lag_ms"), int | float):
+        # meta.json counts "+lag = lips after audio"; here + means lips lead.
+        extra["meta_lip_audio_lag_s"] = 0.0 - float(sync["best_lag_ms"]) / 1000.0
+    return landmark_clip(
+        source, raw, fps=fps, width=float(width), height=float(height), audio=audio,
+        sample_rate=sample_rate, text=text or fields["text"], phones=phones, words=words,
+        fields=fields, extra=extra, where=lm_path)
+
+
+def landmark_clip(
+    source: ClipSource, raw: np.ndarray, *, fps: float, width: float, height: float,
+    audio: np.ndarray, sample_rate: int, text: str | None, phones, words,
+    fields: dict, extra: dict, where: Path,
+) -> RawClip:
+    """A :class:`RawClip` from tracked landmarks and the clip's speech (any source).
+
+    Parameters
+    ----------
+    source : ClipSource
+        The clip (its files make the checksum).
+    raw : np.ndarray, shape (n_frames, 468 or 478, 3)
+        Landmarks as the tracker gives them (see the module docstring), NaN without a face.
+    fps, width, height : float
+        Frame rate and image size (pixels).
+    audio : np.ndarray, shape (n_samples,)
+        Mono speech starting at frame 0.
+    sample_rate : int
+        Its rate (Hz).
+    text, phones, words
+        Transcript, phone labels and word alignment, if the clip has them.
+    fields : dict
+        :func:`metadata_fields` of the clip's metadata.
+    extra : dict
+        Reader facts to keep (merged into the clip's ``extra``).
+    where : Path
+        Named in errors.
+
+    Raises
+    ------
+    DataError
+        Landmarks of the wrong shape, no face in any frame, audio and motion durations
+        that disagree.
+    """
+    folder = source.source
+    lm_path = where
     if raw.ndim != 3 or raw.shape[1] not in (N_FACE, N_WITH_IRISES) or raw.shape[2] != 3:
         raise DataError(
             f"{lm_path}: expected landmarks of shape (n_frames, {N_FACE} or {N_WITH_IRISES}, 3), "
@@ -302,30 +354,29 @@ def load_talkingface(source: ClipSource) -> RawClip:
     schema = landmark_schema()
     motion = check_motion(motion, schema.names, lm_path, "channel")
 
-    audio, sample_rate = read_wav(audio_path)
     check_durations(n, fps, len(audio) / sample_rate, folder)
-    lag, confidence = lip_audio_lag(norm.points, audio, sample_rate, fps)
-    fields = metadata_fields(meta, meta_path)
+    lips = lip_activity(norm.points)
+    loudness = audio_envelope(audio, sample_rate, fps, n)
+    lag, confidence = estimate_lag(lips, loudness, fps)
 
-    extra: dict = {
+    extra = {
+        **extra,
         "layout": source.layout,
         "lip_audio_lag_s": round(lag, 4),
         "lag_confidence": round(confidence, 4),
+        # pooled per speaker at ingest (ingest.lag): whether any lag is applied is decided there
+        "lag_evidence": np.round(lag_evidence(lips, loudness, fps), 4).tolist(),
         "procrustes_rms_mm": round(float(np.nanmedian(norm.residual_mm)), 3),
         "procrustes_rms_p95_mm": round(float(np.nanpercentile(norm.residual_mm, 95)), 3),
         "stable_jitter_mm": round(_stable_jitter(norm.points), 3),
         "image_size": [float(width), float(height)],
     }
-    sync = meta.get("lip_audio_sync_estimate")
-    if isinstance(sync, dict) and isinstance(sync.get("best_lag_ms"), int | float):
-        # meta.json counts "+lag = lips after audio"; here + means lips lead.
-        extra["meta_lip_audio_lag_s"] = 0.0 - float(sync["best_lag_ms"]) / 1000.0
     logger.info("%s: lip-audio lag %+.3f s (r %.2f); Procrustes residual %.2f mm", folder,
                 lag, confidence, extra["procrustes_rms_mm"])
     return RawClip(
         clip_id=source.clip_id, corpus=source.corpus, source=folder, motion=motion, fps=fps,
         schema=schema, audio=audio, sample_rate=sample_rate,
-        checksum=checksum_files(source.paths), text=fields["text"], phones=None,
+        checksum=checksum_files(source.paths), text=text, phones=phones, words=words,
         emotion=fields["emotion"], speaker=fields["speaker"],
         sentence_id=fields["sentence_id"], extra=extra,
     )

@@ -23,7 +23,8 @@ rows here (and interpolated later, as marker dropouts are:
 :func:`ingest.motion.fill_gaps`) and reported; a gap longer than :data:`MAX_GAP_S` is taken
 for two takes run together and rejected. The lag between the lips and the speech is
 estimated as for landmark clips (:func:`ingest.readers.sync.estimate_lag`), with the
-mouth's opening and width read off the blendshapes (:func:`mouth_activity`).
+mouth's opening and width read off the blendshapes (:func:`mouth_activity`); its evidence
+is pooled per speaker at ingest, which decides whether it is applied (:mod:`ingest.lag`).
 """
 
 from __future__ import annotations
@@ -46,7 +47,12 @@ from ingest.readers.common import (
     read_json_object,
     speech_and_side_files,
 )
-from ingest.readers.sync import audio_envelope, estimate_lag, opening_width_activity
+from ingest.readers.sync import (
+    audio_envelope,
+    estimate_lag,
+    lag_evidence,
+    opening_width_activity,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -215,13 +221,14 @@ def load_livelink(source: ClipSource) -> RawClip:
 
     meta_path = source.file("metadata")
     meta = read_json_object(meta_path) if meta_path else {}
-    audio, sample_rate, fields, phones = speech_and_side_files(
+    audio, sample_rate, fields, phones, words = speech_and_side_files(
         source, len(motion), fps, path, meta, meta_path)
     audio_seconds = len(audio) / sample_rate
 
     filled = np.where(np.isnan(motion), np.nanmean(motion, axis=0), motion)
     loudness = audio_envelope(audio, sample_rate, fps, len(motion))
-    lag, confidence = estimate_lag(mouth_activity(filled, names), loudness, fps)
+    activity = mouth_activity(filled, names)
+    lag, confidence = estimate_lag(activity, loudness, fps)
     n_dropped = int(dropped.sum())
     extra = {
         "layout": source.layout,
@@ -231,6 +238,8 @@ def load_livelink(source: ClipSource) -> RawClip:
         "gaps": int((dropped > 0).sum()),
         "lip_audio_lag_s": round(lag, 4),
         "lag_confidence": round(confidence, 4),
+        # pooled per speaker at ingest (ingest.lag), which decides whether it is applied
+        "lag_evidence": np.round(lag_evidence(activity, loudness, fps), 4).tolist(),
         "motion_audio_offset_s": round(len(motion) / fps - audio_seconds, 4),
     }
     if n_dropped:

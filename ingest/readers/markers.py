@@ -122,7 +122,7 @@ def load_markers(source: ClipSource) -> RawClip:
                            fps, motion_path.name, data.rate)
         if "variation" in meta:
             extra["variation"] = meta["variation"]
-    text, phones = transcript_and_labels(source, audio_seconds)
+    text, phones, words = transcript_and_labels(source, audio_seconds)
     if text is not None:
         fields["text"] = text
 
@@ -130,6 +130,7 @@ def load_markers(source: ClipSource) -> RawClip:
         clip_id=source.clip_id, corpus=source.corpus, source=motion_path, motion=motion,
         fps=data.rate, schema=schema, audio=audio, sample_rate=sample_rate,
         checksum=checksum_files(source.paths), text=fields["text"], phones=phones,
+        words=words,
         emotion=fields["emotion"], speaker=fields["speaker"],
         sentence_id=fields["sentence_id"], extra=extra,
     )

@@ -17,12 +17,26 @@ clips' own ``meta.json`` estimates best):
   ``i / fps``, in dB, floored 50 dB below its peak (so pauses do not dominate).
 
 The mouth opening itself correlates less well (its level drifts with expression).
+
+When a lag is identifiable (issue #14): on a 3 s utterance the correlation of lip activity
+with loudness has side peaks one syllable (~0.2 s) either side of the true lag that are
+nearly as high as the true peak, and a per-clip estimate locks onto them (on GRID s1 it
+shifted 320 of 800 clips by up to +-0.48 s, where one speaker in one session has one
+lag). So the correlation is kept per clip as *evidence* (:func:`lag_evidence`: sums of
+products and powers of the standardised signals at every lag of :data:`LAG_GRID_S`),
+evidence of all the clips of one speaker and session is pooled
+(:func:`pooled_lag`), and an estimate is used only when it is *identifiable*
+(:meth:`LagEstimate.identifiable`): at least :data:`MIN_EVIDENCE_S` seconds of speech
+behind it and a peak that beats the best side peak (local maximum further than
+:data:`SIDE_PEAK_EXCLUSION_S` from it) by :data:`MIN_PEAK_MARGIN` in correlation.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from numbers import Real
 
 import numpy as np
@@ -36,6 +50,16 @@ logger = logging.getLogger(__name__)
 MAX_LAG_S = 0.5
 #: Loudness floor below the clip's peak (dB).
 FLOOR_DB = 50.0
+#: Lags (s) at which evidence is kept, whatever a clip's frame rate (10 ms steps).
+LAG_GRID_S = np.round(np.arange(-50, 51) * 0.01, 2)
+#: Side peaks are local maxima of the correlation at least this far from its peak (s):
+#: past the main lobe (its half width is about half a syllable).
+SIDE_PEAK_EXCLUSION_S = 0.12
+#: An estimate is identifiable when its peak correlation beats the best side peak by
+#: this much ...
+MIN_PEAK_MARGIN = 0.05
+#: ... and it rests on at least this many seconds of audio (one clip or a pool).
+MIN_EVIDENCE_S = 20.0
 
 
 def audio_envelope(audio: np.ndarray, sample_rate: int, fps: float, n_frames: int) -> np.ndarray:
@@ -149,13 +173,17 @@ def estimate_lag(
         if a.std() > 0 and b.std() > 0:
             corr[k] = float(np.corrcoef(a, b)[0, 1])
     best = int(np.argmax(corr))
-    offset = 0.0
-    if 0 < best < len(lags) - 1:
+    return float((lags[best] + _peak_offset(corr, best)) / fps), float(corr[best])
+
+
+def _peak_offset(corr: np.ndarray, best: int) -> float:
+    """Offset (in steps, within +-0.5) of the top of a parabola through ``corr``'s peak."""
+    if 0 < best < len(corr) - 1:
         left, mid, right = corr[best - 1], corr[best], corr[best + 1]
         curvature = left - 2 * mid + right
         if curvature < 0:
-            offset = 0.5 * (left - right) / curvature
-    return float((lags[best] + offset) / fps), float(corr[best])
+            return float(0.5 * (left - right) / curvature)
+    return 0.0
 
 
 def lip_audio_lag(
@@ -230,3 +258,113 @@ def shift_motion(motion: np.ndarray, lag_s: float, fps: float) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         blended = motion[lo] + weight * (motion[hi] - motion[lo])
     return np.where(weight > 0, blended, motion[lo])
+
+
+@dataclass(frozen=True)
+class LagEstimate:
+    """A lip-audio lag read off pooled or single-clip evidence.
+
+    Attributes
+    ----------
+    lag_s : float
+        Seconds, positive when the lips lead the audio.
+    confidence : float
+        Correlation at the peak.
+    margin : float
+        Peak correlation minus the best side peak's (:data:`SIDE_PEAK_EXCLUSION_S`).
+    seconds : float
+        Duration of the audio behind the estimate.
+    n_clips : int
+        Clips pooled.
+    """
+
+    lag_s: float
+    confidence: float
+    margin: float
+    seconds: float
+    n_clips: int = 1
+
+    def identifiable(self, *, min_margin: float = MIN_PEAK_MARGIN,
+                     min_seconds: float = MIN_EVIDENCE_S) -> bool:
+        """Whether the peak clearly beats its side peaks on enough audio."""
+        return self.seconds >= min_seconds and self.margin >= min_margin
+
+
+def lag_evidence(lips: np.ndarray, loudness: np.ndarray, fps: float) -> np.ndarray:
+    """Cross-correlation sums of one clip at the lags of :data:`LAG_GRID_S`.
+
+    Both signals are standardised over the clip (loudness in dB, floored as in
+    :func:`estimate_lag`); at each frame lag the sums over the overlapping frames of
+    ``lips[t] * loud[t + lag]``, ``lips[t]**2`` and ``loud[t + lag]**2`` are taken and
+    interpolated linearly onto the grid, so clips of any frame rate pool.
+
+    Parameters
+    ----------
+    lips : np.ndarray, shape (n_frames,)
+        Lip activity (:func:`lip_activity`).
+    loudness : np.ndarray, shape (n_frames,)
+        Audio RMS per frame (:func:`audio_envelope`).
+    fps : float
+        Frames per second of both.
+
+    Returns
+    -------
+    np.ndarray, shape (3, len(LAG_GRID_S))
+        Rows: sum of products, lip power, loudness power. Zero where the clip is too
+        short for the lag or a signal is constant.
+    """
+    lips = np.asarray(lips, dtype=np.float64)
+    db = 20.0 * np.log10(np.asarray(loudness, dtype=np.float64) + 1e-10)
+    db = np.maximum(db, db.max() - FLOOR_DB) if len(db) else db
+    n = min(len(lips), len(db))
+    out = np.zeros((3, len(LAG_GRID_S)))
+    if n < 4 or lips[:n].std() == 0 or db[:n].std() == 0:
+        return out
+    a = (lips[:n] - lips[:n].mean()) / lips[:n].std()
+    b = (db[:n] - db[:n].mean()) / db[:n].std()
+    max_lag = min(int(math.ceil(LAG_GRID_S[-1] * fps)) + 1, n - 2)
+    lags = np.arange(-max_lag, max_lag + 1)
+    sums = np.zeros((3, len(lags)))
+    for k, lag in enumerate(lags):
+        x = a[max(0, -lag):n - max(0, lag)]
+        y = b[max(0, lag):n - max(0, -lag)]
+        sums[:, k] = (x @ y, x @ x, y @ y)
+    seconds = lags / fps
+    inside = np.abs(LAG_GRID_S) <= seconds[-1] + 1e-9
+    for row in range(3):
+        out[row, inside] = np.interp(LAG_GRID_S[inside], seconds, sums[row])
+    return out
+
+
+def lag_from_evidence(evidence: Sequence[np.ndarray], seconds: float) -> LagEstimate:
+    """The lag at the peak of pooled correlation evidence.
+
+    Parameters
+    ----------
+    evidence : sequence of np.ndarray, each shape (3, len(LAG_GRID_S))
+        :func:`lag_evidence` of the clips pooled.
+    seconds : float
+        Their total duration.
+
+    Returns
+    -------
+    LagEstimate
+        Pooled correlation ``sum(products) / sqrt(sum(lip power) * sum(loud power))``;
+        the lag refined below the grid step by a parabola through the peak.
+    """
+    total = np.sum(np.asarray(evidence, dtype=np.float64).reshape(-1, 3, len(LAG_GRID_S)),
+                   axis=0)
+    denom = np.sqrt(total[1] * total[2])
+    corr = np.divide(total[0], denom, out=np.zeros(len(LAG_GRID_S)), where=denom > 0)
+    best = int(np.argmax(corr))
+    step = float(LAG_GRID_S[1] - LAG_GRID_S[0])
+    offset = _peak_offset(corr, best)
+    # side peaks: local maxima (edges included) outside the main lobe
+    padded = np.concatenate(([-np.inf], corr, [-np.inf]))
+    local = (corr >= padded[:-2]) & (corr >= padded[2:])
+    far = np.abs(LAG_GRID_S - LAG_GRID_S[best]) >= SIDE_PEAK_EXCLUSION_S - 1e-9
+    sides = corr[local & far]
+    margin = float(corr[best] - sides.max()) if len(sides) else float(corr[best])
+    return LagEstimate(lag_s=float(LAG_GRID_S[best] + offset * step),
+                       confidence=float(corr[best]), margin=margin, seconds=float(seconds),
+                       n_clips=len(evidence))

@@ -11,6 +11,7 @@ compares unlike things (Cao et al. 2005, §4.1-4.2):
 * :mod:`.ctc` -- the second phone engine, a CTC phone recogniser shipped in the ``hama``
   wheel: recognition, CTC-Viterbi forced alignment, per-frame phone posteriors;
 * :mod:`.engines` -- the engines' names and which does what by default;
+* :mod:`.words` -- phones aligned inside the words of a known word alignment;
 * :mod:`.features` -- RASTA-PLP prosody curves and MFCCs.
 
 Imports: ``db`` and the file formats of ``ingest``.

