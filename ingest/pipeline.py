@@ -248,12 +248,18 @@ def ingest(
     if db_path.exists() and not is_database(db_path) and (
             not db_path.is_dir() or not (db_path / LOCK_NAME).exists() and _foreign(db_path)):
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
+    # What the sources hold is checked before the database is touched (or made).
+    found = discover([Path(s) for s in sources])
+    if not found:
+        raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
+    _check_tracker(found)
     with writer_lock(db_path, wait=wait, what="database"):
-        return _ingest_locked(sources, db_path, config, workers, progress, started, say)
+        return _ingest_locked(found, db_path, config, workers, progress, started, say)
 
 
-def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, progress,
-                   started: float, say: Callable[[str], object] | None) -> IngestReport:
+def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig, workers: int,
+                   progress, started: float,
+                   say: Callable[[str], object] | None) -> IngestReport:
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
@@ -261,10 +267,6 @@ def _ingest_locked(sources, db_path: Path, config: IngestConfig, workers: int, p
         raise ParameterError(f"--db {db_path} exists and is not an animegraph database")
     based_on = existing.version_dir.name if existing is not None else None
 
-    found = discover([Path(s) for s in sources])
-    if not found:
-        raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
-    _check_tracker(found)
     known: dict[tuple[str, str], str] = {}
     fps = config.fps
     reference = None

@@ -52,6 +52,15 @@ def _number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
 
 
+
+def _phones_engine_option(parser, transcript: str) -> None:
+    """``--phones-engine`` of ``ingest`` and ``synth`` (``transcript``: what they call one)."""
+    parser.add_argument("--phones-engine", choices=ENGINES, default=None,
+                        help=f"phone engine when there are no labels: auto (default: "
+                        f"PocketSphinx aligns {transcript}, hama recognises phones without "
+                        "one: each measured best at it), hama (CTC phone model shipped in "
+                        "its wheel) or pocketsphinx")
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every sub-command."""
     from animegraph.apps.cache import DB_ENV, default_db_dir
@@ -129,11 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark and iPhone (Live Link) motion where it is "
                      "instead of shifting it by the estimated lip-audio lag")
-    ing.add_argument("--phones-engine", choices=ENGINES, default=None,
-                     help="phone engine when there are no labels: auto (default: PocketSphinx "
-                     "aligns a transcript, hama recognises phones without one: each measured "
-                     "best at it), "
-                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
+    _phones_engine_option(ing, "a transcript")
     ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
                      help="fastest plausible marker motion in mm/s (default 5000); a faster "
                      "jump is a dropout, or rejects the clip if it lasts")
@@ -215,11 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
-    syn.add_argument("--phones-engine", choices=ENGINES, default=None,
-                     help="phone engine when there are no labels: auto (default: PocketSphinx "
-                     "aligns a --text, hama recognises phones without one: each measured "
-                     "best at it), "
-                     "hama (CTC phone model shipped in its wheel) or pocketsphinx")
+    _phones_engine_option(syn, "a --text")
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
