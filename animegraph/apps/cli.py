@@ -466,9 +466,8 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
     if args.explain is not None and args.labels is not None:
         raise UsageError(f"animegraph {args.command}: give --explain or --labels, not both")
     labels = args.labels
-    beside = args.motion.with_name(args.motion.stem + ".phones.csv")
-    if labels is None and args.explain is None and beside.is_file():
-        labels = beside  # what 'query --export' writes next to each snippet
+    if labels is None and args.explain is None:
+        labels = _sidecar_labels(args.motion)  # what 'query --export' writes by each snippet
     return read_phone_track(labels=labels, explain=args.explain)
 
 
@@ -801,15 +800,16 @@ def _check_livelink_channels(args: argparse.Namespace, names) -> None:
                          f"other channels (write .csv or .npz)")
 
 
-#: Phone-label files looked for beside a speech file, in this order (what 'corpus synth',
-#: 'demo', 'query --export' and 'batch' write, and the label formats ingest reads).
+#: Phone-label files looked for beside a speech or motion file, in this order (what
+#: 'corpus synth', 'demo', 'query --export' and 'batch' write; the formats ingest reads).
 SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
 
 
-def _sidecar_labels(audio: Path) -> Path | None:
-    """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``audio``, if there is one."""
+def _sidecar_labels(path: Path) -> Path | None:
+    """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``path`` (speech for
+    ``synth``, motion for ``render`` and ``plot``), if there is one."""
     for suffix in SIDECAR_LABELS:
-        beside = audio.with_name(audio.stem + suffix)
+        beside = path.with_name(path.stem + suffix)
         if beside.is_file():
             return beside
     return None

@@ -93,8 +93,8 @@ def plot_clips(clips: Sequence, path: Path, *, title: str = "",
 def head_pitch(markers: np.ndarray) -> np.ndarray:
     """Head pitch (degrees, positive tips the face down) of marker motion, per frame.
 
-    The rotation of the rigid head markers from their rest positions (Kabsch: SVD of
-    their cross-covariance), read as the rig's pitch: the rig composes R = Ry Rx Rz
+    The rotation of the rigid head markers from their rest positions
+    (:func:`ingest.motion.rigid_fit`, Kabsch), read as the rig's pitch: the rig composes R = Ry Rx Rz
     (:func:`ingest.corpus.face.rigid_transform`), so R[1, 2] = -sin(pitch). On the
     demo's reference clip it follows the rig's own head_pitch control within 0.2 deg.
 
@@ -108,21 +108,18 @@ def head_pitch(markers: np.ndarray) -> np.ndarray:
     np.ndarray, shape (n_frames,)
         NaN where a head marker is missing.
     """
+    from ingest.motion import rigid_fit
+
     head = [i for i, (_, _, group) in enumerate(face.MARKERS) if group == "head"]
-    rest = face.marker_rest()[head]
-    rest = rest - rest.mean(axis=0)
     points = np.asarray(markers, dtype=np.float64)[:, head]
     out = np.full(len(points), np.nan)
     ok = np.isfinite(points).all(axis=(1, 2))
     if not ok.any():
         return out
-    moved = points[ok] - points[ok].mean(axis=1, keepdims=True)
-    u, _, vt = np.linalg.svd(np.einsum("pi,tpj->tij", rest, moved))
-    v, ut = np.swapaxes(vt, 1, 2), np.swapaxes(u, 1, 2)
-    flip = np.ones((len(moved), 3))
-    flip[:, 2] = np.sign(np.linalg.det(v @ ut))
-    rotation = v @ (flip[:, :, None] * ut)
-    out[ok] = np.rad2deg(-np.arcsin(np.clip(rotation[:, 1, 2], -1.0, 1.0)))
+    # rigid_fit takes each pose back onto the rest positions: the head's rotation is the
+    # transpose, so its R[1, 2] is the fit's [2, 1].
+    back, _ = rigid_fit(points[ok], face.marker_rest()[head])
+    out[ok] = np.rad2deg(-np.arcsin(np.clip(back[:, 2, 1], -1.0, 1.0)))
     return out
 
 
