@@ -94,8 +94,8 @@ def head_pitch(markers: np.ndarray) -> np.ndarray:
     """Head pitch (degrees, positive tips the face down) of marker motion, per frame.
 
     The rotation of the rigid head markers from their rest positions
-    (:func:`ingest.motion.rigid_fit`, Kabsch), read as the rig's pitch: the rig composes R = Ry Rx Rz
-    (:func:`ingest.corpus.face.rigid_transform`), so R[1, 2] = -sin(pitch). On the
+    (:func:`ingest.motion.rigid_fit`, Kabsch), read as the rig's pitch: the rig composes
+    R = Ry Rx Rz (:func:`ingest.corpus.face.rigid_transform`), so R[1, 2] = -sin(pitch). On the
     demo's reference clip it follows the rig's own head_pitch control within 0.2 deg.
 
     Parameters
