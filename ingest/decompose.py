@@ -4,66 +4,37 @@ The motion of the whole corpus, concatenated (§5.1.2, Eq. 8), is first reduced 
 to the components that keep a given share of its variance (95 %, §4.1; 95-98 %,
 §5.1.2), then unmixed by FastICA into independent components ``u`` with ``x = A u``
 (Eq. 7). Every learned quantity is a plain array (:meth:`MotionDecomposer.to_arrays`),
-so the database stores it without pickles.
+so the database stores it without pickles; :class:`ingest.unmixing.Unmixing` applies
+them without scikit-learn.
 
 Per independent component, the low-pass cutoff is the frequency below which 99 % of
-its energy lies over the whole corpus (§4.3, Smoothing).
+its energy lies over the whole corpus (§4.3, Smoothing): :mod:`ingest.lowpass`.
 """
 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt, welch
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.decomposition import PCA, FastICA
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.validation import check_is_fitted
 
 from db.errors import DataError, ParameterError
+from ingest.lowpass import ENERGY_KEPT, SMOOTHING_ORDER, cutoff_frequencies, smooth
+from ingest.unmixing import VARIANCE_KEPT, Unmixing
 
-#: Share of the motion's variance the PCA keeps (Cao et al. §4.1).
-VARIANCE_KEPT = 0.95
-#: Share of each independent component's energy below its low-pass cutoff (§4.3).
-ENERGY_KEPT = 0.99
+__all__ = ["ENERGY_KEPT", "SMOOTHING_ORDER", "VARIANCE_KEPT", "MotionDecomposer",
+           "cutoff_frequencies", "smooth"]
 
 
-class MotionDecomposer(TransformerMixin, BaseEstimator):
+class MotionDecomposer(Unmixing, TransformerMixin, BaseEstimator):
     """PCA keeping ``variance`` of the motion, then FastICA on the principal components.
 
-    Parameters
-    ----------
-    variance : float
-        Share of variance the PCA keeps, in (0, 1] (Cao et al. §4.1: 0.95; §5.1.2:
-        0.95-0.98).
-    max_iter : int
-        FastICA iterations.
-    tol : float
-        FastICA tolerance.
-    random_state : int
-        Seed of FastICA's initial unmixing matrix.
-
-    Attributes
-    ----------
-    mean_ : np.ndarray, shape (n_channels,)
-    components_ : np.ndarray, shape (n_pcs, n_channels)
-        Principal axes (orthonormal rows).
-    explained_variance_ratio_ : np.ndarray, shape (n_pcs,)
-    unmixing_ : np.ndarray, shape (n_ics, n_pcs)
-        ``u = unmixing_ @ (p - ica_mean_)`` for principal-component scores ``p``.
-    mixing_ : np.ndarray, shape (n_pcs, n_ics)
-        The mixing matrix A of Eq. 7 in principal-component space.
-    ica_mean_ : np.ndarray, shape (n_pcs,)
+    The scikit-learn estimator that learns an :class:`~ingest.unmixing.Unmixing` (its
+    parameters, attributes and transforms are documented there).
     """
-
-    def __init__(self, variance: float = VARIANCE_KEPT, max_iter: int = 1000,
-                 tol: float = 1e-4, random_state: int = 0):
-        self.variance = variance
-        self.max_iter = max_iter
-        self.tol = tol
-        self.random_state = random_state
 
     def fit(self, X, y=None):
         """Learn the PCA and the ICA from motion ``X`` of shape (n_frames, n_channels)."""
@@ -95,122 +66,5 @@ class MotionDecomposer(TransformerMixin, BaseEstimator):
         self.ica_mean_ = ica.mean_
         return self
 
-    def transform(self, X):
-        """Independent components of motion ``X``: shape (n_frames, n_ics)."""
-        return self.sources_from_pcs(self.to_pcs(X))
-
-    def inverse_transform(self, U):
-        """Motion (n_frames, n_channels) from independent components (n_frames, n_ics)."""
-        return self.from_pcs(self.pcs_from_sources(U))
-
-    def to_pcs(self, X):
-        """Principal-component scores of ``X``: shape (n_frames, n_pcs)."""
-        check_is_fitted(self, "components_")
-        return (self._check(X) - self.mean_) @ self.components_.T
-
-    def from_pcs(self, P):
-        """Motion from principal-component scores (n_frames, n_pcs)."""
-        check_is_fitted(self, "components_")
-        return np.asarray(P) @ self.components_ + self.mean_
-
-    def sources_from_pcs(self, P):
-        check_is_fitted(self, "unmixing_")
-        return (np.asarray(P) - self.ica_mean_) @ self.unmixing_.T
-
-    def pcs_from_sources(self, U):
-        check_is_fitted(self, "mixing_")
-        return np.asarray(U) @ self.mixing_.T + self.ica_mean_
-
-    @property
-    def n_pcs_(self) -> int:
-        return int(self.components_.shape[0])
-
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """The learned state as named float arrays (for the database)."""
-        check_is_fitted(self, "unmixing_")
-        return {
-            "channel_mean": self.mean_, "pca_components": self.components_,
-            "pca_explained_variance_ratio": self.explained_variance_ratio_,
-            "ica_unmixing": self.unmixing_, "ica_mixing": self.mixing_,
-            "ica_mean": self.ica_mean_,
-            "decomposer_params": np.array([self.variance, self.max_iter, self.tol,
-                                           self.random_state, float(self.ica_converged_)]),
-        }
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> MotionDecomposer:
-        """Rebuild a fitted decomposer from :meth:`to_arrays`."""
-        variance, max_iter, tol, seed, converged = arrays["decomposer_params"]
-        self = cls(variance=float(variance), max_iter=int(max_iter), tol=float(tol),
-                   random_state=int(seed))
-        self.mean_ = arrays["channel_mean"]
-        self.components_ = arrays["pca_components"].reshape(-1, self.mean_.shape[0])
-        self.explained_variance_ratio_ = arrays["pca_explained_variance_ratio"]
-        n = self.components_.shape[0]
-        self.unmixing_ = arrays["ica_unmixing"].reshape(n, n)
-        self.mixing_ = arrays["ica_mixing"].reshape(n, n)
-        self.ica_mean_ = arrays["ica_mean"]
-        self.ica_converged_ = bool(converged)
-        return self
-
-    @staticmethod
-    def _check(X) -> np.ndarray:
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2:
-            raise ParameterError(f"motion must be (n_frames, n_channels), got shape {X.shape}")
-        if not np.isfinite(X).all():
-            raise DataError("motion has NaN or infinite values: fill gaps first")
-        return X
-
-
-def cutoff_frequencies(sources: Sequence[np.ndarray], fps: float, *,
-                       energy: float = ENERGY_KEPT) -> np.ndarray:
-    """Per component, the frequency below which ``energy`` of its energy lies (§4.3).
-
-    Parameters
-    ----------
-    sources : sequence of np.ndarray, each (n_frames_k, n_ics)
-        Independent components of every clip (clips are not concatenated, so the joins
-        between them add no false high frequencies).
-    fps : float
-        Frame rate.
-    energy : float
-        Share of energy below the cutoff.
-
-    Returns
-    -------
-    np.ndarray, shape (n_ics,)
-        Cutoff frequencies in Hz (at most the Nyquist frequency).
-    """
-    nperseg = int(min(256, max(8, min(len(s) for s in sources))))
-    total = None
-    freqs = None
-    for s in sources:
-        if len(s) < nperseg:
-            continue
-        freqs, psd = welch(s, fs=fps, nperseg=nperseg, axis=0, detrend="constant")
-        weighted = psd * len(s)  # long clips weigh more: energy, not clip count
-        total = weighted if total is None else total + weighted
-    if total is None:
-        raise DataError("clips are too short to measure their frequency content")
-    cumulative = np.cumsum(total, axis=0)
-    cumulative /= np.maximum(cumulative[-1], 1e-300)
-    index = np.array([np.searchsorted(cumulative[:, k], energy) for k in range(total.shape[1])])
-    return freqs[np.minimum(index, len(freqs) - 1)]
-
-
-#: Order of the zero-phase Butterworth low-pass of the smoothing step (§4.3).
-SMOOTHING_ORDER = 2
-
-
-def smooth(motion: np.ndarray, cutoffs: np.ndarray, fps: float) -> np.ndarray:
-    """Zero-phase low-pass of each column at its cutoff (Hz); columns at Nyquist pass."""
-    out = motion.copy()
-    nyquist = fps / 2
-    if len(motion) < 3 * (2 * SMOOTHING_ORDER + 1):
-        return out  # too short to filter without edge artefacts swamping it
-    for k, cut in enumerate(cutoffs):
-        if 0 < cut < 0.99 * nyquist:
-            sos = butter(SMOOTHING_ORDER, cut / nyquist, output="sos")
-            out[:, k] = sosfiltfilt(sos, motion[:, k])
-    return out
+    def _check_fitted(self, attribute: str) -> None:
+        check_is_fitted(self, attribute)

@@ -9,7 +9,6 @@ not show.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from db.errors import DataError
 
@@ -40,6 +39,8 @@ def fill_gaps(motion: np.ndarray, names=None) -> tuple[np.ndarray, np.ndarray]:
     missing = np.isnan(motion)
     if not missing.any():
         return motion.copy(), missing
+    from scipy.interpolate import PchipInterpolator  # deferred: only gaps need it
+
     filled = motion.copy()
     frames = np.arange(len(motion))
     for c in np.flatnonzero(missing.any(axis=0)):

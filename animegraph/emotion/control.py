@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from db.errors import DataError, ParameterError
-from ingest.decompose import smooth
 from ingest.emotion.model import EmotionModel
+from ingest.lowpass import smooth
 from ingest.motion import unstabilize_points
 
 AUTO = "auto"

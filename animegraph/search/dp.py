@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from animegraph.search.problem import Problem
 from db.errors import ParameterError
@@ -12,9 +11,10 @@ from db.errors import ParameterError
 DP_MAX_PAIRS = 4_000_000
 
 
-
 def dp(p: Problem) -> tuple[np.ndarray, float, int, int]:
     """Viterbi over every pair of consecutive candidates: D(b) = u(b) + min_a D(a) + T(a, b)."""
+    from scipy.spatial.distance import cdist  # deferred: the default search does not use it
+
     sizes = np.diff(p.off)
     pairs = sizes[:-1] * sizes[1:]
     if len(pairs) and pairs.max() > DP_MAX_PAIRS:

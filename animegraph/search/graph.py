@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from db.arrow import numbers
 from db.errors import DataError
 from db.store import Database
 from ingest.speech.phones import PHONES
@@ -136,13 +137,13 @@ class AnimeGraph:
         n = t.num_rows
         if n == 0:
             raise DataError(f"database {db.root} has no anime nodes")
-        node_id = t.column("node_id").to_numpy()
+        node_id = numbers(t.column("node_id"))
         if not np.array_equal(node_id, np.arange(n)):
             raise DataError(f"database {db.root} is damaged: node ids are not 0..{n - 1}")
 
         def codes(name: str) -> tuple[np.ndarray, tuple[str, ...]]:
             encoded = t.column(name).combine_chunks().dictionary_encode()
-            return (encoded.indices.to_numpy().astype(np.int32),
+            return (numbers(encoded.indices).astype(np.int32),
                     tuple(encoded.dictionary.to_pylist()))
 
         clip_codes, clip_ids = codes("clip_id")
@@ -155,9 +156,9 @@ class AnimeGraph:
         node_phone = remap[phone_codes]
 
         prosody_values, prosody_offsets = _ragged(t.column("prosody"),
-                                                   t.column("prosody_frames").to_numpy())
+                                                   numbers(t.column("prosody_frames")))
         motion_values, motion_offsets = _ragged(t.column("motion"),
-                                                t.column("n_frames").to_numpy())
+                                                numbers(t.column("n_frames")))
         first = _fixed(t.column("first_pcs"), n)
         last = _fixed(t.column("last_pcs"), n)
         by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)
@@ -169,8 +170,8 @@ class AnimeGraph:
             next_node=_links(t.column("next_node")), prev_node=_links(t.column("prev_node")),
             start_frame=_ints(t, "start_frame", np.int32),
             end_frame=_ints(t, "end_frame", np.int32),
-            start_time=t.column("start_time").to_numpy().astype(np.float32),
-            end_time=t.column("end_time").to_numpy().astype(np.float32),
+            start_time=numbers(t.column("start_time")).astype(np.float32),
+            end_time=numbers(t.column("end_time")).astype(np.float32),
             prosody_offsets=prosody_offsets, prosody_values=prosody_values,
             motion_offsets=motion_offsets, motion_values=motion_values,
             first_pcs=first, last_pcs=last, by_phone=by_phone, clip_ids=clip_ids,
@@ -211,14 +212,14 @@ class AnimeGraph:
 def _links(column: pa.ChunkedArray) -> np.ndarray:
     if not pa.types.is_integer(column.type):
         raise TypeError(f"links must be integers, not {column.type}")
-    return column.combine_chunks().fill_null(-1).to_numpy().astype(np.int64)
+    return numbers(column, null=-1).astype(np.int64)
 
 
 def _ints(t: pa.Table, name: str, dtype) -> np.ndarray:
     column = t.column(name)
     if not pa.types.is_integer(column.type) or column.null_count:
         raise TypeError(f"{name} must be integers without nulls, not {column.type}")
-    values = column.to_numpy().astype(np.int64)
+    values = numbers(column).astype(np.int64)
     info = np.iinfo(dtype)
     if ((values < info.min) | (values > info.max)).any():
         raise ValueError(f"{name} outside the range of {np.dtype(dtype).name}")
@@ -230,7 +231,7 @@ def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndar
     flat = column.combine_chunks()
     if flat.null_count:
         raise ValueError(f"{column.type} column has nulls")
-    values = flat.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
+    values = numbers(flat.flatten()).astype(np.float32)
     rows = rows_per_node.astype(np.int64)
     if (rows < 1).any():
         raise ValueError("a node with no frames")
@@ -238,7 +239,7 @@ def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndar
     width = values.size // total if total else 0
     if width < 1 or total * width != values.size:
         raise ValueError(f"{values.size} values do not fill {total} frames")
-    lengths = np.diff(flat.offsets.to_numpy())
+    lengths = np.diff(numbers(flat.offsets))
     if not np.array_equal(lengths, rows * width):
         raise ValueError("a node's list does not hold its frames")
     offsets = np.zeros(len(rows) + 1, dtype=np.int64)
@@ -248,8 +249,8 @@ def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndar
 
 def _fixed(column: pa.ChunkedArray, n: int) -> np.ndarray:
     flat = column.combine_chunks()
-    values = flat.flatten().to_numpy(zero_copy_only=False)
-    lengths = np.diff(flat.offsets.to_numpy())
+    values = numbers(flat.flatten())
+    lengths = np.diff(numbers(flat.offsets))
     if flat.null_count or (len(lengths) and (lengths != lengths[0]).any()) or values.size == 0:
         raise ValueError("rows of unequal length")
     return values.astype(np.float32).reshape(n, -1)

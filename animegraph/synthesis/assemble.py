@@ -13,7 +13,7 @@ Three steps, each optional so their effect can be measured:
   two are cross-faded linearly.
 * **Smoothing** — each independent component is low-pass filtered at the cutoff learned
   from the database (99 % of that component's energy below it;
-  :func:`ingest.decompose.smooth`, beside the learning of the cutoffs).
+  :func:`ingest.lowpass.smooth`, beside the learning of the cutoffs).
 
 Beyond the paper, :func:`blend_k_best` averages the k best-matching animes of each phone
 instead of joining one anime per phone (opt-in: ``synthesize(..., k_best=K)``).
@@ -31,7 +31,7 @@ import numpy as np
 
 from animegraph.search.dtw import dtw, warp_indices
 from animegraph.search.graph import AnimeGraph
-from ingest.decompose import smooth
+from ingest.lowpass import smooth
 
 #: :func:`blend_k_best` weighs the r-th ranked anime (r = 1, 2, ...) by ``r ** -RANK_DECAY``.
 #: Measured against equal weights (0) and 1 (docs/results.md): 0.5 was as good or better

@@ -9,9 +9,9 @@ import numpy as np
 from animegraph.search.graph import AnimeGraph
 from db.errors import DataError
 from db.store import Database
-from ingest.decompose import MotionDecomposer
 from ingest.emotion.model import EmotionModel
 from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
+from ingest.unmixing import Unmixing
 
 
 @dataclass(frozen=True, eq=False)
@@ -20,7 +20,7 @@ class Model:
 
     db: Database
     graph: AnimeGraph
-    decomposer: MotionDecomposer
+    decomposer: Unmixing
     cutoffs: np.ndarray
     names: tuple[str, ...]
     groups: tuple[str, ...]
@@ -49,7 +49,7 @@ class Model:
         except (KeyError, IndexError, TypeError) as exc:
             raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None
         try:
-            decomposer = MotionDecomposer.from_arrays(arrays)
+            decomposer = Unmixing.from_arrays(arrays)
             cutoffs = np.asarray(arrays["ic_cutoff_hz"], dtype=np.float64)
             _check_shapes(graph, decomposer, cutoffs, names, arrays.get("head_reference"))
         except (KeyError, IndexError, TypeError, ValueError) as exc:
@@ -87,7 +87,7 @@ class Model:
         return filled
 
 
-def _check_shapes(graph: AnimeGraph, decomposer: MotionDecomposer, cutoffs: np.ndarray,
+def _check_shapes(graph: AnimeGraph, decomposer: Unmixing, cutoffs: np.ndarray,
                   names: tuple[str, ...], head_reference: np.ndarray | None) -> None:
     """ValueError unless the graph, the PCA/ICA model and the channels fit together."""
     n_pcs, n_channels = decomposer.components_.shape

@@ -36,8 +36,8 @@ from animegraph.synthesis.assemble import (
 from animegraph.synthesis.explain import blended_sources, explain_rows
 from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
-from ingest.decompose import smooth
 from ingest.formats.phones_csv import Segment
+from ingest.lowpass import smooth
 from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
 from ingest.speech.segment import segment
 

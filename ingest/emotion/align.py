@@ -13,7 +13,6 @@ Ties while backtracking go to the diagonal, then (i-1, j), then (i, j-1), the co
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from db.errors import ParameterError
 
@@ -31,6 +30,8 @@ def dtw_path(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     np.ndarray of int64, shape (L, 2)
         Pairs (i, j) of aligned frames from (0, 0) to (n-1, m-1).
     """
+    from scipy.spatial.distance import cdist  # deferred: only learning emotion mappings aligns
+
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     if x.ndim != 2 or y.ndim != 2 or x.shape[1] != y.shape[1] or not len(x) or not len(y):

@@ -36,27 +36,12 @@ from sklearn.cluster import KMeans
 from sklearn.utils.validation import check_is_fitted
 
 from db.errors import DataError, ParameterError
+from ingest.emotion.rbf import KERNEL, KERNELS, N_CENTRES, RbfMapping, _matrix, rbf
 
-#: K-means centres the correspondences are reduced to (§5.2: 250 clusters).
-N_CENTRES = 250
-#: Radial basis functions of Eq. 11: "exp" is exp(-x/d), "gauss" exp(-x^2/d).
-KERNELS = ("exp", "gauss")
-#: Default kernel: the paper gives both forms of Eq. 11 without preferring one; in the
-#: paper's cross-validation on the default synthetic corpus (docs/results.md) the Gaussian
-#: form has the lower error (unit-cube RMS 0.0077 against 0.0084 for exp(-x/d)).
-KERNEL = "gauss"
+__all__ = ["KERNEL", "KERNELS", "N_CENTRES", "EmotionMapping", "rbf"]
 
 
-def rbf(distance: np.ndarray, d: float, kernel: str) -> np.ndarray:
-    """phi of Eq. 11 applied to distances (any shape)."""
-    if kernel == "exp":
-        return np.exp(-distance / d)
-    if kernel == "gauss":
-        return np.exp(-(distance**2) / d)
-    raise ParameterError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-
-
-class EmotionMapping(TransformerMixin, BaseEstimator):
+class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
     """RBF mapping of emotion components from emotion space i to j (§5.2, Eq. 10).
 
     Parameters
@@ -87,13 +72,6 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
     n_samples_fit_ : int
         Correspondences the mapping was learned from.
     """
-
-    def __init__(self, n_centres: int = N_CENTRES, kernel: str = KERNEL, random_state: int = 0,
-                 offset: bool = False):
-        self.n_centres = n_centres
-        self.kernel = kernel
-        self.random_state = random_state
-        self.offset = offset
 
     def fit(self, X, y):
         """Learn F from corresponding emotion components.
@@ -145,57 +123,5 @@ class EmotionMapping(TransformerMixin, BaseEstimator):
         self.n_features_in_ = int(X.shape[1])
         return self
 
-    def transform(self, X):
-        """Map emotion components: F(e) = e + sum_r c_r phi(||e - e^r||) (Eq. 10).
-
-        Parameters
-        ----------
-        X : array-like, shape (n_frames, n_emotion_components)
-
-        Returns
-        -------
-        np.ndarray, shape (n_frames, n_emotion_components)
-        """
+    def _check_fitted(self) -> None:
         check_is_fitted(self, "coef_")
-        X = _matrix("X", X)
-        if X.shape[1] != self.centres_.shape[1]:
-            raise ParameterError(f"X has {X.shape[1]} emotion components, the mapping "
-                                 f"{self.centres_.shape[1]}")
-        return X + self.offset_ + rbf(cdist(X, self.centres_), self.d_, self.kernel) @ self.coef_
-
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """The fitted mapping as float arrays (for the database)."""
-        check_is_fitted(self, "coef_")
-        return {
-            "centres": self.centres_, "targets": self.targets_, "coef": self.coef_,
-            "offset": self.offset_,
-            "params": np.array([self.d_, KERNELS.index(self.kernel), self.n_centres,
-                                self.random_state, self.n_samples_fit_], dtype=np.float64),
-        }
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> EmotionMapping:
-        """Rebuild a fitted mapping from :meth:`to_arrays`."""
-        d, kernel, n_centres, seed, n_samples = arrays["params"]
-        offset = np.asarray(arrays.get("offset", [0.0]), dtype=np.float64).ravel()
-        self = cls(n_centres=int(n_centres), kernel=KERNELS[int(kernel)],
-                   random_state=int(seed), offset=bool(np.any(offset != 0)))
-        width = np.asarray(arrays["centres"]).shape[-1]
-        self.centres_ = np.asarray(arrays["centres"], dtype=np.float64).reshape(-1, width)
-        self.targets_ = np.asarray(arrays["targets"], dtype=np.float64).reshape(-1, width)
-        self.coef_ = np.asarray(arrays["coef"], dtype=np.float64).reshape(-1, width)
-        self.d_ = float(d)
-        self.offset_ = offset if offset.size == width else np.zeros(width)
-        self.n_samples_fit_ = int(n_samples)
-        self.n_features_in_ = width
-        return self
-
-
-def _matrix(name: str, a) -> np.ndarray:
-    a = np.asarray(a, dtype=np.float64)
-    if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] == 0:
-        raise ParameterError(f"{name} must be a non-empty (n_samples, n_components) array, "
-                             f"got shape {a.shape}")
-    if not np.isfinite(a).all():
-        raise ParameterError(f"{name} has NaN or infinite values")
-    return a

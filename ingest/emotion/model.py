@@ -25,12 +25,12 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import permutations
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from db.errors import AnimeGraphError, DataError, ParameterError
 from ingest.emotion.align import sample_at
-from ingest.emotion.classifier import EmotionClassifier
 from ingest.emotion.components import (
     Aligner,
     ComponentSplit,
@@ -38,7 +38,11 @@ from ingest.emotion.components import (
     split_components,
     take_pairs,
 )
-from ingest.emotion.mapping import KERNEL, N_CENTRES, EmotionMapping
+from ingest.emotion.rbf import KERNEL, N_CENTRES, RbfMapping
+
+if TYPE_CHECKING:
+    from ingest.emotion.classifier import EmotionClassifier
+    from ingest.emotion.mapping import EmotionMapping
 
 logger = logging.getLogger(__name__)
 
@@ -52,6 +56,38 @@ PREFIX = "emotion/"
 MIN_CLASSIFIER_CLIPS = 2
 _CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "normalize", "classes",
                        "norm_speakers")
+
+
+class _StoredClassifier:
+    """:attr:`EmotionModel.classifier` and ``classifier_note``, rebuilt on first read.
+
+    A database's classifier is a scikit-learn estimator; rebuilding it imports
+    scikit-learn (about a second), which a synthesis that is given its emotion never
+    needs. :meth:`EmotionModel.from_database` therefore keeps the stored arrays (a
+    ``dict``), and the first read of either attribute turns them into an
+    :class:`~ingest.emotion.classifier.EmotionClassifier` -- or, for a classifier stored
+    by an older animegraph, into None with the reason in ``classifier_note``.
+    """
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, model, owner=None):
+        if model is None:  # the dataclass field's default
+            return None if self.name == "classifier" else ""
+        stored = model.__dict__["_classifier"]
+        if isinstance(stored, dict):
+            from ingest.emotion.classifier import EmotionClassifier
+
+            try:
+                model.__dict__["_classifier"] = EmotionClassifier.from_arrays(stored)
+            except DataError as exc:  # an older format: the rest of the model still loads
+                model.__dict__["_classifier"] = None
+                model.__dict__["_classifier_note"] = str(exc)
+        return model.__dict__["_" + self.name]
+
+    def __set__(self, model, value) -> None:
+        model.__dict__["_" + self.name] = value
 
 
 @dataclass(frozen=True)
@@ -101,8 +137,9 @@ class EmotionModel:
     emotions : tuple of str
         Emotions of the database's clips (``unknown`` left out).
     split : ComponentSplit
-    mappings : dict of (str, str) to EmotionMapping
-        F_ij by (i, j).
+    mappings : dict of (str, str) to RbfMapping
+        F_ij by (i, j) (fitted :class:`~ingest.emotion.mapping.EmotionMapping`, or as
+        restored from a database).
     offsets : dict of (str, str) to np.ndarray, shape (n_emotion_components,)
         Mean e_j - e_i over the correspondences (the offset baseline).
     centroids : dict of str to np.ndarray, shape (n_emotion_components,)
@@ -110,6 +147,7 @@ class EmotionModel:
     parallel : dict of str to int
         Sentences recorded in both emotions, by "a/b" (sorted names).
     classifier : EmotionClassifier or None
+        From a database, rebuilt on first use (:class:`_StoredClassifier`).
     notes : tuple of str
         What could not be learned and why.
     classifier_note : str
@@ -123,9 +161,9 @@ class EmotionModel:
     offsets: dict = field(default_factory=dict)
     centroids: dict = field(default_factory=dict)
     parallel: dict = field(default_factory=dict)
-    classifier: EmotionClassifier | None = None
+    classifier: EmotionClassifier | None = _StoredClassifier()
     notes: tuple[str, ...] = ()
-    classifier_note: str = ""
+    classifier_note: str = _StoredClassifier()
 
     # ------------------------------------------------------------------ use
     def check_emotion(self, name: str) -> str:
@@ -135,7 +173,7 @@ class EmotionModel:
                                  f"has {', '.join(self.emotions) or 'no labelled emotions'})")
         return name
 
-    def mapping(self, src: str, dst: str) -> EmotionMapping | None:
+    def mapping(self, src: str, dst: str) -> RbfMapping | None:
         """F_src,dst (None when src == dst: the identity).
 
         Raises
@@ -259,28 +297,25 @@ class EmotionModel:
         for pair in entry["mappings"]:
             src, dst = pair.split("->")
             prefix = f"{PREFIX}map/{src}/{dst}/"
-            mappings[(src, dst)] = EmotionMapping.from_arrays(
+            mappings[(src, dst)] = RbfMapping.from_arrays(
                 {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)})
             offsets[(src, dst)] = arrays[f"{PREFIX}offset/{src}/{dst}"]
         for name in entry["emotions"]:
             key = f"{PREFIX}centroid/{name}"
             if key in arrays:
                 centroids[name] = arrays[key]
-        classifier, classifier_note = None, ""
+        classifier = None
         if entry.get("classifier"):
             prefix = PREFIX + "classifier/"
             stored = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
             stored.update({k: np.array(v) for k, v in entry["classifier"].items()})
             for key in ("support", "n_support"):
                 stored[key] = stored[key].astype(np.int64)
-            try:
-                classifier = EmotionClassifier.from_arrays(stored)
-            except DataError as exc:  # an older format: the rest of the model still loads
-                classifier_note = str(exc)
+            classifier = stored  # rebuilt on first use (_StoredClassifier)
         return cls(emotions=tuple(entry["emotions"]), split=split, mappings=mappings,
                    offsets=offsets, centroids=centroids,
                    parallel=dict(entry["parallel_sentences"]), classifier=classifier,
-                   notes=tuple(entry.get("notes", ())), classifier_note=classifier_note)
+                   notes=tuple(entry.get("notes", ())))
 
 
 def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
@@ -288,6 +323,8 @@ def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str]
                 random_state: int = 0, offset: bool = False
                 ) -> tuple[EmotionMapping, np.ndarray]:
     """F_src,dst and the mean offset from the parallel ``sentences`` (§5.2)."""
+    from ingest.emotion.mapping import EmotionMapping
+
     x, y = correspondences(data, src, dst, sentences, split)
     f = EmotionMapping(n_centres=n_centres, kernel=kernel, random_state=random_state,
                        offset=offset).fit(x, y)
@@ -389,6 +426,8 @@ def _fit_classifier(audio, emotions, speakers, notes) -> EmotionClassifier | Non
     with fewer than :data:`MIN_CLASSIFIER_CLIPS` usable clips too. Never raises for data:
     what could not be done is a note.
     """
+    from ingest.emotion.classifier import EmotionClassifier
+
     model = EmotionClassifier(probability=True)
     rows, labels, who, dropped = [], [], [], []
     for i, (a, sr) in enumerate(audio):

@@ -27,7 +27,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
@@ -194,6 +193,8 @@ def normalise_landmarks(
     residual = np.full(n, np.nan)
     ok = np.isfinite(pixels[:, stable]).all(axis=(1, 2))
     if ok.any():
+        from scipy.spatial.transform import Rotation  # deferred: synth reads no video
+
         scale, rot, trans = similarity_fit(pixels[ok][:, stable], canonical[stable])
         fitted = scale[:, None, None] * np.einsum("nij,nkj->nki", rot, pixels[ok])
         fitted += trans[:, None, :]

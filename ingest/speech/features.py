@@ -68,10 +68,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft
-from scipy.signal import lfilter
 
 from db.errors import DataError, ParameterError
+from ingest.filters import lfilter
 
 logger = logging.getLogger(__name__)
 
@@ -266,7 +265,7 @@ def _band_spectrogram(
         if b > a:
             segment[a - lo : b - lo] = audio[a:b]
         frames = segment[(chunk - lo)[:, None] + offsets] * window
-        spectrum = scipy.fft.rfft(frames, n=n_fft, axis=1)
+        spectrum = np.fft.rfft(frames, n=n_fft, axis=1)
         out.append(reduce(spectrum.real**2 + spectrum.imag**2))
     return np.concatenate(out, axis=0)
 
@@ -321,17 +320,18 @@ def _rasta_filter(log_bands: np.ndarray) -> np.ndarray:
     np.ndarray, shape (n_frames, n_bands)
         Zero for the first four frames, which only set the FIR part of the filter state
         (so that each band's level does not cause a transient); the full IIR filter runs
-        from frame 4 on. Matlab's ``filter`` and :func:`scipy.signal.lfilter` share the
-        transposed direct form II, so the state carries over unchanged.
+        from frame 4 on. Matlab's ``filter``, :func:`scipy.signal.lfilter` and
+        :func:`ingest.filters.lfilter` (used here: the same, without importing
+        :mod:`scipy.signal`) share the transposed direct form II, so the state carries over
+        unchanged.
     """
     n_prime = len(RASTA_NUMERATOR) - 1
     zi = np.zeros((n_prime, log_bands.shape[1]))
-    _, state = lfilter(RASTA_NUMERATOR, [1.0], log_bands[:n_prime], axis=0, zi=zi)
+    _, state = lfilter(RASTA_NUMERATOR, [1.0], log_bands[:n_prime], zi)
     out = np.zeros_like(log_bands)
     if len(log_bands) > n_prime:
-        out[n_prime:], _ = lfilter(
-            RASTA_NUMERATOR, RASTA_DENOMINATOR, log_bands[n_prime:], axis=0, zi=state
-        )
+        out[n_prime:], _ = lfilter(RASTA_NUMERATOR, RASTA_DENOMINATOR, log_bands[n_prime:],
+                                   state)
     return out
 
 
@@ -515,7 +515,7 @@ def rasta_plp(
     loudness = _postaud(bands, centres_hz)
     # dolpc.m: the auditory spectrum is a power spectrum on [0, pi]; its inverse DFT, with
     # the mirror image implied by irfft, is the autocorrelation.
-    autocorr = scipy.fft.irfft(loudness, n=2 * (n_bands - 1), axis=1)[:, : config.model_order + 1]
+    autocorr = np.fft.irfft(loudness, n=2 * (n_bands - 1), axis=1)[:, : config.model_order + 1]
     a, error = _levinson(autocorr, config.model_order)
     cepstra = _lpc_to_cepstrum(a, error, config.n_coeffs)
     if config.lifter_exp > 0:

@@ -86,7 +86,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -178,6 +177,8 @@ def _check_audio(audio: object, sample_rate: object) -> tuple[np.ndarray, int]:
 
 def _prepare(audio: np.ndarray, sample_rate: int) -> _Audio:
     """Checked float audio -> 16 kHz dithered 16-bit PCM for PocketSphinx."""
+    from scipy.signal import resample_poly  # deferred: importing scipy.signal takes a second
+
     duration = len(audio) / sample_rate
     peak = float(np.max(np.abs(audio))) if audio.size else 0.0
     if sample_rate != SAMPLE_RATE:
