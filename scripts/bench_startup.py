@@ -5,7 +5,9 @@ Usage::
     python scripts/bench_startup.py [--db PATH] [--runs 5] [--top 12]
 
 Every figure is the median of ``--runs`` fresh ``python -m animegraph`` processes (warm:
-one run first, unmeasured, so the OS file cache and numba's kernel cache are filled):
+one run first, unmeasured, so the OS file cache and numba's kernel cache are filled),
+wall time and CPU time (user + system of the process: less dependent on the machine's
+load than wall time, which on a loaded machine is several times a quiet one's):
 
 * ``animegraph --help`` wall time (target: <= 0.3 s);
 * ``animegraph synth`` of a 4 s eSpeak NG sentence (phones from the ``.phones.csv``
@@ -14,7 +16,12 @@ one run first, unmeasured, so the OS file cache and numba's kernel cache are fil
   database + segment + audio cost + search + post), and the rest, the start-up overhead
   (interpreter, imports, writing; target: wall <= 3 s in all, overhead <= 2 s);
 * ``animegraph map-emotion`` of that motion to sad: wall time and the reported work;
-* the heaviest imports of ``synth`` by ``python -X importtime`` (cumulative).
+* ``synth`` again without numba's set-up started early in a background thread
+  (``ANIMEGRAPH_NO_WARM_UP=1``; runs alternate with the default's);
+* the heaviest imports of ``synth`` by ``python -X importtime`` (cumulative), their sum,
+  and which of the libraries a one-shot ``synth`` should not import it imported.
+
+To compare with another checkout, run this script with ``PYTHONPATH=THAT_CHECKOUT``.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -38,25 +46,41 @@ from ingest.speech.espeak import Voice, speak
 SENTENCE = "The quiet fisherman sold his boat and moved to the city by the sea."
 
 
-def _run(args: list[str]) -> tuple[float, str]:
+#: The processes' environment: a user's Python caches bytecode (``__pycache__``); this
+#: machine's sessions set PYTHONDONTWRITEBYTECODE, which would compile every module of
+#: the project at each start (``--no-bytecode`` keeps it).
+_ENV = dict(os.environ)
+
+#: Libraries a one-shot synth does not need (used by other commands).
+HEAVY = ("sklearn", "scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.spatial",
+         "scipy.fft", "pandas", "pyarrow.dataset", "librosa", "duckdb")
+
+
+def _run(args: list[str], env: dict | None = None) -> tuple[float, float, str]:
+    """(wall s, CPU s, stderr) of one ``python -m animegraph ARGS``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-m", "animegraph", *args], capture_output=True,
-                         text=True)
+                         text=True, env={**_ENV, **(env or {})})
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if out.returncode != 0:
         sys.exit(f"bench_startup: 'animegraph {' '.join(args)}' failed: {out.stderr.strip()}")
-    return wall, out.stderr
+    return wall, cpu, out.stderr
 
 
-def _median(args: list[str], runs: int, parse=None) -> tuple[float, float | None]:
-    _run(args)  # warm
-    walls, works = [], []
+def _median(args: list[str], runs: int, parse=None, envs=({},)) -> list[tuple[float, ...]]:
+    """Per environment of ``envs``: median (wall, CPU, work) over ``runs`` runs, the
+    environments' runs alternating."""
+    for env in envs:
+        _run(args, env)  # warm
+    rows = [[] for _ in envs]
     for _ in range(runs):
-        wall, err = _run(args)
-        walls.append(wall)
-        if parse is not None:
-            works.append(parse(err))
-    return statistics.median(walls), (statistics.median(works) if works else None)
+        for k, env in enumerate(envs):
+            wall, cpu, err = _run(args, env)
+            rows[k].append((wall, cpu, parse(err) if parse else 0.0))
+    return [tuple(statistics.median(r[i] for r in runs_) for i in range(3)) for runs_ in rows]
 
 
 def _synth_work(err: str) -> float:
@@ -69,15 +93,22 @@ def _map_work(err: str) -> float:
     return float(re.search(r"frames from .* in ([\d.]+) s;", err).group(1))
 
 
-def _imports(args: list[str], top: int) -> list[tuple[float, str]]:
+def _imports(args: list[str], top: int):
+    """The heaviest imports (cumulative s), all imports' total, the HEAVY ones made, and
+    the names of all modules imported."""
     out = subprocess.run([sys.executable, "-X", "importtime", "-m", "animegraph", *args],
-                         capture_output=True, text=True)
-    rows = []
+                         capture_output=True, text=True, env=_ENV)
+    rows, total, names = [], 0.0, set()
     for line in out.stderr.splitlines():
         m = re.match(r"import time:\s+\d+ \|\s+(\d+) \|( *)(\S+)", line)
-        if m and len(m.group(2)) <= 3:  # the project's own imports and what they pull in
+        if not m:
+            continue
+        names.add(m.group(3))
+        if len(m.group(2)) == 1:
+            total += int(m.group(1)) / 1e6  # top level: each import counted once
+        if len(m.group(2)) <= 3:  # the project's own imports and what they pull in
             rows.append((int(m.group(1)) / 1e6, m.group(3)))
-    return sorted(rows, reverse=True)[:top]
+    return sorted(rows, reverse=True)[:top], total, [h for h in HEAVY if h in names], names
 
 
 def main() -> None:
@@ -85,15 +116,20 @@ def main() -> None:
     parser.add_argument("--db", type=Path, default=None)
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--top", type=int, default=12)
+    parser.add_argument("--no-bytecode", action="store_true",
+                        help="keep PYTHONDONTWRITEBYTECODE if set (default: drop it)")
     args = parser.parse_args()
+    if not args.no_bytecode:
+        _ENV.pop("PYTHONDONTWRITEBYTECODE", None)
     db = args.db or default_database()[0]
     if not is_database(db):
         sys.exit(f"bench_startup: no database at {db}: run 'animegraph demo' first")
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} cores, load average "
-          f"{os.getloadavg()[0]:.2f}; database {db}; median of {args.runs} warm runs")
+          f"{os.getloadavg()[0]:.2f}; database {db}; median of {args.runs} warm runs; "
+          f"bytecode {'not ' if _ENV.get('PYTHONDONTWRITEBYTECODE') else ''}cached")
 
-    help_s, _ = _median(["--help"], args.runs)
-    print(f"animegraph --help: {help_s:.2f} s wall (target <= 0.3 s)")
+    (help_s, help_cpu, _), = _median(["--help"], args.runs)
+    print(f"animegraph --help: {help_s:.2f} s wall, {help_cpu:.2f} s CPU (target <= 0.3 s)")
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -102,19 +138,27 @@ def main() -> None:
         write_phones_csv(tmp / "speech.phones.csv", [(p.phone, p.start, p.end)
                                                      for p in utt.phones])
         synth = ["synth", str(tmp / "speech.wav"), "--db", str(db), "-o", str(tmp / "m.c3d")]
-        wall, work = _median(synth, args.runs, _synth_work)
-        print(f"animegraph synth ({utt.duration:.1f} s of speech): {wall:.2f} s wall = "
-              f"{work:.2f} s work (load + segment + audio cost + search + post) + "
-              f"{wall - work:.2f} s start-up and writing (targets: wall <= 3 s, "
+        (wall, cpu, work), (cold_wall, cold_cpu, cold_work) = _median(
+            synth, args.runs, _synth_work, envs=({}, {"ANIMEGRAPH_NO_WARM_UP": "1"}))
+        print(f"animegraph synth ({utt.duration:.1f} s of speech): {wall:.2f} s wall, "
+              f"{cpu:.2f} s CPU = {work:.2f} s work (load + segment + audio cost + search + "
+              f"post) + {wall - work:.2f} s start-up and writing (targets: wall <= 3 s, "
               f"start-up <= 2 s)")
+        print(f"  without numba's set-up in the background: {cold_wall:.2f} s wall, "
+              f"{cold_cpu:.2f} s CPU = {cold_work:.2f} s work + {cold_wall - cold_work:.2f} s")
         mapping = ["map-emotion", str(tmp / "m.c3d"), "--db", str(db), "--to", "sad",
                    "--from", "neutral", "-o", str(tmp / "sad.c3d")]
-        wall, work = _median(mapping, args.runs, _map_work)
-        print(f"animegraph map-emotion: {wall:.2f} s wall = {work:.2f} s work + "
-              f"{wall - work:.2f} s start-up and writing")
+        (wall, cpu, work), = _median(mapping, args.runs, _map_work)
+        print(f"animegraph map-emotion: {wall:.2f} s wall, {cpu:.2f} s CPU = {work:.2f} s "
+              f"work + {wall - work:.2f} s start-up and writing")
+        rows, total, heavy, names = _imports(synth, args.top)
+        print(f"imports of 'synth': {len(names)} modules, {total:.2f} s in all (one run); of "
+              f"the libraries it does not need ({', '.join(HEAVY)}): "
+              f"{', '.join(heavy) or 'none'}")
         print("heaviest imports of 'synth' (cumulative s):")
-        for seconds, name in _imports(synth, args.top):
+        for seconds, name in rows:
             print(f"  {seconds:6.3f}  {name}")
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ Usage::
 
 Synthesizes the demo's held-out sentence (its eSpeak speech and exact phones, as
 ``animegraph demo`` does) from the database (default: the demo's) with every
-combination of time-warping, blending and smoothing, and prints the lip-corner-to-eye
+combination of time-warping, blending and smoothing (and with the helper pair blended as
+the paper does and anchored, ``PostOptions.helper``), and prints the lip-corner-to-eye
 distance (the demo plot's second measure) of the synthesized motion: its maximum and its
 99th percentile over the speech, against the reference motion of the same sentence in
 that emotion and in neutral, and the number of jump matches.
@@ -61,15 +62,20 @@ def main() -> None:
         print(f"  reference {emo:<8s}: {_summary(c.markers, c.fps, start, end)}")
     model = Model.load(db)
     labels = [Segment(p.phone, p.start, p.end) for p in clip.utterance.phones]
-    for warp, blend, smooth in itertools.product((True, False), repeat=3):
+    runs = [(warp, blend, smooth, "paper")
+            for warp, blend, smooth in itertools.product((True, False), repeat=3)]
+    runs += [(warp, True, smooth, "anchored")
+             for warp, smooth in itertools.product((True, False), repeat=2)]
+    for warp, blend, smooth, helper in runs:
         out = synthesize(model, clip.utterance.audio, clip.utterance.sample_rate,
                          labels=labels, emotion=args.emotion,
-                         options=PostOptions(time_warp=warp, blend=blend, smooth=smooth))
+                         options=PostOptions(time_warp=warp, blend=blend, smooth=smooth,
+                                             helper=helper))
         markers = out.motion.reshape(len(out.motion), -1, 3)
         helpers = sum(1 for j in out.joins if j.get("blend") == "helper")
-        print(f"  synthesized warp={warp!s:<5} blend={blend!s:<5} smooth={smooth!s:<5}: "
-              f"{_summary(markers, out.fps, start, end)}; {out.result.n_jumps} jumps, "
-              f"{helpers} blended with a helper pair")
+        print(f"  synthesized warp={warp!s:<5} blend={blend!s:<5} smooth={smooth!s:<5} "
+              f"helper={helper if blend else '-':<8}: {_summary(markers, out.fps, start, end)}; "
+              f"{out.result.n_jumps} jumps, {helpers} blended with a helper pair")
 
 
 if __name__ == "__main__":

@@ -233,3 +233,40 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
         assert row["pick_weight"] == weights[0]
     with pytest.raises(ParameterError, match="k must be"):
         synthesize(model, audio, sr, labels=labels, k_best=0)
+
+
+def test_anchor_moves_the_helper_onto_the_animes_poses(rng):
+    from animegraph.synthesis.assemble import anchor
+
+    helper = rng.normal(size=(30, 4))
+    first, last = rng.normal(size=4), rng.normal(size=4)
+    out = anchor(helper, first, last)
+    np.testing.assert_allclose(out[0], first)
+    np.testing.assert_allclose(out[-1], last)
+    # Only a linear displacement is added: the helper's transition is kept.
+    np.testing.assert_allclose(np.diff(out - helper, n=2, axis=0), 0.0, atol=1e-12)
+    np.testing.assert_allclose(anchor(helper, helper[0], helper[-1]), helper)
+
+
+def test_anchored_helper_changes_only_the_blend_inside_a_jump(model, held_out):
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    raw = PostOptions(smooth=False)
+    paper = synthesize(model, audio, sr, labels=labels, options=raw)
+    anchored = synthesize(model, audio, sr, labels=labels,
+                          options=PostOptions(smooth=False, helper="anchored"))
+    np.testing.assert_array_equal(paper.result.nodes, anchored.result.nodes)
+    helped = [j for j in paper.joins if j["blend"] == "helper"]
+    assert helped, "the held-out sentence has no helper-blended jump to test"
+    from animegraph.synthesis.assemble import output_frames
+
+    _, ranges = output_frames(paper.phones, model.graph.fps)
+    inside = np.zeros(len(paper.motion), dtype=bool)
+    for j in helped:
+        s0, s2 = ranges[j["index"]][0], ranges[j["index"] + 1][1]
+        inside[s0 + 1:s2 - 1] = True  # w = 0 at the blend's first and last frames
+    differs = np.abs(paper.motion - anchored.motion).max(axis=1) > 1e-9
+    assert differs.any() and not (differs & ~inside).any()
+    with pytest.raises(ParameterError, match="helper must be one of"):
+        PostOptions(helper="nearest")

@@ -14,7 +14,13 @@ import numpy as np
 
 from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
 from animegraph.search import search
-from animegraph.synthesis import query_phones, render_k_best, render_nodes, score_candidates
+from animegraph.synthesis import (
+    PostOptions,
+    query_phones,
+    render_k_best,
+    render_nodes,
+    score_candidates,
+)
 
 
 def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
@@ -32,6 +38,9 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: the paper) the exact search's motion averaged over the 20 best animes of each phone
 #: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: Rows only on request (``eval_lipsync.py --graph-methods``): "exact-anchored" is the exact
+#: search with the helper pairs of §4.3 anchored (``PostOptions(helper="anchored")``).
+OPTIONAL_METHODS = ("exact-anchored",)
 
 
 def heldout_query(model, clip):
@@ -73,7 +82,8 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     if method.startswith("kbest"):
         k = int(method[len("kbest"):])
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
-    return render_nodes(model, phones, nodes, emotion=emotion)[0], jumps
+    options = PostOptions(helper="anchored") if method.endswith("-anchored") else None
+    return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps
 
 
 def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,

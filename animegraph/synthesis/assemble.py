@@ -31,12 +31,15 @@ import numpy as np
 
 from animegraph.search.dtw import dtw, warp_indices
 from animegraph.search.graph import AnimeGraph
+from db.errors import ParameterError
 from ingest.lowpass import smooth
 
 #: :func:`blend_k_best` weighs the r-th ranked anime (r = 1, 2, ...) by ``r ** -RANK_DECAY``.
 #: Measured against equal weights (0) and 1 (docs/results.md): 0.5 was as good or better
 #: on every data set.
 RANK_DECAY = 0.5
+#: PostOptions.helper: the helper pair's motion as recorded (the paper), or anchored.
+HELPER_MODES = ("paper", "anchored")
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,13 @@ class PostOptions:
     time_warp: bool = True  # DTW on prosody; False: stretch each anime uniformly
     blend: bool = True  # blend at jump matches
     smooth: bool = True  # low-pass with the learned cutoffs
+    #: How a helper pair's motion enters the blend at a jump: "paper" as recorded (§4.3),
+    #: "anchored" displaced onto the two animes' poses at the blend's ends (see assemble).
+    helper: str = "paper"
+
+    def __post_init__(self) -> None:
+        if self.helper not in HELPER_MODES:
+            raise ParameterError(f"helper must be one of {HELPER_MODES}, got {self.helper!r}")
 
 
 def output_frames(phones: Sequence[Phone], fps: float) -> tuple[int, list[tuple[int, int]]]:
@@ -152,6 +162,30 @@ def find_helper_pair(graph: AnimeGraph, a: int, b: int, *, emotion: int | None =
     return int(m[k]), int(n[k])
 
 
+def anchor(helper: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """A helper pair's motion displaced to start at ``first`` and end at ``last``.
+
+    Beyond the paper (``PostOptions(helper="anchored")``). §4.3 blends the helper pair's
+    motion in as recorded, with weight 1 at the joint, so there the face is the helper
+    recording's: its transition, and also its pose, which can be far from the two animes'
+    (a weaker smile, in the demo: the lip corner spikes to neutral levels). Anchored, the
+    helper adds only its transition: a linear displacement (motion warping, Witkin &
+    Popović 1995) moves it onto the animes' poses at the blend's first and last frames.
+
+    Parameters
+    ----------
+    helper : np.ndarray, shape (n_frames, n_ics)
+    first, last : np.ndarray, shape (n_ics,)
+        The anime motion at the blend's first and last frames.
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, n_ics)
+    """
+    u = np.linspace(0.0, 1.0, len(helper))[:, None]
+    return helper + (1 - u) * (first - helper[0]) + u * (last - helper[-1])
+
+
 def _continuation(graph: AnimeGraph, node: int, n: int, *, forward: bool) -> np.ndarray:
     """``n`` frames after (or before) ``node`` in its recording, extrapolated past its ends."""
     frames = []
@@ -226,6 +260,8 @@ def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *
                     warp_anime(graph, m, phones[i], s1 - s0, time_warp=opts.time_warp),
                     warp_anime(graph, k, phones[i + 1], s2 - s1, time_warp=opts.time_warp),
                 ])
+                if opts.helper == "anchored":
+                    helper = anchor(helper, motion[s0], motion[s2 - 1])
                 t = np.arange(s0, s2, dtype=np.float64)
                 w = np.where(t <= s1, (t - s0) / max(s1 - s0, 1), (s2 - 1 - t) /
                              max(s2 - 1 - s1, 1))
