@@ -253,8 +253,28 @@ def ingest(
     if not found:
         raise ParameterError("no clips found under " + ", ".join(str(s) for s in sources))
     _check_tracker(found)
-    with writer_lock(db_path, wait=wait, what="database"):
-        return _ingest_locked(found, db_path, config, workers, progress, started, say)
+    made = not db_path.exists()
+    try:
+        with writer_lock(db_path, wait=wait, what="database"):
+            return _ingest_locked(found, db_path, config, workers, progress, started, say)
+    except BaseException:  # an interrupt too: a first ingest that fails leaves no folder
+        if made:
+            _remove_unmade(db_path)
+        raise
+
+
+def _remove_unmade(folder: Path) -> None:
+    """Remove the folder a first ingest made if it holds nothing but the lock file.
+
+    Another ingest into the same new folder, started meanwhile and waiting for the lock
+    (``wait`` > 0), then fails to write and says so: nothing is lost.
+    """
+    try:
+        if [p.name for p in folder.iterdir()] == [LOCK_NAME]:
+            (folder / LOCK_NAME).unlink()
+            folder.rmdir()
+    except OSError:
+        pass
 
 
 def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig, workers: int,

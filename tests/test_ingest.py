@@ -198,3 +198,14 @@ def test_cli_ingest_reports_rejections_with_exit_status_1(tiny_corpus, tmp_path,
     assert main(["ingest", str(src), "--db", str(db), "--quiet"]) == 1  # still rejected
     assert "database" in capsys.readouterr().out
     assert current_version(db) == "v000001"
+
+
+def test_a_first_ingest_that_rejects_every_clip_leaves_no_folder(tiny_corpus, tmp_path):
+    src = tmp_path / tiny_corpus.name
+    shutil.copytree(tiny_corpus, src)
+    for victim in (src / "clips").glob("*.c3d"):
+        victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])  # truncated
+    db = tmp_path / "db"
+    with pytest.raises(ParameterError):
+        ingest([src], db)
+    assert not db.exists()  # not even the folder with the lock file it was made under

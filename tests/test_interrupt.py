@@ -19,8 +19,6 @@ from pathlib import Path
 import psutil
 import pytest
 
-from db.store import is_database
-
 #: Longest wait for a process to appear or to end (a bound, not a measurement).
 BOUND_S = 120.0
 
@@ -87,7 +85,7 @@ def test_ctrl_c_ends_a_parallel_ingest(tiny_corpus, tmp_path, presses):
     workers = _workers(proc)
     _interrupt(proc, presses)
     _clean_exit(_ended(proc, workers), err)
-    assert not is_database(db)  # nothing half-written
+    assert not db.exists()  # nothing half-written, not even the folder with its lock file
 
 
 def test_ctrl_c_ends_a_corpus_being_generated(tmp_path):
