@@ -103,3 +103,15 @@ def test_restored_models_transform_as_the_estimators(tiny_db, rng):
         e = rng.normal(size=(40, light.centres_.shape[1]))
         np.testing.assert_allclose(light.transform(e), fitted.transform(e), rtol=1e-12,
                                    atol=1e-12)
+
+
+def test_info_imports_no_heavy_library(tiny_db):
+    code = (
+        "import json, sys\n"
+        "from animegraph.apps.cli import main\n"
+        f"status = main(['info', '--db', {str(tiny_db[0])!r}])\n"
+        f"print(json.dumps([status, [m for m in {HEAVY!r} if m in sys.modules]]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [0, []]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import Counter
 
-from animegraph.baselines.base import stored_models
+from animegraph.baselines.stored import stored_models
 from db.store import Database
 from ingest.speech.phones import PHONES
 

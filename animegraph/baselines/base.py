@@ -26,12 +26,9 @@ from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
 from animegraph.baselines.data import TrainingSet, frame_times, resample_to, training_set
+from animegraph.baselines.stored import META_KEY, MODELS_DIR
 from db.errors import DataError, ParameterError
 
-#: Key of the model description in a stored model's Parquet metadata.
-META_KEY = b"animegraph.baseline"
-#: Folder of stored baseline models inside a database folder.
-MODELS_DIR = "baselines"
 #: BLAS threads while fitting and predicting. The baselines' matrices are small (tens to
 #: hundreds of columns); extra BLAS threads only contend: on a loaded two-core machine a
 #: small mu-mlp fit spent over a minute in BLAS calls with the default thread pool and took
@@ -231,39 +228,6 @@ def read_model(path) -> BaselineModel:
     except (OSError, KeyError, ValueError, TypeError, pa.ArrowException) as exc:
         raise DataError(f"stored model {path} is unreadable ({exc})") from exc
     return estimator_class(meta["method"]).from_arrays(arrays_from_table(table), meta)
-
-
-def stored_models(db_root) -> list[dict]:
-    """What baseline models are stored with a database, read from their metadata only.
-
-    Returns
-    -------
-    list of dict
-        One per model file, sorted by method: ``method``, ``params``, ``n_channels``,
-        ``fps``, ``emotions``, ``db_version``, ``bytes`` and ``current`` (fitted on the
-        live version, so ``synth --method`` uses it; a stale model is refitted there).
-        An unreadable file is listed with an ``error`` instead of the description.
-    """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from db.store import current_version
-
-    root = Path(db_root)
-    live = current_version(root)
-    out = []
-    for path in sorted((root / MODELS_DIR).glob("*/*.parquet")):
-        row = {"method": path.stem, "db_version": path.parent.name,
-               "current": path.parent.name == live, "bytes": path.stat().st_size}
-        try:
-            meta = json.loads(pq.read_schema(path).metadata[META_KEY])
-        except (OSError, KeyError, TypeError, ValueError, pa.ArrowException) as exc:
-            row["error"] = f"unreadable ({exc})"
-        else:
-            row |= {"params": meta["params"], "n_channels": len(meta["channels"]),
-                    "fps": meta["fps"], "emotions": meta["emotions"]}
-        out.append(row)
-    return sorted(out, key=lambda r: (not r["current"], r["method"], r["db_version"]))
 
 
 def load_model(db_root, method: str) -> BaselineModel | None:
