@@ -295,7 +295,7 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--graph-methods", nargs="+", default=list(evaluate.METHODS),
                         choices=evaluate.METHODS + evaluate.OPTIONAL_METHODS,
-                        help="the Anime Graph's rows (default: all but exact-anchored)")
+                        help="the Anime Graph's rows (default: all but the exact-<helper> ones)")
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help="phone engine for clips without labels (default: auto)")
     parser.add_argument("--grid-db", type=Path,

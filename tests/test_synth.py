@@ -148,6 +148,9 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
      "--tolerance, --k-best only apply"),
     (["--method", "mu-mlp", "--k-best", "10"], "--k-best only applies"),
     (["--k-best", "0"], "--k-best must be at least 1, got 0"),
+    (["--helper", "anchored", "--k-best", "3"], "--helper blends the paper's search"),
+    (["--helper", "nearest"], "invalid choice"),
+    (["--method", "mu-mlp", "--helper", "paper"], "--helper only applies"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out
@@ -270,3 +273,38 @@ def test_anchored_helper_changes_only_the_blend_inside_a_jump(model, held_out):
     assert differs.any() and not (differs & ~inside).any()
     with pytest.raises(ParameterError, match="helper must be one of"):
         PostOptions(helper="nearest")
+
+
+def test_nonspeech_anchoring_leaves_the_speech_components_as_recorded(model, held_out):
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    out = {mode: synthesize(model, audio, sr, labels=labels,
+                            options=PostOptions(smooth=False, helper=mode))
+           for mode in ("paper", "anchored-nonspeech")}
+    speech = model.emotion_model.split.speech_components
+    rest = np.setdiff1d(np.arange(out["paper"].ics.shape[1]), speech)
+    assert speech.size and rest.size
+    np.testing.assert_array_equal(out["paper"].ics[:, speech],
+                                  out["anchored-nonspeech"].ics[:, speech])
+    assert np.abs(out["paper"].ics[:, rest] - out["anchored-nonspeech"].ics[:, rest]).max() > 0
+
+
+def test_cli_helper_choices_are_the_synthesis_modes():
+    from animegraph.apps.cli import HELPER_CHOICES
+    from animegraph.synthesis import HELPER_MODES
+
+    assert HELPER_CHOICES == HELPER_MODES
+
+
+def test_cli_synth_helper(tiny_db, held_out, tmp_path, capsys):
+    stem, _ = held_out
+    out = tmp_path / "o.npz"
+    argv = ["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0]), "-o", str(out)]
+    assert main([*argv, "--helper", "anchored-nonspeech"]) == 0
+    assert "the paper's search" in capsys.readouterr().err
+    with np.load(out) as f:
+        anchored = f["motion"]
+    assert main(argv) == 0
+    with np.load(out) as f:
+        assert not np.array_equal(anchored, f["motion"])

@@ -21,6 +21,9 @@ from animegraph.baselines import METHODS
 from db.errors import AnimeGraphError
 from ingest.speech.engines import ENGINES
 
+#: ``synth --helper``: animegraph.synthesis.HELPER_MODES, written out so that ``--help`` does
+#: not import the synthesis (tests/test_synth.py checks that they are the same).
+HELPER_CHOICES = ("paper", "anchored", "anchored-nonspeech")
 #: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
 SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), or a "
                   "video's sound track (.mp4, .mov, .mkv ...), any sample rate, channels "
@@ -219,6 +222,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write the explanation as JSON here")
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
+    syn.add_argument("--helper", choices=HELPER_CHOICES, default=None,
+                     help="the paper's search, with a helper pair's motion blended in at a "
+                     "jump as recorded ('paper', §4.3, the default), moved onto the animes' "
+                     "poses at the blend's ends ('anchored'), or that but for the speech "
+                     "components ('anchored-nonspeech')")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
     _phones_engine_option(syn, "a --text")
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
@@ -659,7 +667,6 @@ def _cmd_sql(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    import os
     import time
 
     if args.method == "anime-graph" and not os.environ.get("ANIMEGRAPH_NO_WARM_UP"):
@@ -703,6 +710,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
     k_best, path = _synth_path(args)
+    if args.helper is not None and k_best:
+        raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
+                         "phone) at its jumps; --k-best averages animes instead: give one")
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -725,7 +735,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
-                          smooth=not args.no_smooth)
+                          smooth=not args.no_smooth, helper=args.helper or PostOptions.helper)
     if choice.probabilities is not None:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
@@ -836,7 +846,8 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"transcript given (aligned by the {engine} phone engine)"
     else:
         given = f"audio only (phones recognised by the {engine} phone engine)"
-    searched = args.exact or args.window is not None or args.search is not None
+    searched = (args.exact or args.window is not None or args.search is not None
+                or args.helper is not None)
     if args.k_best is not None:
         return args.k_best, f"{given}; k-best {args.k_best} as asked"
     if args.labels is None and args.text is None and not searched:
@@ -868,6 +879,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--tolerance", args.tolerance is not None),
         ("--explain-json", args.explain_json is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
+        ("--helper", args.helper is not None),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "

@@ -15,6 +15,7 @@ import numpy as np
 from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
 from animegraph.search import search
 from animegraph.synthesis import (
+    HELPER_MODES,
     PostOptions,
     query_phones,
     render_k_best,
@@ -38,9 +39,10 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: the paper) the exact search's motion averaged over the 20 best animes of each phone
 #: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
-#: Rows only on request (``eval_lipsync.py --graph-methods``): "exact-anchored" is the exact
-#: search with the helper pairs of §4.3 anchored (``PostOptions(helper="anchored")``).
-OPTIONAL_METHODS = ("exact-anchored",)
+#: Rows only on request (``eval_lipsync.py --graph-methods``): the exact search with the
+#: helper pairs of §4.3 blended one way or another (``exact-<mode>``: ``PostOptions(helper=
+#: mode)``, e.g. ``exact-paper``, ``exact-anchored``).
+OPTIONAL_METHODS = tuple(f"exact-{mode}" for mode in HELPER_MODES)
 
 
 def heldout_query(model, clip):
@@ -82,7 +84,8 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     if method.startswith("kbest"):
         k = int(method[len("kbest"):])
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
-    options = PostOptions(helper="anchored") if method.endswith("-anchored") else None
+    options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
+               else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps
 
 

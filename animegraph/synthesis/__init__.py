@@ -14,6 +14,7 @@ Imports: ``db``, ``ingest``, and of ``animegraph`` only :mod:`animegraph.search`
 """
 
 from animegraph.synthesis.assemble import (
+    HELPER_MODES,
     Phone,
     PostOptions,
     blend_k_best,
@@ -34,7 +35,7 @@ from animegraph.synthesis.pipeline import (
 )
 
 __all__ = [
-    "Model", "Phone", "PostOptions", "Synthesis", "backoffs", "blend_k_best",
+    "HELPER_MODES", "Model", "Phone", "PostOptions", "Synthesis", "backoffs", "blend_k_best",
     "explain_record", "map_emotion", "query_phones", "rank_weights", "read_database_motion",
     "render_k_best", "render_nodes", "score_candidates", "synthesize", "to_world",
     "warp_positions", "write_explain", "write_motion",

@@ -39,7 +39,7 @@ from ingest.lowpass import smooth
 #: on every data set.
 RANK_DECAY = 0.5
 #: PostOptions.helper: the helper pair's motion as recorded (the paper), or anchored.
-HELPER_MODES = ("paper", "anchored")
+HELPER_MODES = ("paper", "anchored", "anchored-nonspeech")
 
 
 @dataclass(frozen=True)
@@ -59,8 +59,9 @@ class PostOptions:
     time_warp: bool = True  # DTW on prosody; False: stretch each anime uniformly
     blend: bool = True  # blend at jump matches
     smooth: bool = True  # low-pass with the learned cutoffs
-    #: How a helper pair's motion enters the blend at a jump: "paper" as recorded (§4.3),
-    #: "anchored" displaced onto the two animes' poses at the blend's ends (see assemble).
+    #: How a helper pair's motion enters the blend at a jump: "paper" as recorded (§4.3);
+    #: "anchored" displaced onto the two animes' poses at the blend's ends (:func:`anchor`);
+    #: "anchored-nonspeech" the same for all but the speech components (§5.1.3).
     helper: str = "paper"
 
     def __post_init__(self) -> None:
@@ -171,6 +172,9 @@ def anchor(helper: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarra
     (a weaker smile, in the demo: the lip corner spikes to neutral levels). Anchored, the
     helper adds only its transition: a linear displacement (motion warping, Witkin &
     Popović 1995) moves it onto the animes' poses at the blend's first and last frames.
+    ``"anchored-nonspeech"`` does so for the emotion and other components only: the
+    helper pair is chosen as an example of the phoneme transition (§4.3), which the
+    speech components carry; its smile, brows and head pose are its recording's.
 
     Parameters
     ----------
@@ -212,7 +216,8 @@ def _continuation(graph: AnimeGraph, node: int, n: int, *, forward: bool) -> np.
 
 def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *,
              cutoffs: np.ndarray | None = None, options: PostOptions | None = None,
-             emotion: int | None = None) -> tuple[np.ndarray, list[dict]]:
+             emotion: int | None = None,
+             speech: np.ndarray | None = None) -> tuple[np.ndarray, list[dict]]:
     """Continuous motion for a matching anime sequence.
 
     Parameters
@@ -227,6 +232,10 @@ def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *
     options : PostOptions, optional
     emotion : int, optional
         Emotion index preferred for helper pairs.
+    speech : np.ndarray of int, optional
+        The speech components (:class:`ingest.emotion.components.ComponentSplit`), left
+        as recorded by ``PostOptions(helper="anchored-nonspeech")`` (all are anchored
+        when not given).
 
     Returns
     -------
@@ -260,8 +269,11 @@ def assemble(graph: AnimeGraph, nodes: Sequence[int], phones: Sequence[Phone], *
                     warp_anime(graph, m, phones[i], s1 - s0, time_warp=opts.time_warp),
                     warp_anime(graph, k, phones[i + 1], s2 - s1, time_warp=opts.time_warp),
                 ])
-                if opts.helper == "anchored":
-                    helper = anchor(helper, motion[s0], motion[s2 - 1])
+                if opts.helper != "paper":
+                    cols = (np.arange(n_ics) if opts.helper == "anchored" or speech is None
+                            else np.setdiff1d(np.arange(n_ics), speech))
+                    helper[:, cols] = anchor(helper[:, cols], motion[s0, cols],
+                                             motion[s2 - 1, cols])
                 t = np.arange(s0, s2, dtype=np.float64)
                 w = np.where(t <= s1, (t - s0) / max(s1 - s0, 1), (s2 - 1 - t) /
                              max(s2 - 1 - s1, 1))

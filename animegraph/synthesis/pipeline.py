@@ -228,8 +228,10 @@ def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = N
     """Post-processed motion (independent components) of an anime sequence, §4.3."""
     graph = model.graph
     emotion_index = graph.emotions.index(emotion) if emotion is not None else None
+    split = model.emotion_model.split if model.emotion_model is not None else None
     return assemble(graph, nodes, phones, cutoffs=model.cutoffs, options=options,
-                    emotion=emotion_index)
+                    emotion=emotion_index,
+                    speech=split.speech_components if split is not None else None)
 
 
 def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
