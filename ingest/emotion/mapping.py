@@ -36,7 +36,7 @@ from sklearn.cluster import KMeans
 from sklearn.utils.validation import check_is_fitted
 
 from db.errors import DataError, ParameterError
-from ingest.emotion.rbf import KERNEL, KERNELS, N_CENTRES, RbfMapping, _matrix, rbf
+from ingest.emotion.rbf import KERNEL, KERNELS, N_CENTRES, RbfMapping, checked_matrix, rbf
 
 __all__ = ["KERNEL", "KERNELS", "N_CENTRES", "EmotionMapping", "rbf"]
 
@@ -93,8 +93,8 @@ class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
         if isinstance(self.n_centres, bool) or not isinstance(self.n_centres, (int, np.integer)) \
                 or self.n_centres < 2:
             raise ParameterError(f"n_centres must be an integer >= 2, got {self.n_centres!r}")
-        X = _matrix("X", X)
-        y = _matrix("y", y)
+        X = checked_matrix("X", X)
+        y = checked_matrix("y", y)
         if y.shape != X.shape:
             raise ParameterError(f"y must have the shape of X {X.shape}, got {y.shape}")
         n_distinct = len(np.unique(X, axis=0))

@@ -70,7 +70,7 @@ class RbfMapping:
         np.ndarray, shape (n_frames, n_emotion_components)
         """
         self._check_fitted()
-        X = _matrix("X", X)
+        X = checked_matrix("X", X)
         if X.shape[1] != self.centres_.shape[1]:
             raise ParameterError(f"X has {X.shape[1]} emotion components, the mapping "
                                  f"{self.centres_.shape[1]}")
@@ -105,7 +105,9 @@ class RbfMapping:
         return self
 
 
-def _matrix(name: str, a) -> np.ndarray:
+def checked_matrix(name: str, a) -> np.ndarray:
+    """``a`` as a finite, non-empty float array of shape (n_samples, n_components), or a
+    ParameterError naming it ``name``."""
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] == 0:
         raise ParameterError(f"{name} must be a non-empty (n_samples, n_components) array, "
