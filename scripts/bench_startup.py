@@ -16,8 +16,6 @@ load than wall time, which on a loaded machine is several times a quiet one's):
   database + segment + audio cost + search + post), and the rest, the start-up overhead
   (interpreter, imports, writing; target: wall <= 3 s in all, overhead <= 2 s);
 * ``animegraph map-emotion`` of that motion to sad: wall time and the reported work;
-* ``synth`` again without numba's set-up started early in a background thread
-  (``ANIMEGRAPH_NO_WARM_UP=1``; runs alternate with the default's);
 * the heaviest imports of ``synth`` by ``python -X importtime`` (cumulative), their sum,
   and which of the libraries a one-shot ``synth`` should not import it imported.
 
@@ -138,14 +136,11 @@ def main() -> None:
         write_phones_csv(tmp / "speech.phones.csv", [(p.phone, p.start, p.end)
                                                      for p in utt.phones])
         synth = ["synth", str(tmp / "speech.wav"), "--db", str(db), "-o", str(tmp / "m.c3d")]
-        (wall, cpu, work), (cold_wall, cold_cpu, cold_work) = _median(
-            synth, args.runs, _synth_work, envs=({}, {"ANIMEGRAPH_NO_WARM_UP": "1"}))
+        (wall, cpu, work), = _median(synth, args.runs, _synth_work)
         print(f"animegraph synth ({utt.duration:.1f} s of speech): {wall:.2f} s wall, "
               f"{cpu:.2f} s CPU = {work:.2f} s work (load + segment + audio cost + search + "
               f"post) + {wall - work:.2f} s start-up and writing (targets: wall <= 3 s, "
               f"start-up <= 2 s)")
-        print(f"  without numba's set-up in the background: {cold_wall:.2f} s wall, "
-              f"{cold_cpu:.2f} s CPU = {cold_work:.2f} s work + {cold_wall - cold_work:.2f} s")
         mapping = ["map-emotion", str(tmp / "m.c3d"), "--db", str(db), "--to", "sad",
                    "--from", "neutral", "-o", str(tmp / "sad.c3d")]
         (wall, cpu, work), = _median(mapping, args.runs, _map_work)

@@ -669,10 +669,6 @@ def _cmd_sql(args: argparse.Namespace) -> int:
 def _cmd_synth(args: argparse.Namespace) -> int:
     import time
 
-    if args.method == "anime-graph" and not os.environ.get("ANIMEGRAPH_NO_WARM_UP"):
-        from animegraph.search.kernels import warm_up
-
-        warm_up()  # numba's set-up overlaps reading the database and the speech
     import numpy as np
 
     from animegraph.emotion.control import check_names, parse_emotion, resolve_emotion

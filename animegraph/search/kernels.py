@@ -8,7 +8,6 @@ that first minute instead of going silent.
 
 from __future__ import annotations
 
-import threading
 from importlib import import_module
 from pathlib import Path
 
@@ -54,30 +53,3 @@ def compile_notice(method: str = "exact") -> str | None:
     return (f"compiling the search kernels once ({len(missing)} to go, {COMPILE_NOTE}; "
             "cached for later runs) ...")
 
-
-def warm_up() -> threading.Thread:
-    """Start numba's one-off set-up in a background thread, and return the thread.
-
-    Before its first kernel runs, a process imports numba and fills numba's target
-    context (its registries of implementations; SciPy's BLAS is looked up on the way):
-    0.6 s of a one-shot ``synth`` on a quiet machine. Started first, it overlaps the
-    reading of the database and of the speech, which release the GIL. The set-up runs
-    under numba's compiler lock, which a kernel's loading or compilation takes too, so
-    the main thread waits for it rather than doing it twice. Any failure (numba's
-    internals are not public API) only leaves the set-up to the first kernel call.
-    """
-    thread = threading.Thread(target=_set_up_numba, name="numba-warm-up", daemon=True)
-    thread.start()
-    return thread
-
-
-def _set_up_numba() -> None:
-    try:
-        import_module("animegraph.search")
-        from numba.core.compiler_lock import global_compiler_lock
-        from numba.core.registry import cpu_target
-
-        with global_compiler_lock:
-            cpu_target.target_context.refresh()
-    except Exception:  # noqa: BLE001 - an optimisation only: the first kernel does it
-        return
