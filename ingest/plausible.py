@@ -250,7 +250,7 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
     far &= ~np.isnan(pts).any(axis=2)
     bad = far.copy()
     reason = np.where(far, f"beyond {limits.max_coordinate_mm:g} mm", "").astype(object)
-    for j in range(pts.shape[1]):
+    for j in _points_to_check(pts, bad, fps, limits):
         p = pts[:, j]
         idx = np.flatnonzero(~np.isnan(p).any(axis=1) & ~bad[:, j])
         if len(idx) < 2:
@@ -274,6 +274,27 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
                 reason[frames, j] = (f"moves at {step:.3g} mm/s, above "
                                      f"{limits.max_speed_mm_s:g} mm/s")
     return bad, reason
+
+
+def _points_to_check(pts: np.ndarray, bad: np.ndarray, fps: float, limits: Limits
+                     ) -> np.ndarray:
+    """Points that may have an implausible sample: all but those whose valid frames are
+    the frames where any point is valid and which never move faster than the limit
+    between two of them (checked for all such points at once: a tracked video's points
+    are missing together, in the frames without a face)."""
+    valid = ~np.isnan(pts).any(axis=2) & ~bad
+    frames = valid.any(axis=1)
+    shared = (valid == frames[:, None]).all(axis=0)
+    idx = np.flatnonzero(frames)
+    if len(idx) < 2 or not shared.any():
+        return np.arange(pts.shape[1])
+    p = pts[idx][:, shared]
+    with np.errstate(over="ignore", invalid="ignore"):
+        speed = (np.linalg.norm(p[1:] - p[:-1], axis=2) * fps
+                 / np.diff(idx).astype(np.float64)[:, None])
+    fine = np.zeros(pts.shape[1], bool)
+    fine[np.flatnonzero(shared)] = (speed <= limits.max_speed_mm_s).all(axis=0)
+    return np.flatnonzero(~fine)
 
 
 def _speeds(p: np.ndarray, a: np.ndarray, b: np.ndarray, fps: float) -> np.ndarray:

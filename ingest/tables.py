@@ -196,26 +196,6 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
     })
 
 
-def _read_frames(db, columns: list[str]) -> pa.Table:
-    """The frames table, read file by file and row group by row group.
-
-    The frames table holds one row group per clip and a column per channel; the pyarrow
-    dataset scanner (``db.table``) buffers so many column chunks at once that reading
-    the 800 GRID clips (1,416 columns x 799 row groups) took 12.6 GB of memory for a
-    table of 0.4 GB. Row group by row group without pre-buffering it takes 2.9 GB.
-    """
-    import pyarrow.parquet as pq
-
-    root = db.table_path("frames")
-    files = sorted(root.rglob("*.parquet")) if root.is_dir() else [root]
-    parts = []
-    for path in files:
-        handle = pq.ParquetFile(path, pre_buffer=False)
-        parts += [handle.read_row_group(i, columns=columns)
-                  for i in range(handle.metadata.num_row_groups)]
-    return pa.concat_tables(parts)
-
-
 def prepared_from_database(db) -> list[PreparedClip]:
     """The clips of a database as :class:`PreparedClip` (to refit the model with more).
 
@@ -231,7 +211,9 @@ def prepared_from_database(db) -> list[PreparedClip]:
                            groups=tuple(c["group"] for c in channels),
                            units=channels[0]["units"])
     audio = {(r["corpus"], r["clip_id"]): r for r in db.table("audio").to_pylist()}
-    frames = _read_frames(db, ["corpus", "clip_id", "frame", *schema.names, "missing"]).sort_by(
+    # Row groups of about 64 MB (db.store.rows_per_group): read whole, without the
+    # per-clip row groups of older databases that made the scanner hold 12.6 GB for GRID.
+    frames = db.table("frames", ["corpus", "clip_id", "frame", *schema.names, "missing"]).sort_by(
         [("corpus", "ascending"), ("clip_id", "ascending"), ("frame", "ascending")])
     keys = list(zip(frames.column("corpus").to_pylist(), frames.column("clip_id").to_pylist(),
                     strict=True))
