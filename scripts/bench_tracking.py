@@ -10,10 +10,10 @@ Default: the GRID s1 videos of ``../shared/data/grid/s1``. Each video is tracked
 it and counted apart), or with ``--fresh`` tracked again without touching the cache, in
 ``--workers`` processes (one video a process at a time, as ``animegraph ingest
 --workers`` tracks). Prints frames, the wall time of the whole run and its rate (frames
-per second over all processes), and per frame the wall and the CPU time
-(``time.process_time`` of the tracking process: load-independent) of the tracking proper
-(decoding included), the load average before and after, and how many frames had no face
-or two.
+per second over all processes), and per frame the wall and the CPU time (the tracking
+process's ``time.process_time`` plus its ffmpeg's: load-independent) of the tracking
+proper (decoding included), the load average before and after, and how many frames had
+no face or two.
 """
 
 from __future__ import annotations
