@@ -32,6 +32,7 @@ frames; otherwise the clip is rejected with its reason. The note says which.
 
 from __future__ import annotations
 
+import functools
 import re
 import unicodedata
 import warnings
@@ -218,6 +219,12 @@ def check_motion(clip: RawClip, limits: Limits) -> tuple[RawClip, str]:
 
 def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
     """Points (``p.x, p.y, p.z`` in a row) and single channels: (names, column indices)."""
+    names, columns = _tracks_of(tuple(channel_names))
+    return list(names), [c.copy() for c in columns]
+
+
+@functools.lru_cache(maxsize=8)
+def _tracks_of(channel_names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[np.ndarray, ...]]:
     names, columns, i = [], [], 0
     channel_names = list(channel_names)
     while i < len(channel_names):
@@ -231,7 +238,7 @@ def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
             names.append(channel_names[i])
             columns.append(np.array([i]))
             i += 1
-    return names, columns
+    return tuple(names), tuple(columns)
 
 
 def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
