@@ -309,7 +309,10 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                 prepare()
             cluster = LocalCluster(
                 n_workers=0, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
+                # CRITICAL: a worker busy in a line when a Ctrl-C closes the scheduler
+                # logs its failed heartbeat as an ERROR with a traceback; a line's own
+                # errors come back through its future, not through the workers' logs.
+                dashboard_address=None, silence_logs=logging.CRITICAL,
                 # One core per worker: numba's own threads would compete with the others.
                 env={"NUMBA_NUM_THREADS": "1"},
             )
