@@ -44,7 +44,13 @@ from db.store import (
     write_version,
 )
 from ingest.clip import checksum_files
-from ingest.decompose import ENERGY_KEPT, VARIANCE_KEPT, MotionDecomposer, cutoff_frequencies
+from ingest.decompose import (
+    ENERGY_KEPT,
+    VARIANCE_KEPT,
+    MotionDecomposer,
+    cutoff_frequencies,
+    pcs_of_clips,
+)
 from ingest.emotion.model import fit_emotion_model
 from ingest.lag import decide_lags
 from ingest.motion import fill_gaps, head_points
@@ -343,9 +349,9 @@ def _check_tracker(found: Sequence[ClipSource]) -> None:
     from ingest.readers.video import TRACKER_HINT, cache_path, tracker_available
 
     videos = [s for s in found if s.layout == "video"]
-    if not videos or tracker_available():
-        return
-    if any(not cache_path(checksum_files([s.source])).is_file() for s in videos):
+    # Importing the tracker takes seconds: only when a video is not tracked yet.
+    if any(not cache_path(checksum_files([s.source])).is_file() for s in videos) and \
+            not tracker_available():
         raise ParameterError(TRACKER_HINT)
 
 
@@ -489,7 +495,7 @@ def build_database(
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
     del motion
-    sources = [model.transform(c.motion) for c in clips]
+    sources = [model.sources_from_pcs(p) for p in pcs_of_clips(model, [c.motion for c in clips])]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
     say("ingest: learning the emotion model (components, mappings, classifier) ...")

@@ -32,6 +32,7 @@ frames; otherwise the clip is rejected with its reason. The note says which.
 
 from __future__ import annotations
 
+import functools
 import re
 import unicodedata
 import warnings
@@ -218,6 +219,12 @@ def check_motion(clip: RawClip, limits: Limits) -> tuple[RawClip, str]:
 
 def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
     """Points (``p.x, p.y, p.z`` in a row) and single channels: (names, column indices)."""
+    names, columns = _tracks_of(tuple(channel_names))
+    return list(names), [c.copy() for c in columns]
+
+
+@functools.lru_cache(maxsize=8)
+def _tracks_of(channel_names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[np.ndarray, ...]]:
     names, columns, i = [], [], 0
     channel_names = list(channel_names)
     while i < len(channel_names):
@@ -231,7 +238,7 @@ def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
             names.append(channel_names[i])
             columns.append(np.array([i]))
             i += 1
-    return names, columns
+    return tuple(names), tuple(columns)
 
 
 def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
@@ -250,7 +257,7 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
     far &= ~np.isnan(pts).any(axis=2)
     bad = far.copy()
     reason = np.where(far, f"beyond {limits.max_coordinate_mm:g} mm", "").astype(object)
-    for j in range(pts.shape[1]):
+    for j in _points_to_check(pts, bad, fps, limits):
         p = pts[:, j]
         idx = np.flatnonzero(~np.isnan(p).any(axis=1) & ~bad[:, j])
         if len(idx) < 2:
@@ -274,6 +281,27 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
                 reason[frames, j] = (f"moves at {step:.3g} mm/s, above "
                                      f"{limits.max_speed_mm_s:g} mm/s")
     return bad, reason
+
+
+def _points_to_check(pts: np.ndarray, bad: np.ndarray, fps: float, limits: Limits
+                     ) -> np.ndarray:
+    """Points that may have an implausible sample: all but those whose valid frames are
+    the frames where any point is valid and which never move faster than the limit
+    between two of them (checked for all such points at once: a tracked video's points
+    are missing together, in the frames without a face)."""
+    valid = ~np.isnan(pts).any(axis=2) & ~bad
+    frames = valid.any(axis=1)
+    shared = (valid == frames[:, None]).all(axis=0)
+    idx = np.flatnonzero(frames)
+    if len(idx) < 2 or not shared.any():
+        return np.arange(pts.shape[1])
+    p = pts[idx][:, shared]
+    with np.errstate(over="ignore", invalid="ignore"):
+        speed = (np.linalg.norm(p[1:] - p[:-1], axis=2) * fps
+                 / np.diff(idx).astype(np.float64)[:, None])
+    fine = np.zeros(pts.shape[1], bool)
+    fine[np.flatnonzero(shared)] = (speed <= limits.max_speed_mm_s).all(axis=0)
+    return np.flatnonzero(~fine)
 
 
 def _speeds(p: np.ndarray, a: np.ndarray, b: np.ndarray, fps: float) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 import pyarrow as pa
 
 from db.store import arrays_to_table
-from ingest.decompose import MotionDecomposer
+from ingest.decompose import MotionDecomposer, pcs_of_clips
 from ingest.prepare import PreparedClip
 from ingest.speech.features import RastaPlpConfig, slice_frames
 
@@ -64,12 +64,11 @@ def build_tables(
     cfg = prosody_config or RastaPlpConfig()
     clips = sorted(clips, key=lambda c: c.key)
     schema = clips[0].schema
-    clip_rows, anime_cols, frame_parts = [], _columns(), []
+    clip_rows, anime_cols = [], _columns()
     audio_rows = []
     node = 0
     sources_all = []
-    for clip in clips:
-        pcs = model.to_pcs(clip.motion)
+    for clip, pcs in zip(clips, pcs_of_clips(model, [c.motion for c in clips]), strict=True):
         sources = model.sources_from_pcs(pcs).astype(np.float32)
         sources_all.append(sources)
         n_phones = len(clip.phones)
@@ -98,7 +97,6 @@ def build_tables(
             a["next_node"].append(node + 1 if pos < n_phones - 1 else None)
             node += 1
         clip_rows.append(_clip_row(clip, n_phones))
-        frame_parts.append(_frames(clip))
         audio_rows.append((clip.clip_id, clip.corpus, clip.sample_rate, clip.audio.tobytes()))
 
     animes = pa.table({
@@ -127,7 +125,7 @@ def build_tables(
     return {
         "clips": pa.Table.from_pylist(clip_rows, schema=CLIPS_SCHEMA),
         "animes": animes,
-        "frames": pa.concat_tables(frame_parts),
+        "frames": _frames(clips),
         "audio": audio,
         "channels": channels,
         "model_arrays": arrays_to_table(arrays),
@@ -160,22 +158,30 @@ def _clip_row(clip: PreparedClip, n_animes: int) -> dict:
     }
 
 
-def _frames(clip: PreparedClip) -> pa.Table:
-    n = len(clip.motion)
-    cols = {
-        "clip_id": pa.array([clip.clip_id] * n, pa.string()),
-        "corpus": pa.array([clip.corpus] * n, pa.string()),
-        "emotion": pa.array([clip.emotion] * n, pa.string()),
-        "frame": pa.array(np.arange(n, dtype=np.int32)),
-        "time": pa.array((np.arange(n) / clip.fps).astype(np.float32)),
-    }
-    for c, name in enumerate(clip.schema.names):
-        cols[name] = pa.array(clip.motion[:, c])
-    rows, chans = np.nonzero(clip.missing)
-    per_frame = [[] for _ in range(n)]
-    for r, c in zip(rows.tolist(), chans.tolist(), strict=True):
-        per_frame[r].append(c)
-    cols["missing"] = pa.array(per_frame, pa.list_(pa.int16()))
+def _frames(clips: Sequence[PreparedClip]) -> pa.Table:
+    """The frames table of ``clips``, in their order: one row a frame, one column a
+    channel, and ``missing`` (the channels filled as gaps in that frame).
+
+    Built for all clips at once, each column one array (not one small table a clip:
+    1,400 columns x 800 clips made 1.1 million arrays to build and to write).
+    """
+    lengths = np.array([len(c.motion) for c in clips])
+    keys = {name: np.repeat(np.array([getattr(c, name) for c in clips], dtype=object), lengths)
+            for name in ("clip_id", "corpus", "emotion")}
+    cols = {name: pa.array(values, pa.string()) for name, values in keys.items()}
+    cols["frame"] = pa.array(np.concatenate([np.arange(n, dtype=np.int32) for n in lengths]))
+    cols["time"] = pa.array(np.concatenate([(np.arange(len(c.motion)) / c.fps).astype(
+        np.float32) for c in clips]))
+    motion = np.concatenate([c.motion for c in clips]).astype(clips[0].motion.dtype,
+                                                              copy=False).T.copy()
+    for c, name in enumerate(clips[0].schema.names):
+        cols[name] = pa.array(motion[c])
+    del motion
+    missing = np.concatenate([c.missing for c in clips])
+    rows, chans = np.nonzero(missing)
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(missing)))])
+    cols["missing"] = pa.ListArray.from_arrays(pa.array(offsets.astype(np.int32)),
+                                               pa.array(chans.astype(np.int16)))
     return pa.table(cols)
 
 
@@ -196,26 +202,6 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
     })
 
 
-def _read_frames(db, columns: list[str]) -> pa.Table:
-    """The frames table, read file by file and row group by row group.
-
-    The frames table holds one row group per clip and a column per channel; the pyarrow
-    dataset scanner (``db.table``) buffers so many column chunks at once that reading
-    the 800 GRID clips (1,416 columns x 799 row groups) took 12.6 GB of memory for a
-    table of 0.4 GB. Row group by row group without pre-buffering it takes 2.9 GB.
-    """
-    import pyarrow.parquet as pq
-
-    root = db.table_path("frames")
-    files = sorted(root.rglob("*.parquet")) if root.is_dir() else [root]
-    parts = []
-    for path in files:
-        handle = pq.ParquetFile(path, pre_buffer=False)
-        parts += [handle.read_row_group(i, columns=columns)
-                  for i in range(handle.metadata.num_row_groups)]
-    return pa.concat_tables(parts)
-
-
 def prepared_from_database(db) -> list[PreparedClip]:
     """The clips of a database as :class:`PreparedClip` (to refit the model with more).
 
@@ -231,7 +217,9 @@ def prepared_from_database(db) -> list[PreparedClip]:
                            groups=tuple(c["group"] for c in channels),
                            units=channels[0]["units"])
     audio = {(r["corpus"], r["clip_id"]): r for r in db.table("audio").to_pylist()}
-    frames = _read_frames(db, ["corpus", "clip_id", "frame", *schema.names, "missing"]).sort_by(
+    # Row groups of about 64 MB (db.store.rows_per_group): read whole, without the
+    # per-clip row groups of older databases that made the scanner hold 12.6 GB for GRID.
+    frames = db.table("frames", ["corpus", "clip_id", "frame", *schema.names, "missing"]).sort_by(
         [("corpus", "ascending"), ("clip_id", "ascending"), ("frame", "ascending")])
     keys = list(zip(frames.column("corpus").to_pylist(), frames.column("clip_id").to_pylist(),
                     strict=True))

@@ -54,6 +54,9 @@ def test_reads_csv_and_json_lines(tmp_path):
     assert b.audio == (tmp_path / "rec" / "b.wav").absolute()
     assert b.emotion.source == "given" and b.window == 4 and b.method == "window"
     assert c.emotion.source == "auto" and c.method == "exact"
+    # the phones of a line are known: k-best 20 unless a search is asked for (issue 14)
+    assert [x.synthesis_path()[0] for x in lines] == [20, None, None, 20]
+    assert "eSpeak NG phones: each phone the mean of its 20" in a.synthesis_path()[1]
     assert d.emotion.text == "sad=0.25,neutral=0.75" and d.emotion.argument == d.emotion.text
 
     jsonl = tmp_path / "lines.jsonl"

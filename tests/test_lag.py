@@ -165,7 +165,7 @@ def test_ingest_reports_and_applies_the_pooled_lag(tmp_path):
 
 
 def test_prepared_clips_read_back_from_the_database(tiny_db, tiny_corpus):
-    """prepared_from_database (row group by row group) gives back each clip's frames."""
+    """prepared_from_database gives back each clip's frames."""
     from db.store import Database
     from ingest.pipeline import prepare_sources
     from ingest.tables import prepared_from_database

@@ -52,6 +52,33 @@ def test_write_then_read_every_table(tmp_path):
     np.testing.assert_array_equal(db.arrays()["m"], np.arange(6.0).reshape(2, 3))
 
 
+def test_a_table_built_clip_by_clip_is_written_in_few_row_groups(tmp_path, monkeypatch):
+    """Frames concatenated from one small table a clip are gathered into row groups of
+    about ROW_GROUP_BYTES (one a clip made wide tables expensive to read), in order."""
+    import db.store as store
+
+    rng = np.random.default_rng(0)
+    parts = [pa.table({"clip_id": [f"c{k:03d}"] * 10, "emotion": ["neutral"] * 10,
+                       "frame": pa.array(np.arange(10), pa.int32()),
+                       **{f"ch{c}": pa.array(rng.normal(size=10).astype(np.float32))
+                          for c in range(50)}}) for k in range(120)]
+    frames = pa.concat_tables(parts)
+    assert frames.column("ch0").num_chunks == 120
+    monkeypatch.setattr(store, "ROW_GROUP_BYTES", 40_000)
+    monkeypatch.setattr(store, "MIN_GROUP_ROWS", 1)
+    rows = store.rows_per_group(frames)
+    assert rows == 40_000 // (frames.nbytes / frames.num_rows)
+    write_version(tmp_path / "db", {**_tables(), "frames": frames}, {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    files = list(db.table_path("frames").rglob("*.parquet"))
+    meta = pq.ParquetFile(files[0]).metadata
+    assert len(files) == 1 and meta.num_row_groups == -(-1200 // rows)
+    assert max(meta.row_group(i).num_rows for i in range(meta.num_row_groups)) == rows
+    back = db.table("frames")
+    assert back.column("clip_id").to_pylist() == frames.column("clip_id").to_pylist()
+    np.testing.assert_array_equal(back.column("ch7").to_numpy(), frames.column("ch7").to_numpy())
+
+
 def test_model_arrays_round_trip_exactly():
     rng = np.random.default_rng(0)
     arrays = {"a": rng.normal(size=(4, 5)), "b": rng.normal(size=7), "c": np.zeros((0, 3))}

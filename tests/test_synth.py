@@ -112,8 +112,9 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
 
 
 def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, capsys):
-    """Labels: the paper's search; audio only: k-best 20 on recognised phones, said on
-    stderr and in --explain; --exact brings the paper's search back."""
+    """Labels or a transcript, and audio only: k-best 20 (one function decides for labels,
+    shared with batch), said on stderr and in --explain; --exact brings the paper's
+    search back."""
     stem, _ = held_out
     # The speech alone, without the phone labels written beside it (synth would use them).
     shutil.copy(stem.with_suffix(".wav"), tmp_path / "speech.wav")
@@ -121,8 +122,14 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     assert main([*base, "--labels", f"{stem}.phones.csv", "-o", str(tmp_path / "a.npz"),
                  "--explain"]) == 0
     captured = capsys.readouterr()
-    assert "path: phone labels given: the paper's search" in captured.err
-    assert "path: phone labels given" in captured.out
+    assert "path: phone labels given: each phone the mean of its 20 best animes" in captured.err
+    assert "path: phone labels given" in captured.out and "k-best 20" in captured.err
+    assert main([*base, "--labels", f"{stem}.phones.csv", "--exact", "-o",
+                 str(tmp_path / "a2.npz")]) == 0
+    assert "path: phone labels given: the paper's search" in capsys.readouterr().err
+    with np.load(tmp_path / "a.npz") as kbest, np.load(tmp_path / "a2.npz") as exact:
+        assert kbest["motion"].shape == exact["motion"].shape
+        assert not np.allclose(kbest["motion"], exact["motion"])
     assert main([*base, "-o", str(tmp_path / "b.npz")]) == 0
     err = capsys.readouterr().err
     assert "path: audio only (phones recognised by the auto phone engine)" in err

@@ -171,3 +171,23 @@ def test_synth_takes_its_speech_from_a_video(tiny_corpus, tiny_db, tmp_path, cap
     assert out.is_file()
     with pytest.raises(DataError, match="not found"):
         read_audio(tmp_path / "absent.mp4")
+
+
+def test_sound_track_is_cached_by_checksum(tmp_path):
+    """A video's decoded sound track is kept beside its tracking: read again without ffmpeg
+    (the video itself may be gone), and a damaged entry is decoded again and replaced."""
+    video = tmp_path / "tone.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=64x48:r=25:d=1", "-f", "lavfi", "-i",
+            "sine=frequency=300:sample_rate=16000:duration=1", "-c:v", "libx264",
+            "-c:a", "aac", "-shortest", str(video))
+    checksum = checksum_files([video])
+    decoded = video_audio(video)
+    first = video_audio(video, checksum=checksum)
+    np.testing.assert_array_equal(first, decoded)
+    entry = cache_path(checksum).with_name(f"{checksum}-audio16000.npy")
+    assert entry.is_file()
+    moved = video.rename(tmp_path / "elsewhere.mp4")
+    np.testing.assert_array_equal(video_audio(video, checksum=checksum), decoded)
+    entry.write_bytes(b"not an npy")
+    np.testing.assert_array_equal(video_audio(moved, checksum=checksum), decoded)
+    assert np.load(entry, allow_pickle=False).dtype == np.float32

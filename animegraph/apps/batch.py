@@ -61,7 +61,7 @@ FORMAT = 1
 DONE = "done.json"
 RENDER_MODES = ("none", "mp4")
 #: Columns of ``OUT/report.csv``.
-REPORT_COLUMNS = ("id", "status", "speaker", "speech", "duration_s", "emotion",
+REPORT_COLUMNS = ("id", "status", "speaker", "speech", "path", "duration_s", "emotion",
                   "emotion_source", "motion_emotions", "jumps", "cost", "seconds",
                   "cpu_seconds", "warnings", "error")
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
@@ -309,7 +309,10 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                 prepare()
             cluster = LocalCluster(
                 n_workers=0, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
+                # CRITICAL: a worker busy in a line when a Ctrl-C closes the scheduler
+                # logs its failed heartbeat as an ERROR with a traceback; a line's own
+                # errors come back through its future, not through the workers' logs.
+                dashboard_address=None, silence_logs=logging.CRITICAL,
                 # One core per worker: numba's own threads would compete with the others.
                 env={"NUMBA_NUM_THREADS": "1"},
             )
@@ -398,7 +401,7 @@ def line_key(line: ScriptLine, db_identity: str, render: str) -> str:
         "format": FORMAT, "animegraph": __version__, "db": db_identity, "render": render,
         "id": line.id, "text": line.text, "audio_sha256": audio,
         "emotion": line.emotion.text, "voice": line.voice, "speaker": line.speaker,
-        "method": line.method, "window": line.window,
+        "method": line.method, "window": line.window, "k_best": line.synthesis_path()[0],
     }
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
@@ -519,7 +522,8 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         audio, sample_rate, labels = _speak(line, warnings)
         text, speech = None, "espeak"
     synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
-                       emotion=line.emotion.argument, method=line.method, window=line.window)
+                       emotion=line.emotion.argument, method=line.method, window=line.window,
+                       k_best=line.synthesis_path()[0])
     warnings.extend(synth.notes)  # e.g. emotion components that could not be mapped
     if line.audio is not None and synth.segmentation != "aligned":
         warnings.append(f"the transcript could not be aligned; phones were "
@@ -543,7 +547,8 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         _render(folder, motion_name, synth.phones)
         outputs.append("preview.mp4")
     return {
-        "speech": speech, "duration_s": round(len(audio) / sample_rate, 3),
+        "speech": speech, "path": line.synthesis_path()[1],
+        "duration_s": round(len(audio) / sample_rate, 3),
         "emotion": used, "motion_emotions": _motion_emotions(synth.explain),
         "jumps": synth.result.n_jumps, "cost": round(float(synth.result.cost), 4),
         "warnings": "; ".join(warnings), "error": "", "_outputs": outputs,

@@ -844,6 +844,10 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"audio only (phones recognised by the {engine} phone engine)"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
+    if args.labels is not None or args.text is not None:  # shared with batch
+        from animegraph.synthesis.path import known_phones_path
+
+        return known_phones_path(given, k_best=args.k_best, searched=searched)
     if args.k_best is not None:
         return args.k_best, f"{given}; k-best {args.k_best} as asked"
     if args.labels is None and args.text is None and not searched:

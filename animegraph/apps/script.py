@@ -15,9 +15,10 @@ column     required meaning
                     emotion preference
 ``speaker``         who says it (kept in the report)
 ``voice``           eSpeak NG voice for lines without audio, e.g. ``en-us+f3``
-``window``          the paper's bounded look-ahead of K phonemes instead of the exact
-                    search
-``exact``           ``true``: the exact search (the default); not with ``window``
+``window``          the paper's bounded look-ahead of K phonemes (one anime a phoneme)
+``exact``           ``true``: the paper's exact search, one anime a phoneme; not with
+                    ``window``. Default (neither): k-best blending around the exact
+                    search's sequence (:mod:`animegraph.synthesis.path`)
 ========== ======== ===================================================================
 
 The whole script is checked before any work: a malformed row (with its line number), a
@@ -122,11 +123,21 @@ class ScriptLine:
     speaker: str = ""
     voice: str | None = None
     window: int | None = None
+    exact: bool = False  # the paper's synthesis asked for (column ``exact``)
 
     @property
     def method(self) -> str:
         """Search method: ``window`` with a look-ahead, else ``exact``."""
         return "window" if self.window is not None else "exact"
+
+    def synthesis_path(self) -> tuple[int | None, str]:
+        """(k-best K or None for the paper's synthesis, why): the phones of a line are
+        known (its text, aligned or spoken by eSpeak NG), so ``synth``'s choice for a
+        transcript applies (:func:`animegraph.synthesis.path.known_phones_path`)."""
+        from animegraph.synthesis.path import known_phones_path
+
+        given = "transcript given" if self.audio is not None else "eSpeak NG phones"
+        return known_phones_path(given, searched=self.exact or self.window is not None)
 
 
 def read_script(path: str | Path) -> list[ScriptLine]:
@@ -268,6 +279,7 @@ def _line(path: Path, line_no: int, row: dict) -> ScriptLine:
         id=ident, text=text, line_no=line_no,
         audio=(path.parent / audio).absolute() if audio else None,
         emotion=emotion, speaker=text_of("speaker"), voice=voice, window=window,
+        exact=exact,
     )
 
 

@@ -58,7 +58,8 @@ def read_audio(path: str | os.PathLike[str],
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:
         lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
-        if not proc.stdout and (not lines or "matches no streams" in lines[-1]):
+        # ffmpeg 7 follows "Stream map '' matches no streams." with more lines
+        if not proc.stdout and (not lines or any("matches no streams" in ln for ln in lines)):
             raise DataError(f"{path}: no audio track")
         raise DataError(f"cannot read the sound track of {path}: "
                         f"{lines[-1] if lines else proc.returncode}")

@@ -243,8 +243,10 @@ def _stable_jitter(points: np.ndarray) -> float:
     return float(np.nanmedian(np.sqrt(((stable - mean) ** 2).sum(-1).mean(-1))))
 
 
+@lru_cache(maxsize=1)
 def landmark_schema() -> ChannelSchema:
-    """Schema of a landmark clip: ``lm<i>.x/y/z`` for the 468 points, then the pose."""
+    """Schema of a landmark clip: ``lm<i>.x/y/z`` for the 468 points, then the pose
+    (built once a process; a ChannelSchema is frozen)."""
     points = ChannelSchema.for_points("landmarks", [f"lm{i}" for i in range(N_FACE)],
                                       landmark_groups(), "mm")
     return ChannelSchema(

@@ -13,7 +13,8 @@ A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmp
   Without it a video clip is rejected with :data:`TRACKER_HINT`, and an ingest of videos
   not yet tracked stops with that one line.
 - **cache**: the landmarks of a video are kept in ``<cache>/tracking/<sha256>-<tracker>.npz``
-  (:func:`ingest.cache.cache_dir`), so re-ingest does not track again.
+  (:func:`ingest.cache.cache_dir`), and its decoded sound track beside them
+  (``<sha256>-audio16000.npy``), so re-ingest neither tracks nor decodes again.
 - **speech**: ``<clip>.wav`` beside the video if there is one, else the video's audio
   track, decoded to 16 kHz mono.
 - **checks** (each a one-line rejection): a file ffmpeg cannot decode; no audio track; a
@@ -90,6 +91,10 @@ class Tracking:
         The container's duration (s).
     seconds : float
         Time the tracking took (s; 0 when read from the cache).
+    cpu_seconds : float
+        CPU time of the tracking meanwhile: this process (``time.process_time``, all its
+        threads) and the ffmpeg that decoded the frames (0 when read from the cache): the
+        load-independent cost.
     """
 
     landmarks: np.ndarray
@@ -99,6 +104,7 @@ class Tracking:
     height: int
     duration: float
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
 
     @property
     def ms_per_frame(self) -> float:
@@ -136,6 +142,14 @@ def _frames(path: Path):
             reader.close()
 
     return meta, frames()
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and of its finished child processes (ffmpeg), s."""
+    import resource
+
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
 
 
 def _nearest_face(faces, previous: np.ndarray | None) -> np.ndarray:
@@ -181,7 +195,7 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
         raise DataError(f"{path}: the video has no frame rate")
     landmarks, counts = [], []
     previous = None
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), _cpu_seconds()
     with face_mesh.FaceMesh(static_image_mode=False, max_num_faces=2, refine_landmarks=True,
                             min_detection_confidence=MIN_DETECTION_CONFIDENCE,
                             min_tracking_confidence=MIN_TRACKING_CONFIDENCE) as mesh:
@@ -195,7 +209,7 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
                 landmarks.append(previous)
             else:
                 landmarks.append(np.full((N_WITH_IRISES, 3), np.nan, np.float32))
-    seconds = time.perf_counter() - started
+    seconds, cpu = time.perf_counter() - started, _cpu_seconds() - cpu
     if not landmarks:
         raise DataError(f"{path}: the video has no frames")
     stacked = np.stack(landmarks).astype(np.float32)
@@ -204,7 +218,8 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
                         f"not {N_WITH_IRISES}")
     logger.info("%s: tracked %d frames in %.1f s (%.1f ms a frame)", path, len(stacked),
                 seconds, 1000 * seconds / len(stacked))
-    return Tracking(stacked, np.asarray(counts, np.int8), fps, width, height, duration, seconds)
+    return Tracking(stacked, np.asarray(counts, np.int8), fps, width, height, duration, seconds,
+                    cpu)
 
 
 def cache_path(checksum: str) -> Path:
@@ -240,16 +255,38 @@ def cached_tracking(path: str | os.PathLike[str], checksum: str | None = None, *
     return tracking
 
 
-def video_audio(path: Path, sample_rate: int = AUDIO_RATE) -> np.ndarray:
+def video_audio(path: Path, sample_rate: int = AUDIO_RATE, checksum: str | None = None
+                ) -> np.ndarray:
     """The video's audio track as mono float32 at ``sample_rate``
     (:func:`ingest.formats.media.read_audio`).
+
+    With the video's ``checksum`` the decoded track is cached beside its tracking
+    (``<cache>/tracking/<sha256>-audio<rate>.npy``), so a re-ingest from the cache starts
+    no ffmpeg; an entry that cannot be read is decoded again and replaced.
 
     Raises
     ------
     DataError
         If the video has no audio track or ffmpeg fails.
     """
-    return read_audio(path, sample_rate)[0]
+    if checksum is None:
+        return read_audio(path, sample_rate)[0]
+    target = cache_dir() / "tracking" / f"{checksum}-audio{int(sample_rate)}.npy"
+    if target.is_file():
+        try:
+            audio = np.load(target, allow_pickle=False)
+            if audio.dtype == np.float32 and audio.ndim == 1 and np.isfinite(audio).all():
+                return audio
+            logger.warning("%s: not a mono float32 sound track; decoding again", target)
+        except (OSError, ValueError) as exc:
+            logger.warning("%s: unreadable audio cache (%s); decoding again", target, exc)
+    audio = read_audio(path, sample_rate)[0]
+    buffer = io.BytesIO()
+    np.save(buffer, audio, allow_pickle=False)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(target) as handle:
+        handle.write(buffer.getvalue())
+    return audio
 
 
 def check_tracking(tracking: Tracking, where: Path) -> None:
@@ -285,7 +322,7 @@ def load_video(source: ClipSource) -> RawClip:
     if audio_path is not None:
         audio, sample_rate = read_wav(audio_path)
     else:
-        audio, sample_rate = video_audio(video), AUDIO_RATE
+        audio, sample_rate = video_audio(video, checksum=checksum), AUDIO_RATE
     meta_path = source.file("metadata")
     meta = read_json_object(meta_path) if meta_path else {}
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(

@@ -76,6 +76,7 @@ recognition (its method says ``"recognized"``).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -350,8 +351,10 @@ _N_MELS = 26
 _N_CEPS = 13
 
 
+@functools.lru_cache(maxsize=1)
 def _mel_filterbank() -> np.ndarray:
-    """Triangular mel filters, shape (_N_MELS, _CHANGE_FFT // 2 + 1), 100 Hz .. 7 kHz."""
+    """Triangular mel filters, shape (_N_MELS, _CHANGE_FFT // 2 + 1), 100 Hz .. 7 kHz
+    (built once a process: shared, read-only)."""
 
     def mel(f: np.ndarray | float) -> np.ndarray:
         return 2595.0 * np.log10(1.0 + np.asarray(f) / 700.0)
