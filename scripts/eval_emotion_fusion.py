@@ -42,10 +42,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from joblib import Parallel, delayed
-from sklearn.linear_model import LogisticRegression
-from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedKFold
-
 from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
     DEFAULT_CACHE,
     DEFAULT_EMODB,
@@ -56,6 +52,10 @@ from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
     matrix,
     print_confusion,
 )
+from joblib import Parallel, delayed
+from sklearn.linear_model import LogisticRegression
+from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedKFold
+
 from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
 
 #: Base feature sets and their tuning grids (ComParE: linear only, as in eval_emotion.py).
