@@ -51,7 +51,7 @@ PREFIX = "emotion/"
 #: calibration needs two per class in every out-of-fold split).
 MIN_CLASSIFIER_CLIPS = 2
 _CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "normalize", "classes",
-                       "norm_speakers")
+                       "norm_speakers", "class_weight")
 
 
 @dataclass(frozen=True)
