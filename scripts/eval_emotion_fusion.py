@@ -55,6 +55,7 @@ from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
 from joblib import Parallel, delayed
 from sklearn.linear_model import LogisticRegression
 from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedKFold
+from tqdm import tqdm
 
 from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
 
@@ -133,9 +134,10 @@ def run(feats, y, spk, names, kinds, feature_level, n_jobs=2) -> dict:
         jobs = [(name, k) for name in names for k in range(len(outer))]
         mats = {name: matrix(feats, BASES[name][0]) for name in names}
         t = time.perf_counter()
-        done = Parallel(n_jobs=n_jobs)(
+        done = list(tqdm(Parallel(n_jobs=n_jobs, return_as="generator")(
             delayed(_base_fold)(mats[name], y, spk, outer[k][0], outer[k][1], kind,
-                                BASES[name][1]) for name, k in jobs)
+                                BASES[name][1]) for name, k in jobs),
+            total=len(jobs), desc=f"{kind} bases", file=sys.stderr))
         base = {(name, k): r for (name, k), r in zip(jobs, done, strict=True)}
         if feature_level:
             for combo in [c for c in combos if len(c) == 2]:
