@@ -260,6 +260,15 @@ def cross_corpus(src_name, Fs, ys, ss, dst_name, Fd, yd, sd) -> dict:
 
 
 # --------------------------------------------------------------------------- main
+def finish(report: dict, t0: float, path: Path | None) -> int:
+    """Print the total time, write ``report`` as JSON to ``path`` (if any); exit status 0."""
+    report["total_s"] = time.perf_counter() - t0
+    print(f"\ntotal {report['total_s']:.0f} s")
+    if path:
+        path.write_text(json.dumps(report, indent=2, default=str))
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--emodb", type=Path, default=DEFAULT_EMODB)
@@ -344,11 +353,7 @@ def main() -> int:
             "emodb->synthetic": cross_corpus("EmoDB", Fe[keep_e], y[keep_e], spk[keep_e],
                                              "synthetic", Fs[keep_s], ys, s_spk[keep_s]),
         }
-    report["total_s"] = time.perf_counter() - t0
-    print(f"\ntotal {report['total_s']:.0f} s")
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=2, default=str))
-    return 0
+    return finish(report, t0, args.json)
 
 
 if __name__ == "__main__":

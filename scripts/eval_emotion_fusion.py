@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import sys
 import time
 from pathlib import Path
@@ -49,6 +48,7 @@ from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
     LINEAR_GRID,
     SEED,
     cached_features,
+    finish,
     matrix,
     print_confusion,
 )
@@ -237,11 +237,7 @@ def main() -> int:
             f"EmoDB LOSO, {best[0]} ({best[1]})", y, res["loso"]["rows"][best[0]][best[1]]
             ["pred"])}
     report["wall_s"] = {k: res[k]["wall_s"] for k in args.kinds}
-    report["total_s"] = time.perf_counter() - t0
-    print(f"\ntotal {report['total_s']:.0f} s")
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=2, default=str))
-    return 0
+    return finish(report, t0, args.json)
 
 
 if __name__ == "__main__":
