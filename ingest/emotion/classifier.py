@@ -75,6 +75,8 @@ CLASSIFIER_FORMAT = 2
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
+_NORMALIZE = ("speaker", "none")
+
 
 def _weight_text(weight) -> str:
     if weight is None:
@@ -96,7 +98,6 @@ def _weight_from_text(text: str):
             raise DataError("stored emotion classifier: class_weight is not a JSON object")
         return weight
     return text
-_NORMALIZE = ("speaker", "none")
 
 
 class EmotionClassifier(ClassifierMixin, BaseEstimator):
@@ -168,7 +169,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         normalize: str = "speaker",
         kernel: str = KERNEL,
         C: float = DEFAULT_C,
-        class_weight: str | None = None,
+        class_weight: str | dict | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
