@@ -503,7 +503,8 @@ def build_database(
         sources, [c.motion for c in clips], [c.emotion for c in clips],
         [c.sentence_id for c in clips], [(c.audio, c.sample_rate) for c in clips],
         model.mixing_.T @ model.components_, clips[0].schema.groups, fps,
-        random_state=config.random_state, speakers=[c.speaker for c in clips])
+        random_state=config.random_state, speakers=[c.speaker for c in clips],
+        classifier_rows=[c.emotion_features for c in clips])
     emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
     say("ingest: building the anime nodes and writing the database ...")
     tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},

@@ -46,6 +46,12 @@ class PreparedClip:
         ARPAbet phone segments tiling the audio.
     prosody : np.ndarray, shape (n_prosody_frames, 9), float32
         RASTA-PLP curve of the whole clip, 100 frames per second.
+    emotion_features : np.ndarray of shape (n_features,), str or None
+        Raw features of the database's emotion classifier
+        (:func:`ingest.emotion.model.classifier_features`; a str: why the audio has none),
+        computed with the clip so that ingest's workers do it in parallel; None: not
+        computed (no emotion label, a clip read back from a database, a slice), the
+        classifier computes it when it needs it. Not stored in the database.
     """
 
     clip_id: str
@@ -67,6 +73,7 @@ class PreparedClip:
     sentence_id: str | None
     text: str | None
     extra: dict = field(default_factory=dict)
+    emotion_features: np.ndarray | str | None = None
 
     @property
     def duration(self) -> float:
@@ -130,14 +137,20 @@ def prepare_clip(
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)
     pcm = np.round(np.clip(audio, -1, 1) * 32767).astype(np.int16)
+    emotion = raw.emotion or UNKNOWN_EMOTION
+    features = None
+    if emotion != UNKNOWN_EMOTION:  # only labelled clips train the classifier
+        from ingest.emotion.model import classifier_features
+
+        features = classifier_features(pcm, raw.sample_rate)
     return PreparedClip(
         clip_id=raw.clip_id, corpus=raw.corpus, source=str(raw.source), checksum=raw.checksum,
         schema=raw.schema, fps=target, source_fps=raw.fps,
         motion=filled.astype(np.float32), missing=missing, audio=pcm,
         sample_rate=raw.sample_rate, phones=tuple(Segment(*p) for p in phones),
         segmentation=method, prosody=prosody.astype(np.float32),
-        emotion=raw.emotion or UNKNOWN_EMOTION, speaker=raw.speaker,
-        sentence_id=raw.sentence_id, text=raw.text, extra=extra,
+        emotion=emotion, speaker=raw.speaker, sentence_id=raw.sentence_id, text=raw.text,
+        extra=extra, emotion_features=features,
     )
 
 
@@ -161,4 +174,4 @@ def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> 
     return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
                    missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],
                    phones=tuple(p for p in phones if p.end > p.start),
-                   prosody=clip.prosody[p0:p1])
+                   prosody=clip.prosody[p0:p1], emotion_features=None)

@@ -21,6 +21,10 @@ wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip.
 ``--read-back DB``: no ingest; the time and peak memory of reading every clip of the
 database back (``ingest.tables.prepared_from_database``, as an ingest into an existing
 database and ``eval_lipsync --grid-db`` do).
+
+After an ingest it also prints the CPU seconds per clip of the emotion classifier's
+features (:func:`ingest.emotion.model.classifier_features`) on the corpus' first
+``--feature-clips`` labelled clips.
 """
 
 from __future__ import annotations
@@ -38,6 +42,20 @@ from pathlib import Path
 from db.store import Database
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.pipeline import ingest
+from ingest.readers import discover, load
+
+
+def _feature_cpu_per_clip(corpus: Path, n: int) -> float | None:
+    """CPU seconds per clip of the classifier's features (the first ``n`` labelled clips)."""
+    try:
+        from ingest.emotion.model import classifier_features
+    except ImportError:  # an animegraph from before this was a function of its own
+        return None
+    clips = [c for c in (load(s) for s in discover([corpus])[:4 * n]) if c.emotion][:n]
+    t = time.process_time()
+    for c in clips:
+        classifier_features(c.audio, c.sample_rate)
+    return (time.process_time() - t) / max(len(clips), 1)
 
 
 def _size_mb(path: Path) -> float:
@@ -100,6 +118,8 @@ def main() -> int:
                         help="time the per-clip work on every K-th clip of --corpus")
     parser.add_argument("--read-back", type=Path, metavar="DB",
                         help="time reading every clip of DB back")
+    parser.add_argument("--feature-clips", type=int, default=20,
+                        help="clips timed for the emotion features (default 20)")
     args = parser.parse_args()
     if args.read_back:
         return read_back(args.read_back)
@@ -140,6 +160,9 @@ def main() -> int:
             "load_before": round(load, 1), "load_after": round(os.getloadavg()[0], 1),
             "peak_rss_mb": round(_peak_mb()), "cores": os.cpu_count(),
         }
+        feature_cpu = _feature_cpu_per_clip(corpus, args.feature_clips)
+        if feature_cpu is not None:
+            row["emotion_feature_cpu_s_per_clip"] = round(feature_cpu, 4)
         for k, v in row.items():
             print(f"{k:14s} {v}")
         if args.keep:

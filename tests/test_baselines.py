@@ -219,7 +219,8 @@ def _shortened(clip, n_frames):
     from dataclasses import replace
 
     samples = int(n_frames / clip.fps * clip.sample_rate)
-    return replace(clip, motion=clip.motion[:n_frames], audio=clip.audio[:samples])
+    return replace(clip, motion=clip.motion[:n_frames], audio=clip.audio[:samples],
+                   emotion_features=None)
 
 
 def test_cli_synth_method_uses_the_stored_model(fitted, tiny_db, split, tmp_path, capsys):

@@ -152,8 +152,8 @@ def test_classifier_feature_matrix_and_round_trip(toy, tmp_path):
     (Xtr, ytr), (Xte, yte) = toy
     Ftr = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])
     Fte = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xte])
-    for kernel in ("linear", "rbf"):
-        model = EmotionClassifier.paper(n_cepstrum=50, kernel=kernel,
+    for kernel, weight in (("linear", None), ("rbf", None), ("linear", "balanced")):
+        model = EmotionClassifier.paper(n_cepstrum=50, kernel=kernel, class_weight=weight,
                                         probability=True).fit(Ftr, ytr)
         np.testing.assert_array_equal(model.predict(Fte), model.predict(Xte))
         np.savez(tmp_path / "m.npz", **model.to_arrays())
@@ -164,6 +164,23 @@ def test_classifier_feature_matrix_and_round_trip(toy, tmp_path):
         np.testing.assert_array_equal(back.decision_function(Fte), model.decision_function(Fte))
         np.testing.assert_allclose(back.predict_proba(Fte), model.predict_proba(Fte),
                                    rtol=0, atol=1e-12)
+
+
+def test_class_weight(toy):
+    # "balanced" scales C per class by its rarity: on a set with one rare class the SVM
+    # changes; an old stored model without the array is unweighted.
+    (Xtr, ytr), _ = toy
+    F = np.vstack([emotion_features(a, sr, n_cepstrum=50) for a, sr in Xtr])
+    keep = (ytr != "noise") | (np.cumsum(ytr == "noise") <= 3)  # 3 noise, 12 + 12 others
+    plain = EmotionClassifier.paper(n_cepstrum=50, C=0.01).fit(F[keep], ytr[keep])
+    weighted = EmotionClassifier.paper(n_cepstrum=50, C=0.01,
+                                       class_weight="balanced").fit(F[keep], ytr[keep])
+    assert not np.allclose(plain.decision_function(F), weighted.decision_function(F))
+    arrays = plain.to_arrays()
+    assert str(arrays.pop("class_weight")) == "none"
+    assert EmotionClassifier.from_arrays(arrays).class_weight is None
+    with pytest.raises(ParameterError, match="class_weight"):
+        EmotionClassifier(class_weight="equal").fit(F, ytr)
 
 
 def test_binary_round_trip(toy):

@@ -255,3 +255,33 @@ def test_old_stored_classifier_says_reingest(tiny_db, tiny_corpus):
     audio, sr = read_wav(_clip(tiny_corpus, "sad").with_suffix(".wav"))
     with pytest.raises(DataError, match="re-ingest the database"):
         classify_speech(model, audio, sr)
+
+
+def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
+    # Each labelled clip's classifier features come with the prepared clip (ingest's
+    # workers); the stored classifier is the one fitted on features computed afterwards.
+    from ingest.emotion.model import _fit_classifier, classifier_features
+    from ingest.prepare import prepare_clip
+    from ingest.readers import discover, load
+    from ingest.tables import prepared_from_database
+
+    source = next(s for s in discover([tiny_corpus]) if "_sad_" in s.clip_id)
+    clip = prepare_clip(load(source))
+    assert clip.emotion == "sad" and isinstance(clip.emotion_features, np.ndarray)
+    np.testing.assert_array_equal(clip.emotion_features,
+                                  classifier_features(clip.audio, clip.sample_rate))
+
+    stored = Model.load(tiny_db[0]).emotion_model.classifier
+    clips = prepared_from_database(Database.open(tiny_db[0]))
+    assert all(c.emotion_features is None for c in clips)  # not stored in the database
+    notes: list[str] = []
+    refit = _fit_classifier([(c.audio, c.sample_rate) for c in clips],
+                            [c.emotion for c in clips], [c.speaker for c in clips], notes)
+    # (the database lists its clips in another order than ingest met them: same model)
+    X = [(c.audio, c.sample_rate) for c in clips]
+    who = [c.speaker for c in clips]
+    np.testing.assert_array_equal(stored.classes_, refit.classes_)
+    np.testing.assert_allclose(stored.decision_function(X, who), refit.decision_function(X, who),
+                               atol=1e-8)
+    np.testing.assert_allclose(stored.predict_proba(X), refit.predict_proba(X), atol=1e-6)
+    assert classifier_features(np.zeros(16000, np.int16), 16000).startswith("audio is silence")

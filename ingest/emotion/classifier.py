@@ -20,6 +20,8 @@ deprecated); without them :meth:`~EmotionClassifier.fit` fits the SVM once.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 from scipy.sparse import issparse
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -72,7 +74,30 @@ DEFAULT_C = 0.1
 CLASSIFIER_FORMAT = 2
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
+
 _NORMALIZE = ("speaker", "none")
+
+
+def _weight_text(weight) -> str:
+    if weight is None:
+        return "none"
+    if isinstance(weight, dict):
+        return json.dumps({str(k): float(v) for k, v in weight.items()}, sort_keys=True)
+    return str(weight)
+
+
+def _weight_from_text(text: str):
+    if text == "none":
+        return None
+    if text.startswith("{"):
+        try:
+            weight = json.loads(text)
+        except ValueError:
+            weight = None
+        if not isinstance(weight, dict):
+            raise DataError("stored emotion classifier: class_weight is not a JSON object")
+        return weight
+    return text
 
 
 class EmotionClassifier(ClassifierMixin, BaseEstimator):
@@ -100,6 +125,10 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         SVM kernel (paper: linear).
     C : float, optional
         SVM penalty.
+    class_weight : None, "balanced" or dict, optional
+        SVM class weights, as :class:`sklearn.svm.SVC`'s: None (every utterance counts the
+        same, Libsvm's and the paper's C-SVC), ``"balanced"`` (C scaled per class
+        inversely to its frequency) or ``{label: weight}`` (stored with ``str`` labels).
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -140,6 +169,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         normalize: str = "speaker",
         kernel: str = KERNEL,
         C: float = DEFAULT_C,
+        class_weight: str | dict | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
@@ -150,6 +180,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.normalize = normalize
         self.kernel = kernel
         self.C = C
+        self.class_weight = class_weight
         self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
@@ -172,6 +203,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if isinstance(self.C, bool) or not isinstance(self.C, int | float | np.number) \
                 or not float(self.C) > 0:
             raise ParameterError(f"C must be a positive number, got {self.C!r}")
+        w = self.class_weight
+        if not (w is None or w == "balanced" or isinstance(w, dict) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and v >= 0
+                for v in w.values())):
+            raise ParameterError(f"class_weight must be None, 'balanced' or a dict of "
+                                 f"non-negative weights, got {w!r}")
         if self.cepstrum not in ("utterance", "frames"):
             raise ParameterError(f"cepstrum must be one of ('utterance', 'frames'), "
                                  f"got {self.cepstrum!r}")
@@ -232,7 +269,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         return Pipeline([
             ("scale", MinMaxScaler(feature_range=(-1, 1))),
             ("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
-                        decision_function_shape="ovr")),
+                        class_weight=self.class_weight, decision_function_shape="ovr")),
         ])
 
     @staticmethod
@@ -385,6 +422,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         dict of str to np.ndarray
             ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
             ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
+            ``class_weight`` (``"none"``, ``"balanced"`` or a JSON object),
             ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
             ``norm_mean``/``norm_scale`` (n_features,) and ``norm_min_utterances`` (when
             ``normalize="speaker"``), the scaler's ``scale_min``/``scale_scale``
@@ -403,6 +441,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             "normalize": np.array(self.normalize),
             "kernel": np.array(self.kernel),
             "C": np.array(float(self.C)),
+            "class_weight": np.array(_weight_text(self.class_weight)),
             "calibration_cv": np.array(self.calibration_cv),
             "random_state": np.array(self.random_state),
             "gamma": np.array(svm._gamma),
@@ -462,9 +501,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         except KeyError as exc:
             raise DataError(f"stored emotion classifier lacks array {exc.args[0]!r}") from None
         probability = "calib_coef" in arrays and "calib_intercept" in arrays
+        weight = _weight_from_text(str(np.asarray(arrays["class_weight"]))
+                                   if "class_weight" in arrays else "none")
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
-                    kernel=str(a["kernel"]), C=float(a["C"]), probability=probability,
+                    kernel=str(a["kernel"]), C=float(a["C"]),
+                    class_weight=weight, probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
         model._check_params()

@@ -55,7 +55,7 @@ PREFIX = "emotion/"
 #: calibration needs two per class in every out-of-fold split).
 MIN_CLASSIFIER_CLIPS = 2
 _CLASSIFIER_STRINGS = ("kernel", "features", "cepstrum", "normalize", "classes",
-                       "norm_speakers")
+                       "norm_speakers", "class_weight")
 
 
 class _StoredClassifier:
@@ -345,6 +345,7 @@ def fit_emotion_model(
     kernel: str = KERNEL,
     random_state: int = 0,
     speakers: Sequence[str | None] | None = None,
+    classifier_rows: Sequence[np.ndarray | str | None] | None = None,
 ) -> EmotionModel:
     """Learn a database's emotion model (see the module docstring).
 
@@ -368,6 +369,9 @@ def fit_emotion_model(
     speakers : sequence of str or None, optional
         Speaker of each clip, for the classifier's per-speaker normalisation (None: one
         speaker).
+    classifier_rows : sequence of (np.ndarray or str or None), optional
+        Per clip, what :func:`classifier_features` returned (computed with the clip in a
+        worker), or None to compute it here.
     """
     mouth = np.array([g == "lips" for g in groups])
     if not mouth.any():
@@ -413,31 +417,67 @@ def fit_emotion_model(
                 random_state=random_state)
     classifier = None
     if audio is not None:
-        classifier = _fit_classifier(audio, emotions, speakers, notes)
+        classifier = _fit_classifier(audio, emotions, speakers, notes, classifier_rows)
     return EmotionModel(emotions=present, split=split, mappings=mappings, offsets=offsets,
                         centroids=centroids, parallel=parallel, classifier=classifier,
                         notes=tuple(notes))
 
 
-def _fit_classifier(audio, emotions, speakers, notes) -> EmotionClassifier | None:
+def database_classifier() -> EmotionClassifier:
+    """The (unfitted) emotion classifier every database learns: the default pipeline with
+    probabilities (``classify`` prints them)."""
+    from ingest.emotion.classifier import EmotionClassifier  # deferred: scikit-learn
+
+    return EmotionClassifier(probability=True)
+
+
+def classifier_features(audio: np.ndarray, sample_rate: float) -> np.ndarray | str:
+    """One clip's raw features for :func:`database_classifier`, or why there are none.
+
+    Computed per clip (in ingest's workers, :func:`ingest.prepare.prepare_clip`) so that
+    :func:`fit_emotion_model` does not compute them one clip after another.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (n_samples,) or (n_samples, n_channels)
+        The clip's speech.
+    sample_rate : int or float
+        Its rate in Hz.
+
+    Returns
+    -------
+    np.ndarray, shape (n_features,), or str
+        The features, or the one-line reason the audio cannot be classified (too short,
+        silent).
+    """
+    try:
+        return database_classifier().featurize([(audio, sample_rate)])[0]
+    except AnimeGraphError as exc:  # featurize names the utterance ("utterance 0: ..."):
+        return str(exc.__cause__ or exc)  # one clip here, its reason is enough
+
+
+def _fit_classifier(audio, emotions, speakers, notes,
+                    features=None) -> EmotionClassifier | None:
     """The default :class:`EmotionClassifier` (with probabilities) on the labelled clips.
 
-    Clips whose audio is unusable (too short, silent) are left out with a note; emotions
-    with fewer than :data:`MIN_CLASSIFIER_CLIPS` usable clips too. Never raises for data:
-    what could not be done is a note.
+    ``features`` (one entry per clip, optional) holds what :func:`classifier_features`
+    returned for a clip, or None where it is computed here. Clips whose audio is unusable
+    (too short, silent) are left out with a note; emotions with fewer than
+    :data:`MIN_CLASSIFIER_CLIPS` usable clips too. Never raises for data: what could not be
+    done is a note.
     """
-    from ingest.emotion.classifier import EmotionClassifier
-
-    model = EmotionClassifier(probability=True)
+    model = database_classifier()
     rows, labels, who, dropped = [], [], [], []
     for i, (a, sr) in enumerate(audio):
         if emotions[i] == "unknown":
             continue
-        try:
-            rows.append(model.featurize([(a, sr)])[0])
-        except AnimeGraphError as exc:
-            dropped.append(f"clip {i} ({exc})")
+        row = features[i] if features is not None else None
+        if row is None:
+            row = classifier_features(a, sr)
+        if isinstance(row, str):
+            dropped.append(f"clip {i} ({row})")
             continue
+        rows.append(np.asarray(row, dtype=np.float64))
         labels.append(emotions[i])
         who.append(speakers[i] if speakers is not None and speakers[i] else "unknown")
     if dropped:
