@@ -274,6 +274,17 @@ class Database:
             return self.version_dir / f"{name}.parquet"
         return self.version_dir / name
 
+    def columns(self, name: str) -> tuple[str, ...]:
+        """The column names of table ``name`` (an empty tuple if it cannot be read)."""
+        if name not in TABLES:
+            raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
+        try:
+            partitioning = "hive" if name in PARTITIONED else None
+            return tuple(ds.dataset(self.table_path(name), format="parquet",
+                                    partitioning=partitioning).schema.names)
+        except (OSError, pa.ArrowException):
+            return ()
+
     def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:
         """Read a table (optionally some columns, rows matching a pyarrow ``filter``)."""
         if name not in TABLES:

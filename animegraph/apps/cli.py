@@ -224,6 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
+                     help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
+                     "default), or beyond the paper posteriorgram (DTW of hama phone "
+                     "posteriors; the database must have been ingested with hama) or both")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -698,6 +702,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
     k_best, path = _synth_path(args)
+    audio_cost = args.audio_cost or "plp"
+    if audio_cost != "plp":
+        path += f"; audio cost {audio_cost} (beyond the paper)"
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -733,7 +740,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
-                     phones_engine=args.phones_engine)
+                     phones_engine=args.phones_engine, audio_cost=audio_cost)
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -815,6 +822,10 @@ def _sidecar_labels(path: Path) -> Path | None:
     return None
 
 
+#: ``synth --audio-cost`` (:data:`animegraph.synthesis.audio.AUDIO_COSTS`, spelled out here
+#: so that the command line starts without importing synthesis).
+SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
+
 #: ``synth`` on audio alone (no --text, no --labels, no search option): each phone the
 #: mean of this many best animes (k-best). Recognised phones are unreliable and the paper's
 #: single-anime search trusts them; k-best 20 measured best on real speech without a
@@ -863,7 +874,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--tolerance", args.tolerance is not None),
         ("--explain-json", args.explain_json is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
-        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None)) if on]
+        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
+        ("--audio-cost", args.audio_cost is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

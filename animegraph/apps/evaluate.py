@@ -15,6 +15,7 @@ import numpy as np
 from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
 from animegraph.search import search
 from animegraph.synthesis import query_phones, render_k_best, render_nodes, score_candidates
+from animegraph.synthesis.audio import candidate_costs
 
 
 def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
@@ -30,12 +31,30 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 
 #: Methods compared: exact search, the paper's look-ahead, the two baselines, and (beyond
 #: the paper) the exact search's motion averaged over the 20 best animes of each phone
-#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
-METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data"). A suffix picks another
+#: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
+#: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
+METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
+           "kbest20-pg", "kbest20-mix")
+#: The methods scored unless others are asked for (those of the paper's audio cost).
+DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
+COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
 
 
-def heldout_query(model, clip):
+def split_method(method: str) -> tuple[str, str]:
+    """``"kbest20-pg"`` -> ``("kbest20", "posteriorgram")``; no suffix: the paper's ``"plp"``."""
+    for suffix, cost in COST_SUFFIXES.items():
+        if method.endswith(suffix):
+            return method[: -len(suffix)], cost
+    return method, "plp"
+
+
+def heldout_query(model, clip, *, posteriorgram: bool = False):
     """The search input of a held-out prepared clip, from its audio and its phones.
+
+    With ``posteriorgram`` the phones also get their posteriorgrams (the clip's own if it
+    has one, else computed).
 
     Returns
     -------
@@ -43,7 +62,9 @@ def heldout_query(model, clip):
     """
     audio = clip.audio.astype(np.float32) / 32767.0
     emotion = clip.emotion if clip.emotion in model.graph.emotions else None
-    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones),
+                             posteriorgram=posteriorgram,
+                             posteriors=getattr(clip, "posteriors", None))
     cands, audio_cost = score_candidates(model, phones, emotion=emotion)
     return phones, emotion, cands, audio_cost
 
@@ -76,7 +97,7 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     return render_nodes(model, phones, nodes, emotion=emotion)[0], jumps
 
 
-def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
+def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
                   estimators: dict | None = None,
                   norm: tuple[np.ndarray, np.ndarray] | None = None,
                   rng: np.random.Generator | None = None,
@@ -105,7 +126,12 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
     """
     rng = rng or np.random.default_rng(0)
     t0 = time.perf_counter()
-    phones, emotion, cands, audio_cost = heldout_query(model, clip)
+    costs_wanted = {split_method(m)[1] for m in methods} - {"plp"}
+    phones, emotion, cands, audio_cost = heldout_query(model, clip,
+                                                       posteriorgram=bool(costs_wanted))
+    costs = {"plp": audio_cost}
+    for name in costs_wanted:
+        costs[name] = candidate_costs(model.graph, phones, cands.nodes, name)
     query_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
@@ -126,7 +152,8 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
 
     for method in methods:
         t0 = time.perf_counter()
-        ics, jumps = method_motion(model, phones, cands, audio_cost, method, emotion=emotion,
+        base, cost = split_method(method)
+        ics, jumps = method_motion(model, phones, cands, costs[cost], base, emotion=emotion,
                                    rng=rng)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
         record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
