@@ -66,6 +66,7 @@ import numpy as np
 from animegraph.apps import evaluate
 from animegraph.apps.plots import plot_heldout, plot_systems
 from animegraph.baselines import BASELINES, METHODS, make_estimator
+from animegraph.baselines.peers import PEERS
 from animegraph.baselines.reference import Loudness, MeanPose
 from animegraph.motion import measures
 from animegraph.synthesis import Model
@@ -86,6 +87,8 @@ SYSTEMS: list[str] = list(METHODS)
 PARAMS: dict[str, dict] = {}
 #: The Anime Graph's rows (``animegraph.apps.evaluate.METHODS``; ``--graph-methods``).
 GRAPH_METHODS: list[str] = list(evaluate.DEFAULT_METHODS)
+#: Peer rows (``animegraph.baselines.peers``; ``--peers``).
+PEER_ROWS: list[str] = []
 #: IngestConfig settings of every prepared clip (the phone engine).
 INGEST: dict[str, object] = {}
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
@@ -142,6 +145,16 @@ def fit_fold(tmp: Path, name: str, train, reference=None) -> dict:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
+    for peer in PEER_ROWS:  # published tools from PyPI (issue 13)
+        t0 = time.perf_counter()
+        try:
+            est = PEERS[peer](**({"phones_engine": INGEST.get("phones_engine")}
+                                 if peer == "openfacefx" else {}))
+            estimators[peer] = est.fit(train)
+        except AnimeGraphError as exc:
+            print(f"# {name}: {peer} not fitted: {exc}", flush=True)
+            continue
+        train_s[peer] = time.perf_counter() - t0
     for cls in (Loudness, MeanPose):  # reference rows in every table (issue 13)
         t0 = time.perf_counter()
         estimators[cls.method] = cls().fit(train)
@@ -298,6 +311,8 @@ def main() -> int:
                              "cost; -pg / -mix: posteriorgram DTW alone / beside RASTA-PLP)")
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help="phone engine for clips without labels (default: auto)")
+    parser.add_argument("--peers", nargs="+", default=[], choices=sorted(PEERS),
+                        help="published tools as peer rows (pip install -e \".[peers]\")")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
     parser.add_argument("--json", type=Path)
@@ -310,6 +325,7 @@ def main() -> int:
     SYSTEMS[:] = args.systems
     INGEST["phones_engine"] = args.phones_engine
     GRAPH_METHODS[:] = args.graph_methods
+    PEER_ROWS[:] = args.peers
     for method, name, value in args.param:
         PARAMS.setdefault(method, {})[name] = value
     if args.plots:
