@@ -744,6 +744,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
+    for warning in out.warnings:
+        print(f"animegraph: warning: {warning}", file=sys.stderr)
     write_motion(out, model, args.output, timecode=args.timecode)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -772,6 +774,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         from animegraph.apps.tabular import format_table
 
         print(f"path: {path}")
+        for warning in out.warnings:
+            print(f"warning: {warning}")
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
     if args.explain_json:

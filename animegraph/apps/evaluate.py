@@ -15,7 +15,7 @@ import numpy as np
 from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
 from animegraph.search import search
 from animegraph.synthesis import query_phones, render_k_best, render_nodes, score_candidates
-from animegraph.synthesis.audio import candidate_costs
+from animegraph.synthesis.audio import candidate_costs, likely_candidates
 
 
 def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
@@ -35,19 +35,23 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
-           "kbest20-pg", "kbest20-mix")
+           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely")
 #: The methods scored unless others are asked for (those of the paper's audio cost).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
 #: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
 COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
 
 
-def split_method(method: str) -> tuple[str, str]:
-    """``"kbest20-pg"`` -> ``("kbest20", "posteriorgram")``; no suffix: the paper's ``"plp"``."""
+def split_method(method: str) -> tuple[str, str, str]:
+    """``"kbest20-pg-likely"`` -> ``("kbest20", "posteriorgram", "likely")``; no suffix: the
+    paper's ``"plp"`` cost over the ``"label"`` candidates."""
+    source = "label"
+    if method.endswith("-likely"):
+        method, source = method[: -len("-likely")], "likely"
     for suffix, cost in COST_SUFFIXES.items():
         if method.endswith(suffix):
-            return method[: -len(suffix)], cost
-    return method, "plp"
+            return method[: -len(suffix)], cost, source
+    return method, "plp", source
 
 
 def heldout_query(model, clip, *, posteriorgram: bool = False):
@@ -126,12 +130,14 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
     """
     rng = rng or np.random.default_rng(0)
     t0 = time.perf_counter()
-    costs_wanted = {split_method(m)[1] for m in methods} - {"plp"}
-    phones, emotion, cands, audio_cost = heldout_query(model, clip,
-                                                       posteriorgram=bool(costs_wanted))
-    costs = {"plp": audio_cost}
-    for name in costs_wanted:
-        costs[name] = candidate_costs(model.graph, phones, cands.nodes, name)
+    wanted = {split_method(m)[1:] for m in methods} - {("plp", "label")}
+    phones, emotion, cands, audio_cost = heldout_query(model, clip, posteriorgram=bool(wanted))
+    pools = {"label": cands}
+    if any(source == "likely" for _, source in wanted):
+        pools["likely"] = likely_candidates(model.graph, phones, cands)
+    costs = {("plp", "label"): audio_cost}
+    for name, source in wanted:
+        costs[name, source] = candidate_costs(model.graph, phones, pools[source].nodes, name)
     query_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
@@ -152,9 +158,9 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
 
     for method in methods:
         t0 = time.perf_counter()
-        base, cost = split_method(method)
-        ics, jumps = method_motion(model, phones, cands, costs[cost], base, emotion=emotion,
-                                   rng=rng)
+        base, cost, source = split_method(method)
+        ics, jumps = method_motion(model, phones, pools[source], costs[cost, source], base,
+                                   emotion=emotion, rng=rng)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
         record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
     for name, est in (estimators or {}).items():

@@ -20,6 +20,12 @@ from db.errors import DataError, ParameterError
 
 #: The audio costs :func:`candidate_costs` computes; the first is the paper's.
 AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
+#: Where candidates come from: the recognised phone's animes (the paper's a_i.P = sn_i.P,
+#: §4.2), or those and the animes of the phones its posteriorgram makes likely.
+CANDIDATE_SOURCES = ("label", "likely")
+#: ``"likely"``: the phones of the :data:`LIKELY_PHONES` largest mean posteriors over
+#: the input phone's frames join its own.
+LIKELY_PHONES = 3
 
 
 def check_audio_cost(name: object) -> str:
@@ -75,6 +81,47 @@ def candidate_costs(graph, phones, nodes, audio_cost: str = "plp") -> list[np.nd
         return next(iter(out.values()))
     return [0.5 * (_by_median(a) + _by_median(b)) for a, b in zip(out["plp"], out["post"],
                                                                      strict=True)]
+
+
+def likely_candidates(graph, phones, cands, top: int = LIKELY_PHONES):
+    """Candidates widened to the phones each input's posteriorgram makes likely.
+
+    Recognised phones are often wrong (phone error rate 0.4-0.6 on real speech,
+    docs/results.md), and the paper's matching constraint a_i.P = sn_i.P then offers only
+    animes of the wrong phone. As spoken term detection searches a recogniser's N-best
+    hypotheses rather than its single best (e.g. the phone lattices of Can & Saraclar
+    2011, "Lattice indexing for spoken term detection", IEEE TASLP), each input phone
+    here also takes the animes of the ``top`` phones of largest mean posterior over its
+    frames; the posteriorgram cost then ranks them all. Silence keeps its own.
+
+    Parameters
+    ----------
+    graph : animegraph.search.AnimeGraph
+    phones : sequence of animegraph.synthesis.Phone
+        With ``posteriors``.
+    cands : animegraph.search.Candidates
+        The label candidates (:func:`animegraph.search.candidates`).
+    top : int
+
+    Returns
+    -------
+    animegraph.search.Candidates
+        ``nodes[i]`` the union, ascending; everything else as ``cands``.
+    """
+    from dataclasses import replace
+
+    from ingest.speech.phones import PHONES
+    from ingest.speech.posteriorgram import PHONE_COLUMNS
+
+    nodes = []
+    for phone, own in zip(phones, cands.nodes, strict=True):
+        if phone.phone == "SIL" or phone.posteriors is None:
+            nodes.append(own)
+            continue
+        mean = np.asarray(phone.posteriors, dtype=np.float64).mean(axis=0)
+        likely = [PHONES.index(PHONE_COLUMNS[k]) for k in np.argsort(-mean)[:top]]
+        nodes.append(np.unique(np.concatenate([own, *(graph.by_phone[p] for p in likely)])))
+    return replace(cands, nodes=tuple(nodes))
 
 
 def _by_median(costs: np.ndarray) -> np.ndarray:

@@ -33,7 +33,9 @@ from animegraph.synthesis.assemble import (
     output_frames,
 )
 from animegraph.synthesis.audio import (
+    CANDIDATE_SOURCES,
     candidate_costs,
+    likely_candidates,
     needs_posteriorgram,
     require_posteriorgrams,
 )
@@ -42,9 +44,11 @@ from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
 from ingest.decompose import smooth
 from ingest.formats.phones_csv import Segment
+from ingest.speech import ctc
 from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.posteriorgram import compute as compute_posteriorgram
+from ingest.speech.quality import assess, warnings_for
 from ingest.speech.segment import segment
 
 
@@ -61,6 +65,9 @@ class Synthesis:
     blended : tuple of list of dict
         With ``k_best``: per phone the animes its motion averages (node, clip_id,
         position, weight), the search's pick first; empty otherwise.
+    warnings : tuple of str
+        What may be wrong with the input speech (:mod:`ingest.speech.quality`): clipping,
+        telephone band, little speech the phone engine knows.
     """
 
     motion: np.ndarray
@@ -75,6 +82,7 @@ class Synthesis:
     emotion: EmotionChoice = field(default_factory=lambda: EmotionChoice(None, None))
     notes: tuple[str, ...] = ()
     blended: tuple[list[dict], ...] = ()
+    warnings: tuple[str, ...] = ()
 
 
 def synthesize(
@@ -83,7 +91,7 @@ def synthesize(
     method: str = "exact", window: int | None = None, tolerance: float = 0.0,
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
-    phones_engine: str | None = None, audio_cost: str = "plp",
+    phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -122,6 +130,10 @@ def synthesize(
         C_audio of Eq. 5 (:data:`animegraph.synthesis.audio.AUDIO_COSTS`): ``"plp"`` (the
         paper's RASTA-PLP DTW, default), ``"posteriorgram"`` (DTW of phone posteriorgrams,
         beyond the paper; the database must hold them) or ``"plp+posteriorgram"``.
+    candidates_from : str, optional
+        ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
+        the phones its posteriorgram makes likely,
+        :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
 
     Returns
     -------
@@ -140,19 +152,25 @@ def synthesize(
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if needs_posteriorgram(audio_cost):
+    if candidates_from not in CANDIDATE_SOURCES:
+        raise ParameterError(f"candidates_from must be one of {', '.join(CANDIDATE_SOURCES)}, "
+                             f"got {candidates_from!r}")
+    posteriorgram = needs_posteriorgram(audio_cost) or candidates_from == "likely"
+    if posteriorgram:
         require_posteriorgrams(model.graph, model.db.root)
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
                              sample_rate)
     emotion = choice.search
     phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
                                        prosody_config=prosody_config, engine=phones_engine,
-                                       posteriorgram=needs_posteriorgram(audio_cost))
+                                       posteriorgram=posteriorgram)
+    warnings = input_warnings(audio, sample_rate, method_used == "recognized" or posteriorgram)
     timings["segment_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
     cost_name = audio_cost
-    cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name)
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
+                                         candidates_from=candidates_from)
     timings["audio_cost_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
@@ -180,7 +198,21 @@ def synthesize(
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
-                     timings=timings, emotion=choice, notes=tuple(notes), blended=blended)
+                     timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
+                     warnings=tuple(warnings))
+
+
+def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
+    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`);
+    with ``phone_rate`` (hama has heard the audio already) also music or an unmodelled
+    language."""
+    probs = None
+    if phone_rate and ctc.available():
+        try:
+            probs = ctc.posteriors(np.asarray(audio, dtype=np.float32), sample_rate)
+        except DataError:
+            probs = None
+    return warnings_for(assess(np.asarray(audio, dtype=np.float32), sample_rate, probs))
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
@@ -240,10 +272,13 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
 
 
 def score_candidates(model: Model, phones, *, emotion: str | None = None,
-                     audio_cost: str = "plp"):
+                     audio_cost: str = "plp", candidates_from: str = "label"):
     """Candidate animes of every input phone and their audio costs (Eq. 5; ``audio_cost``
-    one of :data:`animegraph.synthesis.audio.AUDIO_COSTS`)."""
+    one of :data:`animegraph.synthesis.audio.AUDIO_COSTS`, ``candidates_from`` one of
+    :data:`animegraph.synthesis.audio.CANDIDATE_SOURCES`)."""
     cands = candidates(model.graph, [p.phone for p in phones], emotion=emotion)
+    if candidates_from == "likely":
+        cands = likely_candidates(model.graph, phones, cands)
     return cands, candidate_costs(model.graph, phones, cands.nodes, audio_cost)
 
 
