@@ -11,7 +11,7 @@ import pytest
 from animegraph.apps.cli import SYNTH_AUDIO_COSTS, main
 from animegraph.search.dtw import audio_cost, audio_costs_many
 from animegraph.synthesis import Model, query_phones, score_candidates, synthesize
-from animegraph.synthesis.audio import AUDIO_COSTS, candidate_costs
+from animegraph.synthesis.audio import AUDIO_COSTS, candidate_costs, likely_candidates
 from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.formats.phones_csv import read_phones_csv
@@ -146,6 +146,21 @@ def test_posteriorgram_cost_knows_the_phones(model, tiny_corpus):
         assert len(p) == len(m) == len(nodes) and np.isfinite(m).all()
     out = synthesize(model, audio, sr, labels=labels, audio_cost="posteriorgram", k_best=3)
     assert out.motion.shape[0] > 0 and np.isfinite(out.motion).all()
+    # Candidates from the likely phones: a superset of the label's, with the phones the
+    # posteriorgram finds likeliest.
+    wide = likely_candidates(graph, phones, c)
+    grew = 0
+    for phone, own, more in zip(phones, c.nodes, wide.nodes, strict=True):
+        assert np.isin(own, more).all() and (np.diff(more) > 0).all()
+        if phone.phone == "SIL":
+            assert np.array_equal(own, more)
+        grew += len(more) > len(own)
+    assert grew > len(phones) // 2
+    out = synthesize(model, audio, sr, labels=labels, audio_cost="posteriorgram", k_best=3,
+                     candidates_from="likely")
+    assert out.motion.shape[0] > 0 and np.isfinite(out.motion).all()
+    with pytest.raises(ParameterError, match="candidates_from"):
+        synthesize(model, audio, sr, labels=labels, candidates_from="all")
 
 
 @needs_hama

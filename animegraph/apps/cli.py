@@ -228,6 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
                      "default), or beyond the paper posteriorgram (DTW of hama phone "
                      "posteriors; the database must have been ingested with hama) or both")
+    syn.add_argument("--candidates", choices=("label", "likely"), default=None,
+                     help="candidate animes of a phone: label (the paper: its own phone's, "
+                     "default), or likely (beyond the paper: also those of the 3 phones its "
+                     "posteriorgram makes likeliest)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -705,6 +709,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     audio_cost = args.audio_cost or "plp"
     if audio_cost != "plp":
         path += f"; audio cost {audio_cost} (beyond the paper)"
+    if args.candidates == "likely":
+        path += "; candidates from the likely phones (beyond the paper)"
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -740,7 +746,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
-                     phones_engine=args.phones_engine, audio_cost=audio_cost)
+                     phones_engine=args.phones_engine, audio_cost=audio_cost,
+                     candidates_from=args.candidates or "label")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -879,7 +886,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--explain-json", args.explain_json is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
-        ("--audio-cost", args.audio_cost is not None)) if on]
+        ("--audio-cost", args.audio_cost is not None),
+        ("--candidates", args.candidates is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "
