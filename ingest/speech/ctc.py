@@ -264,6 +264,12 @@ _RECENT_SIZE = 2
 _RECENT_LOCK = threading.Lock()
 
 
+def forget() -> None:
+    """Drop the remembered model outputs (e.g. to time a fresh run on the same audio)."""
+    with _RECENT_LOCK:
+        _RECENT.clear()
+
+
 def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
     key = hashlib.blake2b(np.ascontiguousarray(samples16).tobytes(), digest_size=16).digest()
