@@ -179,7 +179,7 @@ def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> 
     p0, p1 = int(round(start / hop)), int(round(end / hop)) + 1
     post = clip.posteriors
     if post is not None:
-        post = post[int(round(start / POSTERIOR_HOP_S)):int(round(end / POSTERIOR_HOP_S))]
+        post = post[int(round(start / POSTERIOR_HOP_S)):int(round(end / POSTERIOR_HOP_S)) + 1]
     return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
                    missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],
                    phones=tuple(p for p in phones if p.end > p.start),

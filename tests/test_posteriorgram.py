@@ -184,3 +184,19 @@ def test_a_database_without_posteriorgrams_says_so(tiny_db, tiny_corpus, tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0
     assert "no phone posteriorgrams" in err[-1] and "Traceback" not in "\n".join(err)
+
+
+@needs_hama
+def test_a_sliced_clip_keeps_posteriorgram_frames_to_its_end(tiny_db):
+    """The within-speaker split cuts clips: each part's posteriorgram must cover its last
+    phone (a cut at 17.99 s once left the last 10 ms phone outside it)."""
+    from ingest.prepare import slice_clip
+    from ingest.speech.features import slice_frames
+
+    clip = prepared_from_database(Database.open(tiny_db[0]))[0]
+    assert clip.posteriors is not None
+    for cut in (0.37, 0.51, 0.7 * clip.duration):
+        for part in (slice_clip(clip, 0.0, cut, suffix="_a"),
+                     slice_clip(clip, cut, clip.duration, suffix="_b")):
+            for phone in part.phones:
+                assert len(slice_frames(part.posteriors, phone.start, phone.end, hop_s=0.02))
