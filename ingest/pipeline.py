@@ -70,6 +70,10 @@ class IngestConfig:
     pool_lag: bool = True  # lag per speaker/session, pooled (ingest.lag); False: per clip
     random_state: int = 0  # FastICA seed
     phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
+    # Store each clip's phone posteriorgram (hama installed; beyond the paper, for synth
+    # --audio-cost posteriorgram): about 0.08 CPU-s per second of speech when hama has not
+    # recognised the phones already.
+    posteriorgrams: bool = True
     limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
 
 
@@ -166,7 +170,7 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, reference, engine, limits = args
+    source, known, fps, reference, engine, limits, posteriorgrams = args
     try:
         # Every reader's checksum is that of the clip's files in role order: an unchanged
         # clip is known before it is read (a video is not decoded, nor its audio aligned).
@@ -179,7 +183,7 @@ def _work(args):
         raw, note = check_clip(raw, limits)
         clip = prepare_clip(raw, fps=fps,
                             head_reference=reference if _has_head(raw.schema) else None,
-                            phones_engine=engine)
+                            phones_engine=engine, posteriorgrams=posteriorgrams)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
@@ -352,8 +356,8 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, reference, config.phones_engine, config.limits)
-            for s in found]
+    jobs = [(s, known, fps, reference, config.phones_engine, config.limits,
+             config.posteriorgrams) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)

@@ -200,3 +200,15 @@ def test_a_sliced_clip_keeps_posteriorgram_frames_to_its_end(tiny_db):
                      slice_clip(clip, cut, clip.duration, suffix="_b")):
             for phone in part.phones:
                 assert len(slice_frames(part.posteriors, phone.start, phone.end, hop_s=0.02))
+
+
+@needs_hama
+def test_prepare_clip_stores_the_posteriorgram_unless_told_not_to(tiny_corpus):
+    from ingest.prepare import prepare_clip
+    from ingest.readers import discover, load
+
+    raw = load(discover([tiny_corpus])[0])
+    with_post = prepare_clip(raw)
+    assert with_post.posteriors.dtype == np.float16
+    assert abs(len(with_post.posteriors) - with_post.duration / 0.02) <= 1
+    assert prepare_clip(raw, posteriorgrams=False).posteriors is None
