@@ -115,6 +115,14 @@ def test_ingest_stores_a_posteriorgram_per_anime(model):
     np.testing.assert_allclose(graph.posterior_values.sum(axis=1), 1.0, atol=5e-3)
     assert model.db.table("animes", columns=["posteriors"]).schema.field(
         "posteriors").type.value_type == "halffloat"  # compact: float16
+    # DuckDB has no half floats: the SQL layer reads them as float32.
+    from db.sql import query
+
+    rows = query(model.db, "SELECT posterior_frames, len(posteriors) AS n, "
+                 "list_sum(posteriors) AS total FROM animes ORDER BY node_id LIMIT 5")
+    for row in rows.to_pylist():
+        assert row["n"] == row["posterior_frames"] * len(PHONE_COLUMNS)
+        assert row["total"] == pytest.approx(row["posterior_frames"], rel=0.01)
 
 
 @needs_hama
