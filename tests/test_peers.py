@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from animegraph.baselines import peers
 from animegraph.baselines.peers import PEERS, OpenFaceFX, PyLipSync
 from animegraph.motion import measures
 from db.errors import DataError
@@ -46,6 +47,7 @@ def test_a_missing_peer_is_one_line(monkeypatch, clips):
             raise ImportError("No module named 'pylipsync'")
         return real(name, *args, **kwargs)
 
+    monkeypatch.setattr(peers, "_REMEMBERED", {})  # weights of earlier tests' clips
     monkeypatch.setattr(builtins, "__import__", no_pylipsync)
     with pytest.raises(DataError, match=r"pylipsync peer is not installed.*\[peers\]"):
         PyLipSync().fit(clips[:3])
