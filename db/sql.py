@@ -94,12 +94,31 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
 
 
 def _dataset(db: Database, name: str) -> ds.Dataset:
+    partitioning = "hive" if name in PARTITIONED else None
     try:
-        if name in PARTITIONED:
-            return ds.dataset(db.table_path(name), format="parquet", partitioning="hive")
-        return ds.dataset(db.table_path(name), format="parquet")
+        dataset = ds.dataset(db.table_path(name), format="parquet", partitioning=partitioning)
+        wide = _without_float16(dataset.schema)
+        if wide is not dataset.schema:  # DuckDB reads no half floats: scanned as float32
+            dataset = ds.dataset(db.table_path(name), format="parquet",
+                                 partitioning=partitioning, schema=wide)
+        return dataset
     except (OSError, pa.ArrowException) as exc:
         raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+
+
+def _without_float16(schema: pa.Schema) -> pa.Schema:
+    """``schema`` with float16 columns (and lists of float16, e.g. ``animes.posteriors``)
+    widened to float32; the same object if it has none."""
+    fields, changed = [], False
+    for field in schema:
+        kind = field.type
+        if pa.types.is_float16(kind):
+            kind = pa.float32()
+        elif pa.types.is_list(kind) and pa.types.is_float16(kind.value_type):
+            kind = pa.list_(pa.float32())
+        changed |= kind != field.type
+        fields.append(field.with_type(kind))
+    return pa.schema(fields, metadata=schema.metadata) if changed else schema
 
 
 def check_read_only(sql: str) -> list[str]:

@@ -298,6 +298,20 @@ class Database:
             return self.version_dir / f"{name}.parquet"
         return self.version_dir / name
 
+    def columns(self, name: str) -> tuple[str, ...]:
+        """The column names of table ``name`` (an empty tuple if it cannot be read)."""
+        if name not in TABLES:
+            raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
+        path = self.table_path(name)
+        try:  # one file's schema: pyarrow.dataset would import pandas (synth's start-up)
+            files = [path] if path.is_file() else sorted(path.rglob("*.parquet"))
+            names = tuple(pq.read_schema(files[0]).names) if files else ()
+        except (OSError, pa.ArrowException):
+            return ()
+        if name in PARTITIONED and names and "emotion" not in names:
+            names += ("emotion",)  # the partition key, a column of the table as read
+        return names
+
     def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:
         """Read a table (optionally some columns, rows matching a pyarrow ``filter``)."""
         if name not in TABLES:

@@ -27,7 +27,7 @@ import logging
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +76,11 @@ class IngestConfig:
     pool_lag: bool = True  # lag per speaker/session, pooled (ingest.lag); False: per clip
     random_state: int = 0  # FastICA seed
     phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
+    # Store each clip's phone posteriorgram (hama installed; beyond the paper, for synth
+    # --audio-cost posteriorgram): about 0.08 CPU-s per second of speech when hama has not
+    # recognised the phones already. Off by default: the posteriorgram cost did not measure
+    # better than the paper's (docs/results.md, issue 13); on when the database has them.
+    posteriorgrams: bool = False
     limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
 
 
@@ -172,7 +177,7 @@ class IngestReport:
 
 def _work(args):
     """Worker: read one clip and prepare it unless the database already has it."""
-    source, known, fps, reference, engine, limits = args
+    source, known, fps, reference, engine, limits, posteriorgrams = args
     try:
         # Every reader's checksum is that of the clip's files in role order: an unchanged
         # clip is known before it is read (a video is not decoded, nor its audio aligned).
@@ -185,7 +190,7 @@ def _work(args):
         raw, note = check_clip(raw, limits)
         clip = prepare_clip(raw, fps=fps,
                             head_reference=reference if _has_head(raw.schema) else None,
-                            phones_engine=engine)
+                            phones_engine=engine, posteriorgrams=posteriorgrams)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
@@ -301,6 +306,9 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         clips = existing.table("clips", columns=["corpus", "clip_id", "checksum"]).to_pylist()
         known = {(c["corpus"], c["clip_id"]): c["checksum"] for c in clips}
         fps = existing.manifest["fps"]
+        if "posteriors" in existing.columns("clips") and not config.posteriorgrams:
+            # A database that stores posteriorgrams keeps them for the clips added to it.
+            config = replace(config, posteriorgrams=True)
         if config.fps is not None and config.fps != fps:
             raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")
 
@@ -378,8 +386,8 @@ def prepare_sources(
 
 
 def _run(found, known, fps, config, workers, progress, reference):
-    jobs = [(s, known, fps, reference, config.phones_engine, config.limits)
-            for s in found]
+    jobs = [(s, known, fps, reference, config.phones_engine, config.limits,
+             config.posteriorgrams) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)
@@ -389,8 +397,6 @@ def _run(found, known, fps, config, workers, progress, reference):
 
 def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:
     """Copy each clip's lag decision (:func:`ingest.lag.decide_lags`) into its report row."""
-    from dataclasses import replace
-
     decided = {(c.source, c.clip_id): c.extra for c in clips if "lag_basis" in c.extra}
     for k, row in enumerate(report.clips):
         extra = decided.get((row.source, row.clip_id))
@@ -431,8 +437,6 @@ def _at_fps(clip: PreparedClip, fps: float) -> PreparedClip:
     """Clips prepared before the database's rate was known are brought to it here."""
     if clip.fps == fps:
         return clip
-    from dataclasses import replace
-
     from ingest.motion import resample_motion
 
     motion = resample_motion(clip.motion, clip.fps, fps).astype(np.float32)

@@ -3,10 +3,11 @@
 A clip is read, its dropouts filled, its motion brought to the database's frame rate,
 its speech segmented into phones (given labels, else alignment inside the words of a
 given word alignment, else forced alignment of the transcript, else phone recognition)
-and its prosody curve computed (RASTA-PLP,
-Cao et al. §4.1). The result, a :class:`PreparedClip`, is what the corpus-wide steps
-(PCA/ICA, anime nodes, tables) work from; it is also what the database keeps of a
-clip, so a later ingest can rebuild the model without re-reading the sources.
+and its prosody curve computed (RASTA-PLP, Cao et al. §4.1), and, beyond the paper,
+its phone posteriorgram (hama installed). The result, a :class:`PreparedClip`, is what
+the corpus-wide steps (PCA/ICA, anime nodes, tables) work from; it is also what the
+database keeps of a clip, so a later ingest can rebuild the model without re-reading
+the sources.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from ingest.clip import ChannelSchema, RawClip
 from ingest.formats.phones_csv import Segment
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
 from ingest.speech.features import RastaPlpConfig, rasta_plp
+from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.segment import segment
 from ingest.speech.words import align_words
 
@@ -52,6 +54,9 @@ class PreparedClip:
         computed with the clip so that ingest's workers do it in parallel; None: not
         computed (no emotion label, a clip read back from a database, a slice), the
         classifier computes it when it needs it. Not stored in the database.
+    posteriors : np.ndarray, shape (n_posterior_frames, 39), float16, or None
+        Phone posteriorgram of the whole clip, 50 frames per second
+        (:mod:`ingest.speech.posteriorgram`); None when hama is not installed.
     """
 
     clip_id: str
@@ -74,6 +79,7 @@ class PreparedClip:
     text: str | None
     extra: dict = field(default_factory=dict)
     emotion_features: np.ndarray | str | None = None
+    posteriors: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -92,6 +98,7 @@ def prepare_clip(
     head_reference: np.ndarray | None = None,
     prosody_config: RastaPlpConfig | None = None,
     phones_engine: str | None = None,
+    posteriorgrams: bool = True,
 ) -> PreparedClip:
     """Turn a clip read from disk into a :class:`PreparedClip`.
 
@@ -106,6 +113,8 @@ def prepare_clip(
         are expressed in the head's frame (:func:`ingest.motion.stabilize_points`).
     phones_engine : str, optional
         Phone engine for clips without labels (:data:`ingest.speech.segment.ENGINES`).
+    posteriorgrams : bool, optional
+        Compute the clip's phone posteriorgram (when hama is installed; beyond the paper).
 
     Raises
     ------
@@ -136,6 +145,7 @@ def prepare_clip(
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)
+    posteriors = clip_posteriorgram(audio, raw.sample_rate) if posteriorgrams else None
     pcm = np.round(np.clip(audio, -1, 1) * 32767).astype(np.int16)
     emotion = raw.emotion or UNKNOWN_EMOTION
     features = None
@@ -150,8 +160,17 @@ def prepare_clip(
         sample_rate=raw.sample_rate, phones=tuple(Segment(*p) for p in phones),
         segmentation=method, prosody=prosody.astype(np.float32),
         emotion=emotion, speaker=raw.speaker, sentence_id=raw.sentence_id, text=raw.text,
-        extra=extra, emotion_features=features,
+        extra=extra, emotion_features=features, posteriors=posteriors,
     )
+
+
+def clip_posteriorgram(audio: np.ndarray, sample_rate: int) -> np.ndarray | None:
+    """The clip's phone posteriorgram as stored (float16), or None without hama."""
+    from ingest.speech import ctc, posteriorgram
+
+    if not ctc.available():
+        return None
+    return posteriorgram.compute(audio, sample_rate).astype(np.float16)
 
 
 
@@ -171,7 +190,10 @@ def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> 
                    for p in clip.phones if p.end > start and p.start < end)
     hop = RastaPlpConfig().hop_s  # frame period of the prosody curve (ingest uses the default)
     p0, p1 = int(round(start / hop)), int(round(end / hop)) + 1
+    post = clip.posteriors
+    if post is not None:
+        post = post[int(round(start / POSTERIOR_HOP_S)):int(round(end / POSTERIOR_HOP_S)) + 1]
     return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
                    missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],
                    phones=tuple(p for p in phones if p.end > p.start),
-                   prosody=clip.prosody[p0:p1], emotion_features=None)
+                   prosody=clip.prosody[p0:p1], emotion_features=None, posteriors=post)

@@ -19,9 +19,11 @@ from db.store import arrays_to_table
 from ingest.decompose import MotionDecomposer, pcs_of_clips
 from ingest.prepare import PreparedClip
 from ingest.speech.features import RastaPlpConfig, slice_frames
+from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 
 _F32 = pa.list_(pa.float32())
 _F64 = pa.list_(pa.float64())
+_F16 = pa.list_(pa.float16())
 
 #: Column types of the clips table (explicit, so all-null columns keep their type).
 CLIPS_SCHEMA = pa.schema([
@@ -33,6 +35,7 @@ CLIPS_SCHEMA = pa.schema([
     ("phone_starts", _F64), ("phone_ends", _F64), ("prosody_frames", pa.int32()),
     ("prosody", _F32), ("lip_audio_lag_s", pa.float64()), ("source", pa.string()),
     ("checksum", pa.string()), ("extra", pa.string()),
+    ("posterior_frames", pa.int32()), ("posteriors", _F16),
 ])
 
 
@@ -68,6 +71,8 @@ def build_tables(
     audio_rows = []
     node = 0
     sources_all = []
+    # Posteriorgrams (beyond the paper) are stored only when every clip has one.
+    with_posteriors = all(c.posteriors is not None and len(c.posteriors) for c in clips)
     for clip, pcs in zip(clips, pcs_of_clips(model, [c.motion for c in clips]), strict=True):
         sources = model.sources_from_pcs(pcs).astype(np.float32)
         sources_all.append(sources)
@@ -90,6 +95,10 @@ def build_tables(
             a["n_frames"].append(stop - first)
             a["prosody_frames"].append(len(prosody))
             a["prosody"].append(prosody.ravel())
+            if with_posteriors:
+                post = slice_frames(clip.posteriors, seg.start, seg.end, hop_s=POSTERIOR_HOP_S)
+                a["posterior_frames"].append(len(post))
+                a["posteriors"].append(post.astype(np.float16).ravel())
             a["motion"].append(sources[first:stop].ravel())
             a["first_pcs"].append(pcs[first].astype(np.float32))
             a["last_pcs"].append(pcs[stop - 1].astype(np.float32))
@@ -111,6 +120,10 @@ def build_tables(
         "prev_node": pa.array(anime_cols["prev_node"], pa.int64()),
         "next_node": pa.array(anime_cols["next_node"], pa.int64()),
     })
+    if with_posteriors:
+        animes = animes.append_column(
+            "posterior_frames", pa.array(anime_cols["posterior_frames"], pa.int32())
+        ).append_column("posteriors", pa.array(anime_cols["posteriors"], _F16))
     audio = pa.table({
         "clip_id": [r[0] for r in audio_rows], "corpus": [r[1] for r in audio_rows],
         "sample_rate": pa.array([r[2] for r in audio_rows], pa.int32()),
@@ -136,7 +149,7 @@ def build_tables(
 def _columns() -> dict[str, list]:
     names = ("node_id clip_id corpus speaker emotion position phoneme start_time end_time "
              "start_frame end_frame n_frames prosody_frames prosody motion first_pcs "
-             "last_pcs prev_node next_node").split()
+             "last_pcs prev_node next_node posterior_frames posteriors").split()
     return {n: [] for n in names}
 
 
@@ -155,6 +168,9 @@ def _clip_row(clip: PreparedClip, n_animes: int) -> dict:
         "lip_audio_lag_s": clip.extra.get("lip_audio_lag_s"),
         "source": clip.source, "checksum": clip.checksum,
         "extra": json.dumps(clip.extra, default=float, sort_keys=True),
+        "posterior_frames": None if clip.posteriors is None else int(len(clip.posteriors)),
+        "posteriors": None if clip.posteriors is None else clip.posteriors.astype(
+            np.float16).ravel(),
     }
 
 
@@ -251,5 +267,15 @@ def prepared_from_database(db) -> list[PreparedClip]:
                 row["prosody_frames"], -1),
             emotion=row["emotion"], speaker=row["speaker"], sentence_id=row["sentence_id"],
             text=row["text"], extra=json.loads(row["extra"]),
+            posteriors=_posteriors(row),
         ))
     return out
+
+
+def _posteriors(row: dict) -> np.ndarray | None:
+    """A clips row's posteriorgram (float16), or None (not stored, or a database built
+    before posteriorgrams)."""
+    values, n = row.get("posteriors"), row.get("posterior_frames")
+    if values is None or not n:
+        return None
+    return np.asarray(values, dtype=np.float16).reshape(n, -1)

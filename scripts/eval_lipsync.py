@@ -66,6 +66,7 @@ import numpy as np
 from animegraph.apps import evaluate
 from animegraph.apps.plots import plot_heldout, plot_systems
 from animegraph.baselines import BASELINES, METHODS, make_estimator
+from animegraph.baselines.peers import PEERS
 from animegraph.baselines.reference import Loudness, MeanPose
 from animegraph.motion import measures
 from animegraph.synthesis import Model
@@ -85,7 +86,9 @@ PLOTS: dict[str, Path] = {}
 SYSTEMS: list[str] = list(METHODS)
 PARAMS: dict[str, dict] = {}
 #: The Anime Graph's rows (``animegraph.apps.evaluate.METHODS``; ``--graph-methods``).
-GRAPH_METHODS: list[str] = list(evaluate.METHODS)
+GRAPH_METHODS: list[str] = list(evaluate.DEFAULT_METHODS)
+#: Peer rows (``animegraph.baselines.peers``; ``--peers``).
+PEER_ROWS: list[str] = []
 #: IngestConfig settings of every prepared clip (the phone engine).
 INGEST: dict[str, object] = {}
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
@@ -143,6 +146,16 @@ def fit_fold(tmp: Path, name: str, train, reference=None) -> dict:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
+    for peer in PEER_ROWS:  # published tools from PyPI (issue 13)
+        t0 = time.perf_counter()
+        try:
+            est = PEERS[peer](**({"phones_engine": INGEST.get("phones_engine")}
+                                 if peer == "openfacefx" else {}))
+            estimators[peer] = est.fit(train)
+        except AnimeGraphError as exc:
+            print(f"# {name}: {peer} not fitted: {exc}", flush=True)
+            continue
+        train_s[peer] = time.perf_counter() - t0
     for cls in (Loudness, MeanPose):  # reference rows in every table (issue 13)
         t0 = time.perf_counter()
         estimators[cls.method] = cls().fit(train)
@@ -293,11 +306,15 @@ def main() -> int:
                         help="systems to compare (default: all four)")
     parser.add_argument("--corpus", type=Path, help="synthetic corpus (default: generate one)")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--graph-methods", nargs="+", default=list(evaluate.METHODS),
+    parser.add_argument("--graph-methods", nargs="+", default=list(evaluate.DEFAULT_METHODS),
                         choices=evaluate.METHODS + evaluate.OPTIONAL_METHODS,
-                        help="the Anime Graph's rows (default: all but the exact-<helper> ones)")
+                        help="the Anime Graph's rows (default: those of the paper's audio "
+                             "cost; -pg / -mix: posteriorgram DTW alone / beside RASTA-PLP; "
+                             "exact-<helper>: the §4.3 helper-pair variants)")
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help="phone engine for clips without labels (default: auto)")
+    parser.add_argument("--peers", nargs="+", default=[], choices=sorted(PEERS),
+                        help="published tools as peer rows (pip install -e \".[peers]\")")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
     parser.add_argument("--json", type=Path)
@@ -309,7 +326,11 @@ def main() -> int:
     args = parser.parse_args()
     SYSTEMS[:] = args.systems
     INGEST["phones_engine"] = args.phones_engine
+    # The posteriorgram rows need the training clips' posteriorgrams (not stored by default).
+    INGEST["posteriorgrams"] = any(evaluate.split_method(m)[1] != "plp"
+                                   for m in args.graph_methods)
     GRAPH_METHODS[:] = args.graph_methods
+    PEER_ROWS[:] = args.peers
     for method, name, value in args.param:
         PARAMS.setdefault(method, {})[name] = value
     if args.plots:

@@ -36,10 +36,11 @@ def tiny_corpus(tmp_path_factory, tiny_config) -> Path:
 @pytest.fixture(scope="session")
 def tiny_db(tiny_corpus, tmp_path_factory):
     """The tiny corpus ingested into a database (path, ingest report), once per session."""
-    from ingest.pipeline import ingest
+    from ingest.pipeline import IngestConfig, ingest
 
     path = tmp_path_factory.mktemp("db") / "tiny.db"
-    report = ingest([tiny_corpus], path, workers=2)
+    # With posteriorgrams (not the default) so that the tests see every stored column.
+    report = ingest([tiny_corpus], path, IngestConfig(posteriorgrams=True), workers=2)
     return path, report
 
 

@@ -141,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     ing.add_argument("--no-lag-correction", action="store_true",
                      help="keep landmark and iPhone (Live Link) motion where it is "
                      "instead of shifting it by the estimated lip-audio lag")
+    ing.add_argument("--posteriorgrams", action="store_true",
+                     help="also store each clip's phone posteriorgram (hama), for synth "
+                     "--audio-cost posteriorgram (beyond the paper; kept once stored)")
     _phones_engine_option(ing, "a transcript")
     ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
                      help="fastest plausible marker motion in mm/s (default 5000); a faster "
@@ -232,6 +235,14 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
+                     help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
+                     "default), or beyond the paper posteriorgram (DTW of hama phone "
+                     "posteriors; the database must have been ingested with hama) or both")
+    syn.add_argument("--candidates", choices=("label", "likely"), default=None,
+                     help="candidate animes of a phone: label (the paper: its own phone's, "
+                     "default), or likely (beyond the paper: also those of the 3 phones its "
+                     "posteriorgram makes likeliest)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -630,7 +641,8 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     limits = Limits() if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction,
-                          phones_engine=args.phones_engine, limits=limits)
+                          phones_engine=args.phones_engine, limits=limits,
+                          posteriorgrams=args.posteriorgrams)
     wait = {} if args.wait is None else {"wait": args.wait}
     report = ingest(args.sources, args.db, config, workers=args.workers,
                     progress=lambda total: _progress(total, args.quiet, "clip",
@@ -709,6 +721,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.helper is not None and k_best:
         raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
                          "phone) at its jumps; --k-best averages animes instead: give one")
+    audio_cost = args.audio_cost or "plp"
+    if audio_cost != "plp":
+        path += f"; audio cost {audio_cost} (beyond the paper)"
+    if args.candidates == "likely":
+        path += "; candidates from the likely phones (beyond the paper)"
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -744,10 +761,13 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
-                     phones_engine=args.phones_engine)
+                     phones_engine=args.phones_engine, audio_cost=audio_cost,
+                     candidates_from=args.candidates or "label")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
+    for warning in out.warnings:
+        print(f"animegraph: warning: {warning}", file=sys.stderr)
     write_motion(out, model, args.output, timecode=args.timecode)
     if isinstance(out.emotion.target, dict):
         print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
@@ -776,6 +796,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         from animegraph.apps.tabular import format_table
 
         print(f"path: {path}")
+        for warning in out.warnings:
+            print(f"warning: {warning}")
         print(format_table(pa.Table.from_pylist(out.explain), "table",
                            max_rows=len(out.explain)), end="")
     if args.explain_json:
@@ -825,6 +847,10 @@ def _sidecar_labels(path: Path) -> Path | None:
             return beside
     return None
 
+
+#: ``synth --audio-cost`` (:data:`animegraph.synthesis.audio.AUDIO_COSTS`, spelled out here
+#: so that the command line starts without importing synthesis).
+SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 #: ``synth`` on audio alone (no --text, no --labels, no search option): each phone the
 #: mean of this many best animes (k-best). Recognised phones are unreliable and the paper's
@@ -880,7 +906,9 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--explain-json", args.explain_json is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
         ("--helper", args.helper is not None),
-        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None)) if on]
+        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
+        ("--audio-cost", args.audio_cost is not None),
+        ("--candidates", args.candidates is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

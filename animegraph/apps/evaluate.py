@@ -22,6 +22,7 @@ from animegraph.synthesis import (
     render_nodes,
     score_candidates,
 )
+from animegraph.synthesis.audio import candidate_costs, likely_candidates
 
 
 def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
@@ -37,16 +38,38 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 
 #: Methods compared: exact search, the paper's look-ahead, the two baselines, and (beyond
 #: the paper) the exact search's motion averaged over the 20 best animes of each phone
-#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data").
-METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: (``synthesize(..., k_best=20)``; docs/results.md, "Real data"). A suffix picks another
+#: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
+#: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
+METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
+           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely")
+#: The methods scored unless others are asked for (those of the paper's audio cost).
+DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
+COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
 #: Rows only on request (``eval_lipsync.py --graph-methods``): the exact search with the
 #: helper pairs of §4.3 blended one way or another (``exact-<mode>``: ``PostOptions(helper=
 #: mode)``, e.g. ``exact-paper``, ``exact-anchored``).
 OPTIONAL_METHODS = tuple(f"exact-{mode}" for mode in HELPER_MODES)
 
 
-def heldout_query(model, clip):
+def split_method(method: str) -> tuple[str, str, str]:
+    """``"kbest20-pg-likely"`` -> ``("kbest20", "posteriorgram", "likely")``; no suffix: the
+    paper's ``"plp"`` cost over the ``"label"`` candidates."""
+    source = "label"
+    if method.endswith("-likely"):
+        method, source = method[: -len("-likely")], "likely"
+    for suffix, cost in COST_SUFFIXES.items():
+        if method.endswith(suffix):
+            return method[: -len(suffix)], cost, source
+    return method, "plp", source
+
+
+def heldout_query(model, clip, *, posteriorgram: bool = False):
     """The search input of a held-out prepared clip, from its audio and its phones.
+
+    With ``posteriorgram`` the phones also get their posteriorgrams (the clip's own if it
+    has one, else computed).
 
     Returns
     -------
@@ -54,7 +77,9 @@ def heldout_query(model, clip):
     """
     audio = clip.audio.astype(np.float32) / 32767.0
     emotion = clip.emotion if clip.emotion in model.graph.emotions else None
-    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones))
+    phones, _ = query_phones(audio, clip.sample_rate, labels=list(clip.phones),
+                             posteriorgram=posteriorgram,
+                             posteriors=getattr(clip, "posteriors", None))
     cands, audio_cost = score_candidates(model, phones, emotion=emotion)
     return phones, emotion, cands, audio_cost
 
@@ -89,7 +114,7 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps
 
 
-def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
+def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
                   estimators: dict | None = None,
                   norm: tuple[np.ndarray, np.ndarray] | None = None,
                   rng: np.random.Generator | None = None,
@@ -118,7 +143,14 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
     """
     rng = rng or np.random.default_rng(0)
     t0 = time.perf_counter()
-    phones, emotion, cands, audio_cost = heldout_query(model, clip)
+    wanted = {split_method(m)[1:] for m in methods} - {("plp", "label")}
+    phones, emotion, cands, audio_cost = heldout_query(model, clip, posteriorgram=bool(wanted))
+    pools = {"label": cands}
+    if any(source == "likely" for _, source in wanted):
+        pools["likely"] = likely_candidates(model.graph, phones, cands)
+    costs = {("plp", "label"): audio_cost}
+    for name, source in wanted:
+        costs[name, source] = candidate_costs(model.graph, phones, pools[source].nodes, name)
     query_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
@@ -139,8 +171,9 @@ def score_heldout(model, clip, *, methods: Sequence[str] = METHODS,
 
     for method in methods:
         t0 = time.perf_counter()
-        ics, jumps = method_motion(model, phones, cands, audio_cost, method, emotion=emotion,
-                                   rng=rng)
+        base, cost, source = split_method(method)
+        ics, jumps = method_motion(model, phones, pools[source], costs[cost, source], base,
+                                   emotion=emotion, rng=rng)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
         record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
     for name, est in (estimators or {}).items():

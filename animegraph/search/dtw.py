@@ -16,9 +16,11 @@ Conventions
 * Curves are ``(n_frames, n_features)``; ``x`` (the input, n frames) is the reference
   timeline and ``y`` (the anime, m frames) is warped onto it.
 * Local cost: Euclidean distance between frames (``metric="euclidean"``, the ``||.||`` of
-  Eq. 5). ``metric="sqeuclidean"`` (squared distance) is offered for :func:`dtw` only; it
-  is tslearn's convention (``tslearn.metrics.dtw`` returns the square root of that
-  accumulated cost).
+  Eq. 5). For posteriorgrams the Eq. 5 functions also take ``metric="neglog-dot"``,
+  ``-log(x . y)`` (:data:`AUDIO_METRICS`; with it ``L``'s mean of posterior vectors is
+  again a posterior vector). ``metric="sqeuclidean"`` (squared distance) is offered for
+  :func:`dtw` only; it is tslearn's convention (``tslearn.metrics.dtw`` returns the
+  square root of that accumulated cost).
 * Steps (1, 0), (0, 1), (1, 1), all with weight 1; the path runs from (0, 0) to
   (n-1, m-1). Ties while backtracking go to the diagonal, then to (i-1, j), then to
   (i, j-1) (tslearn's order), so paths agree with tslearn's.
@@ -47,10 +49,18 @@ import numpy as np
 
 from db.errors import ParameterError
 
-__all__ = ["DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw", "warp_indices",
-           "warp_onto"]
+__all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
+           "warp_indices", "warp_onto"]
 
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
+#: Local distances of Eq. 5's audio cost: the paper's Euclidean norm between RASTA-PLP
+#: frames, or (beyond the paper) -log of the inner product of two posterior vectors, the
+#: distance of posteriorgram DTW (Hazen, Shen & White 2009, "Query-by-example spoken term
+#: detection using phonetic posteriorgram templates", ASRU; Zhang & Glass 2009, ASRU).
+AUDIO_METRICS = {"euclidean": 0, "neglog-dot": 2}
+#: Inner products below this count as this (-log: at most 23 nats), so that two
+#: posteriorgram frames with no phone in common still have a finite distance.
+_DOT_FLOOR = 1e-10
 
 #: ``audio_costs_many`` runs in parallel (numba ``prange``) from this many nodes on, when numba
 #: has more than one thread. On 2 cores (OpenMP layer) parallel breaks even at ~10 nodes
@@ -121,11 +131,19 @@ def _accumulate_band(xt, y, band, metric, acc, c):
         lo, hi = _band_limits(m, n, band, j)
         for i in range(lo, hi + 1):
             c[i] = 0.0
-        for k in range(d):
-            yk = np.float64(y[j, k])
+        if metric == 2:  # -log of the inner product (posteriorgrams)
+            for k in range(d):
+                yk = np.float64(y[j, k])
+                for i in range(lo, hi + 1):
+                    c[i] += xt[k, i] * yk
             for i in range(lo, hi + 1):
-                diff = xt[k, i] - yk
-                c[i] += diff * diff
+                c[i] = -np.log(max(c[i], _DOT_FLOOR))
+        else:
+            for k in range(d):
+                yk = np.float64(y[j, k])
+                for i in range(lo, hi + 1):
+                    diff = xt[k, i] - yk
+                    c[i] += diff * diff
         if metric == 0:
             for i in range(lo, hi + 1):
                 c[i] = np.sqrt(c[i])
@@ -189,9 +207,14 @@ def _dtw_path(xt, y, band, metric):
 
 
 @_jit()
-def _row_error(xt, i, total, count):
-    """|| x[i] - total / count ||: one term of Eq. 5."""
+def _row_error(xt, i, total, count, metric):
+    """One term of Eq. 5: || x[i] - total / count ||, or with ``metric`` 2
+    -log(x[i] . total / count)."""
     s = 0.0
+    if metric == 2:
+        for k in range(xt.shape[0]):
+            s += xt[k, i] * total[k] / count
+        return -np.log(max(s, _DOT_FLOOR))
     for k in range(xt.shape[0]):
         diff = xt[k, i] - total[k] / count
         s += diff * diff
@@ -199,16 +222,16 @@ def _row_error(xt, i, total, count):
 
 
 @_jit()
-def _audio_cost_one(xt, y, band, acc, c, total):
+def _audio_cost_one(xt, y, band, metric, acc, c, total):
     """Eq. 5 for one anime curve ``y``; ``acc`` (>= m, n), ``c`` (n,), ``total`` (d,) are
-    workspace.
+    workspace; ``metric`` 0 (Euclidean) or 2 (-log inner product).
 
     Backtracks the optimal path from (n-1, m-1) and, since the cells of one input frame
     i are consecutive on it, averages their anime frames on the fly: no path is kept.
     """
     d, n = xt.shape
     m = y.shape[0]
-    _accumulate(xt, y, band, 0, acc, c)
+    _accumulate(xt, y, band, metric, acc, c)
     for k in range(d):
         total[k] = 0.0
     count = 0
@@ -223,18 +246,19 @@ def _audio_cost_one(xt, y, band, acc, c, total):
             break
         pi, pj = _step_back(acc, i, j)
         if pi != i:
-            cost += _row_error(xt, i, total, count)
+            cost += _row_error(xt, i, total, count, metric)
             for k in range(d):
                 total[k] = 0.0
             count = 0
         i = pi
         j = pj
-    cost += _row_error(xt, 0, total, count)
+    cost += _row_error(xt, 0, total, count, metric)
     return cost / n
 
 
 @_jit()
-def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, lo, hi, out):
+def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, lo, hi,
+                 out):
     """Eq. 5 for the pairs [lo, hi): input ``inputs[t]`` (columns ``x_off[k]:x_off[k+1]``
     of ``xs``, shape (d, total input frames)) against node ``nodes[t]``.
 
@@ -254,18 +278,20 @@ def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, lo, h
             c = np.empty(xt.shape[1])
             current = k
         a = nodes[t]
-        out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, acc, c, total)
+        out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, metric, acc, c,
+                                 total)
 
 
 @_jit(parallel=True)
-def _costs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, n_chunks, out):
+def _costs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, n_chunks,
+                    out):
     # Chunks of pairs, not pairs, in parallel: one workspace per chunk, and one parallel
     # region for a whole utterance (a region per phone cost more in thread wake-ups than
     # the work on a loaded 2-core machine). (numba.get_num_threads() is not called in
     # here: it would make the function uncachable.)
     n_pairs = nodes.shape[0]
     for chunk in numba.prange(n_chunks):
-        _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band,
+        _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric,
                      chunk * n_pairs // n_chunks, (chunk + 1) * n_pairs // n_chunks, out)
 
 
@@ -408,7 +434,8 @@ def warp_indices(n_out: int, path: np.ndarray) -> np.ndarray:
     return sums / np.diff(np.append(starts, len(path)))
 
 
-def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = None) -> float:
+def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = None,
+               metric: str = "euclidean") -> float:
     """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for one anime node.
 
     ``(1/n) * sum_k || c_input[k] - L(c_anime)[k] ||`` with L the DTW operator of
@@ -423,11 +450,14 @@ def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = N
         The anime node's prosody curve.
     band : int or None, optional
         Sakoe-Chiba radius, as in :func:`dtw`.
+    metric : {"euclidean", "neglog-dot"}, optional
+        The local distance (:data:`AUDIO_METRICS`): Eq. 5's Euclidean norm, or
+        ``-log(x . y)`` between posteriorgram frames (rows summing to 1).
 
     Returns
     -------
     float
-        The mean Euclidean distance per input frame; equal to the matching entry of
+        The mean local distance per input frame; equal to the matching entry of
         :func:`audio_costs`.
 
     Raises
@@ -442,13 +472,14 @@ def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = N
     out = np.empty(1)
     zero = np.zeros(1, dtype=np.int64)
     _costs_range(np.ascontiguousarray(x.T), np.array([0, len(x)], dtype=np.int64), y,
-                 np.array([0, len(y)], dtype=np.int64), zero, zero, len(y), _band(band), 0, 1,
-                 out)
+                 np.array([0, len(y)], dtype=np.int64), zero, zero, len(y), _band(band),
+                 _audio_metric(metric), 0, 1, out)
     return float(out[0])
 
 
 def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
-                nodes: np.ndarray, *, band: int | None = None) -> np.ndarray:
+                nodes: np.ndarray, *, band: int | None = None,
+                metric: str = "euclidean") -> np.ndarray:
     """Audio cost of Eq. 5 (Cao et al. 2005 §4.2) for many anime nodes at once.
 
     Eq. 5 depends only on the input phone and the anime node, not on the rest of the
@@ -481,12 +512,12 @@ def audio_costs(c_input: np.ndarray, values: np.ndarray, offsets: np.ndarray,
     ParameterError
         As :func:`audio_costs_many`.
     """
-    return audio_costs_many([c_input], values, offsets, [nodes], band=band)[0]
+    return audio_costs_many([c_input], values, offsets, [nodes], band=band, metric=metric)[0]
 
 
 def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets: np.ndarray,
-                     nodes: Sequence[np.ndarray], *,
-                     band: int | None = None) -> list[np.ndarray]:
+                     nodes: Sequence[np.ndarray], *, band: int | None = None,
+                     metric: str = "euclidean") -> list[np.ndarray]:
     """Audio costs of Eq. 5 for every input phone against its candidate nodes.
 
     The search's hot path: one compiled loop over all (phone, node) pairs of an
@@ -506,6 +537,8 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
         ``nodes[i]``: the nodes to score against input ``i`` (may be empty).
     band : int or None, optional
         Sakoe-Chiba radius, as in :func:`dtw`.
+    metric : {"euclidean", "neglog-dot"}, optional
+        The local distance, as in :func:`audio_cost`.
 
     Returns
     -------
@@ -525,6 +558,7 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
                              f"for {len(c_inputs)} curves")
     values = _values(values)
     band = _band(band)
+    code = _audio_metric(metric)
     offsets = _int_vector("offsets", offsets)
     if len(offsets) < 2:
         raise ParameterError(f"offsets must have n_nodes + 1 >= 2 entries, got {len(offsets)}")
@@ -547,11 +581,11 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
         max_len = int(np.diff(offsets)[flat].max())
         if len(flat) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
             n_chunks = min(len(flat), 8 * numba.get_num_threads())
-            _costs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
+            _costs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
                             n_chunks, out)
         else:
-            _costs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, 0,
-                         len(flat), out)
+            _costs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
+                         0, len(flat), out)
     return np.split(out, np.cumsum(sizes)[:-1])
 
 
@@ -639,6 +673,12 @@ def _band(band) -> int:
     if isinstance(band, bool) or not isinstance(band, Integral) or band < 0:
         raise ParameterError(f"band must be None or a non-negative integer, got {band!r}")
     return int(band)
+
+
+def _audio_metric(metric) -> int:
+    if not isinstance(metric, str) or metric not in AUDIO_METRICS:
+        raise ParameterError(f"metric must be one of {', '.join(AUDIO_METRICS)}, got {metric!r}")
+    return AUDIO_METRICS[metric]
 
 
 def _count(name: str, n) -> int:

@@ -61,6 +61,11 @@ class AnimeGraph:
     fps : float
     n_channels : int
         Channels of the original motion (for RMS distances).
+    posterior_offsets : np.ndarray of int64, shape (n_nodes + 1,), or None
+    posterior_values : np.ndarray of float32, shape (n_posterior_frames, 39), or None
+        Beyond the paper: each node's phone posteriorgram (50 frames per second,
+        :mod:`ingest.speech.posteriorgram`), as ``prosody_*``; None when the database has
+        none (built without hama, or before posteriorgrams).
     """
 
     node_phone: np.ndarray
@@ -84,6 +89,8 @@ class AnimeGraph:
     emotions: tuple[str, ...]
     fps: float
     n_channels: int
+    posterior_offsets: np.ndarray | None = None
+    posterior_values: np.ndarray | None = None
 
     @property
     def n_nodes(self) -> int:
@@ -159,6 +166,12 @@ class AnimeGraph:
                                                    numbers(t.column("prosody_frames")))
         motion_values, motion_offsets = _ragged(t.column("motion"),
                                                 numbers(t.column("n_frames")))
+        posterior_values = posterior_offsets = None
+        if {"posteriors", "posterior_frames"} <= set(db.columns("animes")):
+            p = db.table("animes", columns=["node_id", "posterior_frames", "posteriors"]
+                         ).sort_by("node_id")
+            posterior_values, posterior_offsets = _ragged(
+                p.column("posteriors"), numbers(p.column("posterior_frames")))
         first = _fixed(t.column("first_pcs"), n)
         last = _fixed(t.column("last_pcs"), n)
         by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)
@@ -177,6 +190,7 @@ class AnimeGraph:
             first_pcs=first, last_pcs=last, by_phone=by_phone, clip_ids=clip_ids,
             emotions=emotions, fps=float(manifest["fps"]),
             n_channels=int(manifest["n_channels"]),
+            posterior_offsets=posterior_offsets, posterior_values=posterior_values,
         )
         graph.check()
         return graph
@@ -203,6 +217,13 @@ class AnimeGraph:
                      "start_time", "end_time"):
             if not np.isfinite(getattr(self, name)).all():
                 raise ValueError(f"{name} not finite")
+        if self.posterior_values is not None:
+            post = self.posterior_values
+            if len(self.posterior_offsets) != n + 1 or np.diff(
+                    self.posterior_offsets).min(initial=1) < 1:
+                raise ValueError("a node without posteriorgram frames")
+            if not np.isfinite(post).all() or (post <= 0).any() or (post > 1).any():
+                raise ValueError("posteriorgram values outside (0, 1]")
         if self.first_pcs.shape != self.last_pcs.shape or self.first_pcs.shape[0] != n:
             raise ValueError("first_pcs and last_pcs shapes differ")
         if not (np.isfinite(self.fps) and self.fps > 0 and self.n_channels > 0):

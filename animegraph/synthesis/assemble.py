@@ -44,12 +44,14 @@ HELPER_MODES = ("paper", "anchored", "anchored-nonspeech")
 
 @dataclass(frozen=True)
 class Phone:
-    """An input phone: label, start and end (s), and its prosody curve (m, 9)."""
+    """An input phone: label, start and end (s), its prosody curve (m, 9) and, beyond the
+    paper, its phone posteriorgram (q, 39) or None."""
 
     phone: str
     start: float
     end: float
     prosody: np.ndarray
+    posteriors: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

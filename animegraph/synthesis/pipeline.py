@@ -25,7 +25,6 @@ import numpy as np
 from animegraph.emotion.control import EmotionChoice, map_frames, resolve_emotion
 from animegraph.search import SearchResult, SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
-from animegraph.search.dtw import audio_costs_many
 from animegraph.synthesis.assemble import (
     Phone,
     PostOptions,
@@ -33,12 +32,23 @@ from animegraph.synthesis.assemble import (
     blend_k_best,
     output_frames,
 )
+from animegraph.synthesis.audio import (
+    CANDIDATE_SOURCES,
+    candidate_costs,
+    likely_candidates,
+    needs_posteriorgram,
+    require_posteriorgrams,
+)
 from animegraph.synthesis.explain import blended_sources, explain_rows
 from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 from ingest.lowpass import smooth
+from ingest.speech import ctc
 from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
+from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
+from ingest.speech.posteriorgram import compute as compute_posteriorgram
+from ingest.speech.quality import assess, warnings_for
 from ingest.speech.segment import segment
 
 
@@ -55,6 +65,9 @@ class Synthesis:
     blended : tuple of list of dict
         With ``k_best``: per phone the animes its motion averages (node, clip_id,
         position, weight), the search's pick first; empty otherwise.
+    warnings : tuple of str
+        What may be wrong with the input speech (:mod:`ingest.speech.quality`): clipping,
+        telephone band, little speech the phone engine knows.
     """
 
     motion: np.ndarray
@@ -69,6 +82,7 @@ class Synthesis:
     emotion: EmotionChoice = field(default_factory=lambda: EmotionChoice(None, None))
     notes: tuple[str, ...] = ()
     blended: tuple[list[dict], ...] = ()
+    warnings: tuple[str, ...] = ()
 
 
 def synthesize(
@@ -77,7 +91,7 @@ def synthesize(
     method: str = "exact", window: int | None = None, tolerance: float = 0.0,
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
-    phones_engine: str | None = None,
+    phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -112,6 +126,14 @@ def synthesize(
     phones_engine : str, optional
         The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
         default, PocketSphinx alignment of a transcript, hama recognition without one).
+    audio_cost : str, optional
+        C_audio of Eq. 5 (:data:`animegraph.synthesis.audio.AUDIO_COSTS`): ``"plp"`` (the
+        paper's RASTA-PLP DTW, default), ``"posteriorgram"`` (DTW of phone posteriorgrams,
+        beyond the paper; the database must hold them) or ``"plp+posteriorgram"``.
+    candidates_from : str, optional
+        ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
+        the phones its posteriorgram makes likely,
+        :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
 
     Returns
     -------
@@ -123,21 +145,32 @@ def synthesize(
     ParameterError
         On an unknown emotion, a malformed mix, or an unknown search method.
     DataError
-        If the audio holds no speech; for ``"auto"``, if the database has no classifier or
+        If the audio holds no speech; if a posteriorgram cost is asked of a database
+        without posteriorgrams; for ``"auto"``, if the database has no classifier or
         the audio is too short to classify (< 0.25 s); for a mix, if the database cannot
         map into one of its emotions.
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    if candidates_from not in CANDIDATE_SOURCES:
+        raise ParameterError(f"candidates_from must be one of {', '.join(CANDIDATE_SOURCES)}, "
+                             f"got {candidates_from!r}")
+    posteriorgram = needs_posteriorgram(audio_cost) or candidates_from == "likely"
+    if posteriorgram:
+        require_posteriorgrams(model.graph, model.db.root)
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
                              sample_rate)
     emotion = choice.search
     phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
-                                       prosody_config=prosody_config, engine=phones_engine)
+                                       prosody_config=prosody_config, engine=phones_engine,
+                                       posteriorgram=posteriorgram)
+    warnings = input_warnings(audio, sample_rate, method_used == "recognized" or posteriorgram)
     timings["segment_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    cands, audio_cost = score_candidates(model, phones, emotion=emotion)
+    cost_name = audio_cost
+    cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
+                                         candidates_from=candidates_from)
     timings["audio_cost_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
@@ -165,7 +198,21 @@ def synthesize(
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
-                     timings=timings, emotion=choice, notes=tuple(notes), blended=blended)
+                     timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
+                     warnings=tuple(warnings))
+
+
+def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
+    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`);
+    with ``phone_rate`` (hama has heard the audio already) also music or an unmodelled
+    language."""
+    probs = None
+    if phone_rate and ctc.available():
+        try:
+            probs = ctc.posteriors(np.asarray(audio, dtype=np.float32), sample_rate)
+        except DataError:
+            probs = None
+    return warnings_for(assess(np.asarray(audio, dtype=np.float32), sample_rate, probs))
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
@@ -192,10 +239,14 @@ def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
 def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None,
                  labels: list[Segment] | None = None,
                  prosody_config: RastaPlpConfig | None = None,
-                 engine: str | None = None) -> tuple[tuple[Phone, ...], str]:
+                 engine: str | None = None, posteriorgram: bool = False,
+                 posteriors: np.ndarray | None = None) -> tuple[tuple[Phone, ...], str]:
     """The search nodes of an utterance: its phones with their prosody curves.
 
-    Returns the phones and how they were found (``labels``, ``aligned``, ``recognized``).
+    With ``posteriorgram`` each phone also gets its part of the utterance's phone
+    posteriorgram (:mod:`ingest.speech.posteriorgram`; ``posteriors``, shape
+    (n_frames, 39), if already computed). Returns the phones and how they were found
+    (``labels``, ``aligned``, ``recognized``).
     """
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
@@ -207,20 +258,28 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()
     curve = rasta_plp(audio, sample_rate, config=cfg)
+    post = None
+    if posteriorgram:
+        post = posteriors if posteriors is not None else compute_posteriorgram(audio,
+                                                                               sample_rate)
+        post = np.asarray(post, dtype=np.float32)
     phones = tuple(Phone(s.phone, s.start, s.end,
-                         np.ascontiguousarray(slice_frames(curve, s.start, s.end, hop_s=cfg.hop_s)))
+                         np.ascontiguousarray(slice_frames(curve, s.start, s.end, hop_s=cfg.hop_s)),
+                         None if post is None else np.ascontiguousarray(
+                             slice_frames(post, s.start, s.end, hop_s=POSTERIOR_HOP_S)))
                    for s in segments)
     return phones, method
 
 
-def score_candidates(model: Model, phones, *, emotion: str | None = None):
-    """Candidate animes of every input phone and their audio costs (Eq. 5)."""
-    graph = model.graph
-    cands = candidates(graph, [p.phone for p in phones], emotion=emotion)
-    audio_cost = audio_costs_many([p.prosody.astype(np.float32) for p in phones],
-                                  graph.prosody_values,
-                                  graph.prosody_offsets, cands.nodes)
-    return cands, audio_cost
+def score_candidates(model: Model, phones, *, emotion: str | None = None,
+                     audio_cost: str = "plp", candidates_from: str = "label"):
+    """Candidate animes of every input phone and their audio costs (Eq. 5; ``audio_cost``
+    one of :data:`animegraph.synthesis.audio.AUDIO_COSTS`, ``candidates_from`` one of
+    :data:`animegraph.synthesis.audio.CANDIDATE_SOURCES`)."""
+    cands = candidates(model.graph, [p.phone for p in phones], emotion=emotion)
+    if candidates_from == "likely":
+        cands = likely_candidates(model.graph, phones, cands)
+    return cands, candidate_costs(model.graph, phones, cands.nodes, audio_cost)
 
 
 def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = None,

@@ -1,0 +1,72 @@
+"""Bad input speech: clipping, telephone band, music or noise are warned, never a traceback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import resample_poly
+
+from animegraph.apps.cli import main
+from ingest.formats.wav import write_wav
+from ingest.speech import ctc
+from ingest.speech.espeak import speak
+from ingest.speech.quality import assess, warnings_for
+
+needs_hama = pytest.mark.skipif(not ctc.available(), reason="the hama phone engine is not "
+                                "installed (pip install hama)")
+
+
+@pytest.fixture(scope="module")
+def speech():
+    utt = speak("The quick brown fox jumps over the lazy dog near the river bank.")
+    return utt.audio.astype(np.float32), utt.sample_rate
+
+
+def _warned(audio, sample_rate, with_phones=False):
+    probs = ctc.posteriors(audio, sample_rate) if with_phones else None
+    return " | ".join(warnings_for(assess(audio, sample_rate, probs)))
+
+
+def test_clean_speech_has_no_warning(speech):
+    audio, sr = speech
+    assert _warned(audio, sr) == ""
+    assert _warned(0.9 * audio / np.abs(audio).max(), sr) == ""  # loud is not clipped
+
+
+def test_clipping(speech):
+    audio, sr = speech
+    clipped = np.clip(4.0 * audio / np.abs(audio).max(), -1.0, 1.0)
+    assert "clipped" in _warned(clipped, sr)
+
+
+def test_telephone_band(speech):
+    audio, sr = speech
+    narrow = resample_poly(audio, 1, 2).astype(np.float32)  # 8 kHz
+    assert "8000 Hz" in _warned(narrow, 8000)
+    back = resample_poly(narrow, 2, 1).astype(np.float32)  # 8 kHz brought back to 16 kHz
+    assert "nothing above 4 kHz" in _warned(back, sr)
+
+
+@needs_hama
+def test_speech_the_engine_knows_and_noise_it_does_not(speech, rng):
+    audio, sr = speech
+    assert "little speech" not in _warned(audio, sr, with_phones=True)
+    t = np.arange(3 * sr) / sr
+    chords = sum(np.sin(2 * np.pi * f * t) for f in (220.0, 277.2, 329.6, 440.0))
+    music = (0.2 * chords * (1 + 0.5 * np.sin(2 * np.pi * 2 * t))).astype(np.float32)
+    noise = (0.1 * rng.standard_normal(3 * sr)).astype(np.float32)
+    for sound in (music, noise):
+        assert "little speech" in _warned(sound, sr, with_phones=True)
+
+
+def test_synth_says_what_is_wrong_and_still_animates(tiny_db, speech, tmp_path, capsys):
+    audio, sr = speech
+    wav = tmp_path / "clipped.wav"
+    write_wav(wav, np.clip(4.0 * audio / np.abs(audio).max(), -1.0, 1.0), sr)
+    out = tmp_path / "out.csv"
+    code = main(["synth", str(wav), "--db", str(tiny_db[0]), "-o", str(out), "--explain"])
+    captured = capsys.readouterr()
+    assert code == 0 and out.exists()
+    assert "animegraph: warning: the audio is clipped" in captured.err
+    assert "warning: the audio is clipped" in captured.out  # --explain says it too
+    assert "Traceback" not in captured.err
