@@ -852,15 +852,11 @@ def _sidecar_labels(path: Path) -> Path | None:
 #: so that the command line starts without importing synthesis).
 SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
-#: ``synth`` on audio alone (no --text, no --labels, no search option): each phone the
-#: mean of this many best animes (k-best). Recognised phones are unreliable and the paper's
-#: single-anime search trusts them; k-best 20 measured best on real speech without a
-#: transcript (FACEGOOD, GRID: docs/results.md, issues 12 and 13).
-AUDIO_ONLY_K_BEST = 20
-
 
 def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
+    from animegraph.synthesis.path import audio_only_path, known_phones_path  # shared with batch
+
     engine = args.phones_engine or "auto"
     if args.labels is not None:
         given = "phone labels given"
@@ -870,18 +866,9 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"audio only (phones recognised by the {engine} phone engine)"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
-    if args.labels is not None or args.text is not None:  # shared with batch
-        from animegraph.synthesis.path import known_phones_path
-
-        return known_phones_path(given, k_best=args.k_best, searched=searched)
-    if args.k_best is not None:
-        return args.k_best, f"{given}; k-best {args.k_best} as asked"
-    if args.labels is None and args.text is None and not searched:
-        return AUDIO_ONLY_K_BEST, (
-            f"{given}: each phone the mean of its {AUDIO_ONLY_K_BEST} best animes "
-            "(k-best measured best on real speech without a transcript; --exact for the "
-            "paper's search)")
-    return None, f"{given}: the paper's search (one anime a phone, §4)"
+    choose = (known_phones_path if args.labels is not None or args.text is not None
+              else audio_only_path)
+    return choose(given, k_best=args.k_best, searched=searched)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:

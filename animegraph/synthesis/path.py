@@ -1,11 +1,14 @@
-"""Which synthesis runs when the phones are known: the paper's search, or k-best blending.
+"""Which synthesis runs: the paper's search, or k-best blending, by what the input has.
 
 Speech with a transcript (phones force-aligned) or with phone labels is synthesized by
 default with k-best blending (beyond the paper: :func:`animegraph.synthesis.render_k_best`,
 each phone the rank-weighted mean of its ``TRANSCRIPT_K_BEST`` best-matching animes around
 the exact search's sequence). The paper's synthesis (one recorded anime a phone, Cao et
 al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search``; a
-script line's ``exact``/``window``). ``synth`` and ``batch`` both decide here.
+script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
+too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
+single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results.md, issues 13
+and 14). ``synth`` and ``batch`` both decide here.
 
 Why: on the one real database with transcripts (GRID s1, 640 clips of one speaker, 159
 held out: docs/results.md, issue 14) k-best 20 was ahead of the paper's exact and
@@ -23,6 +26,8 @@ from __future__ import annotations
 
 #: k-best blending's K when the phones are known (a transcript or labels).
 TRANSCRIPT_K_BEST = 20
+#: ... and when they are recognised from the audio alone.
+AUDIO_ONLY_K_BEST = 20
 
 
 def known_phones_path(given: str, *, k_best: int | None = None,
@@ -52,4 +57,17 @@ def known_phones_path(given: str, *, k_best: int | None = None,
     return TRANSCRIPT_K_BEST, (
         f"{given}: each phone the mean of its {TRANSCRIPT_K_BEST} best animes (k-best "
         "measured best on real speech with a transcript, GRID; --exact for the paper's "
+        "search)")
+
+
+def audio_only_path(given: str, *, k_best: int | None = None,
+                    searched: bool = False) -> tuple[int | None, str]:
+    """As :func:`known_phones_path`, for speech alone (phones recognised from the audio)."""
+    if k_best is not None:
+        return k_best, f"{given}; k-best {k_best} as asked"
+    if searched:
+        return None, f"{given}: the paper's search (one anime a phone, §4) as asked"
+    return AUDIO_ONLY_K_BEST, (
+        f"{given}: each phone the mean of its {AUDIO_ONLY_K_BEST} best animes (k-best "
+        "measured best on real speech without a transcript; --exact for the paper's "
         "search)")

@@ -53,7 +53,6 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import resample_poly
 
 from db.errors import DataError
 from ingest.formats.phones_csv import Segment
@@ -220,6 +219,8 @@ def _log_probs(samples: np.ndarray) -> np.ndarray:
 def _resample(samples: np.ndarray, sample_rate: int) -> np.ndarray:
     if sample_rate != SAMPLE_RATE:
         g = math.gcd(SAMPLE_RATE, sample_rate)
+        from scipy.signal import resample_poly  # deferred: a second of a one-shot synth
+
         samples = resample_poly(samples, SAMPLE_RATE // g, sample_rate // g)
     peak = float(np.max(np.abs(samples))) if samples.size else 0.0
     if peak > 0:
