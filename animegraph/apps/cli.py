@@ -855,7 +855,7 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
-    from animegraph.synthesis.path import audio_only_path, known_phones_path  # shared with batch
+    from animegraph.synthesis.path import synthesis_path  # shared with batch
 
     engine = args.phones_engine or "auto"
     if args.labels is not None:
@@ -866,9 +866,8 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"audio only (phones recognised by the {engine} phone engine)"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
-    choose = (known_phones_path if args.labels is not None or args.text is not None
-              else audio_only_path)
-    return choose(given, k_best=args.k_best, searched=searched)
+    return synthesis_path(given, known_phones=args.labels is not None or args.text is not None,
+                          k_best=args.k_best, searched=searched)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:

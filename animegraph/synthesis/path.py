@@ -30,14 +30,16 @@ TRANSCRIPT_K_BEST = 20
 AUDIO_ONLY_K_BEST = 20
 
 
-def known_phones_path(given: str, *, k_best: int | None = None,
-                      searched: bool = False) -> tuple[int | None, str]:
-    """The k-best setting for speech whose phones are known, and a line saying why.
+def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
+                   searched: bool = False) -> tuple[int | None, str]:
+    """The k-best setting for speech, and a line saying which path runs and why.
 
     Parameters
     ----------
     given : str
         What the phones come from, for the line (e.g. ``"transcript given"``).
+    known_phones : bool
+        The phones are known (a transcript or labels), not recognised from the audio.
     k_best : int, optional
         K asked for explicitly (``--k-best``): used as it is.
     searched : bool
@@ -54,20 +56,13 @@ def known_phones_path(given: str, *, k_best: int | None = None,
         return k_best, f"{given}; k-best {k_best} as asked"
     if searched:
         return None, f"{given}: the paper's search (one anime a phone, §4) as asked"
-    return TRANSCRIPT_K_BEST, (
-        f"{given}: each phone the mean of its {TRANSCRIPT_K_BEST} best animes (k-best "
-        "measured best on real speech with a transcript, GRID; --exact for the paper's "
-        "search)")
+    k, where = ((TRANSCRIPT_K_BEST, "with a transcript, GRID") if known_phones
+                else (AUDIO_ONLY_K_BEST, "without a transcript"))
+    return k, (f"{given}: each phone the mean of its {k} best animes (k-best measured best "
+               f"on real speech {where}; --exact for the paper's search)")
 
 
-def audio_only_path(given: str, *, k_best: int | None = None,
-                    searched: bool = False) -> tuple[int | None, str]:
-    """As :func:`known_phones_path`, for speech alone (phones recognised from the audio)."""
-    if k_best is not None:
-        return k_best, f"{given}; k-best {k_best} as asked"
-    if searched:
-        return None, f"{given}: the paper's search (one anime a phone, §4) as asked"
-    return AUDIO_ONLY_K_BEST, (
-        f"{given}: each phone the mean of its {AUDIO_ONLY_K_BEST} best animes (k-best "
-        "measured best on real speech without a transcript; --exact for the paper's "
-        "search)")
+def known_phones_path(given: str, *, k_best: int | None = None,
+                      searched: bool = False) -> tuple[int | None, str]:
+    """:func:`synthesis_path` for speech whose phones are known (``batch``'s lines)."""
+    return synthesis_path(given, known_phones=True, k_best=k_best, searched=searched)
