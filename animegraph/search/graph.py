@@ -136,11 +136,16 @@ class AnimeGraph:
 
     @classmethod
     def _from_database(cls, db: Database) -> AnimeGraph:
-        t = db.table("animes", columns=[
+        columns = [
             "node_id", "clip_id", "emotion", "position", "phoneme", "start_frame",
             "end_frame", "start_time", "end_time", "prosody_frames", "prosody", "n_frames",
             "motion", "first_pcs", "last_pcs", "prev_node", "next_node",
-        ]).sort_by("node_id")
+        ]
+        # Phone posteriorgrams (beyond the paper) are stored only by ingest --posteriorgrams.
+        posteriors = {"posteriors", "posterior_frames"} <= set(db.columns("animes"))
+        if posteriors:
+            columns += ["posterior_frames", "posteriors"]
+        t = db.table("animes", columns=columns).sort_by("node_id")
         n = t.num_rows
         if n == 0:
             raise DataError(f"database {db.root} has no anime nodes")
@@ -167,11 +172,9 @@ class AnimeGraph:
         motion_values, motion_offsets = _ragged(t.column("motion"),
                                                 numbers(t.column("n_frames")))
         posterior_values = posterior_offsets = None
-        if {"posteriors", "posterior_frames"} <= set(db.columns("animes")):
-            p = db.table("animes", columns=["node_id", "posterior_frames", "posteriors"]
-                         ).sort_by("node_id")
+        if posteriors:
             posterior_values, posterior_offsets = _ragged(
-                p.column("posteriors"), numbers(p.column("posterior_frames")))
+                t.column("posteriors"), numbers(t.column("posterior_frames")))
         first = _fixed(t.column("first_pcs"), n)
         last = _fixed(t.column("last_pcs"), n)
         by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)

@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ingest.speech.ctc import FRAME_RATE
 from ingest.speech.phones import PHONES, SILENCE
 
 __all__ = ["HOP_S", "PHONE_COLUMNS", "SMOOTHING", "compute", "fold"]
 
 #: Frame period of a posteriorgram (s): the hama model's 20 ms.
-HOP_S = 0.02
+HOP_S = 1.0 / FRAME_RATE
 #: Weight of the uniform distribution mixed into every frame (Hazen et al. 2009 §3.1).
 SMOOTHING = 0.01
 #: The phones a posteriorgram's columns stand for: :data:`PHONES` without ``SIL``.
