@@ -28,13 +28,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from animegraph.baselines.base import BaselineModel, check_enough
-from animegraph.baselines.data import TrainingSet
+from animegraph.baselines.reference import FeatureLine
 from db.errors import DataError
 
 __all__ = ["PEERS", "OpenFaceFX", "PyLipSync"]
 
-#: Shape weights of the last clips seen, by tool and audio (:meth:`_ShapeWeights._remembered`).
+#: Shape weights of the last clips seen, by tool and audio (:meth:`_ShapeWeights._features`).
 _REMEMBERED: dict[tuple, np.ndarray] = {}
 _REMEMBER = 512
 #: Frame rate the tools are run at (their shape weights are then interpolated to the
@@ -47,14 +46,14 @@ def _missing(package: str, exc: ImportError) -> DataError:
                      f"pip install -e \".[peers]\"")
 
 
-class _ShapeWeights(BaselineModel):
+class _ShapeWeights(FeatureLine):
     """Motion as a per-channel affine function of a tool's per-frame shape weights."""
 
     def _weights(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
                  phones=None) -> np.ndarray:
         raise NotImplementedError
 
-    def _remembered(self, audio, sample_rate, times, phones=None) -> np.ndarray:
+    def _features(self, audio, sample_rate, times, phones=None) -> np.ndarray:
         """:meth:`_weights`, remembered for the last clips seen (an evaluation refits on
         the same clips fold after fold; the tools run at 20-60x real time)."""
         digest = hashlib.blake2b(np.ascontiguousarray(audio).tobytes(), digest_size=16)
@@ -66,28 +65,6 @@ class _ShapeWeights(BaselineModel):
                 _REMEMBERED.pop(next(iter(_REMEMBERED)))
             _REMEMBERED[key] = self._weights(audio, sample_rate, times, phones)
         return _REMEMBERED[key]
-
-    def _fit(self, data: TrainingSet) -> None:
-        w, motion = [], []
-        for clip in data.clips:
-            times = np.arange(clip.n_frames) / clip.fps
-            w.append(self._remembered(clip.audio, clip.sample_rate, times, clip.phones))
-            motion.append(clip.motion)
-        x = np.concatenate(w)
-        check_enough(len(x), x.shape[1] + 1, f"the {self.method} mapping")
-        design = np.column_stack([np.ones(len(x)), x])
-        self.coef_, *_ = np.linalg.lstsq(design, np.concatenate(motion), rcond=None)
-
-    def _predict(self, audio, sample_rate, times, emotion):
-        w = self._remembered(np.asarray(audio, dtype=np.float32), sample_rate, times)
-        return np.column_stack([np.ones(len(w)), w]) @ self.coef_
-
-    def _arrays(self):
-        return {"coef": self.coef_}
-
-    def _restore(self, arrays):
-        self.coef_ = arrays["coef"]
-
 
 def _at(times_in: np.ndarray, values: np.ndarray, times: np.ndarray) -> np.ndarray:
     """``values`` (n_in, k) sampled at ``times`` by linear interpolation (held at the ends)."""

@@ -26,7 +26,8 @@ from animegraph.baselines.base import BaselineModel, check_enough
 from animegraph.baselines.data import TrainingSet
 from db.errors import ParameterError
 
-__all__ = ["RMS_WINDOW", "SMOOTH_SECONDS", "Loudness", "MeanPose", "rms_envelope"]
+__all__ = ["RMS_WINDOW", "SMOOTH_SECONDS", "FeatureLine", "Loudness", "MeanPose",
+           "rms_envelope"]
 
 #: Length (s) of the window each RMS value is taken over, centred on its frame.
 RMS_WINDOW = 0.04
@@ -90,7 +91,40 @@ class MeanPose(BaselineModel):
         self.mean_ = arrays["mean"]
 
 
-class Loudness(BaselineModel):
+class FeatureLine(BaselineModel):
+    """Motion as a per-channel affine function of per-frame features: motion ≈ a + B · w,
+    fitted by least squares on the training clips (how the loudness and the peer tools'
+    shape weights, :mod:`animegraph.baselines.peers`, are mapped onto the face)."""
+
+    def _features(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
+                  phones=None) -> np.ndarray:
+        """Features of ``audio`` at ``times``: shape (len(times), n_features). ``phones``:
+        a training clip's phone segments (None when predicting from audio alone)."""
+        raise NotImplementedError
+
+    def _fit(self, data: TrainingSet) -> None:
+        w, motion = [], []
+        for clip in data.clips:
+            times = np.arange(clip.n_frames) / clip.fps
+            w.append(self._features(clip.audio, clip.sample_rate, times, clip.phones))
+            motion.append(clip.motion)
+        x = np.concatenate(w)
+        check_enough(len(x), x.shape[1] + 1, f"the {self.method} mapping")
+        design = np.column_stack([np.ones(len(x)), x])
+        self.coef_, *_ = np.linalg.lstsq(design, np.concatenate(motion), rcond=None)
+
+    def _predict(self, audio, sample_rate, times, emotion):
+        w = self._features(audio, sample_rate, times)
+        return np.column_stack([np.ones(len(w)), w]) @ self.coef_  # (n_frames, n_channels)
+
+    def _arrays(self):
+        return {"coef": self.coef_}
+
+    def _restore(self, arrays):
+        self.coef_ = arrays["coef"]
+
+
+class Loudness(FeatureLine):
     """Motion as a per-channel affine function of the speech's smoothed RMS envelope.
 
     Parameters
@@ -111,26 +145,8 @@ class Loudness(BaselineModel):
         if not (self.window > 0 and self.smooth >= 0):
             raise ParameterError(f"window must be > 0 and smooth >= 0, got {self.window}, "
                                  f"{self.smooth}")
-        env, motion = [], []
-        for clip in data.clips:
-            times = np.arange(clip.n_frames) / clip.fps
-            env.append(self._envelope(clip.audio, clip.sample_rate, times))
-            motion.append(clip.motion)
-        x = np.concatenate(env)
-        y = np.concatenate(motion)
-        check_enough(len(x), 2, "the loudness mapping")
-        design = np.column_stack([np.ones_like(x), x])
-        self.coef_, *_ = np.linalg.lstsq(design, y, rcond=None)  # (2, n_channels)
+        super()._fit(data)
 
-    def _envelope(self, audio, sample_rate, times):
-        return rms_envelope(audio, sample_rate, times, window=self.window, smooth=self.smooth)
-
-    def _predict(self, audio, sample_rate, times, emotion):
-        env = self._envelope(audio, sample_rate, times)
-        return np.column_stack([np.ones_like(env), env]) @ self.coef_
-
-    def _arrays(self):
-        return {"coef": self.coef_}
-
-    def _restore(self, arrays):
-        self.coef_ = arrays["coef"]
+    def _features(self, audio, sample_rate, times, phones=None):
+        return rms_envelope(audio, sample_rate, times, window=self.window,
+                            smooth=self.smooth)[:, None]
