@@ -71,6 +71,15 @@ SHARED_EMOTIONS = {"neutral": "neutral", "happy": "happiness", "angry": "anger",
 
 
 # --------------------------------------------------------------------------- features
+def cache_folder(name: str, utterances, cache: Path) -> Path:
+    """``cache``'s folder for the features of a corpus (named by a digest of its audio)."""
+    digest = hashlib.sha1(b"".join(np.ascontiguousarray(a[:4000]).tobytes()
+                                   for a, _ in utterances)).hexdigest()[:10]
+    folder = cache / f"{name}-{len(utterances)}-{digest}"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
 def cached_features(name: str, utterances, cache: Path, blocks=("paper_utterance",
                     "paper_frames", "rich", "egemaps", "compare")) -> dict:
     """Feature blocks of a corpus (computed once, then read from ``cache``).
@@ -79,10 +88,7 @@ def cached_features(name: str, utterances, cache: Path, blocks=("paper_utterance
     (whole-utterance and frame-averaged cepstrum); ``cepstrum`` is ``paper_frames``'
     coefficients 0..49. Returns the blocks and the seconds per utterance of each.
     """
-    digest = hashlib.sha1(b"".join(np.ascontiguousarray(a[:4000]).tobytes()
-                                   for a, _ in utterances)).hexdigest()[:10]
-    folder = cache / f"{name}-{len(utterances)}-{digest}"
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = cache_folder(name, utterances, cache)
     timing_file = folder / "seconds_per_utterance.json"
     timings = json.loads(timing_file.read_text()) if timing_file.exists() else {}
     out = {}
@@ -101,8 +107,10 @@ def cached_features(name: str, utterances, cache: Path, blocks=("paper_utterance
         out[block] = np.vstack(rows)
         np.save(path, out[block])
         timing_file.write_text(json.dumps(timings))
-    out["cepstrum"] = out["paper_frames"][:, 3:3 + CEPSTRUM_BLOCK]
-    out["paper"] = out["paper_utterance"][:, :503]
+    if "paper_frames" in out:
+        out["cepstrum"] = out["paper_frames"][:, 3:3 + CEPSTRUM_BLOCK]
+    if "paper_utterance" in out:
+        out["paper"] = out["paper_utterance"][:, :503]
     return out, timings
 
 
@@ -111,9 +119,9 @@ def matrix(feats: dict, spec: str) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- nested
-def _fit_score(params, F, y, spk, train, test, speakers_at_test=True):
-    model = EmotionClassifier(**params).fit(F[train], y[train], speakers=spk[train])
-    return model.score(F[test], y[test], speakers=spk[test] if speakers_at_test else None)
+def _fit_score(params, F, y, spk, train, test, factory=EmotionClassifier):
+    model = factory(**params).fit(F[train], y[train], speakers=spk[train])
+    return model.score(F[test], y[test], speakers=spk[test])
 
 
 def _inner(F, y, spk, train, kind):
@@ -122,18 +130,25 @@ def _inner(F, y, spk, train, kind):
     return list(LeaveOneGroupOut().split(F[train], y[train], spk[train]))
 
 
-def _outer_fold(F, y, spk, train, test, kind, base, grid):
-    """Tune inside ``train``; score on ``test`` (with, and for LOSO without, speakers)."""
+def _outer_fold(F, y, spk, train, test, kind, base, grid, factory=EmotionClassifier,
+                fold_features=None):
+    """Tune inside ``train``; score on ``test`` (with, and for LOSO without, speakers).
+
+    ``factory(**params)`` makes the estimator; ``fold_features(train)``, if given, makes
+    the feature matrix from what is learned on the training fold alone (e.g. a codebook).
+    """
+    if fold_features is not None:
+        F = fold_features(train)
     inner = _inner(F, y, spk, train, kind)
     Ft, yt, st = F[train], y[train], spk[train]
     best, best_score = None, -1.0
     for params in ParameterGrid(grid):
         p = {**base, **params}
-        s = np.mean([_fit_score(p, Ft, yt, st, a, b) for a, b in inner])
+        s = np.mean([_fit_score(p, Ft, yt, st, a, b, factory) for a, b in inner])
         if s > best_score:
             best, best_score = p, s
     t = time.perf_counter()
-    model = EmotionClassifier(**best).fit(Ft, yt, speakers=st)
+    model = factory(**best).fit(Ft, yt, speakers=st)
     fit_s = time.perf_counter() - t
     pred = model.predict(F[test], speakers=spk[test])
     chosen = f"{best['kernel']} C={best['C']:g}"
@@ -143,25 +158,28 @@ def _outer_fold(F, y, spk, train, test, kind, base, grid):
     if kind == "loso":
         out["pred_single"] = model.predict(F[test])  # one utterance at a time: fallback
         if best.get("normalize") == "speaker":
-            raw = EmotionClassifier(**{**best, "normalize": "none"}).fit(Ft, yt)
+            raw = factory(**{**best, "normalize": "none"}).fit(Ft, yt)
             out["pred_raw_model"] = raw.predict(F[test])
     return out
 
 
-def nested(F, y, spk, base: dict, grid=GRID, kinds=("10fold", "loso")) -> dict:
-    """Outer 10-fold and LOSO accuracy with every choice made inside the training folds."""
+def nested(F, y, spk, base: dict, grid=GRID, kinds=("10fold", "loso"),
+           factory=EmotionClassifier, fold_features=None) -> dict:
+    """Outer 10-fold and LOSO accuracy with every choice made inside the training folds
+    (``factory`` and ``fold_features`` as :func:`_outer_fold`'s)."""
     res = {}
     for kind in kinds:
         splits = (list(StratifiedKFold(10, shuffle=True, random_state=SEED).split(F, y))
                   if kind == "10fold" else list(LeaveOneGroupOut().split(F, y, spk)))
-        folds = Parallel(n_jobs=2)(delayed(_outer_fold)(F, y, spk, tr, te, kind, base, grid)
+        folds = Parallel(n_jobs=2)(delayed(_outer_fold)(F, y, spk, tr, te, kind, base, grid,
+                                                        factory, fold_features)
                                    for tr, te in splits)
         pred = np.empty(y.size, dtype=y.dtype)
         accs = []
         for (_, te), f in zip(splits, folds, strict=True):
             pred[te] = f["pred"]
             accs.append(float(np.mean(f["pred"] == y[te])))
-        r = {"acc": float(np.mean(accs)), "std": float(np.std(accs)),
+        r = {"acc": float(np.mean(accs)), "std": float(np.std(accs)), "folds": accs,
              "chosen": sorted({f["chosen"] for f in folds}),
              "fit_s": float(np.mean([f["fit_s"] for f in folds])), "pred": pred}
         for extra in ("pred_single", "pred_raw_model"):

@@ -35,6 +35,7 @@ __all__ = [
     "as_float_pcm",
     "is_pair",
     "prepare_audio",
+    "speed_perturb",
     "utterances",
 ]
 
@@ -140,6 +141,41 @@ def prepare_audio(audio, sample_rate) -> np.ndarray:
         raise DataError(f"audio is silence: {active:.2f} s above {SILENCE_DBFS:g} dBFS, "
                         f"{MIN_ACTIVE} s of sound needed")
     return x / np.percentile(np.abs(x), LEVEL_PERCENTILE)
+
+
+def speed_perturb(audio, sample_rate, factor: float) -> np.ndarray:
+    """The utterance played ``factor`` times faster: tempo and pitch together.
+
+    Speed perturbation (Ko, Peddinti, Povey & Khudanpur 2015, "Audio augmentation for
+    speech recognition", INTERSPEECH): the signal resampled by ``1 / factor`` and read at
+    the original rate, as ``sox speed``; 0.9 lowers the pitch and the formants by 10 %
+    and lasts 11 % longer. The perturbed copy of a speaker sounds like another speaker.
+
+    Parameters
+    ----------
+    audio : array-like, shape (n_samples,) or (n_samples, n_channels)
+        Speech, integer or float PCM (channels averaged).
+    sample_rate : int or float
+        Its rate in Hz (only checked; the output has the same rate).
+    factor : float
+        Speed factor in [0.5, 2] (Ko et al.: 0.9, 1.0, 1.1).
+
+    Returns
+    -------
+    np.ndarray, shape (ceil(n_samples / factor),)
+        float64 mono at ``sample_rate``.
+    """
+    _rate(sample_rate)
+    if isinstance(factor, bool) or not isinstance(factor, Real) \
+            or not 0.5 <= float(factor) <= 2.0:
+        raise ParameterError(f"factor must be a number in [0.5, 2], got {factor!r}")
+    x = as_float_pcm(audio)
+    if x.ndim == 2:
+        x = x.mean(axis=1)
+    ratio = Fraction(float(factor)).limit_denominator(100)
+    if ratio == 1:
+        return x
+    return resample_poly(x, ratio.denominator, ratio.numerator)
 
 
 def _active_seconds(x: np.ndarray) -> float:

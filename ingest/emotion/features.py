@@ -182,24 +182,38 @@ def _stats(v: np.ndarray) -> list[float]:
     return [float(v.mean()), float(v.std()), float(p10), float(p90), float(p90 - p10)]
 
 
-def _rich(x: np.ndarray) -> np.ndarray:
+def _frames(x: np.ndarray) -> dict[str, np.ndarray]:
+    """Frame-level descriptors at 16 kHz, 32 ms frames, hop 10 ms: the magnitude
+    spectrogram ``spec`` (257, T), 20 MFCCs ``mfcc`` (20, T) from 40 mel bands, ``rms``
+    (T,) and the YIN F0 ``f0`` (Hz, about T frames; 60-500 Hz)."""
     import librosa
 
     sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
     xf = x.astype(np.float32)
     spec = np.abs(librosa.stft(xf, n_fft=n_fft, hop_length=hop))
-    power = spec**2
-    mel = librosa.feature.melspectrogram(S=power, sr=sr, n_mels=40)
-    mfcc = librosa.feature.mfcc(S=librosa.power_to_db(mel), n_mfcc=20)
+    mel = librosa.feature.melspectrogram(S=spec**2, sr=sr, n_mels=40)
+    return {
+        "spec": spec,
+        "mfcc": librosa.feature.mfcc(S=librosa.power_to_db(mel), n_mfcc=20),
+        "rms": librosa.feature.rms(S=spec, frame_length=n_fft, hop_length=hop)[0],
+        "f0": librosa.yin(xf, fmin=60, fmax=500, sr=sr, frame_length=1024, hop_length=hop),
+    }
+
+
+def _rich(x: np.ndarray) -> np.ndarray:
+    import librosa
+
+    sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
+    xf = x.astype(np.float32)
+    fr = _frames(x)
+    spec, mfcc, rms, f0 = fr["spec"], fr["mfcc"], fr["rms"], fr["f0"]
     d1 = librosa.feature.delta(mfcc, width=5)
     d2 = librosa.feature.delta(mfcc, order=2, width=5)
     parts = [mfcc.mean(1), mfcc.std(1), d1.std(1), d2.std(1)]
 
-    rms = librosa.feature.rms(S=spec, frame_length=n_fft, hop_length=hop)[0]
     log_e = np.log(rms + 1e-8)
     parts.append(_stats(log_e) + [float(np.diff(log_e).std()) if log_e.size > 1 else 0.0])
 
-    f0 = librosa.yin(xf, fmin=60, fmax=500, sr=sr, frame_length=1024, hop_length=hop)
     n = min(f0.size, rms.size)
     f0, r = f0[:n], rms[:n]
     voiced = (r > 0.1 * np.percentile(r, 95)) & (f0 > 62) & (f0 < 490)

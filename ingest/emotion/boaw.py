@@ -1,0 +1,167 @@
+"""Bag-of-audio-words of frame-level descriptors, for emotion from speech (issue #16).
+
+After Schmitt, Ringeval & Schuller (2016), "At the border of acoustics and linguistics:
+bag-of-audio-words for the recognition of emotions in speech", INTERSPEECH, and their
+toolkit openXBOW (Schmitt & Schuller 2017, JMLR 18(96)); not in Cao et al. An utterance's
+frames are quantised against a codebook of frames seen in training and counted: the
+histogram says *which* short-time sounds occur how often, where functionals
+(:func:`ingest.emotion.features.rich_features`) say how descriptors are distributed.
+
+* :func:`frame_descriptors` -- per 10 ms frame (16 kHz, 32 ms windows, as the ``rich``
+  block): 20 MFCCs, log energy and F0 in semitones above 27.5 Hz (0 when unvoiced, as
+  eGeMAPS' ``F0semitoneFrom27.5Hz``), and their deltas;
+* :class:`BagOfAudioWords` -- openXBOW's recipe with its defaults where it has them:
+  descriptors standardised by the training frames (``-standardizeInput``), one codebook
+  for the descriptors and one for their deltas (``-attributes``), each of
+  :data:`CODEBOOK_SIZE` words (openXBOW's default) picked by k-means++ seeding without
+  the k-means updates (openXBOW's default codebook: "random sampling is much faster than
+  clustering while obtaining almost the same final performance"), :data:`ASSIGNMENTS`
+  nearest words counted per frame (multi-assignment ``-a``; 10 as in openXBOW's
+  tutorial), counts per second of speech (``-norm``, utterances differ in length) and
+  logarithmic term frequency ``lg(TF + 1)`` (``-log``).
+
+The parameters are fixed a priori from those sources, not tuned on the evaluation data.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from db.errors import ParameterError
+from ingest.emotion.audio import prepare_audio
+
+__all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "N_DESCRIPTORS", "BagOfAudioWords",
+           "frame_descriptors"]
+
+#: Words per codebook (openXBOW's default ``-size``).
+CODEBOOK_SIZE = 500
+#: Nearest words counted per frame (openXBOW ``-a``; its tutorial's 10).
+ASSIGNMENTS = 10
+#: Descriptors per frame before deltas: 20 MFCCs, log energy, F0 (semitones).
+N_DESCRIPTORS = 22
+_HOP_S = 0.01  # frame hop of :func:`frame_descriptors`, seconds
+
+
+def frame_descriptors(audio, sample_rate) -> np.ndarray:
+    """Frame-level descriptors of one utterance and their deltas.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (n_samples,) or (n_samples, n_channels)
+        Speech (prepared as :func:`ingest.emotion.audio.prepare_audio`: 16 kHz,
+        level-normalised; silence refused).
+    sample_rate : int or float
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 2 * N_DESCRIPTORS)
+        Per 10 ms frame: 20 MFCCs, log RMS energy, F0 in semitones above 27.5 Hz (0 when
+        unvoiced), then the deltas of these 22 (5-frame regression), float64.
+    """
+    import librosa
+
+    from ingest.emotion.features import _frames  # the ``rich`` block's frame analysis
+
+    fr = _frames(prepare_audio(audio, sample_rate))
+    mfcc, rms, f0 = fr["mfcc"], fr["rms"], fr["f0"]
+    n = min(mfcc.shape[1], rms.size, f0.size)
+    mfcc, rms, f0 = mfcc[:, :n], rms[:n], f0[:n]
+    voiced = (rms > 0.1 * np.percentile(rms, 95)) & (f0 > 62) & (f0 < 490)
+    semitones = np.where(voiced, 12.0 * np.log2(np.maximum(f0, 1.0) / 27.5), 0.0)
+    lld = np.vstack([mfcc, np.log(rms + 1e-8)[None], semitones[None]]).astype(np.float64)
+    delta = librosa.feature.delta(lld, width=5, mode="nearest") if n >= 5 \
+        else np.zeros_like(lld)
+    return np.nan_to_num(np.vstack([lld, delta]).T, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _nearest(Z: np.ndarray, words: np.ndarray, k: int) -> np.ndarray:
+    """Indices (n, k) of the ``k`` nearest ``words`` (Euclidean) of each row of ``Z``."""
+    d = (Z * Z).sum(1)[:, None] - 2.0 * Z @ words.T + (words * words).sum(1)[None]
+    return np.argpartition(d, k - 1, axis=1)[:, :k] if k < words.shape[0] \
+        else np.broadcast_to(np.arange(words.shape[0]), (Z.shape[0], words.shape[0]))
+
+
+class BagOfAudioWords:
+    """Codebooks of frame descriptors and the log term-frequency histograms they give.
+
+    Parameters
+    ----------
+    size : int, optional
+        Words per codebook (one for the descriptors, one for their deltas).
+    assignments : int, optional
+        Nearest words counted per frame.
+    max_frames : int, optional
+        Training frames the codebooks are seeded from (a random subset when there are
+        more; k-means++ seeding costs frames x words).
+    random_state : int, optional
+
+    Attributes
+    ----------
+    mean_, scale_ : np.ndarray, shape (n_descriptors,)
+        Standardisation of the training frames.
+    codebooks_ : list of np.ndarray, each (size, n_descriptors / 2)
+        Standardised words: descriptors, deltas.
+    """
+
+    def __init__(self, size: int = CODEBOOK_SIZE, assignments: int = ASSIGNMENTS,
+                 max_frames: int = 50_000, random_state: int = 0):
+        self.size = size
+        self.assignments = assignments
+        self.max_frames = max_frames
+        self.random_state = random_state
+
+    def fit(self, frames) -> BagOfAudioWords:
+        """Learn the standardisation and the codebooks.
+
+        Parameters
+        ----------
+        frames : sequence of np.ndarray, each (n_frames_k, n_descriptors)
+            :func:`frame_descriptors` of the training utterances.
+        """
+        from sklearn.cluster import kmeans_plusplus
+
+        if not 1 <= self.assignments <= self.size:
+            raise ParameterError(f"assignments must be in [1, size={self.size}], "
+                                 f"got {self.assignments}")
+        X = np.vstack(list(frames))
+        if X.shape[0] < self.size:
+            raise ParameterError(f"{X.shape[0]} training frames for a codebook of "
+                                 f"{self.size} words")
+        self.mean_ = X.mean(0)
+        sd = X.std(0)
+        self.scale_ = np.where(sd > 0, sd, 1.0)
+        rng = np.random.default_rng(self.random_state)
+        if X.shape[0] > self.max_frames:
+            X = X[rng.choice(X.shape[0], self.max_frames, replace=False)]
+        Z = (X - self.mean_) / self.scale_
+        half = Z.shape[1] // 2
+        self.codebooks_ = [
+            kmeans_plusplus(np.ascontiguousarray(part), self.size,
+                            random_state=self.random_state + i)[0]
+            for i, part in enumerate((Z[:, :half], Z[:, half:]))]
+        return self
+
+    def transform(self, frames) -> np.ndarray:
+        """Histograms, shape (n_utterances, 2 * size): ``lg(1 + counts per second)`` of
+        the descriptors' words, then of the deltas' words."""
+        rows = []
+        for F in frames:
+            Z = (np.asarray(F, dtype=np.float64) - self.mean_) / self.scale_
+            half = Z.shape[1] // 2
+            parts = []
+            for words, part in zip(self.codebooks_, (Z[:, :half], Z[:, half:]),
+                                   strict=True):
+                idx = _nearest(part, words, self.assignments)
+                counts = np.bincount(idx.ravel(), minlength=words.shape[0])
+                parts.append(np.log10(1.0 + counts / (max(Z.shape[0], 1) * _HOP_S)))
+            rows.append(np.concatenate(parts))
+        return np.vstack(rows)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """``boaw_mean``, ``boaw_scale`` (n_descriptors,), ``boaw_codebook0/1`` (size,
+        n_descriptors / 2), ``boaw_assignments``."""
+        return {"boaw_mean": self.mean_.copy(), "boaw_scale": self.scale_.copy(),
+                "boaw_codebook0": self.codebooks_[0].copy(),
+                "boaw_codebook1": self.codebooks_[1].copy(),
+                "boaw_assignments": np.array(self.assignments)}
+

@@ -1,0 +1,161 @@
+"""Bag-of-audio-words and block-weighted fusion with the functionals, nested, on EmoDB
+(issue #16, third session).
+
+Usage::
+
+    python scripts/eval_emotion_boaw.py [--emodb DIR] [--cache DIR] [--kinds 10fold loso]
+                                        [--systems ...] [--json OUT]
+
+Systems (all with per-speaker normalisation, scaling to [-1, 1] and the SVM, kernel and C
+chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner stratified
+5-fold for the outer stratified 10-fold, inner leave-one-speaker-out for the outer LOSO):
+
+* ``default``: rich + cepstrum functionals (171), the stored default, for reference;
+* ``default-weighted``: the same two blocks, each block's scaled columns multiplied so
+  that every block holds the same share of the total variance whatever its width
+  (weight ``sqrt(n_total / (n_blocks * width))``; the equal-trace normalisation of
+  multiple-kernel learning, Kloft et al. 2011, JMLR 12);
+* ``boaw``: bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`, after
+  Schmitt, Ringeval & Schuller 2016, INTERSPEECH; openXBOW's defaults), 2 x 500 words;
+* ``default+boaw``: the functionals and the bag of words concatenated, block-weighted as
+  ``default-weighted`` (plain concatenation would let the 1,000 words drown the 171
+  functionals; ``scripts/eval_emotion_fusion.py --feature-level`` weights the blocks
+  *before* the classifier's per-speaker normalisation and scaling, which undo any
+  per-column weight, so it measures plain concatenation).
+
+The codebooks (and their standardisation) are learned on the outer training fold's frames
+alone, anew for every outer fold; the inner tuning folds use that fold's codebooks (they
+see no outer test audio). Frame descriptors are cached in ``--cache``. **The shared EmoDB
+copy is cut to 2.0 s per file** (its README): not comparable with published figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
+    DEFAULT_CACHE,
+    DEFAULT_EMODB,
+    GRID,
+    cache_folder,
+    cached_features,
+    finish,
+    matrix,
+    nested,
+    print_confusion,
+)
+from sklearn.preprocessing import FunctionTransformer
+from tqdm import tqdm
+
+from ingest.emotion.boaw import BagOfAudioWords, frame_descriptors
+from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
+
+SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw")
+
+
+def cached_frames(utt, cache: Path) -> list[np.ndarray]:
+    """:func:`frame_descriptors` of every utterance (cached as one array and offsets)."""
+    folder = cache_folder("emodb", utt, cache)
+    path, offsets_path = folder / "boaw_frames.npy", folder / "boaw_offsets.npy"
+    if not path.exists():
+        rows = [frame_descriptors(a, sr) for a, sr in tqdm(utt, desc="frames",
+                                                           file=sys.stderr)]
+        np.save(offsets_path, np.cumsum([0] + [r.shape[0] for r in rows]))
+        np.save(path, np.vstack(rows))
+    X, off = np.load(path, allow_pickle=False), np.load(offsets_path, allow_pickle=False)
+    return [X[a:b] for a, b in zip(off[:-1], off[1:], strict=True)]
+
+
+def _weigh(X, w):
+    return X * w
+
+
+def block_weights(widths) -> np.ndarray:
+    """Per-column weights: every block the same share of the total variance."""
+    total = float(sum(widths))
+    return np.concatenate([np.full(n, np.sqrt(total / (len(widths) * n))) for n in widths])
+
+
+class BlockWeighted(EmotionClassifier):
+    """:class:`EmotionClassifier` with each block's scaled columns weighted
+    (:func:`block_weights`; ``widths`` set on the instance by :func:`weighted`)."""
+
+    widths: tuple = ()
+
+    def _make_pipeline(self):
+        pipe = super()._make_pipeline()
+        pipe.steps.insert(1, ("weigh", FunctionTransformer(
+            _weigh, kw_args={"w": block_weights(self.widths)})))
+        return pipe
+
+
+def weighted(widths):
+    def make(**params):
+        model = BlockWeighted(**params)
+        model.widths = tuple(widths)
+        return model
+    return make
+
+
+def boaw_features(frames, default: np.ndarray, with_default: bool):
+    """``fold_features``: the bag of words learned on the training fold (with the
+    functionals in front if ``with_default``)."""
+    def make(train):
+        H = BagOfAudioWords().fit([frames[i] for i in train]).transform(frames)
+        return np.hstack([default, H]) if with_default else H
+    return make
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--emodb", type=Path, default=DEFAULT_EMODB)
+    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument("--kinds", nargs="+", default=["10fold", "loso"],
+                        choices=["10fold", "loso"])
+    parser.add_argument("--systems", nargs="+", default=list(SYSTEMS), choices=SYSTEMS)
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+
+    t0 = time.perf_counter()
+    utt, y, spk = load_emodb(args.emodb)
+    feats, _ = cached_features("emodb", utt, args.cache, ["paper_frames", "rich"])
+    F = matrix(feats, DEFAULT_FEATURES)
+    frames = cached_frames(utt, args.cache)
+    n_words = 2 * BagOfAudioWords().size
+    print(f"EmoDB (the shared copy, cut to 2.0 s): {y.size} files, {np.unique(spk).size} "
+          f"speakers, {sum(f.shape[0] for f in frames)} frames; codebooks learned in each "
+          "outer training fold", flush=True)
+    setups = {
+        "default": dict(factory=EmotionClassifier),
+        "default-weighted": dict(factory=weighted((feats["rich"].shape[1],
+                                                   feats["cepstrum"].shape[1]))),
+        "boaw": dict(fold_features=boaw_features(frames, F, False)),
+        "default+boaw": dict(factory=weighted((F.shape[1], n_words)),
+                             fold_features=boaw_features(frames, F, True)),
+    }
+    report = {}
+    for label in args.systems:
+        t = time.perf_counter()
+        r = nested(F, y, spk, dict(normalize="speaker"), GRID, kinds=tuple(args.kinds),
+                   **setups[label])
+        cells = "".join(f"{k} {100 * r[k]['acc']:.1f} ± {100 * r[k]['std']:.1f}  "
+                        for k in args.kinds)
+        if "loso" in r:
+            cells += f"LOSO 1 utt. {100 * r['loso']['acc_single']:.1f}  "
+        chosen = sorted({c for k in args.kinds for c in r[k]["chosen"]})
+        print(f"  {label:<18}{cells}chosen {', '.join(chosen)}  "
+              f"({time.perf_counter() - t:.0f} s)", flush=True)
+        report[label] = {k: {m: v for m, v in r[k].items() if not m.startswith("pred")}
+                         for k in r}
+        if "loso" in r:
+            report[label]["confusion_loso"] = print_confusion(
+                f"EmoDB LOSO, {label}", y, r["loso"]["pred"])
+    return finish(report, t0, args.json)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
