@@ -39,6 +39,21 @@ def test_mapping_interpolates_its_centres(rng, kernel):
     assert EmotionMapping().n_centres == N_CENTRES == 250
 
 
+def test_mappings_from_one_source_share_its_clustering(rng):
+    x = rng.normal(size=(300, 3))
+    y1, y2 = x + 1.0, np.tanh(x)
+    clusters: dict = {}
+    shared = [EmotionMapping(n_centres=40).fit(x, y, clusters=clusters) for y in (y1, y2)]
+    assert len(clusters) == 1  # one K-means for both targets
+    alone = [EmotionMapping(n_centres=40).fit(x, y) for y in (y1, y2)]
+    for a, b in zip(shared, alone, strict=True):
+        np.testing.assert_array_equal(a.centres_, b.centres_)
+        np.testing.assert_array_equal(a.coef_, b.coef_)
+    EmotionMapping(n_centres=40, random_state=1).fit(x, y1, clusters=clusters)
+    EmotionMapping(n_centres=40).fit(x[:200], y1[:200], clusters=clusters)
+    assert len(clusters) == 3  # another seed, other samples: clustered anew
+
+
 def test_mapping_with_offset_falls_back_to_the_mean_offset(rng):
     x = rng.normal(size=(300, 2))
     y = x + 3.0

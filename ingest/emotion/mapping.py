@@ -28,6 +28,8 @@ Choices where the paper is silent
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 from scipy.spatial.distance import cdist, pdist
@@ -39,6 +41,24 @@ from db.errors import DataError, ParameterError
 from ingest.emotion.rbf import KERNEL, KERNELS, N_CENTRES, RbfMapping, checked_matrix, rbf
 
 __all__ = ["KERNEL", "KERNELS", "N_CENTRES", "EmotionMapping", "rbf"]
+
+
+def _kmeans(X: np.ndarray, n_centres: int, random_state, memo: dict
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """K-means of the samples ``X`` (labels (n,), centres (k, d)), k = ``n_centres`` or
+    the number of distinct samples if fewer; taken from ``memo`` when ``X`` was already
+    clustered with the same ``n_centres`` and ``random_state``."""
+    key = (X.shape, hashlib.sha1(np.ascontiguousarray(X).tobytes()).hexdigest(),
+           n_centres, repr(random_state))
+    if key not in memo:
+        n_distinct = len(np.unique(X, axis=0))
+        k = min(n_centres, n_distinct)
+        if k < 2:
+            raise DataError(f"need at least 2 distinct correspondences to learn a mapping, "
+                            f"got {n_distinct}")
+        km = KMeans(n_clusters=k, n_init=1, random_state=random_state).fit(X)
+        memo[key] = (km.labels_, km.cluster_centers_)
+    return memo[key]
 
 
 class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
@@ -73,7 +93,7 @@ class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
         Correspondences the mapping was learned from.
     """
 
-    def fit(self, X, y):
+    def fit(self, X, y, *, clusters: dict | None = None):
         """Learn F from corresponding emotion components.
 
         Parameters
@@ -82,6 +102,12 @@ class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
             Source emotion components e_i(t), time-aligned with ``y``.
         y : array-like, shape (n_samples, n_emotion_components)
             Target emotion components e_j(t).
+        clusters : dict, optional
+            Shared between fits: the K-means of a source ``X`` already clustered (the same
+            samples, centres and seed) is taken from it instead of being computed again.
+            The mappings from one emotion to every other emotion of a parallel corpus
+            cluster the same source frames (issue #16: 20 K-means on the demo corpus, 5
+            distinct); the result is the same as without it.
 
         Returns
         -------
@@ -97,18 +123,14 @@ class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
         y = checked_matrix("y", y)
         if y.shape != X.shape:
             raise ParameterError(f"y must have the shape of X {X.shape}, got {y.shape}")
-        n_distinct = len(np.unique(X, axis=0))
-        k = min(int(self.n_centres), n_distinct)
-        if k < 2:
-            raise DataError(f"need at least 2 distinct correspondences to learn a mapping, "
-                            f"got {n_distinct}")
-        km = KMeans(n_clusters=k, n_init=1, random_state=self.random_state).fit(X)
-        labels = km.labels_
+        labels, centres = _kmeans(X, int(self.n_centres), self.random_state,
+                                  {} if clusters is None else clusters)
+        k = centres.shape[0]
         counts = np.bincount(labels, minlength=k)
         keep = counts > 0
         targets = np.zeros((k, X.shape[1]))
         np.add.at(targets, labels, y)
-        centres = km.cluster_centers_[keep]
+        centres = centres[keep]
         targets = targets[keep] / counts[keep, None]
         d = float(pdist(centres).min())
         if not d > 0:

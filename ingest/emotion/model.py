@@ -320,14 +320,16 @@ class EmotionModel:
 
 def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],
                 split: ComponentSplit, *, n_centres: int = N_CENTRES, kernel: str = KERNEL,
-                random_state: int = 0, offset: bool = False
+                random_state: int = 0, offset: bool = False, clusters: dict | None = None
                 ) -> tuple[EmotionMapping, np.ndarray]:
-    """F_src,dst and the mean offset from the parallel ``sentences`` (§5.2)."""
+    """F_src,dst and the mean offset from the parallel ``sentences`` (§5.2); ``clusters``
+    shares the K-means of identical source samples between mappings
+    (:meth:`EmotionMapping.fit`)."""
     from ingest.emotion.mapping import EmotionMapping
 
     x, y = correspondences(data, src, dst, sentences, split)
     f = EmotionMapping(n_centres=n_centres, kernel=kernel, random_state=random_state,
-                       offset=offset).fit(x, y)
+                       offset=offset).fit(x, y, clusters=clusters)
     return f, (y - x).mean(axis=0)
 
 
@@ -405,6 +407,7 @@ def fit_emotion_model(
         notes.append("no component differs between emotions: no mappings")
     data = ParallelData(sources, emotions, sentence_ids, aligner)
     mappings, offsets = {}, {}
+    clusters: dict = {}  # a source emotion's frames are clustered once for every target
     if e.size:
         for src, dst in permutations(present, 2):
             sentences = data.sentences(src, dst)
@@ -414,7 +417,7 @@ def fit_emotion_model(
                 continue
             mappings[(src, dst)], offsets[(src, dst)] = fit_mapping(
                 data, src, dst, sentences, split, n_centres=n_centres, kernel=kernel,
-                random_state=random_state)
+                random_state=random_state, clusters=clusters)
     classifier = None
     if audio is not None:
         classifier = _fit_classifier(audio, emotions, speakers, notes, classifier_rows)
