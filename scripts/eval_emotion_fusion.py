@@ -23,9 +23,11 @@ are fitted, for every combination of bases:
 
 ``--feature-level`` adds feature-level fusion with the same protocol: the blocks
 concatenated, each block first z-scored over the training population and divided by the
-square root of its width, so that each block, whatever its width, contributes the same
-total variance to the linear kernel (plain concatenation lets ComParE's 6,373 columns
-drown the default's 171; plain concatenation was measured in ``eval_emotion.py``).
+square root of its width. **This weighting has no effect** (found in the third session):
+the classifier's per-speaker z-normalisation and its scaling to [-1, 1] act per column and
+undo any per-column factor applied before them, so this measures plain concatenation
+(measured in ``eval_emotion.py``). A block weighting that holds is applied after the
+scaler, inside the estimator: ``BlockWeighted`` in ``scripts/eval_emotion_boaw.py``.
 
 Scores: accuracy of the outer test folds (mean ± s.d. over folds); for leave-one-speaker-
 out also one utterance at a time without a speaker (the ``classify`` case). **The shared
@@ -198,7 +200,8 @@ def main() -> int:
     parser.add_argument("--kinds", nargs="+", default=["10fold", "loso"],
                         choices=["10fold", "loso"])
     parser.add_argument("--feature-level", action="store_true",
-                        help="also block-weighted concatenation of each pair of bases")
+                        help="also concatenation of each pair of bases (the weighting "
+                             "before the classifier is undone by its normalisation)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
