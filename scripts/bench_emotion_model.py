@@ -17,6 +17,7 @@ load average, and a digest of the fitted model's arrays (equal digests: equal re
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import os
 import sys
@@ -93,34 +94,33 @@ def digest(model) -> str:
     return h.hexdigest()[:12]
 
 
-class PartTimer:
-    """Wall and CPU seconds spent in named functions of :mod:`ingest.emotion.model`."""
+#: Functions of :mod:`ingest.emotion.model` timed by :func:`timed_parts`.
+PARTS = ("split_components", "fit_mapping", "_fit_classifier")
 
-    PARTS = ("split_components", "fit_mapping", "_fit_classifier", "fit_mappings")
 
-    def __init__(self):
-        self.wall, self.cpu, self.saved = {}, {}, {}
+@contextlib.contextmanager
+def timed_parts():
+    """Wall and CPU seconds spent in :data:`PARTS` while the block runs: yields
+    ``{"wall": {name: s}, "cpu": {name: s}}``."""
+    out: dict = {"wall": {}, "cpu": {}}
+    saved = {name: getattr(emotion_model, name) for name in PARTS}
 
-    def __enter__(self):
-        for name in self.PARTS:
-            if hasattr(emotion_model, name):
-                real = getattr(emotion_model, name)
-                self.saved[name] = real
-                setattr(emotion_model, name, self._wrap(name, real))
-        return self
-
-    def _wrap(self, name, real):
+    def wrap(name, real):
         def timed(*a, **kw):
             w, c = time.perf_counter(), time.process_time()
             try:
                 return real(*a, **kw)
             finally:
-                self.wall[name] = self.wall.get(name, 0.0) + time.perf_counter() - w
-                self.cpu[name] = self.cpu.get(name, 0.0) + time.process_time() - c
+                out["wall"][name] = out["wall"].get(name, 0.0) + time.perf_counter() - w
+                out["cpu"][name] = out["cpu"].get(name, 0.0) + time.process_time() - c
         return timed
 
-    def __exit__(self, *exc):
-        for name, real in self.saved.items():
+    for name, real in saved.items():
+        setattr(emotion_model, name, wrap(name, real))
+    try:
+        yield out
+    finally:
+        for name, real in saved.items():
             setattr(emotion_model, name, real)
 
 
@@ -129,16 +129,16 @@ def time_inputs(path: Path, repeat: int, profile: bool) -> int:
     runs = []
     for _ in range(repeat):
         w, c = time.perf_counter(), time.process_time()
-        with PartTimer() as parts:
+        with timed_parts() as parts:
             model = emotion_model.fit_emotion_model(*args, **kw)
         runs.append((time.perf_counter() - w, time.process_time() - c, parts, digest(model)))
     print(f"fit_emotion_model on {len(args[0])} clips, {repeat} run(s), load average "
           f"{os.getloadavg()[0]:.1f}; children's CPU is not in 'CPU (this process)'")
     print(f"  {'part':<22}{'wall (s)':>10}{'CPU, this process (s)':>24}")
-    for name in PartTimer.PARTS:
-        if name in runs[0][2].wall:
-            print(f"  {name:<22}{np.median([r[2].wall[name] for r in runs]):10.2f}"
-                  f"{np.median([r[2].cpu[name] for r in runs]):24.2f}")
+    for name in PARTS:
+        if name in runs[0][2]["wall"]:
+            print(f"  {name:<22}{np.median([r[2]['wall'][name] for r in runs]):10.2f}"
+                  f"{np.median([r[2]['cpu'][name] for r in runs]):24.2f}")
     print(f"  {'total':<22}{np.median([r[0] for r in runs]):10.2f}"
           f"{np.median([r[1] for r in runs]):24.2f}")
     print(f"  children's CPU so far: {os.times().children_user:.2f} s; model digest(s): "

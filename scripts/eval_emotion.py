@@ -201,6 +201,36 @@ def print_confusion(title: str, y, pred) -> dict:
     return {"labels": labels, "matrix": cm.tolist()}
 
 
+def common_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--emodb``, ``--cache``, ``--kinds`` and ``--json`` of the EmoDB scripts."""
+    parser.add_argument("--emodb", type=Path, default=DEFAULT_EMODB)
+    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument("--kinds", nargs="+", default=["10fold", "loso"],
+                        choices=["10fold", "loso"])
+    parser.add_argument("--json", type=Path)
+
+
+def emodb_default(emodb: Path, cache: Path):
+    """EmoDB's utterances, labels, speakers, cached feature blocks and the default's
+    feature matrix (n, 171)."""
+    utt, y, spk = load_emodb(emodb)
+    feats, _ = cached_features("emodb", utt, cache, ["paper_frames", "rich"])
+    return utt, y, spk, feats, matrix(feats, DEFAULT_FEATURES)
+
+
+def report_row(label: str, r: dict, kinds, y, seconds: float) -> dict:
+    """Print one system's nested accuracies (and its LOSO confusion); its JSON entry."""
+    cells = "".join(f"{k} {100 * r[k]['acc']:.1f} ± {100 * r[k]['std']:.1f}  " for k in kinds)
+    if "loso" in r:
+        cells += f"LOSO 1 utt. {100 * r['loso']['acc_single']:.1f}  "
+    chosen = sorted({c for k in kinds for c in r[k]["chosen"]})
+    print(f"  {label:<22}{cells}chosen {', '.join(chosen)}  ({seconds:.0f} s)", flush=True)
+    out = {k: {m: v for m, v in r[k].items() if not m.startswith("pred")} for k in r}
+    if "loso" in r:
+        out["confusion_loso"] = print_confusion(f"EmoDB LOSO, {label}", y, r["loso"]["pred"])
+    return out
+
+
 def evaluate_configs(name, feats, y, spk, configs) -> dict:
     res = {}
     print(f"\n{name}: nested accuracy (%), C and kernel chosen inside each training fold")

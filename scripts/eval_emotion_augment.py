@@ -32,22 +32,20 @@ from pathlib import Path
 
 import numpy as np
 from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
-    DEFAULT_CACHE,
-    DEFAULT_EMODB,
     GRID,
     SEED,
     cache_folder,
-    cached_features,
+    common_arguments,
+    emodb_default,
     finish,
-    matrix,
-    print_confusion,
+    report_row,
 )
 from joblib import Parallel, delayed
 from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedKFold
 from tqdm import tqdm
 
 from ingest.emotion.audio import speed_perturb
-from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
+from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier
 from ingest.emotion.features import block_features
 
 #: Speed factors of the perturbed copies (Ko et al. 2015).
@@ -128,18 +126,12 @@ def nested(F, augmented, y, spk, factors, kinds, grid=GRID) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--emodb", type=Path, default=DEFAULT_EMODB)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    common_arguments(parser)
     parser.add_argument("--factors", type=float, nargs="+", default=list(FACTORS))
-    parser.add_argument("--kinds", nargs="+", default=["10fold", "loso"],
-                        choices=["10fold", "loso"])
-    parser.add_argument("--json", type=Path)
     args = parser.parse_args()
 
     t0 = time.perf_counter()
-    utt, y, spk = load_emodb(args.emodb)
-    feats, _ = cached_features("emodb", utt, args.cache, ["paper_frames", "rich"])
-    F = matrix(feats, DEFAULT_FEATURES)
+    utt, y, spk, feats, F = emodb_default(args.emodb, args.cache)
     augmented = [perturbed_features(utt, args.cache, f) for f in args.factors]
     print(f"EmoDB (the shared copy, cut to 2.0 s): {y.size} files, {np.unique(spk).size} "
           f"speakers; training folds augmented by speed factors "
@@ -149,17 +141,7 @@ def main() -> int:
     for label, (aug, factors) in rows.items():
         t = time.perf_counter()
         r = nested(F, aug, y, spk, factors, args.kinds)
-        cells = "".join(f"{k} {100 * r[k]['acc']:.1f} ± {100 * r[k]['std']:.1f}  "
-                        for k in args.kinds)
-        if "loso" in r:
-            cells += f"LOSO 1 utt. {100 * r['loso']['acc_single']:.1f}  "
-        print(f"  {label:<22}{cells}chosen "
-              f"{', '.join(sorted({c for k in args.kinds for c in r[k]['chosen']}))}"
-              f"  ({time.perf_counter() - t:.0f} s)", flush=True)
-        report[label] = {k: {m: v for m, v in r[k].items() if m != "pred"} for k in r}
-        if "loso" in r:
-            report[label]["confusion_loso"] = print_confusion(
-                f"EmoDB LOSO, {label}", y, r["loso"]["pred"])
+        report[label] = report_row(label, r, args.kinds, y, time.perf_counter() - t)
     return finish(report, t0, args.json)
 
 

@@ -13,8 +13,9 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
 * ``default``: rich + cepstrum functionals (171), the stored default, for reference;
 * ``default-weighted``: the same two blocks, each block's scaled columns multiplied so
   that every block holds the same share of the total variance whatever its width
-  (weight ``sqrt(n_total / (n_blocks * width))``; the equal-trace normalisation of
-  multiple-kernel learning, Kloft et al. 2011, JMLR 12);
+  (``EmotionClassifier(block_widths=...)``, :func:`ingest.emotion.classifier.block_weights`:
+  weight ``sqrt(n_total / (n_blocks * width))``, the equal-trace normalisation of
+  multiple-kernel learning);
 * ``boaw``: bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`, after
   Schmitt, Ringeval & Schuller 2016, INTERSPEECH; openXBOW's defaults), 2 x 500 words;
 * ``default+boaw``: the functionals and the bag of words concatenated, block-weighted as
@@ -34,25 +35,23 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
-    DEFAULT_CACHE,
-    DEFAULT_EMODB,
     GRID,
     cache_folder,
-    cached_features,
+    common_arguments,
+    emodb_default,
     finish,
-    matrix,
     nested,
-    print_confusion,
+    report_row,
 )
-from sklearn.preprocessing import FunctionTransformer
 from tqdm import tqdm
 
 from ingest.emotion.boaw import BagOfAudioWords, frame_descriptors
-from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
+from ingest.emotion.classifier import EmotionClassifier
 
 SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw")
 
@@ -70,37 +69,6 @@ def cached_frames(utt, cache: Path) -> list[np.ndarray]:
     return [X[a:b] for a, b in zip(off[:-1], off[1:], strict=True)]
 
 
-def _weigh(X, w):
-    return X * w
-
-
-def block_weights(widths) -> np.ndarray:
-    """Per-column weights: every block the same share of the total variance."""
-    total = float(sum(widths))
-    return np.concatenate([np.full(n, np.sqrt(total / (len(widths) * n))) for n in widths])
-
-
-class BlockWeighted(EmotionClassifier):
-    """:class:`EmotionClassifier` with each block's scaled columns weighted
-    (:func:`block_weights`; ``widths`` set on the instance by :func:`weighted`)."""
-
-    widths: tuple = ()
-
-    def _make_pipeline(self):
-        pipe = super()._make_pipeline()
-        pipe.steps.insert(1, ("weigh", FunctionTransformer(
-            _weigh, kw_args={"w": block_weights(self.widths)})))
-        return pipe
-
-
-def weighted(widths):
-    def make(**params):
-        model = BlockWeighted(**params)
-        model.widths = tuple(widths)
-        return model
-    return make
-
-
 def boaw_features(frames, default: np.ndarray, with_default: bool):
     """``fold_features``: the bag of words learned on the training fold (with the
     functionals in front if ``with_default``)."""
@@ -112,18 +80,12 @@ def boaw_features(frames, default: np.ndarray, with_default: bool):
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--emodb", type=Path, default=DEFAULT_EMODB)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--kinds", nargs="+", default=["10fold", "loso"],
-                        choices=["10fold", "loso"])
+    common_arguments(parser)
     parser.add_argument("--systems", nargs="+", default=list(SYSTEMS), choices=SYSTEMS)
-    parser.add_argument("--json", type=Path)
     args = parser.parse_args()
 
     t0 = time.perf_counter()
-    utt, y, spk = load_emodb(args.emodb)
-    feats, _ = cached_features("emodb", utt, args.cache, ["paper_frames", "rich"])
-    F = matrix(feats, DEFAULT_FEATURES)
+    utt, y, spk, feats, F = emodb_default(args.emodb, args.cache)
     frames = cached_frames(utt, args.cache)
     n_words = 2 * BagOfAudioWords().size
     print(f"EmoDB (the shared copy, cut to 2.0 s): {y.size} files, {np.unique(spk).size} "
@@ -131,10 +93,12 @@ def main() -> int:
           "outer training fold", flush=True)
     setups = {
         "default": dict(factory=EmotionClassifier),
-        "default-weighted": dict(factory=weighted((feats["rich"].shape[1],
-                                                   feats["cepstrum"].shape[1]))),
+        "default-weighted": dict(factory=partial(
+            EmotionClassifier, block_widths=(feats["rich"].shape[1],
+                                             feats["cepstrum"].shape[1]))),
         "boaw": dict(fold_features=boaw_features(frames, F, False)),
-        "default+boaw": dict(factory=weighted((F.shape[1], n_words)),
+        "default+boaw": dict(factory=partial(EmotionClassifier,
+                                             block_widths=(F.shape[1], n_words)),
                              fold_features=boaw_features(frames, F, True)),
     }
     report = {}
@@ -142,18 +106,7 @@ def main() -> int:
         t = time.perf_counter()
         r = nested(F, y, spk, dict(normalize="speaker"), GRID, kinds=tuple(args.kinds),
                    **setups[label])
-        cells = "".join(f"{k} {100 * r[k]['acc']:.1f} ± {100 * r[k]['std']:.1f}  "
-                        for k in args.kinds)
-        if "loso" in r:
-            cells += f"LOSO 1 utt. {100 * r['loso']['acc_single']:.1f}  "
-        chosen = sorted({c for k in args.kinds for c in r[k]["chosen"]})
-        print(f"  {label:<18}{cells}chosen {', '.join(chosen)}  "
-              f"({time.perf_counter() - t:.0f} s)", flush=True)
-        report[label] = {k: {m: v for m, v in r[k].items() if not m.startswith("pred")}
-                         for k in r}
-        if "loso" in r:
-            report[label]["confusion_loso"] = print_confusion(
-                f"EmoDB LOSO, {label}", y, r["loso"]["pred"])
+        report[label] = report_row(label, r, args.kinds, y, time.perf_counter() - t)
     return finish(report, t0, args.json)
 
 

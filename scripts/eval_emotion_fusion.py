@@ -27,7 +27,8 @@ square root of its width. **This weighting has no effect** (found in the third s
 the classifier's per-speaker z-normalisation and its scaling to [-1, 1] act per column and
 undo any per-column factor applied before them, so this measures plain concatenation
 (measured in ``eval_emotion.py``). A block weighting that holds is applied after the
-scaler, inside the estimator: ``BlockWeighted`` in ``scripts/eval_emotion_boaw.py``.
+scaler, inside the estimator: ``EmotionClassifier(block_widths=...)``, measured in
+``scripts/eval_emotion_boaw.py``.
 
 Scores: accuracy of the outer test folds (mean ± s.d. over folds); for leave-one-speaker-
 out also one utterance at a time without a speaker (the ``classify`` case). **The shared

@@ -64,3 +64,41 @@ def test_bag_of_audio_words_counts_nearest_words(rng):
         BagOfAudioWords(size=5, assignments=6).fit(low)
     with pytest.raises(ParameterError, match="training frames"):
         BagOfAudioWords(size=1000).fit(low[:1])
+
+
+def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
+    from ingest.emotion.classifier import EmotionClassifier, block_weights
+
+    w = block_weights((1, 4))
+    np.testing.assert_allclose(w, [np.sqrt(2.5)] + [np.sqrt(5 / 8)] * 4)
+    assert (w**2).sum() == pytest.approx(5)  # the total variance is kept
+    y = np.repeat(["a", "b", "c"], 20)
+    F = rng.normal(size=(60, 5)) + (y == "a")[:, None] * np.array([2.0, 0, 0, 0, 0]) \
+        + (y == "b")[:, None] * np.array([0, 0.5, 0.5, 0.5, 0.5])
+    spk = np.tile(["s1", "s2"], 30)
+    plain = EmotionClassifier(C=1.0).fit(F, y, speakers=spk)
+    weighted = EmotionClassifier(C=1.0, block_widths=(1, 4)).fit(F, y, speakers=spk)
+    assert not np.allclose(plain.decision_function(F), weighted.decision_function(F))
+    scaled = weighted.pipeline_["scale"].transform(weighted.normalizer_.transform(F, spk))
+    np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
+        weighted.normalizer_.transform(F, spk)), scaled * w)
+    arrays = weighted.to_arrays()
+    assert int(arrays["format"]) == 3 and arrays["block_widths"].tolist() == [1, 4]
+    back = EmotionClassifier.from_arrays(arrays)
+    assert back.block_widths == (1, 4)
+    np.testing.assert_allclose(back.decision_function(F), weighted.decision_function(F))
+    # without block widths the stored format stays 2, readable as before
+    old = plain.to_arrays()
+    assert int(old["format"]) == 2 and "block_widths" not in old
+    np.testing.assert_array_equal(EmotionClassifier.from_arrays(old).predict(F),
+                                  plain.predict(F))
+    from db.errors import DataError
+
+    with pytest.raises(DataError, match="block_widths"):
+        EmotionClassifier.from_arrays({k: v for k, v in arrays.items()
+                                       if k != "block_widths"})
+    with pytest.raises(ParameterError, match="sum to 6"):
+        EmotionClassifier(block_widths=(2, 4)).fit(F, y)
+    for bad in ((0, 5), (1.5, 3.5), "15", ()):
+        with pytest.raises(ParameterError, match="block_widths"):
+            EmotionClassifier(block_widths=bad).fit(F, y)

@@ -28,7 +28,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.linear_model import LogisticRegression
 from sklearn.model_selection import StratifiedKFold
 from sklearn.pipeline import Pipeline
-from sklearn.preprocessing import MinMaxScaler
+from sklearn.preprocessing import FunctionTransformer, MinMaxScaler
 from sklearn.svm import SVC
 from sklearn.utils.metaestimators import available_if
 from sklearn.utils.multiclass import check_classification_targets
@@ -71,11 +71,42 @@ DEFAULT_FEATURES = "rich+cepstrum"
 #: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
 DEFAULT_C = 0.1
 #: Version of the stored arrays; older databases hold none and must be re-ingested.
-CLASSIFIER_FORMAT = 2
+#: Format 3 is written only by a classifier with ``block_widths`` (an animegraph that
+#: reads format 2 alone would ignore the weights); the default still writes format 2.
+CLASSIFIER_FORMAT = 3
+#: Formats :meth:`EmotionClassifier.from_arrays` reads.
+READABLE_FORMATS = (2, 3)
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
 _NORMALIZE = ("speaker", "none")
+
+
+def block_weights(widths) -> np.ndarray:
+    """Column weights giving every block of columns the same share of the variance.
+
+    Block b of ``width_b`` columns is multiplied by ``sqrt(n / (n_blocks * width_b))``
+    (n the total width): after scaling every column to [-1, 1], each block holds
+    ``n / n_blocks`` of the total variance whatever its width (the equal-trace
+    normalisation of multiple kernel learning), and the total stays ``n`` (so that
+    ``gamma="auto"`` keeps its meaning).
+
+    Parameters
+    ----------
+    widths : sequence of int
+        Width of each block, in column order.
+
+    Returns
+    -------
+    np.ndarray, shape (sum(widths),)
+    """
+    widths = [int(w) for w in widths]
+    total = float(sum(widths))
+    return np.concatenate([np.full(w, np.sqrt(total / (len(widths) * w))) for w in widths])
+
+
+def _weigh(X, w):
+    return X * w
 
 
 def _weight_text(weight) -> str:
@@ -129,6 +160,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         SVM class weights, as :class:`sklearn.svm.SVC`'s: None (every utterance counts the
         same, Libsvm's and the paper's C-SVC), ``"balanced"`` (C scaled per class
         inversely to its frequency) or ``{label: weight}`` (stored with ``str`` labels).
+    block_widths : sequence of int, optional
+        Widths of consecutive blocks of feature columns (summing to the feature width):
+        after scaling, each block is weighted by :func:`block_weights` so that a wide
+        block does not drown a narrow one. None (default): every column counts the same.
+        Measured with the bag-of-audio-words (``scripts/eval_emotion_boaw.py``).
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -170,6 +206,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         kernel: str = KERNEL,
         C: float = DEFAULT_C,
         class_weight: str | dict | None = None,
+        block_widths: tuple | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
@@ -181,6 +218,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.kernel = kernel
         self.C = C
         self.class_weight = class_weight
+        self.block_widths = block_widths
         self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
@@ -209,6 +247,13 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 for v in w.values())):
             raise ParameterError(f"class_weight must be None, 'balanced' or a dict of "
                                  f"non-negative weights, got {w!r}")
+        b = self.block_widths
+        if b is not None and (isinstance(b, str | bytes) or not hasattr(b, "__len__")
+                              or len(b) == 0 or not all(
+                isinstance(v, int | np.integer) and not isinstance(v, bool) and v > 0
+                for v in b)):
+            raise ParameterError(f"block_widths must be None or a sequence of positive "
+                                 f"integers, got {b!r}")
         if self.cepstrum not in ("utterance", "frames"):
             raise ParameterError(f"cepstrum must be one of ('utterance', 'frames'), "
                                  f"got {self.cepstrum!r}")
@@ -266,11 +311,14 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         return np.vstack(rows)
 
     def _make_pipeline(self) -> Pipeline:
-        return Pipeline([
-            ("scale", MinMaxScaler(feature_range=(-1, 1))),
-            ("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
-                        class_weight=self.class_weight, decision_function_shape="ovr")),
-        ])
+        steps = [("scale", MinMaxScaler(feature_range=(-1, 1)))]
+        if self.block_widths is not None:
+            steps.append(("weigh", FunctionTransformer(
+                _weigh, kw_args={"w": block_weights(self.block_widths)})))
+        steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
+                                 class_weight=self.class_weight,
+                                 decision_function_shape="ovr")))
+        return Pipeline(steps)
 
     @staticmethod
     def _as_2d(d: np.ndarray) -> np.ndarray:
@@ -317,6 +365,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 f"y has {classes.size} class; need at least two emotion classes, "
                 f"got {classes.tolist()}"
             )
+        if self.block_widths is not None and sum(self.block_widths) != F.shape[1]:
+            raise ParameterError(f"block_widths sum to {sum(self.block_widths)}, but X has "
+                                 f"{F.shape[1]} features")
         self.normalizer_ = None
         if self.normalize == "speaker":
             self.normalizer_ = SpeakerNormalizer().fit(F, speakers)
@@ -420,7 +471,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Returns
         -------
         dict of str to np.ndarray
-            ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
+            ``format`` (2, or :data:`CLASSIFIER_FORMAT` with ``block_widths``, then
+            stored as an int array), the parameters (``features``,
             ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
             ``class_weight`` (``"none"``, ``"balanced"`` or a JSON object),
             ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
@@ -434,7 +486,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         check_is_fitted(self, ["pipeline_"])
         scaler, svm = self.pipeline_["scale"], self.pipeline_["svm"]
         out = {
-            "format": np.array(CLASSIFIER_FORMAT),
+            "format": np.array(2 if self.block_widths is None else CLASSIFIER_FORMAT),
             "features": np.array(self.features),
             "n_cepstrum": np.array(self.n_cepstrum),
             "cepstrum": np.array(self.cepstrum),
@@ -454,6 +506,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             "dual_coef": svm.dual_coef_.copy(),
             "intercept": svm.intercept_.copy(),
         }
+        if self.block_widths is not None:
+            out["block_widths"] = np.array([int(w) for w in self.block_widths])
         if self.normalizer_ is not None:
             out.update(self.normalizer_.to_arrays())
         if self.calibrator_ is not None:
@@ -485,7 +539,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             Arrays missing, or stored by an older animegraph (no ``format``; its features
             were not level-normalised): re-ingest.
         """
-        if "format" not in arrays or int(np.asarray(arrays["format"])) != CLASSIFIER_FORMAT:
+        if "format" not in arrays or int(np.asarray(arrays["format"])) not in READABLE_FORMATS:
             raise DataError("the stored emotion classifier is from an older animegraph: "
                             "re-ingest the database (animegraph ingest SRC --db DB) to "
                             "replace it")
@@ -503,10 +557,15 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         probability = "calib_coef" in arrays and "calib_intercept" in arrays
         weight = _weight_from_text(str(np.asarray(arrays["class_weight"]))
                                    if "class_weight" in arrays else "none")
+        widths = None
+        if int(np.asarray(arrays["format"])) >= 3:
+            if "block_widths" not in arrays:
+                raise DataError("stored emotion classifier lacks array 'block_widths'")
+            widths = tuple(int(w) for w in np.asarray(arrays["block_widths"]).ravel())
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
-                    class_weight=weight, probability=probability,
+                    class_weight=weight, block_widths=widths, probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
         model._check_params()
