@@ -60,9 +60,9 @@ def frame_descriptors(audio, sample_rate) -> np.ndarray:
     """
     import librosa
 
-    from ingest.emotion.features import _frames  # the ``rich`` block's frame analysis
+    from ingest.emotion.features import frame_analysis  # the ``rich`` block's frames
 
-    fr = _frames(prepare_audio(audio, sample_rate))
+    fr = frame_analysis(prepare_audio(audio, sample_rate))
     mfcc, rms, f0 = fr["mfcc"], fr["rms"], fr["f0"]
     n = min(mfcc.shape[1], rms.size, f0.size)
     mfcc, rms, f0 = mfcc[:, :n], rms[:n], f0[:n]

@@ -44,6 +44,7 @@ __all__ = [
     "N_CEPSTRUM",
     "block_features",
     "emotion_features",
+    "frame_analysis",
     "parse_features",
     "real_cepstrum",
     "rich_features",
@@ -182,8 +183,9 @@ def _stats(v: np.ndarray) -> list[float]:
     return [float(v.mean()), float(v.std()), float(p10), float(p90), float(p90 - p10)]
 
 
-def _frames(x: np.ndarray) -> dict[str, np.ndarray]:
-    """Frame-level descriptors at 16 kHz, 32 ms frames, hop 10 ms: the magnitude
+def frame_analysis(x: np.ndarray) -> dict[str, np.ndarray]:
+    """Frame-level analysis of prepared 16 kHz speech ``x`` (shared by the ``rich``
+    block and :mod:`ingest.emotion.boaw`), 32 ms frames, hop 10 ms: the magnitude
     spectrogram ``spec`` (257, T), 20 MFCCs ``mfcc`` (20, T) from 40 mel bands, ``rms``
     (T,) and the YIN F0 ``f0`` (Hz, about T frames; 60-500 Hz)."""
     import librosa
@@ -205,7 +207,7 @@ def _rich(x: np.ndarray) -> np.ndarray:
 
     sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
     xf = x.astype(np.float32)
-    fr = _frames(x)
+    fr = frame_analysis(x)
     spec, mfcc, rms, f0 = fr["spec"], fr["mfcc"], fr["rms"], fr["f0"]
     d1 = librosa.feature.delta(mfcc, width=5)
     d2 = librosa.feature.delta(mfcc, order=2, width=5)
