@@ -40,6 +40,7 @@ from animegraph.synthesis.audio import (
     require_posteriorgrams,
 )
 from animegraph.synthesis.explain import blended_sources, explain_rows
+from animegraph.synthesis.guide import blend_guide, guide_trajectory, guided_costs, target_costs
 from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -92,6 +93,7 @@ def synthesize(
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
+    guide=None, guide_blend: float = 0.0,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -134,6 +136,13 @@ def synthesize(
         ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
         the phones its posteriorgram makes likely,
         :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
+    guide : animegraph.baselines.base.BaselineModel, optional
+        Beyond the paper (:mod:`animegraph.synthesis.guide`): a baseline fitted on this
+        database whose predicted motion for the audio guides the choice of animes (its
+        distance to each candidate is added to C_audio: trajectory-guided selection).
+    guide_blend : float, optional
+        With ``guide``: the guide's share in the output motion (0: none, the default;
+        :data:`animegraph.synthesis.guide.GUIDE_BLEND` = 0.5: the mean of the two).
 
     Returns
     -------
@@ -171,6 +180,11 @@ def synthesize(
     cost_name = audio_cost
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
                                          candidates_from=candidates_from)
+    guide_ics = None
+    if guide is not None:
+        guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=emotion)
+        audio_cost = guided_costs(audio_cost, target_costs(
+            model.graph, model.decomposer.mixing_, phones, cands.nodes, guide_ics))
     timings["audio_cost_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
@@ -189,6 +203,8 @@ def synthesize(
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
                                  options=options)
+    if guide_ics is not None and guide_blend > 0:
+        ics = blend_guide(ics, guide_ics, guide_blend)
     motion = model.to_channels(ics)
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0

@@ -1,0 +1,128 @@
+"""Trajectory-guided selection (animegraph.synthesis.guide): a baseline's predicted motion
+as the target of the animes' choice, and as a blend."""
+
+import numpy as np
+import pytest
+
+from animegraph.apps import evaluate
+from animegraph.baselines import make_estimator
+from animegraph.search import candidates
+from animegraph.synthesis import Model, query_phones, synthesize
+from animegraph.synthesis.assemble import output_frames, warp_anime
+from animegraph.synthesis.guide import (
+    blend_guide,
+    guide_trajectory,
+    guided_costs,
+    target_costs,
+)
+from db.errors import ParameterError
+from db.store import Database
+from ingest.formats.media import read_audio
+from ingest.tables import prepared_from_database
+
+SMALL_MLP = {"n_mfcc": 6, "context": 1, "subset_hidden": (3, 4), "expression_hidden": 4,
+             "frame_rate": 60.0}
+
+
+@pytest.fixture(scope="module")
+def model(tiny_db):
+    return Model.load(tiny_db[0])
+
+
+@pytest.fixture(scope="module")
+def mlp(tiny_db):
+    return make_estimator("mu-mlp", **SMALL_MLP).fit(
+        prepared_from_database(Database.open(tiny_db[0])))
+
+
+@pytest.fixture(scope="module")
+def speech(tiny_corpus, model):
+    wav = sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0]
+    audio, rate = read_audio(wav)
+    phones, _ = query_phones(audio, rate, labels=None, engine="pocketsphinx")
+    return audio, rate, phones
+
+
+def test_target_cost_is_the_mean_distance_to_the_guide(model, speech):
+    """The vectorised cost equals a loop over warp_anime (uniform stretch) and the
+    distance in principal-component space; a candidate that is the guide costs 0."""
+    _, _, phones = speech
+    graph = model.graph
+    cands = candidates(graph, [p.phone for p in phones])
+    n, ranges = output_frames(phones, graph.fps)
+    rng = np.random.default_rng(0)
+    guide = rng.normal(size=(n, graph.motion_values.shape[1]))
+    i = next(k for k, (a, b) in enumerate(ranges) if b - a >= 3 and len(cands.nodes[k]) > 2)
+    a, b = ranges[i]
+    guide[a:b] = warp_anime(graph, int(cands.nodes[i][1]), phones[i], b - a, time_warp=False)
+    costs = target_costs(graph, model.decomposer.mixing_, phones, cands.nodes, guide)
+    assert [len(c) for c in costs] == [len(c) for c in cands.nodes]
+    assert costs[i][1] == pytest.approx(0.0, abs=1e-5)
+    assert np.argmin(costs[i]) == 1
+    pcs = model.decomposer.pcs_from_sources
+    for j, node in enumerate(cands.nodes[i][:5]):
+        warped = warp_anime(graph, int(node), phones[i], b - a, time_warp=False)
+        want = np.linalg.norm(pcs(warped) - pcs(guide[a:b]), axis=1).mean()
+        assert costs[i][j] == pytest.approx(want, rel=1e-5, abs=1e-6)
+
+
+def test_guided_costs_scale_the_target_to_the_audio_median():
+    audio = [np.array([1.0, 2.0, 3.0]), np.array([4.0]), np.array([])]
+    target = [np.array([10.0, 20.0, 0.0]), np.array([0.0]), np.array([])]
+    out = guided_costs(audio, target)
+    np.testing.assert_allclose(out[0], [1.0 + 2.0 * 10 / 10, 2.0 + 2.0 * 20 / 10, 3.0])
+    np.testing.assert_allclose(out[1], [4.0])  # a zero target median: the audio cost alone
+    assert out[2].shape == (0,)
+
+
+def test_blend_guide():
+    a, b = np.zeros((4, 2)), np.ones((4, 2))
+    np.testing.assert_allclose(blend_guide(a, b), 0.5)
+    np.testing.assert_allclose(blend_guide(a, b, 1.0), b)
+    with pytest.raises(ParameterError):
+        blend_guide(a, b, 1.5)
+    with pytest.raises(ParameterError):
+        blend_guide(a, np.ones((3, 2)))
+
+
+def test_synthesize_guided(model, mlp, speech):
+    """Guided ranking changes which animes are averaged; with the guide's whole share the
+    output is the guide's own motion."""
+    audio, rate, phones = speech
+    labels = [evaluate_segment(p) for p in phones]
+    plain = synthesize(model, audio, rate, labels=labels, k_best=5)
+    guided = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp)
+    assert plain.motion.shape == guided.motion.shape
+    assert any(not np.array_equal(x["node"], y["node"]) for x, y in
+               zip(sum(plain.blended, []), sum(guided.blended, []), strict=True))
+    whole = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp, guide_blend=1.0)
+    target = guide_trajectory(model, mlp, audio, rate, guided.phones)
+    np.testing.assert_allclose(whole.ics, target, atol=1e-9)
+
+
+def test_guide_of_other_channels_is_one_error(model, mlp, speech):
+    audio, rate, phones = speech
+    other = make_estimator("mu-mlp", **SMALL_MLP)
+    other.__dict__.update({k: v for k, v in mlp.__dict__.items()})
+    other.channels_ = tuple(mlp.channels_[:-1])
+    with pytest.raises(Exception, match="channels"):
+        guide_trajectory(model, other, audio, rate, phones)
+
+
+def test_heldout_guided_rows(tiny_db, model, mlp):
+    clip = prepared_from_database(Database.open(tiny_db[0]))[0]
+    row = evaluate.score_heldout(model, clip, methods=("kbest20", "kbest20-guided",
+                                                       "kbest20-guided-blend", "kbest20-blend"),
+                                 guide=mlp)
+    assert set(row["methods"]) == {"kbest20", "kbest20-guided", "kbest20-guided-blend",
+                                   "kbest20-blend"}
+    assert evaluate.split_guide("kbest20-mix-likely-guided-blend") == (
+        "kbest20-mix-likely", True, True)
+    with pytest.raises(ValueError, match="guide"):
+        evaluate.score_heldout(model, clip, methods=("kbest20-guided",))
+
+
+def evaluate_segment(phone):
+    from ingest.formats.phones_csv import Segment
+
+    return Segment(phone.phone, phone.start, phone.end)
