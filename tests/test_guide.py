@@ -126,3 +126,84 @@ def evaluate_segment(phone):
     from ingest.formats.phones_csv import Segment
 
     return Segment(phone.phone, phone.start, phone.end)
+
+
+def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
+    """``synth --guide``: the stored guide is used (fitted and stored on first use), the
+    path line says so, --guide-blend 1 writes the guide's motion; bad uses are one line."""
+    import shutil
+
+    from animegraph.apps.cli import SYNTH_GUIDES, main
+    from animegraph.baselines.base import load_model, save_model
+    from animegraph.synthesis.guide import GUIDES
+
+    assert SYNTH_GUIDES == GUIDES
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    save_model(mlp, db)  # small, so that the test does not fit the paper's size
+    wav = tmp_path / "speech.wav"
+    shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
+    base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
+    assert main([*base, "-o", str(tmp_path / "g.npz"), "--guide", "mu-mlp", "--explain"]) == 0
+    captured = capsys.readouterr()
+    assert "by their distance to mu-mlp's predicted motion, the output 0.5 mu-mlp" in captured.err
+    assert "fitting" not in captured.err and "mu-mlp's predicted motion" in captured.out
+    assert main([*base, "-o", str(tmp_path / "p.npz")]) == 0
+    assert main([*base, "-o", str(tmp_path / "w.npz"), "--guide", "mu-mlp",
+                 "--guide-blend", "1"]) == 0
+    assert main(["synth", str(wav), "--db", str(db), "--method", "mu-mlp",
+                 "-o", str(tmp_path / "m.npz")]) == 0
+    capsys.readouterr()
+    with np.load(tmp_path / "g.npz") as g, np.load(tmp_path / "p.npz") as p, \
+            np.load(tmp_path / "w.npz") as w, np.load(tmp_path / "m.npz") as m:
+        assert g["motion"].shape == p["motion"].shape
+        assert not np.allclose(g["motion"], p["motion"])
+        # The guide's motion as the database's PCA/ICA model holds it (95 % of the variance).
+        held = Model.load(db)
+        m_held = held.to_channels(held.decomposer.transform(held.to_local(m["motion"])))
+        n = min(len(w["motion"]), len(m_held))
+        np.testing.assert_allclose(w["motion"][:n - 1], m_held[:n - 1], atol=1e-4)
+    assert load_model(db, "mu-mlp").get_params() == mlp.get_params()
+    for extra, needle in ((["--guide-blend", "0.3"], "--guide-blend needs --guide"),
+                          (["--guide", "mu-mlp", "--guide-blend", "2"], "must be in [0, 1]"),
+                          (["--method", "mu-mlp", "--guide", "mu-mlp"], "--guide only applies")):
+        assert main([*base, "-o", str(tmp_path / "x.npz"), *extra]) in (1, 2)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and needle in err[0], err
+
+
+def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, mlp, speech,
+                                                                      tmp_path):
+    """The NumPy-only restore of a stored mu-mlp gives the estimator's prediction, in a
+    process that never imports scikit-learn."""
+    import json
+    import shutil
+    import subprocess
+    import sys
+
+    from animegraph.baselines.base import save_model
+    from animegraph.baselines.stored import load_forward
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    assert load_forward(db, "mu-mlp") is None and load_forward(db, "av-hmm") is None
+    save_model(mlp, db)
+    audio, rate, _ = speech
+    stored = load_forward(db, "mu-mlp")
+    for emotion in (None, "happy"):
+        np.testing.assert_allclose(stored.predict(audio, rate, emotion=emotion),
+                                   mlp.predict(audio, rate, emotion=emotion), atol=1e-9)
+    np.save(tmp_path / "audio.npy", np.asarray(audio, dtype=np.float32))
+    code = (
+        "import json, sys\nimport numpy as np\n"
+        "from animegraph.baselines.stored import load_forward\n"
+        f"m = load_forward({str(db)!r}, 'mu-mlp')\n"
+        f"y = m.predict(np.load({str(tmp_path / 'audio.npy')!r}), {rate})\n"
+        f"np.save({str(tmp_path / 'y.npy')!r}, y)\n"
+        "print(json.dumps([k for k in ('sklearn', 'scipy.special', 'pandas') "
+        "if k in sys.modules]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+    np.testing.assert_allclose(np.load(tmp_path / "y.npy"), mlp.predict(audio, rate),
+                               atol=1e-6)

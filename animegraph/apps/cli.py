@@ -243,6 +243,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="candidate animes of a phone: label (the paper: its own phone's, "
                      "default), or likely (beyond the paper: also those of the 3 phones its "
                      "posteriorgram makes likeliest)")
+    syn.add_argument("--guide", choices=(*SYNTH_GUIDES, "none"), default=None,
+                     help="beyond the paper: a baseline fitted on the database (on first use, "
+                     "then stored) predicts the motion, and each phone's animes are ranked by "
+                     "their distance to it beside the audio cost (trajectory-guided "
+                     "selection); none: off (default)")
+    syn.add_argument("--guide-blend", type=_number, default=None, metavar="W",
+                     help="with --guide: the guide's share of the output motion, in [0, 1] "
+                     "(default 0.5, the mean of the two; 0: guided ranking only)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -726,6 +734,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path += f"; audio cost {audio_cost} (beyond the paper)"
     if args.candidates == "likely":
         path += "; candidates from the likely phones (beyond the paper)"
+    guide_name, guide_blend = _synth_guide(args)
+    if guide_name is not None:
+        path += (f"; animes ranked beside the audio cost by their distance to {guide_name}'s "
+                 f"predicted motion" + (f", the output {guide_blend:g} {guide_name}" if
+                                        guide_blend else "") + " (beyond the paper)")
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -744,6 +757,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
+    guide = _load_guide(args.db, guide_name)
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -762,7 +776,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
-                     candidates_from=args.candidates or "label")
+                     candidates_from=args.candidates or "label", guide=guide,
+                     guide_blend=guide_blend)
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -853,6 +868,43 @@ def _sidecar_labels(path: Path) -> Path | None:
 SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 
+#: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
+SYNTH_GUIDES = ("mu-mlp", "av-hmm")
+
+
+def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float]:
+    """``synth --guide`` and ``--guide-blend``: the guiding baseline (None: off) and its
+    share of the output motion."""
+    if args.guide_blend is not None and not 0.0 <= args.guide_blend <= 1.0:
+        raise UsageError(f"animegraph synth: --guide-blend must be in [0, 1], got "
+                         f"{args.guide_blend}")
+    if args.guide in (None, "none"):
+        if args.guide_blend is not None:
+            raise UsageError("animegraph synth: --guide-blend needs --guide mu-mlp or av-hmm")
+        return None, 0.0
+    from animegraph.synthesis.guide import GUIDE_BLEND
+
+    return args.guide, GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend)
+
+
+def _load_guide(db, name: str | None):
+    """The guiding baseline stored with the database ``db`` (mu-mlp restored without
+    scikit-learn), fitted and stored on first use (saying so on stderr), or None."""
+    if name is None:
+        return None
+    from animegraph.baselines.stored import load_forward, model_path
+
+    model = load_forward(db, name)
+    if model is not None:
+        return model
+    from animegraph.baselines.base import fitted_model, load_model
+
+    if not model_path(db, name).is_file() or load_model(db, name) is None:
+        print(f"animegraph: fitting {name} on {db} to guide the animes' choice (first use; "
+              f"stored with the database) ...", file=sys.stderr)
+    return fitted_model(db, name)
+
+
 def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
     from animegraph.synthesis.path import synthesis_path  # shared with batch
@@ -894,7 +946,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--helper", args.helper is not None),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
         ("--audio-cost", args.audio_cost is not None),
-        ("--candidates", args.candidates is not None)) if on]
+        ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
+        ("--guide-blend", args.guide_blend is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "
