@@ -734,8 +734,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path += f"; audio cost {audio_cost} (beyond the paper)"
     if args.candidates == "likely":
         path += "; candidates from the likely phones (beyond the paper)"
-    guide_name, guide_blend = _synth_guide(args)
-    if guide_name is not None:
+    guide_name, guide_blend, guide_asked = _synth_guide(args)
+    if guide_name is not None and guide_asked:
         path += (f"; animes ranked beside the audio cost by their distance to {guide_name}'s "
                  f"predicted motion" + (f", the output {guide_blend:g} {guide_name}" if
                                         guide_blend else "") + " (beyond the paper)")
@@ -757,7 +757,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
-    guide = _load_guide(args.db, guide_name)
+    guide = _load_guide(args.db, guide_name, asked=guide_asked)
+    if guide is None and guide_name is not None:
+        path += f"; but without its {guide_name} guide, which could not be fitted"
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -872,24 +874,31 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 SYNTH_GUIDES = ("mu-mlp", "av-hmm")
 
 
-def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float]:
-    """``synth --guide`` and ``--guide-blend``: the guiding baseline (None: off) and its
-    share of the output motion."""
+def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
+    """``synth --guide`` and ``--guide-blend``: the guiding baseline (None: off), its
+    share of the output motion, and whether it was asked for (else the audio-only path's
+    default, :func:`animegraph.synthesis.path.audio_only_guide`)."""
+    from animegraph.synthesis.guide import GUIDE_BLEND
+    from animegraph.synthesis.path import audio_only_guide
+
     if args.guide_blend is not None and not 0.0 <= args.guide_blend <= 1.0:
         raise UsageError(f"animegraph synth: --guide-blend must be in [0, 1], got "
                          f"{args.guide_blend}")
-    if args.guide in (None, "none"):
-        if args.guide_blend is not None:
-            raise UsageError("animegraph synth: --guide-blend needs --guide mu-mlp or av-hmm")
-        return None, 0.0
-    from animegraph.synthesis.guide import GUIDE_BLEND
+    _, known, searched = _synth_given(args)
+    name = (audio_only_guide(known_phones=known, searched=searched) if args.guide is None
+            else None if args.guide == "none" else args.guide)
+    if name is None and args.guide_blend is not None:
+        raise UsageError("animegraph synth: --guide-blend needs --guide mu-mlp or av-hmm")
+    return (name, GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend),
+            args.guide is not None)
 
-    return args.guide, GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend)
 
-
-def _load_guide(db, name: str | None):
+def _load_guide(db, name: str | None, *, asked: bool = True):
     """The guiding baseline stored with the database ``db`` (mu-mlp restored without
-    scikit-learn), fitted and stored on first use (saying so on stderr), or None."""
+    scikit-learn), fitted and stored on first use (saying so on stderr), or None.
+
+    A default guide (not ``asked``) that cannot be fitted or stored is left out with a
+    warning line: the path falls back to k-best alone."""
     if name is None:
         return None
     from animegraph.baselines.stored import load_forward, model_path
@@ -902,13 +911,19 @@ def _load_guide(db, name: str | None):
     if not model_path(db, name).is_file() or load_model(db, name) is None:
         print(f"animegraph: fitting {name} on {db} to guide the animes' choice (first use; "
               f"stored with the database) ...", file=sys.stderr)
-    return fitted_model(db, name)
+    if asked:
+        return fitted_model(db, name)
+    try:
+        return fitted_model(db, name)
+    except (AnimeGraphError, OSError) as exc:
+        print(f"animegraph: warning: no {name} guide ({exc}); each phone the mean of its "
+              f"best animes alone", file=sys.stderr)
+        return None
 
 
-def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
-    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
-    from animegraph.synthesis.path import synthesis_path  # shared with batch
-
+def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
+    """What ``synth``'s phones come from (for the path line), whether they are known (labels
+    or a transcript), and whether the paper's search was asked for."""
     engine = args.phones_engine or "auto"
     if args.labels is not None:
         given = "phone labels given"
@@ -918,8 +933,15 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"audio only (phones recognised by the {engine} phone engine)"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
-    return synthesis_path(given, known_phones=args.labels is not None or args.text is not None,
-                          k_best=args.k_best, searched=searched)
+    return given, args.labels is not None or args.text is not None, searched
+
+
+def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
+    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
+    from animegraph.synthesis.path import synthesis_path  # shared with batch
+
+    given, known, searched = _synth_given(args)
+    return synthesis_path(given, known_phones=known, k_best=args.k_best, searched=searched)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:

@@ -28,6 +28,15 @@ from __future__ import annotations
 TRANSCRIPT_K_BEST = 20
 #: ... and when they are recognised from the audio alone.
 AUDIO_ONLY_K_BEST = 20
+#: The baseline whose predicted motion guides the audio-only path
+#: (:mod:`animegraph.synthesis.guide`); None: unguided.
+AUDIO_ONLY_GUIDE: str | None = None
+
+
+def audio_only_guide(*, known_phones: bool, searched: bool = False) -> str | None:
+    """The guide of synthesis by default: :data:`AUDIO_ONLY_GUIDE` for speech alone
+    without a search asked for, else none (the known-phones path is unguided)."""
+    return None if known_phones or searched else AUDIO_ONLY_GUIDE
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
