@@ -93,6 +93,8 @@ def test_synthesize_guided(model, mlp, speech):
     plain = synthesize(model, audio, rate, labels=labels, k_best=5)
     guided = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp)
     assert plain.motion.shape == guided.motion.shape
+    assert "target_cost" in guided.explain[0] and "target_cost" not in plain.explain[0]
+    assert "guide_s" in guided.timings and "guide_s" not in plain.timings
     assert any(not np.array_equal(x["node"], y["node"]) for x, y in
                zip(sum(plain.blended, []), sum(guided.blended, []), strict=True))
     whole = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp, guide_blend=1.0)

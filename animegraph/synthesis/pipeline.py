@@ -180,14 +180,17 @@ def synthesize(
     cost_name = audio_cost
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
                                          candidates_from=candidates_from)
-    guide_ics = None
-    if guide is not None:
+    guide_ics, target, unary = None, None, audio_cost
+    if guide is not None:  # trajectory-guided: C_audio plus the target cost
+        t_guide = time.perf_counter()
         guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=emotion)
-        audio_cost = guided_costs(audio_cost, target_costs(
-            model.graph, model.decomposer.mixing_, phones, cands.nodes, guide_ics))
+        timings["guide_s"] = time.perf_counter() - t_guide
+        target = target_costs(model.graph, model.decomposer.mixing_, phones, cands.nodes,
+                              guide_ics)
+        unary = guided_costs(audio_cost, target)
     timings["audio_cost_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
-    result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
+    result = search(model.graph, cands, unary, weights=weights or SearchWeights(),
                     emotion=emotion, method=method, window=window, tolerance=tolerance)
     timings["search_s"] = time.perf_counter() - t2
 
@@ -196,7 +199,7 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
-        ics, ranked = render_k_best(model, phones, cands, audio_cost, result.nodes, k_best,
+        ics, ranked = render_k_best(model, phones, cands, unary, result.nodes, k_best,
                                     weights=weights, options=options, emotion=emotion)
         joins = []
     notes: list[str] = []
@@ -208,7 +211,7 @@ def synthesize(
     motion = model.to_channels(ics)
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
-    explain = explain_rows(model, phones, result, cands, audio_cost)
+    explain = explain_rows(model, phones, result, cands, audio_cost, target)
     blended = tuple(blended_sources(model.graph, r) for r in ranked)
     for row, animes in zip(explain, blended, strict=False):
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]
