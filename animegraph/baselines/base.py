@@ -95,11 +95,7 @@ class BaselineModel(Predicting, BaseEstimator):
         # JSON has no tuples: sequence parameters come back as lists.
         model = cls(**{k: tuple(v) if isinstance(v, list) else v
                        for k, v in description["params"].items()})
-        model.channels_ = tuple(description["channels"])
-        model.groups_ = tuple(description["groups"])
-        model.kind_ = description["kind"]
-        model.fps_ = float(description["fps"])
-        model.emotions_ = tuple(description["emotions"])
+        model._set_described(description)
         model._restore(dict(arrays))
         return model
 

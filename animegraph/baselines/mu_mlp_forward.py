@@ -124,11 +124,7 @@ class StoredMuMlp(MuMlpForward, Predicting):
         params = description["params"]
         self.n_mfcc, self.context = int(params["n_mfcc"]), int(params["context"])
         self.frame_rate = float(params["frame_rate"])
-        self.channels_ = tuple(description["channels"])
-        self.groups_ = tuple(description["groups"])
-        self.kind_ = description["kind"]
-        self.fps_ = float(description["fps"])
-        self.emotions_ = tuple(description["emotions"])
+        self._set_described(description)
         self._restore(dict(arrays))
         return self
 

@@ -83,6 +83,15 @@ class Predicting:
         """Motion at ``times`` (s): shape (len(times), n_channels)."""
         raise NotImplementedError
 
+    def _set_described(self, description: dict) -> None:
+        """The fitted attributes common to all methods from a stored description
+        (``channels``, ``groups``, ``kind``, ``fps``, ``emotions``)."""
+        self.channels_ = tuple(description["channels"])
+        self.groups_ = tuple(description["groups"])
+        self.kind_ = description["kind"]
+        self.fps_ = float(description["fps"])
+        self.emotions_ = tuple(description["emotions"])
+
     def check_channels(self, names, where: str = "the database") -> None:
         """Raise DataError unless ``names`` are the channels the model was trained on."""
         names = tuple(names)
