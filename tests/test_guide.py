@@ -86,20 +86,26 @@ def test_blend_guide():
 
 
 def test_synthesize_guided(model, mlp, speech):
-    """Guided ranking changes which animes are averaged; with the guide's whole share the
-    output is the guide's own motion."""
+    """Guided ranking changes which animes are averaged; the blend (the default use of a
+    guide) keeps them and averages the motion with the guide's; with the guide's whole
+    share the output is the guide's own motion."""
     audio, rate, phones = speech
     labels = [evaluate_segment(p) for p in phones]
     plain = synthesize(model, audio, rate, labels=labels, k_best=5)
-    guided = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp)
-    assert plain.motion.shape == guided.motion.shape
-    assert "target_cost" in guided.explain[0] and "target_cost" not in plain.explain[0]
-    assert "guide_s" in guided.timings and "guide_s" not in plain.timings
+    ranked = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp,
+                        guide_rank=True, guide_blend=0.0)
+    assert plain.motion.shape == ranked.motion.shape
     assert any(not np.array_equal(x["node"], y["node"]) for x, y in
-               zip(sum(plain.blended, []), sum(guided.blended, []), strict=True))
+               zip(sum(plain.blended, []), sum(ranked.blended, []), strict=True))
+    assert "target_cost" in ranked.explain[0] and "target_cost" not in plain.explain[0]
+    blended = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp)
+    assert blended.blended == plain.blended and "guide_s" in blended.timings
+    target = guide_trajectory(model, mlp, audio, rate, plain.phones)
+    np.testing.assert_allclose(blended.ics, 0.5 * plain.ics + 0.5 * target, atol=1e-9)
     whole = synthesize(model, audio, rate, labels=labels, k_best=5, guide=mlp, guide_blend=1.0)
-    target = guide_trajectory(model, mlp, audio, rate, guided.phones)
     np.testing.assert_allclose(whole.ics, target, atol=1e-9)
+    with pytest.raises(ParameterError, match="nothing"):
+        synthesize(model, audio, rate, labels=labels, guide=mlp, guide_blend=0.0)
 
 
 def test_guide_of_other_channels_is_one_error(model, mlp, speech):
@@ -131,8 +137,9 @@ def evaluate_segment(phone):
 
 
 def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
-    """``synth --guide``: the stored guide is used (fitted and stored on first use), the
-    path line says so, --guide-blend 1 writes the guide's motion; bad uses are one line."""
+    """Audio only, ``synth`` averages its motion with the stored mu-mlp's by default and
+    says so; ``--guide none`` turns it off, ``--guide-rank`` ranks by it, ``--guide-blend
+    1`` writes the guide's motion; bad uses are one line."""
     import shutil
 
     from animegraph.apps.cli import SYNTH_GUIDES, main
@@ -146,32 +153,63 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
     base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
-    assert main([*base, "-o", str(tmp_path / "g.npz"), "--guide", "mu-mlp", "--explain"]) == 0
+    assert main([*base, "-o", str(tmp_path / "g.npz"), "--explain"]) == 0
     captured = capsys.readouterr()
-    assert "by their distance to mu-mlp's predicted motion, the output 0.5 mu-mlp" in captured.err
+    assert "the output the mean of that and mu-mlp's predicted motion (measured" in captured.err
     assert "fitting" not in captured.err and "mu-mlp's predicted motion" in captured.out
-    assert main([*base, "-o", str(tmp_path / "p.npz")]) == 0
-    assert main([*base, "-o", str(tmp_path / "w.npz"), "--guide", "mu-mlp",
-                 "--guide-blend", "1"]) == 0
+    assert main([*base, "-o", str(tmp_path / "p.npz"), "--guide", "none"]) == 0
+    assert "predicted motion" not in capsys.readouterr().err
+    assert main([*base, "-o", str(tmp_path / "r.npz"), "--guide", "mu-mlp", "--guide-rank",
+                 "--explain"]) == 0
+    captured = capsys.readouterr()
+    assert "the output 0.5 mu-mlp's predicted motion, each phone's animes ranked" in \
+        captured.err and "target_cost" in captured.out
+    assert main([*base, "-o", str(tmp_path / "w.npz"), "--guide-blend", "1"]) == 0
     assert main(["synth", str(wav), "--db", str(db), "--method", "mu-mlp",
                  "-o", str(tmp_path / "m.npz")]) == 0
     capsys.readouterr()
     with np.load(tmp_path / "g.npz") as g, np.load(tmp_path / "p.npz") as p, \
-            np.load(tmp_path / "w.npz") as w, np.load(tmp_path / "m.npz") as m:
-        assert g["motion"].shape == p["motion"].shape
+            np.load(tmp_path / "w.npz") as w, np.load(tmp_path / "m.npz") as m, \
+            np.load(tmp_path / "r.npz") as r:
+        assert g["motion"].shape == p["motion"].shape == r["motion"].shape
         assert not np.allclose(g["motion"], p["motion"])
+        assert not np.allclose(g["motion"], r["motion"])
         # The guide's motion as the database's PCA/ICA model holds it (95 % of the variance).
         held = Model.load(db)
         m_held = held.to_channels(held.decomposer.transform(held.to_local(m["motion"])))
         n = min(len(w["motion"]), len(m_held))
         np.testing.assert_allclose(w["motion"][:n - 1], m_held[:n - 1], atol=1e-4)
     assert load_model(db, "mu-mlp").get_params() == mlp.get_params()
-    for extra, needle in ((["--guide-blend", "0.3"], "--guide-blend needs --guide"),
-                          (["--guide", "mu-mlp", "--guide-blend", "2"], "must be in [0, 1]"),
+    for extra, needle in ((["--guide", "none", "--guide-blend", "0.3"], "needs a guide"),
+                          (["--exact", "--guide-rank"], "--guide-rank needs a guide"),
+                          (["--guide-blend", "2"], "must be in [0, 1]"),
+                          (["--guide-blend", "0"], "nothing to do"),
                           (["--method", "mu-mlp", "--guide", "mu-mlp"], "--guide only applies")):
         assert main([*base, "-o", str(tmp_path / "x.npz"), *extra]) in (1, 2)
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and needle in err[0], err
+
+
+def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corpus, tmp_path,
+                                                              capsys):
+    """The tiny database has too little speech for the paper's mu-mlp: audio-only synth
+    warns and averages the animes alone; asked for by name, it is one error line."""
+    import shutil
+
+    from animegraph.apps.cli import main
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    wav = tmp_path / "speech.wav"
+    shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
+    base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
+    assert main([*base, "-o", str(tmp_path / "a.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: no mu-mlp guide (too little data" in err
+    assert "but without its mu-mlp guide, which could not be fitted" in err
+    assert main([*base, "-o", str(tmp_path / "b.npz"), "--guide", "mu-mlp"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "too little data" in err[-1] and not any("Traceback" in e for e in err)
 
 
 def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, mlp, speech,

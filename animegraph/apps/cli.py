@@ -245,12 +245,14 @@ def build_parser() -> argparse.ArgumentParser:
                      "posteriorgram makes likeliest)")
     syn.add_argument("--guide", choices=(*SYNTH_GUIDES, "none"), default=None,
                      help="beyond the paper: a baseline fitted on the database (on first use, "
-                     "then stored) predicts the motion, and each phone's animes are ranked by "
-                     "their distance to it beside the audio cost (trajectory-guided "
-                     "selection); none: off (default)")
+                     "then stored) predicts the motion, and the output is the mean of it and "
+                     "the animes' (default with audio only: mu-mlp; none: off)")
     syn.add_argument("--guide-blend", type=_number, default=None, metavar="W",
-                     help="with --guide: the guide's share of the output motion, in [0, 1] "
-                     "(default 0.5, the mean of the two; 0: guided ranking only)")
+                     help="the guide's share of the output motion, in [0, 1] (default 0.5; "
+                     "0 with --guide-rank: ranking only)")
+    syn.add_argument("--guide-rank", action="store_true",
+                     help="also rank each phone's animes by their distance to the guide's "
+                     "motion beside the audio cost (trajectory-guided selection)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -734,11 +736,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path += f"; audio cost {audio_cost} (beyond the paper)"
     if args.candidates == "likely":
         path += "; candidates from the likely phones (beyond the paper)"
-    guide_name, guide_blend, guide_asked = _synth_guide(args)
-    if guide_name is not None and guide_asked:
-        path += (f"; animes ranked beside the audio cost by their distance to {guide_name}'s "
-                 f"predicted motion" + (f", the output {guide_blend:g} {guide_name}" if
-                                        guide_blend else "") + " (beyond the paper)")
+    guide_name, guide_blend, guide_rank = _synth_guide(args)
+    from animegraph.synthesis.path import guide_line
+
+    path += guide_line(guide_name, guide_blend, guide_rank, known_phones=args.labels is not
+                       None or args.text is not None, asked=args.guide is not None)
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -757,7 +759,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
-    guide = _load_guide(args.db, guide_name, asked=guide_asked)
+    guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
     if guide is None and guide_name is not None:
         path += f"; but without its {guide_name} guide, which could not be fitted"
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
@@ -779,7 +781,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
-                     guide_blend=guide_blend)
+                     guide_blend=guide_blend, guide_rank=guide_rank)
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -875,22 +877,27 @@ SYNTH_GUIDES = ("mu-mlp", "av-hmm")
 
 
 def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
-    """``synth --guide`` and ``--guide-blend``: the guiding baseline (None: off), its
-    share of the output motion, and whether it was asked for (else the audio-only path's
-    default, :func:`animegraph.synthesis.path.audio_only_guide`)."""
+    """``synth --guide``, ``--guide-blend`` and ``--guide-rank``: the guiding baseline
+    (None: off; by default the audio-only path's,
+    :func:`animegraph.synthesis.path.audio_only_guide`), its share of the output motion,
+    and whether it ranks the animes too."""
     from animegraph.synthesis.guide import GUIDE_BLEND
     from animegraph.synthesis.path import audio_only_guide
 
-    if args.guide_blend is not None and not 0.0 <= args.guide_blend <= 1.0:
-        raise UsageError(f"animegraph synth: --guide-blend must be in [0, 1], got "
-                         f"{args.guide_blend}")
+    share = GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend)
+    if not 0.0 <= share <= 1.0:
+        raise UsageError(f"animegraph synth: --guide-blend must be in [0, 1], got {share:g}")
     _, known, searched = _synth_given(args)
     name = (audio_only_guide(known_phones=known, searched=searched) if args.guide is None
             else None if args.guide == "none" else args.guide)
-    if name is None and args.guide_blend is not None:
-        raise UsageError("animegraph synth: --guide-blend needs --guide mu-mlp or av-hmm")
-    return (name, GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend),
-            args.guide is not None)
+    if name is None and (args.guide_blend is not None or args.guide_rank):
+        flag = "--guide-rank" if args.guide_rank else "--guide-blend"
+        raise UsageError(f"animegraph synth: {flag} needs a guide (--guide mu-mlp or av-hmm; "
+                         f"the default one is for audio only without a search option)")
+    if name is not None and share == 0 and not args.guide_rank:
+        raise UsageError("animegraph synth: --guide-blend 0 leaves the guide nothing to do: "
+                         "add --guide-rank, or --guide none")
+    return name, share, args.guide_rank
 
 
 def _load_guide(db, name: str | None, *, asked: bool = True):
@@ -969,7 +976,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
         ("--audio-cost", args.audio_cost is not None),
         ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
-        ("--guide-blend", args.guide_blend is not None)) if on]
+        ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank))
+        if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

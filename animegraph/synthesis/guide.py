@@ -24,9 +24,16 @@ R.-H. Wang, ICASSP 2007). Here:
   scaling it to the audio cost's median over the phone's candidates (equal weights,
   :data:`TARGET_WEIGHT`, set before measuring), so the search and k-best ranking use the
   sum in place of C_audio and the paper's other weights keep their meaning;
-* :func:`blend_guide`: optionally the synthesized motion is averaged with the guide's
+* :func:`blend_guide`: the synthesized motion is averaged with the guide's
   (:data:`GUIDE_BLEND`, 0.5: the plain mean of two predictors, model averaging as in
-  Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, §8.8).
+  Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, §8.8; equal weights
+  rather than fitted ones, the robust choice of forecast combination, Bates & Granger
+  1969, Clemen 1989).
+
+Measured (docs/results.md, "Issue 13, third session"): the blend alone beat k-best 20 and
+mu-mlp on FACEGOOD and talkingface, within and across speakers; the guided ranking did
+not hold across speakers (a guide fitted on other speakers is a poor target), so
+``synthesize`` ranks by the guide only when asked (``guide_rank``, ``synth --guide-rank``).
 """
 
 from __future__ import annotations
@@ -156,6 +163,16 @@ def guided_costs(audio: list[np.ndarray], target: list[np.ndarray],
         else:
             out.append(a)
     return out
+
+
+def check_guide_use(share: float, rank: bool) -> None:
+    """ParameterError unless the guide does something: a share in [0, 1], not 0 without
+    ranking."""
+    if not 0.0 <= share <= 1.0:
+        raise ParameterError(f"the guide's share must be in [0, 1], got {share!r}")
+    if share == 0 and not rank:
+        raise ParameterError("a guide with no share of the output and no ranking does "
+                             "nothing: give a share > 0 or rank by it")
 
 
 def blend_guide(ics: np.ndarray, guide: np.ndarray, share: float = GUIDE_BLEND) -> np.ndarray:

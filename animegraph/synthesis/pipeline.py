@@ -40,7 +40,14 @@ from animegraph.synthesis.audio import (
     require_posteriorgrams,
 )
 from animegraph.synthesis.explain import blended_sources, explain_rows
-from animegraph.synthesis.guide import blend_guide, guide_trajectory, guided_costs, target_costs
+from animegraph.synthesis.guide import (
+    GUIDE_BLEND,
+    blend_guide,
+    check_guide_use,
+    guide_trajectory,
+    guided_costs,
+    target_costs,
+)
 from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -93,7 +100,7 @@ def synthesize(
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
-    guide=None, guide_blend: float = 0.0,
+    guide=None, guide_blend: float = GUIDE_BLEND, guide_rank: bool = False,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -138,11 +145,15 @@ def synthesize(
         :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
     guide : animegraph.baselines.base.BaselineModel, optional
         Beyond the paper (:mod:`animegraph.synthesis.guide`): a baseline fitted on this
-        database whose predicted motion for the audio guides the choice of animes (its
-        distance to each candidate is added to C_audio: trajectory-guided selection).
+        database whose predicted motion for the audio is averaged with the synthesized
+        motion (``guide_blend``) and, with ``guide_rank``, guides the choice of animes.
     guide_blend : float, optional
-        With ``guide``: the guide's share in the output motion (0: none, the default;
-        :data:`animegraph.synthesis.guide.GUIDE_BLEND` = 0.5: the mean of the two).
+        With ``guide``: the guide's share of the output motion, in [0, 1]
+        (:data:`animegraph.synthesis.guide.GUIDE_BLEND` = 0.5, the mean of the two).
+    guide_rank : bool, optional
+        With ``guide``: add each candidate's distance to the guide's motion to C_audio
+        (trajectory-guided selection); off by default (it did not hold across speakers,
+        docs/results.md, "Issue 13, third session").
 
     Returns
     -------
@@ -161,6 +172,8 @@ def synthesize(
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    if guide is not None:
+        check_guide_use(guide_blend, guide_rank)
     if candidates_from not in CANDIDATE_SOURCES:
         raise ParameterError(f"candidates_from must be one of {', '.join(CANDIDATE_SOURCES)}, "
                              f"got {candidates_from!r}")
@@ -181,10 +194,11 @@ def synthesize(
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
                                          candidates_from=candidates_from)
     guide_ics, target, unary = None, None, audio_cost
-    if guide is not None:  # trajectory-guided: C_audio plus the target cost
+    if guide is not None:
         t_guide = time.perf_counter()
         guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=emotion)
         timings["guide_s"] = time.perf_counter() - t_guide
+    if guide is not None and guide_rank:  # trajectory-guided: C_audio plus the target cost
         target = target_costs(model.graph, model.decomposer.mixing_, phones, cands.nodes,
                               guide_ics)
         unary = guided_costs(audio_cost, target)
