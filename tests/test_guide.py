@@ -247,3 +247,37 @@ def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, m
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
     np.testing.assert_allclose(np.load(tmp_path / "y.npy"), mlp.predict(audio, rate),
                                atol=1e-6)
+
+
+def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, mlp, tmp_path):
+    """Audio only, the default guide (a stored mu-mlp) adds no library to a one-shot
+    ``synth``'s imports: not scikit-learn, librosa or pandas (tests/test_startup.py)."""
+    import json
+    import shutil
+    import subprocess
+    import sys
+
+    from animegraph.baselines.base import save_model
+
+    from test_startup import HEAVY
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    save_model(mlp, db)
+    wav = tmp_path / "speech.wav"
+    shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
+    loaded = {}
+    for guide in ("mu-mlp", "none"):
+        code = (
+            "import json, sys\n"
+            "from animegraph.apps.cli import main\n"
+            f"status = main(['synth', {str(wav)!r}, '--db', {str(db)!r}, '--guide', "
+            f"{guide!r}, '-o', {str(tmp_path / 'out.npz')!r}])\n"
+            f"print(json.dumps([status, [m for m in {HEAVY + ('scipy.special',)!r} "
+            "if m in sys.modules]]))\n")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             check=True)
+        status, loaded[guide] = json.loads(out.stdout.strip().splitlines()[-1])
+        assert status == 0
+    assert loaded["mu-mlp"] == loaded["none"]
+    assert not {"sklearn", "librosa", "pandas"} & set(loaded["mu-mlp"])
