@@ -8,7 +8,9 @@ al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search`
 script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
 too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
 single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results.md, issues 13
-and 14). ``synth`` and ``batch`` both decide here.
+and 14); and, beyond that, averaged 50/50 with the motion a statistical model (mu-mlp,
+:data:`AUDIO_ONLY_GUIDE`) predicts for the speech (:mod:`animegraph.synthesis.guide`;
+``synth --guide``). ``synth`` and ``batch`` both decide here.
 
 Why: on the one real database with transcripts (GRID s1, 640 clips of one speaker, 159
 held out: docs/results.md, issue 14) k-best 20 was ahead of the paper's exact and
