@@ -257,9 +257,9 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
     import subprocess
     import sys
 
-    from animegraph.baselines.base import save_model
-
     from test_startup import HEAVY
+
+    from animegraph.baselines.base import save_model
 
     db = tmp_path / "db"
     shutil.copytree(tiny_db[0], db)
