@@ -916,7 +916,7 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
     from animegraph.baselines.base import fitted_model, load_model
 
     if not model_path(db, name).is_file() or load_model(db, name) is None:
-        print(f"animegraph: fitting {name} on {db} to guide the animes' choice (first use; "
+        print(f"animegraph: fitting {name} on {db} to guide the motion (first use; "
               f"stored with the database) ...", file=sys.stderr)
     if asked:
         return fitted_model(db, name)
