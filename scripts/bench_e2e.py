@@ -4,12 +4,15 @@ Usage::
 
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
                                 [--phones-engine auto|hama|pocketsphinx] [--k-best K]
+                                [--guide mu-mlp|av-hmm [--guide-blend W]]
 
 Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
 phones recognised (default), force-aligned to the text, or taken from eSpeak's events.
 Prints each run's phase timings and real-time factor (synthesis time / audio duration), and
-the process's CPU time (less sensitive to the machine's load than the wall time).
+the process's CPU time (less sensitive to the machine's load than the wall time). With
+``--guide`` the database's stored guide (fitted and stored first if absent, reported
+apart) guides the animes' choice, as ``synth --guide``.
 DB defaults to the default database (built on first use, as by ``animegraph demo``).
 """
 
@@ -37,6 +40,10 @@ def main() -> int:
     parser.add_argument("--audio-cost", default=None,
                         help="synthesize's audio_cost (default plp; posteriorgram, "
                              "plp+posteriorgram)")
+    parser.add_argument("--guide", choices=("mu-mlp", "av-hmm"), default=None,
+                        help="trajectory-guided selection by this stored baseline")
+    parser.add_argument("--guide-blend", type=float, default=0.5,
+                        help="with --guide: the guide's share of the output (0.5)")
     args = parser.parse_args()
 
     from animegraph.synthesis import Model, synthesize
@@ -55,12 +62,24 @@ def main() -> int:
     kwargs = {"phones_engine": args.phones_engine, "k_best": args.k_best}
     if args.audio_cost is not None:
         kwargs["audio_cost"] = args.audio_cost
+    if args.guide is not None:
+        from animegraph.baselines.stored import load_forward
+
+        t = time.perf_counter()
+        guide = load_forward(args.db, args.guide)
+        if guide is None:
+            from animegraph.baselines.base import fitted_model
+
+            guide = fitted_model(args.db, args.guide)
+            print(f"# {args.guide} fitted and stored in {time.perf_counter() - t:.1f} s")
+        kwargs |= {"guide": guide, "guide_blend": args.guide_blend}
     if args.segmentation == "aligned":
         kwargs["text"] = TEXT
     elif args.segmentation == "labels":
         kwargs["labels"] = [Segment(p.phone, p.start, p.end) for p in utt.phones]
     print(f"# {seconds:.2f} s of speech, {model.graph.n_nodes} animes, phones "
-          f"{args.segmentation} ({args.phones_engine or 'auto'}), k-best {args.k_best}")
+          f"{args.segmentation} ({args.phones_engine or 'auto'}), k-best {args.k_best}"
+          + (f", guide {args.guide} ({args.guide_blend:g})" if args.guide else ""))
     for k in range(args.repeats):
         if hasattr(ctc, "forget"):  # every run hears the audio afresh (hama remembers its
             ctc.forget()            # last outputs; checkouts before issue 13's second session

@@ -4,13 +4,14 @@ Usage::
 
     python scripts/compare_systems.py RUN.json --dataset grid [--part aligned]
                                       [--system kbest20] [--against exact mu-mlp ...]
-                                      [--measures mouth_r lve] [--seed 0]
+                                      [--measures mouth_r lve] [--seed 0] [--per-clip]
 
 Reads the per-clip scores of ``scripts/eval_lipsync.py --json RUN.json`` and prints, per
 measure, the mean per-clip difference (system minus the other), its 95 % bootstrap
 confidence interval (2,000 resamples of the clips, percentile method; Efron & Tibshirani,
 An Introduction to the Bootstrap, 1993, ch. 13) and the share of clips on which the system
-is better (higher mouth R, lower errors).
+is better (higher mouth R, lower errors). ``--per-clip`` also lists every clip's values
+(e.g. the folds of a leave-one-clip-out run).
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ def main() -> int:
     parser.add_argument("--against", nargs="+", default=None, help="default: every other")
     parser.add_argument("--measures", nargs="+", default=["mouth_r", "lve"])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--per-clip", action="store_true",
+                        help="also print each clip's values of every system and measure")
     args = parser.parse_args()
     try:
         data = json.loads(args.run.read_text())[args.dataset]
@@ -51,6 +54,14 @@ def main() -> int:
         print(f"compare_systems: no {args.system!r} in the run ({', '.join(systems)})",
               file=sys.stderr)
         return 1
+    if args.per_clip:
+        shown = [args.system, *(args.against or [s for s in systems if s != args.system])]
+        for measure in args.measures:
+            print(f"{measure} per clip: " + "  ".join(shown))
+            for r in rows:
+                vals = [r["methods"].get(s, {}).get(measure) for s in shown]
+                print(f"  {r['clip']:28s} " + "  ".join(
+                    "-" if v is None else f"{v:.4f}" for v in vals))
     rng = np.random.default_rng(args.seed)
     print(f"{args.dataset} {args.part or ''}: {len(rows)} clips; {args.system} minus ...")
     for other in args.against or [s for s in systems if s != args.system]:

@@ -89,6 +89,8 @@ PARAMS: dict[str, dict] = {}
 GRAPH_METHODS: list[str] = list(evaluate.DEFAULT_METHODS)
 #: Peer rows (``animegraph.baselines.peers``; ``--peers``).
 PEER_ROWS: list[str] = []
+#: The baseline guiding the ``-guided`` / ``-blend`` rows (``--guide``), if any.
+GUIDE: list[str] = []
 #: IngestConfig settings of every prepared clip (the phone engine).
 INGEST: dict[str, object] = {}
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
@@ -174,8 +176,11 @@ def score_fold(fold: dict, name: str, test) -> list[dict]:
     rows = []
     for k, clip in enumerate(test):
         preds = {} if k == 0 else None
+        guide = estimators.get(label(GUIDE[0])) if GUIDE else None
+        if GUIDE and guide is None:  # the guide could not be fitted on this fold
+            methods = [m for m in methods if evaluate.split_guide(m) == (m, False, False)]
         row = evaluate.score_heldout(model, clip, methods=methods, estimators=estimators,
-                                     norm=norm, rng=rng, predictions=preds)
+                                     norm=norm, rng=rng, predictions=preds, guide=guide)
         for method, scores in row["methods"].items():
             scores["train_s"] = train_s[method]
         rows.append(row)
@@ -317,6 +322,9 @@ def main() -> int:
                         help="published tools as peer rows (pip install -e \".[peers]\")")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
+    parser.add_argument("--guide", choices=("mu-mlp", "av-hmm"), default="mu-mlp",
+                        help="the baseline guiding the -guided / -blend rows (fitted on each "
+                             "fold's training clips, as its own row; default mu-mlp)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
@@ -327,8 +335,12 @@ def main() -> int:
     SYSTEMS[:] = args.systems
     INGEST["phones_engine"] = args.phones_engine
     # The posteriorgram rows need the training clips' posteriorgrams (not stored by default).
-    INGEST["posteriorgrams"] = any(evaluate.split_method(m)[1] != "plp"
-                                   for m in args.graph_methods)
+    INGEST["posteriorgrams"] = any(
+        evaluate.split_method(evaluate.split_guide(m)[0])[1] != "plp" for m in args.graph_methods)
+    guided = [m for m in args.graph_methods if evaluate.split_guide(m) != (m, False, False)]
+    if guided and args.guide not in args.systems:
+        parser.error(f"{', '.join(guided)} need the guide {args.guide} among --systems")
+    GUIDE[:] = [args.guide] if guided else []
     GRAPH_METHODS[:] = args.graph_methods
     PEER_ROWS[:] = args.peers
     for method, name, value in args.param:

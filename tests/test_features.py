@@ -496,3 +496,19 @@ def test_slice_frames_errors():
         slice_frames(feats, 0.5, 0.6)  # 10 frames span 0 .. 0.09 s
     with pytest.raises(ParameterError, match="n_frames"):
         frame_times(-1)
+
+
+@pytest.mark.parametrize("sample_rate, n_fft", [(16000, 512), (22050, 1024), (8000, 256)])
+def test_mel_filters_and_dct_are_librosas(sample_rate, n_fft):
+    """mfcc() computes librosa's mel filterbank and DCT itself (NumPy only)."""
+    import scipy.fft
+
+    from ingest.speech.features import dct_ii, slaney_mel_filters
+
+    np.testing.assert_allclose(
+        slaney_mel_filters(sample_rate, n_fft, 40),
+        librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=40, dtype=np.float64),
+        rtol=1e-10, atol=1e-12)
+    x = np.random.default_rng(0).standard_normal((40, 7))
+    np.testing.assert_allclose(dct_ii(40) @ x, scipy.fft.dct(x, type=2, norm="ortho", axis=0),
+                               atol=1e-12)

@@ -243,6 +243,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help="candidate animes of a phone: label (the paper: its own phone's, "
                      "default), or likely (beyond the paper: also those of the 3 phones its "
                      "posteriorgram makes likeliest)")
+    syn.add_argument("--guide", choices=(*SYNTH_GUIDES, "none"), default=None,
+                     help="beyond the paper: a baseline fitted on the database (on first use, "
+                     "then stored) predicts the motion, and the output is the mean of it and "
+                     "the animes' (default with audio only: mu-mlp; none: off)")
+    syn.add_argument("--guide-blend", type=_number, default=None, metavar="W",
+                     help="the guide's share of the output motion, in [0, 1] (default 0.5; "
+                     "0 with --guide-rank: ranking only)")
+    syn.add_argument("--guide-rank", action="store_true",
+                     help="also rank each phone's animes by their distance to the guide's "
+                     "motion beside the audio cost (trajectory-guided selection)")
     syn.set_defaults(func=_cmd_synth)
 
     bat = sub.add_parser(
@@ -726,6 +736,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path += f"; audio cost {audio_cost} (beyond the paper)"
     if args.candidates == "likely":
         path += "; candidates from the likely phones (beyond the paper)"
+    guide_name, guide_blend, guide_rank = _synth_guide(args)
+    from animegraph.synthesis.path import guide_line
+
+    path += guide_line(guide_name, guide_blend, guide_rank, known_phones=args.labels is not
+                       None or args.text is not None, asked=args.guide is not None)
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -744,6 +759,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
+    guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
+    if guide is None and guide_name is not None:
+        path += f"; but without its {guide_name} guide, which could not be fitted"
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -762,7 +780,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
-                     candidates_from=args.candidates or "label")
+                     candidates_from=args.candidates or "label", guide=guide,
+                     guide_blend=guide_blend, guide_rank=guide_rank)
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -853,10 +872,65 @@ def _sidecar_labels(path: Path) -> Path | None:
 SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 
-def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
-    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
-    from animegraph.synthesis.path import synthesis_path  # shared with batch
+#: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
+SYNTH_GUIDES = ("mu-mlp", "av-hmm")
 
+
+def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
+    """``synth --guide``, ``--guide-blend`` and ``--guide-rank``: the guiding baseline
+    (None: off; by default the audio-only path's,
+    :func:`animegraph.synthesis.path.audio_only_guide`), its share of the output motion,
+    and whether it ranks the animes too."""
+    from animegraph.synthesis.guide import GUIDE_BLEND
+    from animegraph.synthesis.path import audio_only_guide
+
+    share = GUIDE_BLEND if args.guide_blend is None else float(args.guide_blend)
+    if not 0.0 <= share <= 1.0:
+        raise UsageError(f"animegraph synth: --guide-blend must be in [0, 1], got {share:g}")
+    _, known, searched = _synth_given(args)
+    name = (audio_only_guide(known_phones=known, searched=searched) if args.guide is None
+            else None if args.guide == "none" else args.guide)
+    if name is None and (args.guide_blend is not None or args.guide_rank):
+        flag = "--guide-rank" if args.guide_rank else "--guide-blend"
+        raise UsageError(f"animegraph synth: {flag} needs a guide (--guide mu-mlp or av-hmm; "
+                         f"the default one is for audio only without a search option)")
+    if name is not None and share == 0 and not args.guide_rank:
+        raise UsageError("animegraph synth: --guide-blend 0 leaves the guide nothing to do: "
+                         "add --guide-rank, or --guide none")
+    return name, share, args.guide_rank
+
+
+def _load_guide(db, name: str | None, *, asked: bool = True):
+    """The guiding baseline stored with the database ``db`` (mu-mlp restored without
+    scikit-learn), fitted and stored on first use (saying so on stderr), or None.
+
+    A default guide (not ``asked``) that cannot be fitted or stored is left out with a
+    warning line: the path falls back to k-best alone."""
+    if name is None:
+        return None
+    from animegraph.baselines.stored import load_forward, model_path
+
+    model = load_forward(db, name)
+    if model is not None:
+        return model
+    from animegraph.baselines.base import fitted_model, load_model
+
+    if not model_path(db, name).is_file() or load_model(db, name) is None:
+        print(f"animegraph: fitting {name} on {db} to guide the motion (first use; "
+              f"stored with the database) ...", file=sys.stderr)
+    if asked:
+        return fitted_model(db, name)
+    try:
+        return fitted_model(db, name)
+    except (AnimeGraphError, OSError) as exc:
+        print(f"animegraph: warning: no {name} guide ({exc}); each phone the mean of its "
+              f"best animes alone", file=sys.stderr)
+        return None
+
+
+def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
+    """What ``synth``'s phones come from (for the path line), whether they are known (labels
+    or a transcript), and whether the paper's search was asked for."""
     engine = args.phones_engine or "auto"
     if args.labels is not None:
         given = "phone labels given"
@@ -866,8 +940,15 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
         given = f"audio only (phones recognised by the {engine} phone engine)"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
-    return synthesis_path(given, known_phones=args.labels is not None or args.text is not None,
-                          k_best=args.k_best, searched=searched)
+    return given, args.labels is not None or args.text is not None, searched
+
+
+def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
+    """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
+    from animegraph.synthesis.path import synthesis_path  # shared with batch
+
+    given, known, searched = _synth_given(args)
+    return synthesis_path(given, known_phones=known, k_best=args.k_best, searched=searched)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -894,7 +975,9 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--helper", args.helper is not None),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
         ("--audio-cost", args.audio_cost is not None),
-        ("--candidates", args.candidates is not None)) if on]
+        ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
+        ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank))
+        if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

@@ -23,6 +23,7 @@ from animegraph.synthesis import (
     score_candidates,
 )
 from animegraph.synthesis.audio import candidate_costs, likely_candidates
+from animegraph.synthesis.guide import blend_guide, guide_trajectory, guided_costs, target_costs
 
 
 def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
@@ -42,11 +43,16 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
-           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely")
+           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely",
+           "kbest20-guided", "kbest20-guided-blend", "kbest20-blend")
 #: The methods scored unless others are asked for (those of the paper's audio cost).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
 #: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
 COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
+#: Guide suffixes (:mod:`animegraph.synthesis.guide`; need ``score_heldout(guide=...)``):
+#: ``-guided`` adds the guide's target cost to C_audio (trajectory-guided selection),
+#: ``-blend`` averages the output with the guide's motion (``GUIDE_BLEND``), both: both.
+GUIDE_SUFFIXES = ("-guided-blend", "-guided", "-blend")
 #: Rows only on request (``eval_lipsync.py --graph-methods``): the exact search with the
 #: helper pairs of §4.3 blended one way or another (``exact-<mode>``: ``PostOptions(helper=
 #: mode)``, e.g. ``exact-paper``, ``exact-anchored``).
@@ -63,6 +69,15 @@ def split_method(method: str) -> tuple[str, str, str]:
         if method.endswith(suffix):
             return method[: -len(suffix)], cost, source
     return method, "plp", source
+
+
+def split_guide(method: str) -> tuple[str, bool, bool]:
+    """``"kbest20-guided-blend"`` -> ``("kbest20", True, True)``: the method without its
+    guide suffix (:data:`GUIDE_SUFFIXES`), guided ranking, blending with the guide."""
+    for suffix in GUIDE_SUFFIXES:
+        if method.endswith(suffix):
+            return method[: -len(suffix)], "guided" in suffix, "blend" in suffix
+    return method, False, False
 
 
 def heldout_query(model, clip, *, posteriorgram: bool = False):
@@ -118,7 +133,7 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
                   estimators: dict | None = None,
                   norm: tuple[np.ndarray, np.ndarray] | None = None,
                   rng: np.random.Generator | None = None,
-                  predictions: dict | None = None) -> dict:
+                  predictions: dict | None = None, guide=None) -> dict:
     """Synthesize a held-out prepared clip from its audio and phones; score every method.
 
     Parameters
@@ -136,6 +151,9 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
         :func:`paper_scores`.
     predictions : dict, optional
         Filled with each method's motion, shape (n_frames, n_channels).
+    guide : BaselineModel, optional
+        Fitted on the same training clips: the guide of the methods with a guide suffix
+        (:data:`GUIDE_SUFFIXES`, :mod:`animegraph.synthesis.guide`).
 
     Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
     and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
@@ -143,7 +161,7 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
     """
     rng = rng or np.random.default_rng(0)
     t0 = time.perf_counter()
-    wanted = {split_method(m)[1:] for m in methods} - {("plp", "label")}
+    wanted = {split_method(split_guide(m)[0])[1:] for m in methods} - {("plp", "label")}
     phones, emotion, cands, audio_cost = heldout_query(model, clip, posteriorgram=bool(wanted))
     pools = {"label": cands}
     if any(source == "likely" for _, source in wanted):
@@ -152,6 +170,14 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
     for name, source in wanted:
         costs[name, source] = candidate_costs(model.graph, phones, pools[source].nodes, name)
     query_s = time.perf_counter() - t0
+    guide_ics, guide_s, guided = None, 0.0, {}
+    if any(split_guide(m)[1] or split_guide(m)[2] for m in methods):
+        if guide is None:
+            raise ValueError("a guided method needs score_heldout(guide=...)")
+        t0 = time.perf_counter()
+        guide_ics = guide_trajectory(model, guide, clip.audio.astype(np.float32) / 32767.0,
+                                     clip.sample_rate, phones, emotion=emotion)
+        guide_s = time.perf_counter() - t0
     truth = clip.motion.astype(np.float64)
     # Channels that move: their share of the database's motion variance (from the PCA).
     share = (model.decomposer.components_**2).T @ model.decomposer.explained_variance_ratio_
@@ -171,11 +197,23 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
 
     for method in methods:
         t0 = time.perf_counter()
-        base, cost, source = split_method(method)
-        ics, jumps = method_motion(model, phones, pools[source], costs[cost, source], base,
+        plain, guided_rank, blend = split_guide(method)
+        base, cost, source = split_method(plain)
+        unary = costs[cost, source]
+        if guided_rank:
+            if (cost, source) not in guided:
+                guided[cost, source] = guided_costs(unary, target_costs(
+                    model.graph, model.decomposer.mixing_, phones, pools[source].nodes,
+                    guide_ics))
+            unary = guided[cost, source]
+        ics, jumps = method_motion(model, phones, pools[source], unary, base,
                                    emotion=emotion, rng=rng)
+        if blend:
+            ics = blend_guide(ics, guide_ics)
         pred = model.decomposer.inverse_transform(ics)  # the database's (stabilised) space
-        record(method, pred, {"jumps": jumps, "synth_s": query_s + time.perf_counter() - t0})
+        extra_s = guide_s if (guided_rank or blend) else 0.0
+        record(method, pred, {"jumps": jumps,
+                              "synth_s": query_s + extra_s + time.perf_counter() - t0})
     for name, est in (estimators or {}).items():
         t0 = time.perf_counter()
         pred = est.predict(clip.audio, clip.sample_rate, n_frames=len(truth),

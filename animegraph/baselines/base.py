@@ -25,18 +25,13 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from animegraph.baselines.data import TrainingSet, frame_times, resample_to, training_set
-from animegraph.baselines.stored import META_KEY, MODELS_DIR
-from db.errors import DataError, ParameterError
-
-#: BLAS threads while fitting and predicting. The baselines' matrices are small (tens to
-#: hundreds of columns); extra BLAS threads only contend: on a loaded two-core machine a
-#: small mu-mlp fit spent over a minute in BLAS calls with the default thread pool and took
-#: 14 s in all with one thread.
-BLAS_THREADS = 1
+from animegraph.baselines.data import TrainingSet, resample_to, training_set
+from animegraph.baselines.predicting import BLAS_THREADS, Predicting
+from animegraph.baselines.stored import META_KEY, MODELS_DIR, model_path
+from db.errors import DataError
 
 
-class BaselineModel(BaseEstimator):
+class BaselineModel(Predicting, BaseEstimator):
     """An audio-to-visual mapping fitted on clips of one motion database.
 
     Subclasses set :attr:`method` and implement ``_fit(data)``, ``_predict(audio,
@@ -69,52 +64,8 @@ class BaselineModel(BaseEstimator):
             self._fit(data)
         return self
 
-    def predict(self, audio: np.ndarray, sample_rate: int, *, emotion: str | None = None,
-                n_frames: int | None = None) -> np.ndarray:
-        """Motion for speech ``audio``.
-
-        Parameters
-        ----------
-        audio : np.ndarray, shape (n_samples,)
-            Mono speech: float in [-1, 1] or int16.
-        sample_rate : int
-            Hz.
-        emotion : str, optional
-            An emotion the model was trained on (methods without an expression model
-            ignore it).
-        n_frames : int, optional
-            Frames to produce (default: the audio's duration at ``fps_``, rounded).
-
-        Returns
-        -------
-        np.ndarray, shape (n_frames, n_channels), float64
-            Motion in the training database's channels at ``fps_``.
-        """
-        check_is_fitted(self, "channels_")
-        audio = np.asarray(audio)
-        if audio.ndim != 1:
-            raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
-        audio = (audio.astype(np.float32) / 32767.0 if audio.dtype == np.int16
-                 else audio.astype(np.float32))
-        if emotion is not None and emotion not in self.emotions_:
-            raise ParameterError(f"emotion {emotion!r} was not in the training data "
-                                 f"(it had {', '.join(self.emotions_)})")
-        if n_frames is None:
-            n_frames = int(round(len(audio) / sample_rate * self.fps_))
-        if n_frames < 1:
-            raise DataError("the audio is too short for one motion frame")
-        with threadpool_limits(limits=BLAS_THREADS):
-            out = self._predict(audio, int(sample_rate), frame_times(n_frames, self.fps_),
-                                emotion)
-        return np.asarray(out, dtype=np.float64)
-
     # -- to be implemented ---------------------------------------------------------
     def _fit(self, data: TrainingSet) -> None:
-        raise NotImplementedError
-
-    def _predict(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
-                 emotion: str | None) -> np.ndarray:
-        """Motion at ``times`` (s): shape (len(times), n_channels)."""
         raise NotImplementedError
 
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -144,24 +95,9 @@ class BaselineModel(BaseEstimator):
         # JSON has no tuples: sequence parameters come back as lists.
         model = cls(**{k: tuple(v) if isinstance(v, list) else v
                        for k, v in description["params"].items()})
-        model.channels_ = tuple(description["channels"])
-        model.groups_ = tuple(description["groups"])
-        model.kind_ = description["kind"]
-        model.fps_ = float(description["fps"])
-        model.emotions_ = tuple(description["emotions"])
+        model._set_described(description)
         model._restore(dict(arrays))
         return model
-
-    def check_channels(self, names, where: str = "the database") -> None:
-        """Raise DataError unless ``names`` are the channels the model was trained on."""
-        names = tuple(names)
-        if names != tuple(self.channels_):
-            extra = sorted(set(names) - set(self.channels_))[:3]
-            lacking = sorted(set(self.channels_) - set(names))[:3]
-            raise DataError(
-                f"the {self.method} model has {len(self.channels_)} channels and {where} "
-                f"{len(names)}: they do not match (e.g. new {extra or 'none'}, missing "
-                f"{lacking or 'none'}); refit the model on it")
 
 
 def check_enough(n_samples: int, n_params: int, what: str) -> None:
@@ -185,14 +121,6 @@ def sample_times(clips, rate: float):
 
 
 # -- stored models ------------------------------------------------------------------
-def model_path(db_root, method: str) -> Path:
-    """Where the model ``method`` fitted on the live version of ``db_root`` is stored."""
-    from db.store import current_version
-
-    root = Path(db_root)
-    return root / MODELS_DIR / current_version(root) / f"{method}.parquet"
-
-
 def save_model(model: BaselineModel, db_root) -> Path:
     """Store a fitted model with the database at ``db_root`` (atomic; see module doc)."""
     import pyarrow.parquet as pq

@@ -46,7 +46,8 @@ from sklearn.mixture import GaussianMixture
 from sklearn.neural_network import MLPRegressor
 
 from animegraph.baselines.base import BaselineModel, check_enough, sample_times
-from animegraph.baselines.data import TrainingSet, audio_features_at, phone_at
+from animegraph.baselines.data import TrainingSet, phone_at
+from animegraph.baselines.mu_mlp_forward import MuMlpForward
 from db.errors import DataError, ParameterError
 
 #: Utterance MUs kept, A0 (§IV-A: 7, 97.56 % of the neutral deformation variance).
@@ -80,20 +81,7 @@ def mlp_params(n_in: int, n_hidden: int, n_out: int) -> int:
     return (n_in + 1) * n_hidden + (n_hidden + 1) * n_out
 
 
-def mlp_forward(x: np.ndarray, weights: list[np.ndarray], biases: list[np.ndarray]) -> np.ndarray:
-    """Forward pass of a tanh MLP with a linear output layer.
-
-    ``x`` shape (n, n_in); ``weights[i]`` (n_i, n_{i+1}); returns (n, n_out).
-    """
-    h = x
-    for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
-        h = h @ w + b
-        if i < len(weights) - 1:
-            h = np.tanh(h)
-    return h
-
-
-class MuMlp(BaselineModel):
+class MuMlp(MuMlpForward, BaselineModel):
     """Hong et al. (2002) iFACE audio-to-MUP mapping (see the module docstring).
 
     Parameters
@@ -133,10 +121,6 @@ class MuMlp(BaselineModel):
         self.random_state = random_state
 
     # -- fitting ---------------------------------------------------------------------
-    def _features(self, audio, sample_rate, times) -> np.ndarray:
-        return audio_features_at(audio, sample_rate, times, n_mfcc=self.n_mfcc,
-                                 context=self.context, context_hop_s=1.0 / self.frame_rate)
-
     def _samples(self, clips):
         """Audio features (n, n_feat), motion (n, n_channels), phone labels at frame_rate."""
         feats, motion, phones = [], [], []
@@ -228,11 +212,6 @@ class MuMlp(BaselineModel):
             self.expressions_[emotion] = {"mk0": mk0, "mk": mk, "v_mean": v_mean,
                                           "v_std": v_std, **net}
 
-    def _current(self, z: np.ndarray) -> np.ndarray:
-        """The current frame's MFCCs (the middle block of the context window)."""
-        c = self.context * self.n_mfcc
-        return z[:, c:c + self.n_mfcc]
-
     def _fit_mixtures(self, z: np.ndarray, phones: np.ndarray, rng) -> list[dict]:
         out = []
         for phone in sorted(set(phones.tolist())):
@@ -249,12 +228,6 @@ class MuMlp(BaselineModel):
                             f"{MIN_SUBSET_FRAMES} frames at {self.frame_rate:g} fps")
         return out
 
-    def _classify(self, z: np.ndarray) -> np.ndarray:
-        """Index of the subset whose mixture gives the highest log-likelihood."""
-        x = self._current(z)
-        scores = np.stack([_gmm_loglik(x, g) for g in self.gmms_], axis=1)
-        return np.argmax(scores, axis=1)
-
     def _fit_mlp(self, x, y, hidden, rng) -> dict:
         net = MLPRegressor(hidden_layer_sizes=(int(hidden),), activation="tanh",
                            solver="lbfgs", alpha=MLP_ALPHA, max_iter=MLP_MAX_ITER,
@@ -265,26 +238,7 @@ class MuMlp(BaselineModel):
         return {"W0": net.coefs_[0], "b0": net.intercepts_[0],
                 "W1": net.coefs_[1], "b1": net.intercepts_[1]}
 
-    # -- prediction ------------------------------------------------------------------
-    def _utterance_mups(self, z: np.ndarray) -> np.ndarray:
-        """Estimated UMUPs (n, A0) of standardised audio features ``z``."""
-        subset = self._classify(z)
-        out = _forward(self.pooled_mlp_, z)
-        for i, net in enumerate(self.subset_mlps_):
-            mask = subset == i
-            if net is not None and mask.any():
-                out[mask] = _forward(net, z[mask])
-        return out * self.u_std_ + self.u_mean_
-
-    def _predict(self, audio, sample_rate, times, emotion):
-        z = (self._features(audio, sample_rate, times) - self.x_mean_) / self.x_std_
-        u = self._utterance_mups(z)
-        if emotion is None or emotion == self.neutral_ or emotion not in self.expressions_:
-            return self.m00_ + u @ self.m0_.T
-        e = self.expressions_[emotion]
-        v = _forward(e, (u - self.u_mean_) / self.u_std_) * e["v_std"] + e["v_mean"]
-        a0 = self.m0_.shape[1]
-        return self.m00_ + v[:, :a0] @ self.m0_.T + e["mk0"] + v[:, a0:] @ e["mk"].T
+    # -- prediction: MuMlpForward (NumPy only, animegraph.baselines.mu_mlp_forward) --
 
     # -- storage ---------------------------------------------------------------------
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -303,39 +257,3 @@ class MuMlp(BaselineModel):
         for emotion, e in self.expressions_.items():
             out |= {f"expr/{emotion}/{k}": v for k, v in e.items()}
         return out
-
-    def _restore(self, arrays: dict[str, np.ndarray]) -> None:
-        for name in ("m00", "m0", "x_mean", "x_std", "u_mean", "u_std"):
-            setattr(self, f"{name}_", arrays[name])
-        self.utterance_variance_ = float(arrays["utterance_variance"])
-        self.subset_frames_ = arrays["subset_frames"].astype(np.int64)
-        self.neutral_ = self.emotions_[int(arrays["neutral_index"])]
-        self.gmms_ = [_group(arrays, f"gmm/{i:03d}/") for i in range(len(self.subset_frames_))]
-        self.pooled_mlp_ = _group(arrays, "pooled/")
-        self.subset_mlps_ = [_group(arrays, f"subset/{i:03d}/") or None
-                             for i in range(len(self.subset_frames_))]
-        self.expressions_ = {e: _group(arrays, f"expr/{e}/") for e in self.emotions_
-                             if _group(arrays, f"expr/{e}/")}
-
-
-def _group(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
-    return {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
-
-
-def _forward(net: dict, x: np.ndarray) -> np.ndarray:
-    y = mlp_forward(x, [net["W0"], net["W1"]], [net["b0"], net["b1"]])
-    return y if y.ndim == 2 else y[:, None]
-
-
-def _gmm_loglik(x: np.ndarray, g: dict) -> np.ndarray:
-    """Log-likelihood of rows of ``x`` under a full-covariance Gaussian mixture."""
-    from scipy.special import logsumexp
-
-    parts = []
-    d = x.shape[1]
-    for w, mu, cov in zip(g["weights"], g["means"], g["covariances"], strict=True):
-        chol = np.linalg.cholesky(cov)
-        sol = np.linalg.solve(chol, (x - mu).T)
-        logdet = 2.0 * np.log(np.diag(chol)).sum()
-        parts.append(np.log(w) - 0.5 * (d * np.log(2 * np.pi) + logdet + (sol**2).sum(axis=0)))
-    return logsumexp(np.stack(parts, axis=1), axis=1)

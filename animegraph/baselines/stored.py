@@ -1,6 +1,8 @@
-"""Which baseline models are stored with a database, read without scikit-learn.
+"""Which baseline models are stored with a database, and (mu-mlp) the model itself,
+read without scikit-learn.
 
-``animegraph info`` lists them; importing :mod:`animegraph.baselines.base` (the
+``animegraph info`` lists them, and a one-shot ``synth --guide mu-mlp`` predicts with the
+stored model (:func:`load_forward`); importing :mod:`animegraph.baselines.base` (the
 estimators) would import scikit-learn, SciPy and pandas for it.
 """
 
@@ -46,3 +48,49 @@ def stored_models(db_root) -> list[dict]:
                     "fps": meta["fps"], "emotions": meta["emotions"]}
         out.append(row)
     return sorted(out, key=lambda r: (not r["current"], r["method"], r["db_version"]))
+
+
+def model_path(db_root, method: str) -> Path:
+    """Where the model ``method`` fitted on the live version of ``db_root`` is stored."""
+    from db.store import current_version
+
+    root = Path(db_root)
+    return root / MODELS_DIR / current_version(root) / f"{method}.parquet"
+
+
+#: Stored models :func:`load_forward` restores without scikit-learn: method -> class.
+FORWARD = {"mu-mlp": "animegraph.baselines.mu_mlp_forward:StoredMuMlp"}
+
+
+def load_forward(db_root, method: str):
+    """The stored ``method`` model of the live database version, restored without
+    scikit-learn (:data:`FORWARD`), or None if none is stored or the method has no such
+    restorer (then :func:`animegraph.baselines.base.fitted_model`).
+
+    Raises
+    ------
+    DataError
+        If the stored file is unreadable, or its channels are not the database's.
+    """
+    from importlib import import_module
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from db.errors import DataError
+    from db.store import Database, arrays_from_table
+
+    path = model_path(db_root, method)
+    if method not in FORWARD or not path.is_file():
+        return None
+    module, name = FORWARD[method].split(":")
+    try:  # ParquetFile, not read_table: that imports pyarrow.dataset (and pandas)
+        table = pq.ParquetFile(path).read()
+        meta = json.loads(table.schema.metadata[META_KEY])
+        model = getattr(import_module(module), name).from_arrays(arrays_from_table(table),
+                                                                 meta)
+    except (OSError, KeyError, ValueError, TypeError, IndexError, pa.ArrowException) as exc:
+        raise DataError(f"stored model {path} is unreadable ({exc})") from exc
+    channels = Database.open(db_root).table("channels").column("name").to_pylist()
+    model.check_channels(channels, f"database {db_root}")
+    return model

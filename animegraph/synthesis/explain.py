@@ -30,8 +30,9 @@ def blended_sources(graph: AnimeGraph, ranked: np.ndarray) -> list[dict]:
             for a, w in zip(ranked, rank_weights(len(ranked)), strict=True)]
 
 
-def explain_rows(model, phones, result, cands, audio_cost) -> list[dict]:
-    """One row per input phone: where its motion came from and what it cost."""
+def explain_rows(model, phones, result, cands, audio_cost, target_cost=None) -> list[dict]:
+    """One row per input phone: where its motion came from and what it cost (with
+    ``target_cost``, the guide's too: :mod:`animegraph.synthesis.guide`)."""
     g = model.graph
     rows = []
     for i, (p, node) in enumerate(zip(phones, result.nodes, strict=True)):
@@ -45,6 +46,8 @@ def explain_rows(model, phones, result, cands, audio_cost) -> list[dict]:
             "audio_cost": float(audio_cost[i][k]),
             "backoff": cands.backoff[i],
         }
+        if target_cost is not None:
+            row["target_cost"] = float(target_cost[i][k])
         if i > 0:
             prev = int(result.nodes[i - 1])
             row["jump"] = bool(g.next_node[prev] != node)

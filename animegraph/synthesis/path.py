@@ -8,7 +8,9 @@ al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search`
 script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
 too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
 single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results.md, issues 13
-and 14). ``synth`` and ``batch`` both decide here.
+and 14); and, beyond that, averaged 50/50 with the motion a statistical model (mu-mlp,
+:data:`AUDIO_ONLY_GUIDE`) predicts for the speech (:mod:`animegraph.synthesis.guide`;
+``synth --guide``). ``synth`` and ``batch`` both decide here.
 
 Why: on the one real database with transcripts (GRID s1, 640 clips of one speaker, 159
 held out: docs/results.md, issue 14) k-best 20 was ahead of the paper's exact and
@@ -28,6 +30,35 @@ from __future__ import annotations
 TRANSCRIPT_K_BEST = 20
 #: ... and when they are recognised from the audio alone.
 AUDIO_ONLY_K_BEST = 20
+#: The baseline whose predicted motion the audio-only path averages with the animes'
+#: (:mod:`animegraph.synthesis.guide`, share ``GUIDE_BLEND``); None: the animes alone.
+#: mu-mlp (Hong et al. 2002): with it the audio-only path beat k-best 20 alone and mu-mlp
+#: alone on FACEGOOD and on talkingface within and across speakers (docs/results.md,
+#: "Issue 13, third session"); the two err differently (recorded motion of possibly
+#: wrong phones; a frame-wise regression that under-articulates), and the mean of two
+#: such predictors is the plainest ensemble (Hastie et al., ESL §8.8).
+AUDIO_ONLY_GUIDE: str | None = "mu-mlp"
+
+
+def audio_only_guide(*, known_phones: bool, searched: bool = False) -> str | None:
+    """The guide of synthesis by default: :data:`AUDIO_ONLY_GUIDE` for speech alone
+    without a search asked for, else none (the known-phones path is unguided)."""
+    return None if known_phones or searched else AUDIO_ONLY_GUIDE
+
+
+def guide_line(name: str | None, share: float, rank: bool, *, known_phones: bool,
+               asked: bool) -> str:
+    """What the path line adds for a guide (empty without one): the default audio-only
+    guide with why, or the guide as asked."""
+    if name is None:
+        return ""
+    ranked = (", each phone's animes ranked by their distance to it beside the audio cost"
+              if rank else "")
+    if not asked and not known_phones:
+        return (f"; the output the mean of that and {name}'s predicted motion{ranked} (measured "
+                f"best on real speech without a transcript, FACEGOOD and talkingface; "
+                f"--guide none for the animes alone)")
+    return f"; the output {share:g} {name}'s predicted motion{ranked} (beyond the paper)"
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,

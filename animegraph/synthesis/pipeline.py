@@ -40,6 +40,14 @@ from animegraph.synthesis.audio import (
     require_posteriorgrams,
 )
 from animegraph.synthesis.explain import blended_sources, explain_rows
+from animegraph.synthesis.guide import (
+    GUIDE_BLEND,
+    blend_guide,
+    check_guide_use,
+    guide_trajectory,
+    guided_costs,
+    target_costs,
+)
 from animegraph.synthesis.model import Model
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -92,6 +100,7 @@ def synthesize(
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
+    guide=None, guide_blend: float = GUIDE_BLEND, guide_rank: bool = False,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -134,6 +143,17 @@ def synthesize(
         ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
         the phones its posteriorgram makes likely,
         :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
+    guide : animegraph.baselines.base.BaselineModel, optional
+        Beyond the paper (:mod:`animegraph.synthesis.guide`): a baseline fitted on this
+        database whose predicted motion for the audio is averaged with the synthesized
+        motion (``guide_blend``) and, with ``guide_rank``, guides the choice of animes.
+    guide_blend : float, optional
+        With ``guide``: the guide's share of the output motion, in [0, 1]
+        (:data:`animegraph.synthesis.guide.GUIDE_BLEND` = 0.5, the mean of the two).
+    guide_rank : bool, optional
+        With ``guide``: add each candidate's distance to the guide's motion to C_audio
+        (trajectory-guided selection); off by default (it did not hold across speakers,
+        docs/results.md, "Issue 13, third session").
 
     Returns
     -------
@@ -152,6 +172,8 @@ def synthesize(
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    if guide is not None:
+        check_guide_use(guide_blend, guide_rank)
     if candidates_from not in CANDIDATE_SOURCES:
         raise ParameterError(f"candidates_from must be one of {', '.join(CANDIDATE_SOURCES)}, "
                              f"got {candidates_from!r}")
@@ -171,9 +193,18 @@ def synthesize(
     cost_name = audio_cost
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
                                          candidates_from=candidates_from)
-    timings["audio_cost_s"] = time.perf_counter() - t1
+    guide_ics, target, unary = None, None, audio_cost
+    if guide is not None:
+        t_guide = time.perf_counter()
+        guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=emotion)
+        timings["guide_s"] = time.perf_counter() - t_guide
+    if guide is not None and guide_rank:  # trajectory-guided: C_audio plus the target cost
+        target = target_costs(model.graph, model.decomposer.mixing_, phones, cands.nodes,
+                              guide_ics)
+        unary = guided_costs(audio_cost, target)
+    timings["audio_cost_s"] = time.perf_counter() - t1 - timings.get("guide_s", 0.0)
     t2 = time.perf_counter()
-    result = search(model.graph, cands, audio_cost, weights=weights or SearchWeights(),
+    result = search(model.graph, cands, unary, weights=weights or SearchWeights(),
                     emotion=emotion, method=method, window=window, tolerance=tolerance)
     timings["search_s"] = time.perf_counter() - t2
 
@@ -182,17 +213,19 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
-        ics, ranked = render_k_best(model, phones, cands, audio_cost, result.nodes, k_best,
+        ics, ranked = render_k_best(model, phones, cands, unary, result.nodes, k_best,
                                     weights=weights, options=options, emotion=emotion)
         joins = []
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
                                  options=options)
+    if guide_ics is not None and guide_blend > 0:
+        ics = blend_guide(ics, guide_ics, guide_blend)
     motion = model.to_channels(ics)
     timings["post_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
-    explain = explain_rows(model, phones, result, cands, audio_cost)
+    explain = explain_rows(model, phones, result, cands, audio_cost, target)
     blended = tuple(blended_sources(model.graph, r) for r in ranked)
     for row, animes in zip(explain, blended, strict=False):
         row["k_best"], row["pick_weight"] = len(animes), animes[0]["weight"]

@@ -564,9 +564,12 @@ def mfcc(
 
     The power spectrum (periodic Hann window of ``round(win_s * sample_rate)`` samples, FFT
     of the next power of two, frames centred at ``k * hop_s``) is integrated by 40 Slaney
-    mel filters (``librosa.filters.mel``, 0 Hz to Nyquist), converted to dB with an absolute
-    floor of -100 dB (no ``top_db`` clamp, so a frame does not depend on the rest of the
-    file) and transformed by :func:`librosa.feature.mfcc` (DCT-II, orthonormal).
+    mel filters (:func:`slaney_mel_filters`, 0 Hz to Nyquist, as ``librosa.filters.mel``),
+    converted to dB with an absolute floor of -100 dB (no ``top_db`` clamp, so a frame does
+    not depend on the rest of the file) and transformed by the orthonormal DCT-II (as
+    :func:`librosa.feature.mfcc`). NumPy only: a one-shot ``synth`` guided by mu-mlp does
+    not import librosa (about a second; tests/test_features.py checks the values against
+    librosa's).
 
     Parameters
     ----------
@@ -592,8 +595,6 @@ def mfcc(
     DataError
         ``audio`` holds NaN or infinite samples.
     """
-    import librosa  # deferred: importing librosa takes a second, rasta_plp does not need it
-
     if not _is_int(n_mfcc) or not 1 <= n_mfcc <= _N_MELS:
         raise ParameterError(f"n_mfcc must be an integer in [1, {_N_MELS}], got {n_mfcc!r}")
     for name, value in (("hop_s", hop_s), ("win_s", win_s)):
@@ -603,17 +604,54 @@ def mfcc(
     sample_rate = _check_sample_rate(sample_rate)
     win_len = _window_length(win_s, hop_s, sample_rate)
     n_fft = 1 << (win_len - 1).bit_length()
-    mel_t = np.ascontiguousarray(
-        librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=_N_MELS, dtype=np.float64).T
-    )
+    mel_t = np.ascontiguousarray(slaney_mel_filters(sample_rate, n_fft, _N_MELS).T)
     window = np.hanning(win_len + 1)[:-1]  # periodic Hann, librosa's "hann"
     mel_power = _band_spectrogram(
         audio, sample_rate, hop_s=float(hop_s), window=window, n_fft=n_fft,
         reduce=lambda power: power @ mel_t,
     )
-    log_mel = librosa.power_to_db(mel_power.T, ref=1.0, amin=_MEL_FLOOR, top_db=None)
-    coeffs = librosa.feature.mfcc(S=log_mel, n_mfcc=n_mfcc)  # (n_mfcc, n_frames)
-    return np.ascontiguousarray(coeffs.T, dtype=np.float32)
+    log_mel = 10.0 * np.log10(np.maximum(mel_power, _MEL_FLOOR))  # (n_frames, n_mels), dB
+    coeffs = log_mel @ dct_ii(_N_MELS)[:n_mfcc].T
+    return np.ascontiguousarray(coeffs, dtype=np.float32)
+
+
+def slaney_mel_filters(sample_rate: int, n_fft: int, n_mels: int) -> np.ndarray:
+    """Slaney's mel filterbank from 0 Hz to Nyquist (the Auditory Toolbox's; librosa's
+    ``filters.mel`` default: mel scale linear below 1 kHz and logarithmic above, each
+    triangle scaled to unit area).
+
+    Returns
+    -------
+    np.ndarray, shape (n_mels, n_fft // 2 + 1), float64
+    """
+    def hz_to_mel(f):
+        f = np.asarray(f, dtype=np.float64)
+        mel = f / (200.0 / 3)
+        high = f >= 1000.0
+        return np.where(high, 15.0 + np.log(np.maximum(f, 1000.0) / 1000.0)
+                        / (np.log(6.4) / 27.0), mel)
+
+    def mel_to_hz(m):
+        m = np.asarray(m, dtype=np.float64)
+        return np.where(m >= 15.0, 1000.0 * np.exp(np.log(6.4) / 27.0 * (m - 15.0)),
+                        m * (200.0 / 3))
+
+    fft_hz = np.linspace(0.0, sample_rate / 2.0, n_fft // 2 + 1)
+    edges = mel_to_hz(np.linspace(hz_to_mel(0.0), hz_to_mel(sample_rate / 2.0), n_mels + 2))
+    width = np.diff(edges)
+    ramps = edges[:, None] - fft_hz[None, :]
+    lower = -ramps[:-2] / width[:-1, None]
+    upper = ramps[2:] / width[1:, None]
+    weights = np.maximum(0.0, np.minimum(lower, upper))
+    return weights * (2.0 / (edges[2:] - edges[:-2]))[:, None]
+
+
+def dct_ii(n: int) -> np.ndarray:
+    """The orthonormal DCT-II matrix, shape (n, n): ``y = dct_ii(n) @ x``."""
+    k = np.arange(n)[:, None]
+    basis = np.cos(np.pi / n * (np.arange(n)[None, :] + 0.5) * k) * np.sqrt(2.0 / n)
+    basis[0] /= np.sqrt(2.0)
+    return basis
 
 
 def slice_frames(
