@@ -245,7 +245,43 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
 GRID_HOLDOUT = 5
 
 
-def grid(tmp: Path, workers: int, db: Path | None) -> dict[str, list[dict]]:
+#: Frame step (s) of :func:`phone_agreement`'s frame accuracy.
+AGREEMENT_STEP_S = 0.01
+
+
+def phone_agreement(reference, hypothesis) -> dict[str, float]:
+    """How recognised phones agree with the aligned ones of the same clip.
+
+    ``per``: phone error rate (``SIL`` left out); ``frame_acc`` / ``viseme_frame_acc``:
+    share of 10 ms frames (over the reference's span) where the two give the same phone
+    / viseme class (timing counts, as it does for the motion chosen); ``onset_err_s``:
+    median absolute onset difference of the matched phones, ``onset_bias_s`` their median
+    signed difference (hypothesis minus reference); ``phones_per_s`` of the hypothesis.
+    """
+    from ingest.speech.phones import VISEME_OF
+    from ingest.speech.segment import boundary_errors, phone_error_rate
+
+    def frames(segs, t):
+        starts = np.array([s.start for s in segs])
+        k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(segs) - 1)
+        return [segs[j].phone for j in k]
+
+    ref, hyp = list(reference), list(hypothesis)
+    t = np.arange(ref[0].start, ref[-1].end, AGREEMENT_STEP_S) + AGREEMENT_STEP_S / 2
+    a, b = frames(ref, t), frames(hyp, t)
+    onsets = boundary_errors(ref, hyp, signed=True)
+    span = hyp[-1].end - hyp[0].start
+    return {"per": phone_error_rate(ref, hyp),
+            "frame_acc": float(np.mean([x == y for x, y in zip(a, b, strict=True)])),
+            "viseme_frame_acc": float(np.mean([VISEME_OF[x] == VISEME_OF[y]
+                                               for x, y in zip(a, b, strict=True)])),
+            "onset_err_s": float(np.median(np.abs(onsets))) if onsets.size else float("nan"),
+            "onset_bias_s": float(np.median(onsets)) if onsets.size else float("nan"),
+            "phones_per_s": sum(s.phone != "SIL" for s in hyp) / span if span > 0 else 0.0}
+
+
+def grid(tmp: Path, workers: int, db: Path | None,
+         engines: list[str] | None = None) -> dict[str, list[dict]]:
     if db is not None:
         from db.store import Database
 
@@ -264,16 +300,27 @@ def grid(tmp: Path, workers: int, db: Path | None) -> dict[str, list[dict]]:
     fold = fit_fold(tmp, "grid", train, reference)
     del train
 
-    def recognised():
+    def recognised(engine, agreement):
         for clip in test:  # one at a time: recognised, scored, dropped
             audio = clip.audio.astype(np.float32) / 32767.0
-            phones, _ = segment(audio, clip.sample_rate, engine=INGEST.get("phones_engine"))
+            phones, _ = segment(audio, clip.sample_rate, engine=engine)
             phones = tuple(phones)
+            agreement.append(phone_agreement(clip.phones, phones))
             yield dataclasses.replace(clip, phones=phones, segmentation="recognized")
 
     out = {"aligned": score_fold(fold, "grid", test)}
-    print(f"# grid: aligned phones scored; recognising phones of {len(test)} clips", flush=True)
-    out["recognized"] = score_fold(fold, "grid", recognised())
+    for engine in engines or [INGEST.get("phones_engine")]:
+        part = "recognized" if not engines else f"recognized-{engine}"
+        print(f"# grid: recognising phones of {len(test)} clips ({part}, engine "
+              f"{engine or 'auto'})", flush=True)
+        agreement: list[dict] = []
+        rows = score_fold(fold, "grid", recognised(engine, agreement))
+        for row, agree in zip(rows, agreement, strict=True):
+            row["phones_vs_aligned"] = agree
+        print(f"# grid {part}: phones against the aligned ones (means over clips): " + ", ".join(
+            f"{k} {np.nanmean([a[k] for a in agreement]):.3f}" for k in agreement[0]),
+            flush=True)
+        out[part] = rows
     return out
 
 
@@ -315,6 +362,9 @@ def main() -> int:
                         help="phone engine for clips without labels (default: auto)")
     parser.add_argument("--peers", nargs="+", default=[], choices=sorted(PEERS),
                         help="published tools as peer rows (pip install -e \".[peers]\")")
+    parser.add_argument("--grid-engines", nargs="+", choices=ENGINES, default=None,
+                        help="grid: score the recognised phones of each of these engines "
+                             "(parts recognized-ENGINE; default: one part, --phones-engine)")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
     parser.add_argument("--json", type=Path)
@@ -347,7 +397,7 @@ def main() -> int:
                 print(f"# {name}: skipped, {SHARED / name} is absent")
                 continue
             if name == "grid":
-                parts = grid(tmp, args.workers, args.grid_db)
+                parts = grid(tmp, args.workers, args.grid_db, args.grid_engines)
                 results[name] = {phones: {"summary": summarise(f"grid, phones {phones}", rows),
                                           "clips": rows} for phones, rows in parts.items()}
                 results[name]["peak_rss_mb"] = peak_rss_mb()

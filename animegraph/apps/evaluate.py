@@ -42,9 +42,13 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
-           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely")
+           "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely",
+           "kbest20-ctx")
 #: The methods scored unless others are asked for (those of the paper's audio cost).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+#: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
+#: (``animegraph.search.k_best(..., context=True)``; beyond the paper).
+CONTEXT_SUFFIX = "-ctx"
 #: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
 COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
 #: Rows only on request (``eval_lipsync.py --graph-methods``): the exact search with the
@@ -107,8 +111,10 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     search input of :func:`heldout_query`, and its number of jump matches."""
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
-        k = int(method[len("kbest"):])
-        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
+        context = method.endswith(CONTEXT_SUFFIX)
+        k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
+        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,
+                             context=context)[0], jumps
     options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
                else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps

@@ -295,11 +295,12 @@ def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = N
 
 def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
                   weights: SearchWeights | None = None, options: PostOptions | None = None,
-                  emotion: str | None = None) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+                  emotion: str | None = None,
+                  context: bool = False) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
     """Motion (independent components) averaging the ``k`` best animes of each phone around
-    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`), and those
-    animes per phone, best first."""
+    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`, ranked by
+    phonetic context first with ``context``), and those animes per phone, best first."""
     ranked = ranked_candidates(model.graph, cands, audio_cost, nodes, k, weights=weights,
-                               emotion=emotion)
+                               emotion=emotion, context=context)
     return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs,
                         options=options), ranked
