@@ -235,6 +235,10 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--context-ranking", action=argparse.BooleanOptionalAction, default=None,
+                     help="beyond the paper: rank each phone's k-best animes by phonetic "
+                     "context (their recorded neighbour phones against the input's) before "
+                     "the audio cost (default: on with a transcript or labels, off without)")
     syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
                      help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
                      "default), or beyond the paper posteriorgram (DTW of hama phone "
@@ -718,6 +722,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
     k_best, path = _synth_path(args)
+    if args.context_ranking is not None and not k_best:
+        raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
+                         "averages; the paper's search (--exact, --window, --search) takes "
+                         "one anime a phone")
     if args.helper is not None and k_best:
         raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
                          "phone) at its jumps; --k-best averages animes instead: give one")
@@ -762,7 +770,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      emotion=choice.target, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
-                     candidates_from=args.candidates or "label")
+                     candidates_from=args.candidates or "label", context=args.context_ranking)
+    if out.context_ranked:
+        path += "; animes ranked by phonetic context first (--no-context-ranking: by audio cost)"
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -894,7 +904,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--helper", args.helper is not None),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
         ("--audio-cost", args.audio_cost is not None),
-        ("--candidates", args.candidates is not None)) if on]
+        ("--candidates", args.candidates is not None),
+        ("--context-ranking", args.context_ranking is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

@@ -28,6 +28,10 @@ from __future__ import annotations
 TRANSCRIPT_K_BEST = 20
 #: ... and when they are recognised from the audio alone.
 AUDIO_ONLY_K_BEST = 20
+#: With known phones, k-best ranks each phone's animes by phonetic context first (their
+#: recorded neighbour phones against the input's; :func:`animegraph.search.k_best` with
+#: ``context``, beyond the paper: unit selection's context target cost, Hunt & Black 1996).
+KNOWN_PHONES_CONTEXT = False
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,

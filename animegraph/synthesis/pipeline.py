@@ -41,6 +41,7 @@ from animegraph.synthesis.audio import (
 )
 from animegraph.synthesis.explain import blended_sources, explain_rows
 from animegraph.synthesis.model import Model
+from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 from ingest.lowpass import smooth
@@ -68,6 +69,9 @@ class Synthesis:
     warnings : tuple of str
         What may be wrong with the input speech (:mod:`ingest.speech.quality`): clipping,
         telephone band, little speech the phone engine knows.
+    context_ranked : bool
+        With ``k_best``: the animes were ranked by phonetic context first
+        (:func:`animegraph.search.k_best` with ``context``).
     """
 
     motion: np.ndarray
@@ -83,6 +87,7 @@ class Synthesis:
     notes: tuple[str, ...] = ()
     blended: tuple[list[dict], ...] = ()
     warnings: tuple[str, ...] = ()
+    context_ranked: bool = False
 
 
 def synthesize(
@@ -92,6 +97,7 @@ def synthesize(
     weights: SearchWeights | None = None, options: PostOptions | None = None,
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
+    context: bool | None = None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -134,6 +140,12 @@ def synthesize(
         ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
         the phones its posteriorgram makes likely,
         :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
+    context : bool, optional
+        With ``k_best``, beyond the paper: rank each phone's animes by phonetic context
+        (their recorded neighbour phones against the input's) before the audio cost
+        (:func:`animegraph.search.k_best`). None (default): as
+        :data:`animegraph.synthesis.path.KNOWN_PHONES_CONTEXT` says when the phones are
+        known (labels, or a transcript aligned), off when they are recognised.
 
     Returns
     -------
@@ -182,8 +194,11 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
+        if context is None:
+            context = KNOWN_PHONES_CONTEXT and method_used in ("labels", "aligned")
         ics, ranked = render_k_best(model, phones, cands, audio_cost, result.nodes, k_best,
-                                    weights=weights, options=options, emotion=emotion)
+                                    weights=weights, options=options, emotion=emotion,
+                                    context=context)
         joins = []
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
@@ -199,7 +214,7 @@ def synthesize(
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
                      timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
-                     warnings=tuple(warnings))
+                     warnings=tuple(warnings), context_ranked=bool(k_best and context))
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
