@@ -31,7 +31,9 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
   other 640 are the database. The database's phones are aligned inside GRID's word
   alignments (as ingest does); the held-out clips are synthesized (a) from those phones
   and (b) from phones recognised in their audio alone (the phone engine, as for the other
-  real data). ``--grid-db``
+  real data; ``--grid-engines hama pocketsphinx`` scores each engine's phones in the same
+  run, as parts ``recognized-<engine>``, with how they agree with the aligned ones:
+  ``scripts/grid_phone_engines.py``'s measures per clip, ``phones_vs_aligned``). ``--grid-db``
   reads the clips prepared by an ``animegraph ingest`` of ``grid/s1`` instead of preparing
   them again.
 
@@ -62,6 +64,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from grid_phone_engines import agreement as phone_agreement  # scripts/ is sys.path[0]
 
 from animegraph.apps import evaluate
 from animegraph.apps.plots import plot_heldout, plot_systems
@@ -245,41 +248,6 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
 GRID_HOLDOUT = 5
 
 
-#: Frame step (s) of :func:`phone_agreement`'s frame accuracy.
-AGREEMENT_STEP_S = 0.01
-
-
-def phone_agreement(reference, hypothesis) -> dict[str, float]:
-    """How recognised phones agree with the aligned ones of the same clip.
-
-    ``per``: phone error rate (``SIL`` left out); ``frame_acc`` / ``viseme_frame_acc``:
-    share of 10 ms frames (over the reference's span) where the two give the same phone
-    / viseme class (timing counts, as it does for the motion chosen); ``onset_err_s``:
-    median absolute onset difference of the matched phones, ``onset_bias_s`` their median
-    signed difference (hypothesis minus reference); ``phones_per_s`` of the hypothesis.
-    """
-    from ingest.speech.phones import VISEME_OF
-    from ingest.speech.segment import boundary_errors, phone_error_rate
-
-    def frames(segs, t):
-        starts = np.array([s.start for s in segs])
-        k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(segs) - 1)
-        return [segs[j].phone for j in k]
-
-    ref, hyp = list(reference), list(hypothesis)
-    t = np.arange(ref[0].start, ref[-1].end, AGREEMENT_STEP_S) + AGREEMENT_STEP_S / 2
-    a, b = frames(ref, t), frames(hyp, t)
-    onsets = boundary_errors(ref, hyp, signed=True)
-    span = hyp[-1].end - hyp[0].start
-    return {"per": phone_error_rate(ref, hyp),
-            "frame_acc": float(np.mean([x == y for x, y in zip(a, b, strict=True)])),
-            "viseme_frame_acc": float(np.mean([VISEME_OF[x] == VISEME_OF[y]
-                                               for x, y in zip(a, b, strict=True)])),
-            "onset_err_s": float(np.median(np.abs(onsets))) if onsets.size else float("nan"),
-            "onset_bias_s": float(np.median(onsets)) if onsets.size else float("nan"),
-            "phones_per_s": sum(s.phone != "SIL" for s in hyp) / span if span > 0 else 0.0}
-
-
 def grid(tmp: Path, workers: int, db: Path | None,
          engines: list[str] | None = None) -> dict[str, list[dict]]:
     if db is not None:
@@ -305,7 +273,7 @@ def grid(tmp: Path, workers: int, db: Path | None,
             audio = clip.audio.astype(np.float32) / 32767.0
             phones, _ = segment(audio, clip.sample_rate, engine=engine)
             phones = tuple(phones)
-            agreement.append(phone_agreement(clip.phones, phones))
+            agreement.append(phone_agreement(list(clip.phones), list(phones)))
             yield dataclasses.replace(clip, phones=phones, segmentation="recognized")
 
     out = {"aligned": score_fold(fold, "grid", test)}
