@@ -122,8 +122,15 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     assert main([*base, "--labels", f"{stem}.phones.csv", "-o", str(tmp_path / "a.npz"),
                  "--explain"]) == 0
     captured = capsys.readouterr()
-    assert "path: phone labels given: each phone the mean of its 20 best animes" in captured.err
+    assert ("path: phone labels given: each phone the mean of its 20 best animes, ranked by "
+            "phonetic context first") in captured.err
     assert "path: phone labels given" in captured.out and "k-best 20" in captured.err
+    assert main([*base, "--labels", f"{stem}.phones.csv", "--no-context-ranking", "-o",
+                 str(tmp_path / "a3.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "phonetic context" not in err and "mean of its 20 best animes" in err
+    with np.load(tmp_path / "a.npz") as by_context, np.load(tmp_path / "a3.npz") as by_audio:
+        assert not np.allclose(by_context["motion"], by_audio["motion"])
     assert main([*base, "--labels", f"{stem}.phones.csv", "--exact", "-o",
                  str(tmp_path / "a2.npz")]) == 0
     assert "path: phone labels given: the paper's search" in capsys.readouterr().err

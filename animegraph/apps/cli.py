@@ -771,8 +771,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", context=args.context_ranking)
-    if out.context_ranked:
-        path += "; animes ranked by phonetic context first (--no-context-ranking: by audio cost)"
+    if out.context_ranked and "phonetic context" not in path:
+        path += "; animes ranked by phonetic context first"
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -877,7 +877,7 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
     return synthesis_path(given, known_phones=args.labels is not None or args.text is not None,
-                          k_best=args.k_best, searched=searched)
+                          k_best=args.k_best, searched=searched, context=args.context_ranking)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
