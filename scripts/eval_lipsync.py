@@ -285,9 +285,11 @@ def grid(tmp: Path, workers: int, db: Path | None,
         rows = score_fold(fold, "grid", recognised(engine, agreement))
         for row, agree in zip(rows, agreement, strict=True):
             row["phones_vs_aligned"] = agree
+        with warnings.catch_warnings():  # a measure no clip has (no pauses) is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            means = {k: np.nanmean([a[k] for a in agreement]) for k in agreement[0]}
         print(f"# grid {part}: phones against the aligned ones (means over clips): " + ", ".join(
-            f"{k} {np.nanmean([a[k] for a in agreement]):.3f}" for k in agreement[0]),
-            flush=True)
+            f"{k} {v:.3f}" for k, v in means.items()), flush=True)
         out[part] = rows
     return out
 
