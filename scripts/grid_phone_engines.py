@@ -17,7 +17,8 @@ over the aligned span:
   before the first and after the last aligned phone) and ``pause_sil_as_speech`` (pauses
   between phones); ``speech_as_sil``: the reverse;
 - ``per``: phone error rate (``SIL`` left out); ``phones`` / ``ref_phones``: phones a clip;
-  ``median_dur_s`` / ``ref_median_dur_s``: median phone duration.
+  ``median_dur_s`` / ``ref_median_dur_s``: median phone duration; ``ref_silence_s`` /
+  ``ref_seconds``: seconds of ``SIL`` in the aligned phones / of the clip.
 
 With ``--scores RUN.json`` (an ``eval_lipsync.py --datasets grid --grid-engines ...`` run on
 the same split) it also prints, per engine, the correlation over the clips between each
@@ -77,7 +78,10 @@ def agreement(reference, hypothesis) -> dict[str, float]:
             "per": phone_error_rate(reference, hypothesis),
             "phones": float(len(durs)), "ref_phones": float(len(ref_durs)),
             "median_dur_s": float(np.median(durs)) if durs else np.nan,
-            "ref_median_dur_s": float(np.median(ref_durs))}
+            "ref_median_dur_s": float(np.median(ref_durs)),
+            "ref_silence_s": float(sum(s.end - s.start for s in reference
+                                       if s.phone == SILENCE)),
+            "ref_seconds": float(reference[-1].end - reference[0].start)}
 
 
 def main() -> int:
