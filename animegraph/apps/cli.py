@@ -771,8 +771,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", context=args.context_ranking)
-    if out.context_ranked and "phonetic context" not in path:
-        path += "; animes ranked by phonetic context first"
+    from animegraph.synthesis.path import CONTEXT_PHRASE
+
+    if out.context_ranked and CONTEXT_PHRASE not in path:
+        path += f"; k-best{CONTEXT_PHRASE}"
+    elif not out.context_ranked:  # e.g. a transcript that failed to align: recognised
+        path = path.replace(CONTEXT_PHRASE, "")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)

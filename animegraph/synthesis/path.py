@@ -42,6 +42,8 @@ AUDIO_ONLY_K_BEST = 20
 #: recorded neighbour phones against the input's; :func:`animegraph.search.k_best` with
 #: ``context``, beyond the paper: unit selection's context target cost, Hunt & Black 1996).
 KNOWN_PHONES_CONTEXT = True
+#: What the path line says of it.
+CONTEXT_PHRASE = ", ranked by phonetic context first"
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
@@ -75,7 +77,7 @@ def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
         return None, f"{given}: the paper's search (one anime a phone, §4) as asked"
     k, where = ((TRANSCRIPT_K_BEST, "with a transcript, GRID") if known_phones
                 else (AUDIO_ONLY_K_BEST, "without a transcript"))
-    ranked = (", ranked by phonetic context first"
+    ranked = (CONTEXT_PHRASE
               if (KNOWN_PHONES_CONTEXT and known_phones if context is None else context)
               else "")
     return k, (f"{given}: each phone the mean of its {k} best animes{ranked} (k-best measured "
