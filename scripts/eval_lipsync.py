@@ -31,7 +31,9 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
   other 640 are the database. The database's phones are aligned inside GRID's word
   alignments (as ingest does); the held-out clips are synthesized (a) from those phones
   and (b) from phones recognised in their audio alone (the phone engine, as for the other
-  real data). ``--grid-db``
+  real data; ``--grid-engines hama pocketsphinx`` scores each engine's phones in the same
+  run, as parts ``recognized-<engine>``, with how they agree with the aligned ones:
+  ``scripts/grid_phone_engines.py``'s measures per clip, ``phones_vs_aligned``). ``--grid-db``
   reads the clips prepared by an ``animegraph ingest`` of ``grid/s1`` instead of preparing
   them again.
 
@@ -62,6 +64,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from grid_phone_engines import agreement as phone_agreement  # scripts/ is sys.path[0]
 
 from animegraph.apps import evaluate
 from animegraph.apps.plots import plot_heldout, plot_systems
@@ -250,7 +253,8 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
 GRID_HOLDOUT = 5
 
 
-def grid(tmp: Path, workers: int, db: Path | None) -> dict[str, list[dict]]:
+def grid(tmp: Path, workers: int, db: Path | None,
+         engines: list[str] | None = None) -> dict[str, list[dict]]:
     if db is not None:
         from db.store import Database
 
@@ -269,16 +273,29 @@ def grid(tmp: Path, workers: int, db: Path | None) -> dict[str, list[dict]]:
     fold = fit_fold(tmp, "grid", train, reference)
     del train
 
-    def recognised():
+    def recognised(engine, agreement):
         for clip in test:  # one at a time: recognised, scored, dropped
             audio = clip.audio.astype(np.float32) / 32767.0
-            phones, _ = segment(audio, clip.sample_rate, engine=INGEST.get("phones_engine"))
+            phones, _ = segment(audio, clip.sample_rate, engine=engine)
             phones = tuple(phones)
+            agreement.append(phone_agreement(list(clip.phones), list(phones)))
             yield dataclasses.replace(clip, phones=phones, segmentation="recognized")
 
     out = {"aligned": score_fold(fold, "grid", test)}
-    print(f"# grid: aligned phones scored; recognising phones of {len(test)} clips", flush=True)
-    out["recognized"] = score_fold(fold, "grid", recognised())
+    for engine in engines or [INGEST.get("phones_engine")]:
+        part = "recognized" if not engines else f"recognized-{engine}"
+        print(f"# grid: recognising phones of {len(test)} clips ({part}, engine "
+              f"{engine or 'auto'})", flush=True)
+        agreement: list[dict] = []
+        rows = score_fold(fold, "grid", recognised(engine, agreement))
+        for row, agree in zip(rows, agreement, strict=True):
+            row["phones_vs_aligned"] = agree
+        with warnings.catch_warnings():  # a measure no clip has (no pauses) is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            means = {k: np.nanmean([a[k] for a in agreement]) for k in agreement[0]}
+        print(f"# grid {part}: phones against the aligned ones (means over clips): " + ", ".join(
+            f"{k} {v:.3f}" for k, v in means.items()), flush=True)
+        out[part] = rows
     return out
 
 
@@ -320,6 +337,9 @@ def main() -> int:
                         help="phone engine for clips without labels (default: auto)")
     parser.add_argument("--peers", nargs="+", default=[], choices=sorted(PEERS),
                         help="published tools as peer rows (pip install -e \".[peers]\")")
+    parser.add_argument("--grid-engines", nargs="+", choices=ENGINES, default=None,
+                        help="grid: score the recognised phones of each of these engines "
+                             "(parts recognized-ENGINE; default: one part, --phones-engine)")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
     parser.add_argument("--guide", choices=("mu-mlp", "av-hmm"), default="mu-mlp",
@@ -359,7 +379,7 @@ def main() -> int:
                 print(f"# {name}: skipped, {SHARED / name} is absent")
                 continue
             if name == "grid":
-                parts = grid(tmp, args.workers, args.grid_db)
+                parts = grid(tmp, args.workers, args.grid_db, args.grid_engines)
                 results[name] = {phones: {"summary": summarise(f"grid, phones {phones}", rows),
                                           "clips": rows} for phones, rows in parts.items()}
                 results[name]["peak_rss_mb"] = peak_rss_mb()

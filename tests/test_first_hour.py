@@ -241,3 +241,18 @@ def test_corpus_generation_labels_its_steps(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "preparing 2 workers" in err and "generating the corpus" in err
     assert "2/2" in err
+
+
+def test_a_kernel_that_moved_in_its_file_counts_as_cached(tmp_path, monkeypatch):
+    from animegraph.search import kernels
+
+    index = tmp_path / "problem.row_dist-586.py311.nbi"
+    monkeypatch.setattr(kernels, "kernel_caches", lambda method="exact": [
+        ("problem.row_dist", index)])
+    assert kernels.uncompiled_kernels() == ["problem.row_dist"]
+    (tmp_path / "problem.row_dist-501.py311.nbi").write_bytes(b"")  # before an edit above it
+    assert kernels.uncompiled_kernels() == [] and kernels.compile_notice() is None
+    (tmp_path / "problem.other-586.py311.nbi").write_bytes(b"")
+    (tmp_path / "problem.row_dist-501.py312.nbi").write_bytes(b"")
+    (tmp_path / "problem.row_dist-501.py311.nbi").unlink()
+    assert kernels.uncompiled_kernels() == ["problem.row_dist"]  # another kernel, Python

@@ -462,3 +462,37 @@ def test_k_best_ranks_by_unary_cost_after_the_pick():
         S.k_best(g, cands, audio, nodes, 0)
     with pytest.raises(ParameterError, match="not a candidate"):
         S.k_best(g, cands, audio, [1, 1], 2)
+
+
+def test_k_best_with_context_ranks_matching_neighbours_before_audio_cost():
+    # Input "B AA T"; the AA animes: 1 (B AA T: both sides), 4 (M AA S: both visemes),
+    # 7 (K AA T: one side), 9 (AA alone: SIL both sides, no match), in audio cost order
+    # 9, 7, 4, 1 (the least first).
+    recs = [["B", "AA", "T"], ["M", "AA", "S"], ["K", "AA", "T"], ["AA"]]
+    n = sum(len(r) for r in recs)
+    z = np.zeros((n, 3))
+    g = make_graph(recs, z, z)
+    cands = candidates(g, ["B", "AA", "T"])
+    np.testing.assert_array_equal(cands.nodes[1], [1, 4, 7, 9])
+    audio = [np.zeros(len(c)) for c in cands.nodes]
+    audio[1] = np.array([4.0, 3.0, 2.0, 1.0])
+    match = problem.context_match(g, cands)
+    lo = len(cands.nodes[0])
+    np.testing.assert_allclose(match[lo:lo + 4], [2.0, 1.0, 1.0, 0.0])
+    nodes = [0, 9, 2]
+    plain = S.k_best(g, cands, audio, nodes, 4)
+    np.testing.assert_array_equal(plain[1], [9, 7, 4, 1])  # by audio cost
+    ctx = S.k_best(g, cands, audio, nodes, 4, context=True)
+    # The pick first; then context (1: 2.0; 7 and 4: 1.0, tied, 7 by its audio cost).
+    np.testing.assert_array_equal(ctx[1], [9, 1, 7, 4])
+    # The emotion term still ranks above the context: an anime of another emotion last.
+    g2 = make_graph(recs, z, z, emotions=[1, 0, 0, 0])
+    ctx2 = S.k_best(g2, candidates(g2, ["B", "AA", "T"]), audio, nodes, 4, context=True,
+                    emotion="angry")
+    np.testing.assert_array_equal(ctx2[1], [9, 7, 4, 1])
+    # Utterance ends count as silence: a lone AA input matches the lone AA anime best.
+    lone = candidates(g, ["AA"])
+    np.testing.assert_array_equal(
+        S.k_best(g, lone, [np.array([0.0, 0.0, 0.0, 1.0])], [1], 2, context=True)[0], [1, 9])
+    with pytest.raises(ParameterError, match="context needs the input phones"):
+        problem.context_match(g, Candidates(nodes=cands.nodes, backoff=cands.backoff))

@@ -122,8 +122,15 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     assert main([*base, "--labels", f"{stem}.phones.csv", "-o", str(tmp_path / "a.npz"),
                  "--explain"]) == 0
     captured = capsys.readouterr()
-    assert "path: phone labels given: each phone the mean of its 20 best animes" in captured.err
+    assert ("path: phone labels given: each phone the mean of its 20 best animes, ranked by "
+            "phonetic context first") in captured.err
     assert "path: phone labels given" in captured.out and "k-best 20" in captured.err
+    assert main([*base, "--labels", f"{stem}.phones.csv", "--no-context-ranking", "-o",
+                 str(tmp_path / "a3.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "phonetic context" not in err and "mean of its 20 best animes" in err
+    with np.load(tmp_path / "a.npz") as by_context, np.load(tmp_path / "a3.npz") as by_audio:
+        assert not np.allclose(by_context["motion"], by_audio["motion"])
     assert main([*base, "--labels", f"{stem}.phones.csv", "--exact", "-o",
                  str(tmp_path / "a2.npz")]) == 0
     assert "path: phone labels given: the paper's search" in capsys.readouterr().err
@@ -140,7 +147,8 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     assert "audio only (phones recognised by the pocketsphinx phone engine): the paper's" in err
     assert main([*base, "--text", "nothing like what is said in it at all", "-o",
                  str(tmp_path / "d.npz"), "--phones-engine", "hama"]) == 0
-    assert "fell back to phone recognition" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "fell back to phone recognition" in err and "phonetic context" not in err
 
 
 @pytest.mark.parametrize("extra, needle", [
@@ -157,6 +165,8 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     (["--k-best", "0"], "--k-best must be at least 1, got 0"),
     (["--helper", "anchored", "--k-best", "3"], "--helper blends the paper's search"),
     (["--helper", "nearest"], "invalid choice"),
+    (["--exact", "--context-ranking"], "--context-ranking ranks the animes k-best averages"),
+    (["--method", "mu-mlp", "--no-context-ranking"], "--context-ranking only applies"),
     (["--method", "mu-mlp", "--helper", "paper"], "--helper only applies"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
@@ -243,6 +253,35 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
         assert row["pick_weight"] == weights[0]
     with pytest.raises(ParameterError, match="k must be"):
         synthesize(model, audio, sr, labels=labels, k_best=0)
+
+
+def test_k_best_ranks_by_phonetic_context_when_asked(model, held_out):
+    from animegraph.search import problem
+    from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
+
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    by_audio = synthesize(model, audio, sr, labels=labels, k_best=4, context=False)
+    by_context = synthesize(model, audio, sr, labels=labels, k_best=4, context=True)
+    default = synthesize(model, audio, sr, labels=labels, k_best=4)
+    assert not by_audio.context_ranked and by_context.context_ranked
+    assert default.context_ranked == KNOWN_PHONES_CONTEXT
+    assert not synthesize(model, audio, sr, labels=labels, context=True).context_ranked
+    # Same picks; the others ranked by context first: their context matches never worse
+    # in rank order than by audio cost, and somewhere better.
+    assert [r["node"] for r in by_audio.explain] == [r["node"] for r in by_context.explain]
+    cands = problem.candidates(model.graph, [p.phone for p in by_context.phones])
+    match = problem.context_match(model.graph, cands)
+    off = np.concatenate([[0], np.cumsum(cands.sizes)])
+    gained = 0.0
+    for i, (a, c) in enumerate(zip(by_audio.blended, by_context.blended, strict=True)):
+        layer = dict(zip(cands.nodes[i].tolist(), match[off[i]:off[i + 1]], strict=True))
+        ctx = [layer[x["node"]] for x in c[1:]]
+        assert ctx == sorted(ctx, reverse=True)  # no emotion given: context decides
+        gained += sum(ctx) - sum(layer[x["node"]] for x in a[1:])
+    assert gained > 0
+    assert not np.allclose(by_audio.motion, by_context.motion)
 
 
 def test_anchor_moves_the_helper_onto_the_animes_poses(rng):

@@ -235,6 +235,10 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--context-ranking", action=argparse.BooleanOptionalAction, default=None,
+                     help="beyond the paper: rank each phone's k-best animes by phonetic "
+                     "context (their recorded neighbour phones against the input's) before "
+                     "the audio cost (default: on with a transcript or labels, off without)")
     syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
                      help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
                      "default), or beyond the paper posteriorgram (DTW of hama phone "
@@ -728,6 +732,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
     k_best, path = _synth_path(args)
+    if args.context_ranking is not None and not k_best:
+        raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
+                         "averages; the paper's search (--exact, --window, --search) takes "
+                         "one anime a phone")
     if args.helper is not None and k_best:
         raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
                          "phone) at its jumps; --k-best averages animes instead: give one")
@@ -781,7 +789,14 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
-                     guide_blend=guide_blend, guide_rank=guide_rank)
+                     guide_blend=guide_blend, guide_rank=guide_rank,
+                     context=args.context_ranking)
+    from animegraph.synthesis.path import CONTEXT_PHRASE
+
+    if out.context_ranked and CONTEXT_PHRASE not in path:
+        path += f"; k-best{CONTEXT_PHRASE}"
+    elif not out.context_ranked:  # e.g. a transcript that failed to align: recognised
+        path = path.replace(CONTEXT_PHRASE, "")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     print(f"animegraph: path: {path}", file=sys.stderr)
@@ -948,7 +963,8 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     from animegraph.synthesis.path import synthesis_path  # shared with batch
 
     given, known, searched = _synth_given(args)
-    return synthesis_path(given, known_phones=known, k_best=args.k_best, searched=searched)
+    return synthesis_path(given, known_phones=known, k_best=args.k_best, searched=searched,
+                          context=args.context_ranking)
 
 
 def _synth_baseline(args: argparse.Namespace) -> int:
@@ -976,8 +992,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
         ("--audio-cost", args.audio_cost is not None),
         ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
-        ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank))
-        if on]
+        ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank),
+        ("--context-ranking", args.context_ranking is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

@@ -44,9 +44,13 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
            "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely",
-           "kbest20-guided", "kbest20-guided-blend", "kbest20-blend")
-#: The methods scored unless others are asked for (those of the paper's audio cost).
-DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20")
+           "kbest20-guided", "kbest20-guided-blend", "kbest20-blend", "kbest20-ctx")
+#: The methods scored unless others are asked for (those of the paper's audio cost;
+#: ``kbest20-ctx`` is ``synth``'s default with known phones).
+DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
+#: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
+#: (``animegraph.search.k_best(..., context=True)``; beyond the paper).
+CONTEXT_SUFFIX = "-ctx"
 #: Method-name suffix -> audio cost (:data:`animegraph.synthesis.audio.AUDIO_COSTS`).
 COST_SUFFIXES = {"-pg": "posteriorgram", "-mix": "plp+posteriorgram"}
 #: Guide suffixes (:mod:`animegraph.synthesis.guide`; need ``score_heldout(guide=...)``):
@@ -122,8 +126,10 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     search input of :func:`heldout_query`, and its number of jump matches."""
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
-        k = int(method[len("kbest"):])
-        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion)[0], jumps
+        context = method.endswith(CONTEXT_SUFFIX)
+        k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
+        return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,
+                             context=context)[0], jumps
     options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
                else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps

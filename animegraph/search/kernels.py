@@ -41,8 +41,19 @@ def kernel_caches(method: str = "exact") -> list[tuple[str, Path]]:
 
 
 def uncompiled_kernels(method: str = "exact") -> list[str]:
-    """Names of ``method``'s kernels not compiled and cached on disk yet."""
-    return [name for name, index in kernel_caches(method) if not index.is_file()]
+    """Names of ``method``'s kernels not compiled and cached on disk yet.
+
+    Numba names an index by the kernel's line (``problem.row_dist-501.py311.nbi``). An
+    index for the same kernel at another line counts as cached: the kernel moved in an
+    edited file, and a helper such as ``row_dist``, compiled into its callers' cached
+    kernels, is not compiled again on its own (so its new index never appears).
+    """
+    def cached(index: Path) -> bool:
+        stem, _, rest = index.name.partition("-")
+        tail = rest.partition(".")[2]
+        return index.is_file() or any(index.parent.glob(f"{stem}-*.{tail}"))
+
+    return [name for name, index in kernel_caches(method) if not cached(index)]
 
 
 def compile_notice(method: str = "exact") -> str | None:

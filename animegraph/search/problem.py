@@ -42,11 +42,20 @@ import numpy as np
 
 from animegraph.search.graph import PHONE_INDEX, AnimeGraph
 from db.errors import DataError, ParameterError
-from ingest.speech.phones import PHONES, VISEME_CLASSES, VISEME_OF
+from ingest.speech.phones import PHONES, SILENCE, VISEME_CLASSES, VISEME_OF
 
 log = logging.getLogger(__name__)
 
 METHODS = ("exact", "paper", "window", "dp")
+
+#: :func:`k_best` with ``context``: what a recorded neighbour scores when it is the input
+#: neighbour's phone, and when it is only of the same viseme class (a phone that looks
+#: alike on the lips, :data:`ingest.speech.phones.VISEME_CLASSES`). Set a priori, not
+#: fitted: a half match for a class-mate (its lips look alike, its tongue may not), so
+#: both neighbours' visemes (1.0) tie one neighbour's exact phone with no match on the
+#: other side.
+CONTEXT_SAME_PHONE = 1.0
+CONTEXT_SAME_VISEME = 0.5
 
 
 
@@ -320,19 +329,34 @@ def node_indices(cands: Candidates, nodes) -> np.ndarray:
 
 def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
            nodes: Sequence[int] | np.ndarray, k: int, *, weights: SearchWeights | None = None,
-           emotion: str | None = None) -> tuple[np.ndarray, ...]:
-    """Per input, its matched node followed by the ``k - 1`` other candidates of least
-    unary cost (beyond the paper: the animes :func:`animegraph.synthesis.blend_k_best`
-    averages).
+           emotion: str | None = None, context: bool = False) -> tuple[np.ndarray, ...]:
+    """Per input, its matched node followed by the ``k - 1`` best other candidates
+    (beyond the paper: the animes :func:`animegraph.synthesis.blend_k_best` averages).
 
-    The unary cost is the part of Eq. (2) that depends on one node only:
-    ``w3 C_audio`` plus the emotion and back-off terms. Ties keep the candidates' order.
+    Without ``context`` the others are ranked by unary cost, the part of Eq. (2) that
+    depends on one node only: ``w3 C_audio`` plus the emotion and back-off terms.
+
+    With ``context`` (beyond the paper) they are ranked lexicographically: first animes
+    of the input's emotion (the emotion term, as in the unary cost), then by
+    :func:`context_match`, the phonetic context of the anime in its recording against
+    the input's (left and right neighbour phones), then by unary cost. This is the
+    target cost on phonetic context of unit-selection speech synthesis (Hunt & Black
+    1996, "Unit selection in a concatenative speech synthesis system using a large
+    speech database", ICASSP, §2-3): by coarticulation a unit recorded in the context
+    it is needed in is the better exemplar; the lips of a phone are shaped by its
+    neighbours (Taylor et al. 2012, "Dynamic units of visual speech", SCA). Context
+    ranks above the audio cost for the reason Cao et al. give the jump match the
+    largest weight and the audio cost the smallest (§4.2, w1 >> w3): consecutive
+    recorded motion carries the coarticulation, the prosody distance is the tie-break.
+    The order is set a priori, not fitted to an evaluation set.
+
+    Ties keep the candidates' order.
 
     Parameters
     ----------
     graph : AnimeGraph
     cands : Candidates
-        n inputs.
+        n inputs (``cands.phones`` is needed for ``context``).
     audio : sequence of np.ndarray
         ``audio[i]``, shape (len(cands.nodes[i]),): C_audio (Eq. 5), as for :func:`search`.
     nodes : array-like of int, shape (n,)
@@ -342,6 +366,8 @@ def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
     weights : SearchWeights, optional
     emotion : str, optional
         The input's emotion; None uses ``cands.emotion``.
+    context : bool, optional
+        Rank by phonetic context before the audio cost (see above).
 
     Returns
     -------
@@ -351,21 +377,80 @@ def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
     Raises
     ------
     ParameterError
-        If ``k`` is not an int >= 1, on malformed inputs (as :func:`search`), or if a
-        node is not a candidate of its input.
+        If ``k`` is not an int >= 1, on malformed inputs (as :func:`search`), if a
+        node is not a candidate of its input, or if ``context`` is asked of candidates
+        without their phones.
     """
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
         raise ParameterError(f"k must be an int >= 1, got {k!r}")
     problem = Problem.build(graph, cands, audio, weights or SearchWeights(), emotion)
+    match = context_match(graph, cands, problem.cn, problem.off) if context else None
     ranked = []
     for i, pick in enumerate(node_indices(cands, nodes)):
         lo, hi = problem.off[i], problem.off[i + 1]
-        order = np.argsort(problem.u[lo:hi], kind="stable")
+        if match is None:
+            order = np.argsort(problem.u[lo:hi], kind="stable")
+        else:  # np.lexsort: the last key is the first; stable
+            order = np.lexsort((problem.u[lo:hi], -match[lo:hi], problem.mismatch[lo:hi]))
         order = np.concatenate([[pick], order[order != pick][:k - 1]])
         ranked.append(problem.cn[lo + order])
     return tuple(ranked)
 
 
+#: Viseme class of each phone index of :data:`ingest.speech.phones.PHONES`.
+_VISEME_INDEX = np.array([sorted(VISEME_CLASSES).index(VISEME_OF[p]) for p in PHONES],
+                         dtype=np.int16)
+
+
+def context_match(graph: AnimeGraph, cands: Candidates, cn: np.ndarray | None = None,
+                  off: np.ndarray | None = None) -> np.ndarray:
+    """How well each candidate's recorded neighbours match the input's (beyond the paper).
+
+    For input ``i`` with neighbours ``cands.phones[i - 1]`` and ``cands.phones[i + 1]``
+    (``SIL`` past either end of the utterance), a candidate anime scores, on each side,
+    :data:`CONTEXT_SAME_PHONE` when the anime next to it in its recording has that
+    phone, :data:`CONTEXT_SAME_VISEME` when it has another phone of the same viseme
+    class, else 0 (a recording's ends count as ``SIL``). Used by :func:`k_best`.
+
+    Parameters
+    ----------
+    graph : AnimeGraph
+    cands : Candidates
+        n inputs, with ``phones``.
+    cn, off : np.ndarray of int64, optional
+        The candidates concatenated, shape (N,), and the layer offsets, shape (n + 1,),
+        as :class:`Problem` holds them (built from ``cands`` when not given).
+
+    Returns
+    -------
+    np.ndarray of float64, shape (N,)
+        The sum of the two sides, in [0, 2 * CONTEXT_SAME_PHONE].
+
+    Raises
+    ------
+    ParameterError
+        If ``cands`` has no phones or not one per input.
+    """
+    n = len(cands)
+    if len(cands.phones) != n:
+        raise ParameterError(f"context needs the input phones, one per input ({n}), got "
+                             f"{len(cands.phones)}")
+    if cn is None or off is None:
+        cn = np.concatenate([np.asarray(c, dtype=np.int64) for c in cands.nodes])
+        off = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum([len(c) for c in cands.nodes], out=off[1:])
+    sil = PHONE_INDEX[SILENCE]
+    want = np.array([sil] + [PHONE_INDEX[p] for p in cands.phones] + [sil], dtype=np.int64)
+    sizes = np.diff(off)
+    score = np.zeros(len(cn), dtype=np.float64)
+    for link, shift in ((graph.prev_node, 0), (graph.next_node, 2)):
+        other = link[cn]
+        got = np.where(other >= 0, graph.node_phone[np.maximum(other, 0)], sil)
+        need = np.repeat(want[shift:shift + n], sizes)
+        same_viseme = _VISEME_INDEX[got] == _VISEME_INDEX[need]
+        score += np.where(got == need, CONTEXT_SAME_PHONE,
+                          np.where(same_viseme, CONTEXT_SAME_VISEME, 0.0))
+    return score
 
 
 def emotion_code(graph: AnimeGraph, emotion: str) -> int:

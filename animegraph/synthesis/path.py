@@ -22,6 +22,16 @@ Friedman, The Elements of Statistical Learning, §2.3.2). On the synthetic corpu
 the motion is generated from the very phones given, the exact search keeps a higher
 mouth R (the search's runs of consecutive animes carry the generator's coarticulation
 exactly): it is reported, not decisive, because its motion is not recorded motion.
+
+With known phones the k best animes are ranked by phonetic context first
+(:data:`KNOWN_PHONES_CONTEXT`; :func:`animegraph.search.k_best` with ``context``: the
+animes recorded between the same neighbour phones, or visemes, before the audio cost;
+unit selection's context target cost, Hunt & Black 1996). Set a priori, then measured
+(docs/results.md, "Issue 14, third session"): on GRID s1 with aligned phones mouth R
+0.884 -> 0.891 (paired +0.007 [+0.003, +0.010]), lip RMSE lower; on the synthetic corpus
+mouth R 0.827 -> 0.873 (+0.046, better on every clip), ahead of the exact search's errors.
+With recognised phones it is not the default (#13's path): on GRID it helped hama's
+phones and hurt PocketSphinx's.
 """
 
 from __future__ import annotations
@@ -30,6 +40,13 @@ from __future__ import annotations
 TRANSCRIPT_K_BEST = 20
 #: ... and when they are recognised from the audio alone.
 AUDIO_ONLY_K_BEST = 20
+#: With known phones, k-best ranks each phone's animes by phonetic context first (their
+#: recorded neighbour phones against the input's; :func:`animegraph.search.k_best` with
+#: ``context``, beyond the paper: unit selection's context target cost, Hunt & Black 1996).
+KNOWN_PHONES_CONTEXT = True
+#: What the path line says of it.
+CONTEXT_PHRASE = ", ranked by phonetic context first"
+
 #: The baseline whose predicted motion the audio-only path averages with the animes'
 #: (:mod:`animegraph.synthesis.guide`, share ``GUIDE_BLEND``); None: the animes alone.
 #: mu-mlp (Hong et al. 2002): with it the audio-only path beat k-best 20 alone and mu-mlp
@@ -62,7 +79,7 @@ def guide_line(name: str | None, share: float, rank: bool, *, known_phones: bool
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
-                   searched: bool = False) -> tuple[int | None, str]:
+                   searched: bool = False, context: bool | None = None) -> tuple[int | None, str]:
     """The k-best setting for speech, and a line saying which path runs and why.
 
     Parameters
@@ -76,6 +93,9 @@ def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
     searched : bool
         A search was asked for (``--exact``, ``--window``, ``--search``, a script line's
         ``exact`` or ``window``): the paper's synthesis, one anime a phone.
+    context : bool, optional
+        Context ranking asked for (``--context-ranking`` / ``--no-context-ranking``); None:
+        :data:`KNOWN_PHONES_CONTEXT` with known phones, off without. Only for the line.
 
     Returns
     -------
@@ -89,8 +109,11 @@ def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,
         return None, f"{given}: the paper's search (one anime a phone, §4) as asked"
     k, where = ((TRANSCRIPT_K_BEST, "with a transcript, GRID") if known_phones
                 else (AUDIO_ONLY_K_BEST, "without a transcript"))
-    return k, (f"{given}: each phone the mean of its {k} best animes (k-best measured best "
-               f"on real speech {where}; --exact for the paper's search)")
+    ranked = (CONTEXT_PHRASE
+              if (KNOWN_PHONES_CONTEXT and known_phones if context is None else context)
+              else "")
+    return k, (f"{given}: each phone the mean of its {k} best animes{ranked} (k-best measured "
+               f"best on real speech {where}; --exact for the paper's search)")
 
 
 def known_phones_path(given: str, *, k_best: int | None = None,

@@ -49,6 +49,7 @@ from animegraph.synthesis.guide import (
     target_costs,
 )
 from animegraph.synthesis.model import Model
+from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 from ingest.lowpass import smooth
@@ -76,6 +77,9 @@ class Synthesis:
     warnings : tuple of str
         What may be wrong with the input speech (:mod:`ingest.speech.quality`): clipping,
         telephone band, little speech the phone engine knows.
+    context_ranked : bool
+        With ``k_best``: the animes were ranked by phonetic context first
+        (:func:`animegraph.search.k_best` with ``context``).
     """
 
     motion: np.ndarray
@@ -91,6 +95,7 @@ class Synthesis:
     notes: tuple[str, ...] = ()
     blended: tuple[list[dict], ...] = ()
     warnings: tuple[str, ...] = ()
+    context_ranked: bool = False
 
 
 def synthesize(
@@ -101,6 +106,7 @@ def synthesize(
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
     guide=None, guide_blend: float = GUIDE_BLEND, guide_rank: bool = False,
+    context: bool | None = None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -154,6 +160,12 @@ def synthesize(
         With ``guide``: add each candidate's distance to the guide's motion to C_audio
         (trajectory-guided selection); off by default (it did not hold across speakers,
         docs/results.md, "Issue 13, third session").
+    context : bool, optional
+        With ``k_best``, beyond the paper: rank each phone's animes by phonetic context
+        (their recorded neighbour phones against the input's) before the audio cost
+        (:func:`animegraph.search.k_best`). None (default): as
+        :data:`animegraph.synthesis.path.KNOWN_PHONES_CONTEXT` says when the phones are
+        known (labels, or a transcript aligned), off when they are recognised.
 
     Returns
     -------
@@ -213,8 +225,11 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
+        if context is None:
+            context = KNOWN_PHONES_CONTEXT and method_used in ("labels", "aligned")
         ics, ranked = render_k_best(model, phones, cands, unary, result.nodes, k_best,
-                                    weights=weights, options=options, emotion=emotion)
+                                    weights=weights, options=options, emotion=emotion,
+                                    context=context)
         joins = []
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
@@ -232,7 +247,7 @@ def synthesize(
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
                      timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
-                     warnings=tuple(warnings))
+                     warnings=tuple(warnings), context_ranked=bool(k_best and context))
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
@@ -328,11 +343,12 @@ def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = N
 
 def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
                   weights: SearchWeights | None = None, options: PostOptions | None = None,
-                  emotion: str | None = None) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+                  emotion: str | None = None,
+                  context: bool = False) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
     """Motion (independent components) averaging the ``k`` best animes of each phone around
-    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`), and those
-    animes per phone, best first."""
+    the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`, ranked by
+    phonetic context first with ``context``), and those animes per phone, best first."""
     ranked = ranked_candidates(model.graph, cands, audio_cost, nodes, k, weights=weights,
-                               emotion=emotion)
+                               emotion=emotion, context=context)
     return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs,
                         options=options), ranked

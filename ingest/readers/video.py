@@ -30,9 +30,14 @@ alignment) or a TextGrid, ``<clip>.phones.csv``, ``<clip>.json`` (speaker, emoti
 
 from __future__ import annotations
 
+import contextlib
 import io
 import logging
 import os
+import re
+import sys
+import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -144,6 +149,46 @@ def _frames(path: Path):
     return meta, frames()
 
 
+#: The lines mediapipe's native code (TensorFlow Lite, absl, glog) writes to file
+#: descriptor 2 while the face mesh is created and first run: informational and warning
+#: lines (``I``/``W`` glog lines, absl's "not initialised" notice, TFLite's delegate
+#: line). Error (``E``) and fatal (``F``) lines are not among them.
+NATIVE_NOISE = re.compile(
+    r"^(?:[IW]\d{4} \d\d:\d\d:\d+\.\d+\s+\d+ \S+:\d+\] "
+    r"|WARNING: All log messages before absl::InitializeLog\(\) is called"
+    r"|INFO: Created TensorFlow Lite )")
+_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def native_log_filtered():
+    """Run a block with file descriptor 2 caught, then write back all but mediapipe's noise.
+
+    mediapipe's C++ logs (absl, glog, TensorFlow Lite) go straight to file descriptor 2,
+    and ``GLOG_minloglevel`` does not silence absl's. Inside the block fd 2 is a
+    temporary file; after it fd 2 is restored and every caught line that is not
+    :data:`NATIVE_NOISE` is written to ``sys.stderr``, so errors (the native ones, and
+    Python's own written meanwhile) stay visible. Process-wide (fd 2 is): one block at
+    a time.
+    """
+    with _STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            kept = [line for line in sink.read().decode(errors="replace").splitlines()
+                    if line.strip() and not NATIVE_NOISE.match(line)]
+            if kept:
+                sys.stderr.write("\n".join(kept) + "\n")
+                sys.stderr.flush()
+
+
 def _cpu_seconds() -> float:
     """CPU time of this process and of its finished child processes (ffmpeg), s."""
     import resource
@@ -181,7 +226,7 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
         video.
     """
     path = Path(path)
-    os.environ.setdefault("GLOG_minloglevel", "2")  # mediapipe's C++ log lines
+    os.environ.setdefault("GLOG_minloglevel", "2")  # glog's; absl's: native_log_filtered
     try:
         from mediapipe.python.solutions import face_mesh
     except ImportError:
@@ -196,13 +241,21 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
     landmarks, counts = [], []
     previous = None
     started, cpu = time.perf_counter(), _cpu_seconds()
-    with face_mesh.FaceMesh(static_image_mode=False, max_num_faces=2, refine_landmarks=True,
-                            min_detection_confidence=MIN_DETECTION_CONFIDENCE,
-                            min_tracking_confidence=MIN_TRACKING_CONFIDENCE) as mesh:
-        bar = tqdm(frames, total=int(round(duration * fps)) or None, unit="frame",
-                   desc=f"tracking {path.name}", leave=False, disable=None if progress else True)
+    bar = tqdm(frames, total=int(round(duration * fps)) or None, unit="frame",
+               desc=f"tracking {path.name}", leave=False, disable=None if progress else True)
+    with contextlib.ExitStack() as stack:
+        # The graph's threads log their set-up (TFLite, absl) from its creation until the
+        # first frame is through: fd 2 filtered over that whole span, in one piece.
+        quiet = stack.enter_context(contextlib.ExitStack())
+        quiet.enter_context(native_log_filtered())
+        mesh = stack.enter_context(face_mesh.FaceMesh(
+            static_image_mode=False, max_num_faces=2, refine_landmarks=True,
+            min_detection_confidence=MIN_DETECTION_CONFIDENCE,
+            min_tracking_confidence=MIN_TRACKING_CONFIDENCE))
         for frame in bar:
-            faces = mesh.process(frame).multi_face_landmarks or []
+            result = mesh.process(frame)
+            quiet.close()  # after the first frame: fd 2 as it was
+            faces = result.multi_face_landmarks or []
             counts.append(len(faces))
             if faces:
                 previous = _nearest_face(faces, previous)

@@ -1,0 +1,26 @@
+"""Held-out scoring (animegraph.apps.evaluate): the k-best rows, context-ranked or not."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from animegraph.apps import evaluate
+from animegraph.synthesis import Model
+from db.store import Database
+from ingest.tables import prepared_from_database
+
+
+def test_kbest_ctx_row_ranks_by_context_and_scores(tiny_db):
+    model = Model.load(tiny_db[0])
+    clip = prepared_from_database(Database.open(tiny_db[0]))[0]
+    assert "kbest20-ctx" in evaluate.DEFAULT_METHODS
+    phones, emotion, cands, cost = evaluate.heldout_query(model, clip)
+    plain, _ = evaluate.method_motion(model, phones, cands, cost, "kbest4", emotion=emotion)
+    ctx, jumps = evaluate.method_motion(model, phones, cands, cost, "kbest4-ctx",
+                                        emotion=emotion)
+    assert plain.shape == ctx.shape and np.isfinite(ctx).all()
+    assert not np.allclose(plain, ctx)  # another ranking, other animes blended
+    row = evaluate.score_heldout(model, clip, methods=("kbest20", "kbest20-ctx"))
+    assert set(row["methods"]) == {"kbest20", "kbest20-ctx"}
+    for scores in row["methods"].values():
+        assert np.isfinite(scores["mouth_r"]) and scores["synth_s"] > 0
