@@ -207,6 +207,12 @@ def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corp
     err = capsys.readouterr().err
     assert "warning: no mu-mlp guide (too little data" in err
     assert "but without its mu-mlp guide, which could not be fitted" in err
+    # The failure is kept with this version of the database: the next run does not fit
+    # again (no "fitting" line), and says why.
+    assert main([*base, "-o", str(tmp_path / "a2.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "fitting mu-mlp" not in err
+    assert "no mu-mlp guide (too little data" in err and "kept from an earlier run" in err
     assert main([*base, "-o", str(tmp_path / "b.npz"), "--guide", "mu-mlp"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert "too little data" in err[-1] and not any("Traceback" in e for e in err)

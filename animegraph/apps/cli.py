@@ -767,7 +767,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
+    t_guide = time.perf_counter()
     guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
+    t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
     if guide is None and guide_name is not None:
         path += f"; but without its {guide_name} guide, which could not be fitted"
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
@@ -923,11 +925,17 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
     warning line: the path falls back to k-best alone."""
     if name is None:
         return None
-    from animegraph.baselines.stored import load_forward, model_path
+    from animegraph.baselines.stored import load_forward, model_path, record_unfit, unfit_reason
 
     model = load_forward(db, name)
     if model is not None:
         return model
+    reason = None if asked else unfit_reason(db, name)
+    if reason is not None:  # a default guide already failed on this version: not again
+        print(f"animegraph: warning: no {name} guide ({reason}; kept from an earlier run, "
+              f"--guide {name} to try again); each phone the mean of its best animes alone",
+              file=sys.stderr)
+        return None
     from animegraph.baselines.base import fitted_model, load_model
 
     if not model_path(db, name).is_file() or load_model(db, name) is None:
@@ -940,6 +948,7 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
     except (AnimeGraphError, OSError) as exc:
         print(f"animegraph: warning: no {name} guide ({exc}); each phone the mean of its "
               f"best animes alone", file=sys.stderr)
+        record_unfit(db, name, str(exc))
         return None
 
 

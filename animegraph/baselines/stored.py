@@ -58,6 +58,38 @@ def model_path(db_root, method: str) -> Path:
     return root / MODELS_DIR / current_version(root) / f"{method}.parquet"
 
 
+
+def _unfit_path(db_root, method: str) -> Path:
+    return model_path(db_root, method).with_suffix(".unfit")
+
+
+def unfit_reason(db_root, method: str) -> str | None:
+    """Why ``method`` could not be fitted on the live version of ``db_root``, as
+    :func:`record_unfit` kept it, or None. The text comes from a database folder (someone
+    else's): only its first line, printable characters, at most 300 of them."""
+    try:
+        text = _unfit_path(db_root, method).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    line = "".join(c for c in (text.splitlines() or [""])[0] if c.isprintable())[:300]
+    return line or "no reason kept"
+
+
+def record_unfit(db_root, method: str, reason: str) -> None:
+    """Keep why ``method`` cannot be fitted on the live version of ``db_root``, so that a
+    default use (``synth``'s audio-only guide) does not fit it again on every run; a new
+    version (another ingest) tries again. A database that cannot be written is left as
+    it is."""
+    from db.atomic import atomic_write
+
+    path = _unfit_path(db_root, method)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path) as handle:
+            handle.write(reason.encode("utf-8"))
+    except OSError:
+        pass
+
 #: Stored models :func:`load_forward` restores without scikit-learn: method -> class.
 FORWARD = {"mu-mlp": "animegraph.baselines.mu_mlp_forward:StoredMuMlp"}
 
