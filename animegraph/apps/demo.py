@@ -7,9 +7,11 @@
    neutral, with exact phone timing; its reference facial motion is made by the same
    face model as the corpus. These are the input and the ground truth that the later
    stages are measured against.
-3. Facial motion for the sentence is synthesized from the database by the Anime Graph
-   search (exact) with time-warping, blending and smoothing, from its speech and phone
-   timing, in the chosen emotion.
+3. Facial motion for the sentence is synthesized from the database as ``synth`` does
+   with known phones (:func:`animegraph.synthesis.path.synthesis_path`: the Anime Graph
+   search, then each phone the mean of its 20 best animes ranked by phonetic context),
+   with time-warping, blending and smoothing, from its speech and phone timing, in the
+   chosen emotion.
 4. The outputs and a PNG plot (reference and synthesized motion) are written to the
    output folder, and the synthesized motion is rendered on the face mesh with the
    speech as an MP4 (Cao et al. §7).
@@ -173,6 +175,7 @@ def run_demo(
                            stem.with_suffix(".json")]
     from animegraph.search.kernels import compile_notice
     from animegraph.synthesis import Model, synthesize, write_motion
+    from animegraph.synthesis.path import synthesis_path
     from ingest.formats.phones_csv import Segment
 
     say("synthesizing the held-out sentence from the database ...")
@@ -182,13 +185,14 @@ def run_demo(
     model = Model.load(db_path)
     first = clips[0]
     labels = [Segment(p.phone, p.start, p.end) for p in first.utterance.phones]
+    k_best, path = synthesis_path("the sentence's phone labels", known_phones=True)
     synth = synthesize(model, first.utterance.audio, first.utterance.sample_rate,
-                       labels=labels, emotion=emotion)
+                       labels=labels, emotion=emotion, k_best=k_best)
     synth_path = write_motion(synth, model, out / f"demo_{emotion}_synthesized.c3d")
     result.outputs.append(synth_path)
     result.synthesis = (f"{len(synth.phones)} phones, {synth.result.n_jumps} jump matches, "
                         f"{synth.timings['total_s']:.2f} s for "
-                        f"{first.utterance.duration:.1f} s of speech")
+                        f"{first.utterance.duration:.1f} s of speech; path: {path}")
     markers = synth.motion.reshape(len(synth.motion), -1, 3)
     png = plot_clips(clips, out / "demo.png",
                      title=f"held-out sentence, {emotion} vs neutral: {text}",
