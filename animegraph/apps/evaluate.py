@@ -44,7 +44,8 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
            "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely",
-           "kbest20-guided", "kbest20-guided-blend", "kbest20-blend", "kbest20-ctx")
+           "kbest20-guided", "kbest20-guided-blend", "kbest20-blend", "kbest20-ctx",
+           "kbest20-ctx-blend")
 #: The methods scored unless others are asked for (those of the paper's audio cost;
 #: ``kbest20-ctx`` is ``synth``'s default with known phones).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
