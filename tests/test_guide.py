@@ -287,3 +287,46 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
         assert status == 0
     assert loaded["mu-mlp"] == loaded["none"]
     assert not {"sklearn", "librosa", "pandas"} & set(loaded["mu-mlp"])
+
+
+@pytest.mark.parametrize("corrupt", ["covariance", "nan", "shape", "std"])
+def test_corrupt_stored_mu_mlp_is_one_line(tiny_db, tiny_corpus, mlp, tmp_path, capsys, corrupt):
+    """A stored mu-mlp from someone else's database that would fail inside the prediction
+    (a covariance not positive definite, a NaN, a network of the wrong shape, a zero
+    spread) is refused when it is read: one error line from synth, never a traceback."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    from animegraph.apps.cli import main
+    from animegraph.baselines.base import save_model
+    from animegraph.baselines.stored import model_path
+    from db.store import arrays_from_table, arrays_to_table
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    save_model(mlp, db)
+    path = model_path(db, "mu-mlp")
+    table = pq.read_table(path)
+    arrays = arrays_from_table(table)
+    if corrupt == "covariance":
+        arrays["gmm/000/covariances"] = -np.abs(arrays["gmm/000/covariances"])
+    elif corrupt == "nan":
+        arrays["pooled/W1"] = np.full_like(arrays["pooled/W1"], np.nan)
+    elif corrupt == "shape":
+        arrays["pooled/W1"] = arrays["pooled/W1"][:, :1]
+        arrays["pooled/b1"] = arrays["pooled/b1"][:1]
+    else:
+        arrays["x_std"] = np.zeros_like(arrays["x_std"])
+    pq.write_table(arrays_to_table(arrays).replace_schema_metadata(table.schema.metadata),
+                   path)
+    wav = tmp_path / "speech.wav"
+    shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
+    for extra in ([], ["--guide", "mu-mlp"], ["--method", "mu-mlp"]):
+        out = tmp_path / "out.npz"
+        assert main(["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx",
+                     "-o", str(out), *extra]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert ("stored mu-mlp model is implausible" if corrupt != "nan" else
+                "values not finite") in err[-1], err[-1]
+        assert not any("Traceback" in e for e in err) and not out.exists()

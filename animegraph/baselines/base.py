@@ -153,9 +153,14 @@ def read_model(path) -> BaselineModel:
     try:
         table = pq.read_table(path)
         meta = json.loads(table.schema.metadata[META_KEY])
+        cls = estimator_class(meta["method"])
+        arrays = arrays_from_table(table)
     except (OSError, KeyError, ValueError, TypeError, pa.ArrowException) as exc:
         raise DataError(f"stored model {path} is unreadable ({exc})") from exc
-    return estimator_class(meta["method"]).from_arrays(arrays_from_table(table), meta)
+    try:
+        return cls.from_arrays(arrays, meta)
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise DataError(f"stored model {path} is unreadable ({exc})") from exc
 
 
 def load_model(db_root, method: str) -> BaselineModel | None:
