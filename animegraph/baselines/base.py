@@ -158,9 +158,11 @@ def read_model(path) -> BaselineModel:
     except (OSError, KeyError, ValueError, TypeError, pa.ArrowException) as exc:
         raise DataError(f"stored model {path} is unreadable ({exc})") from exc
     try:
-        return cls.from_arrays(arrays, meta)
+        model = cls.from_arrays(arrays, meta)
     except (KeyError, ValueError, TypeError, IndexError) as exc:
         raise DataError(f"stored model {path} is unreadable ({exc})") from exc
+    model.check_restored(str(path))
+    return model
 
 
 def load_model(db_root, method: str) -> BaselineModel | None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from animegraph.baselines.data import audio_features_at
-from animegraph.baselines.predicting import Predicting
+from animegraph.baselines.predicting import Predicting, implausible
 
 
 def mlp_forward(x: np.ndarray, weights: list[np.ndarray], biases: list[np.ndarray]) -> np.ndarray:
@@ -110,8 +110,6 @@ class MuMlpForward:
         positive definite, and every network's shapes chaining from the audio features
         to the database's channels (a dry run on one zero frame). DataError if not, so
         that a corrupt model is one line, not a failure inside the prediction."""
-        from db.errors import DataError
-
         nets = [self.pooled_mlp_, *(n for n in self.subset_mlps_ if n is not None)]
         try:  # (finite values: db.store.arrays_from_table checks them on reading)
             if any(np.any(np.asarray(g["weights"]) <= 0) for g in self.gmms_):
@@ -129,8 +127,7 @@ class MuMlpForward:
                 if out.shape != (1, len(self.channels_)):
                     raise ValueError("the motion is not the database's channels")
         except (KeyError, ValueError, IndexError, TypeError) as exc:  # LinAlgError too
-            raise DataError(f"stored mu-mlp model is implausible ({exc}); 'animegraph fit "
-                            f"--method mu-mlp' fits it again") from exc
+            raise implausible(self.method, "(read from a database)", exc) from exc
 
 
 class StoredMuMlp(MuMlpForward, Predicting):

@@ -21,6 +21,12 @@ from db.errors import DataError, ParameterError
 BLAS_THREADS = 1
 
 
+def implausible(method: str, where: str, exc: Exception) -> DataError:
+    """The one-line error of a stored ``method`` model whose arrays do not work."""
+    return DataError(f"stored {method} model {where} is implausible ({exc}); "
+                     f"'animegraph fit --method {method}' fits it again")
+
+
 class NotFitted(DataError):
     """A model asked to predict before it was fitted."""
 
@@ -74,9 +80,32 @@ class Predicting:
         if n_frames < 1:
             raise DataError("the audio is too short for one motion frame")
         with threadpool_limits(limits=BLAS_THREADS):
-            out = self._predict(audio, int(sample_rate), frame_times(n_frames, self.fps_),
-                                emotion)
+            try:
+                out = self._predict(audio, int(sample_rate),
+                                    frame_times(n_frames, self.fps_), emotion)
+            except (ValueError, IndexError, KeyError, TypeError) as exc:
+                if not getattr(self, "restored_from_", None):
+                    raise
+                # Arrays from someone else's database that the dry run of
+                # check_restored did not reach (e.g. a cluster no noise frame falls in).
+                raise implausible(self.method, self.restored_from_, exc) from exc
         return np.asarray(out, dtype=np.float64)
+
+    def check_restored(self, where: str) -> None:
+        """A dry run of a model restored from stored arrays (someone else's database):
+        half a second of fixed noise in every emotion must give finite motion of the
+        model's channels. DataError naming ``where`` if not, so that arrays that do not
+        fit together are one line when read; and a later :meth:`predict` that fails on
+        them is one line too."""
+        self.restored_from_ = where  # predict's errors are then the arrays' (one line)
+        noise = np.random.default_rng(0).normal(0.0, 0.1, 8000).astype(np.float32)
+        try:
+            for emotion in (None, *self.emotions_):
+                out = self.predict(noise, 16000, emotion=emotion)
+                if out.shape[1:] != (len(self.channels_),) or not np.isfinite(out).all():
+                    raise ValueError("its motion is not finite motion of its channels")
+        except (ValueError, IndexError, KeyError, TypeError, FloatingPointError) as exc:
+            raise implausible(self.method, where, exc) from exc
 
     def _predict(self, audio: np.ndarray, sample_rate: int, times: np.ndarray,
                  emotion: str | None) -> np.ndarray:

@@ -125,4 +125,5 @@ def load_forward(db_root, method: str):
         raise DataError(f"stored model {path} is unreadable ({exc})") from exc
     channels = Database.open(db_root).table("channels").column("name").to_pylist()
     model.check_channels(channels, f"database {db_root}")
+    model.check_restored(str(path))
     return model
