@@ -406,11 +406,16 @@ def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, samples16: n
     for k, phone in enumerate(phones):
         onsets.append((phone, max(0.0, starts[k] * frame - ONSET_SHIFT)))
         lo = int(last[k]) + 1
-        if k + 1 == len(phones):  # trailing silence: the quiet frames that reach the end
+        if k + 1 == len(phones):
+            # Trailing silence from the first pause after the last phone: no phone was
+            # heard later, so a louder frame there (a breath, noise) is not speech either
+            # (GRID: the last phone ran on into the silence after the sentence).
             tail = quiet[lo:n]
-            count = len(tail) - int(np.flatnonzero(~tail)[-1]) - 1 if (~tail).any() else len(tail)
-            if count:
-                onsets.append((SILENCE, (n - count) * frame))
+            first = _first_run(tail, min_run)
+            if first is None and len(tail) and tail[-1]:  # else the quiet frames at the end
+                first = int(np.flatnonzero(~tail)[-1]) + 1 if (~tail).any() else 0
+            if first is not None:
+                onsets.append((SILENCE, (lo + first) * frame))
             break
         run = _longest_run(quiet[lo: int(starts[k + 1])])
         if run is not None and run[1] - run[0] >= min_run:
@@ -418,6 +423,14 @@ def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, samples16: n
     if refine:
         onsets = _refine(onsets, samples16 * 32767.0, REFINE_WINDOW)
     return _tile(onsets, duration)
+
+
+def _first_run(mask: np.ndarray, min_run: int) -> int | None:
+    """Start of the first run of at least ``min_run`` True in ``mask``, or None."""
+    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
+    runs = np.flatnonzero(np.diff(padded)).reshape(-1, 2)
+    long = runs[runs[:, 1] - runs[:, 0] >= min_run]
+    return int(long[0, 0]) if len(long) else None
 
 
 def _longest_run(mask: np.ndarray) -> tuple[int, int] | None:
