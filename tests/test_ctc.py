@@ -144,3 +144,23 @@ def test_engine_choice(spoken, caplog):
         segments, method = segment(u.audio, u.sample_rate, text=SENTENCES[1], engine="hama")
     assert method == "recognized"
     assert "transcript alignment failed" in caplog.text and "fell back" in caplog.text
+
+
+def test_trailing_silence_starts_at_the_first_pause_after_the_last_phone():
+    """After the last phone, the clip is silence from its first quiet run of MIN_PAUSE
+    or more, even if a louder frame (a breath) follows: no phone was heard there (GRID's
+    last phones used to run on to the breath). With no pause before the breath, the
+    silence starts after it."""
+    hop = ctc.SAMPLE_RATE // ctc.FRAME_RATE
+    rng = np.random.default_rng(0)
+    level = np.full(50, 1e-4)          # 50 frames of 20 ms: quiet ...
+    level[5:21] = 0.3                  # ... the phone's speech
+    level[30:33] = 0.3                 # ... a breath after a 9-frame pause
+    samples = (rng.standard_normal(50 * hop) * np.repeat(level, hop)).astype(np.float64)
+    segs = ctc._timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
+    assert [s.phone for s in segs] == [SILENCE, "AA", SILENCE]
+    assert segs[-1].start == pytest.approx(21 / ctc.FRAME_RATE)
+    level[21:30] = 0.3                 # no pause before the breath: the quiet end only
+    samples = (rng.standard_normal(50 * hop) * np.repeat(level, hop)).astype(np.float64)
+    segs = ctc._timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
+    assert segs[-1].phone == SILENCE and segs[-1].start == pytest.approx(33 / ctc.FRAME_RATE)

@@ -29,8 +29,9 @@ near its start, then blanks. A segment therefore runs from its phone's first fra
 ``scripts/eval_segmentation.py``) to the next phone's start. Pauses come from the audio:
 a run of at least :data:`MIN_PAUSE` seconds of quiet 20 ms frames (``_quiet_frames``:
 :data:`PAUSE_DB` below the clip's loud frames, or nearer its noise floor) lying between
-two phones is ``SIL``; so are the edges before the first phone and after the last phone's
-frames when they are quiet.
+two phones is ``SIL``; so is the edge before the first phone, and the end of the clip from
+the first such quiet run after the last phone's frames (or the quiet frames that reach the
+end, if shorter): no phone is heard after it, so a louder frame there is not speech.
 
 Failures
 --------
