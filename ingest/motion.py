@@ -60,6 +60,15 @@ def fill_gaps(motion: np.ndarray, names=None) -> tuple[np.ndarray, np.ndarray]:
     return filled, missing
 
 
+def interpolate(times_in: np.ndarray, values: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Frames ``values`` (shape (n_in, d), at ``times_in``) linearly interpolated at
+    ``times``, held at the ends; shape (len(times), d), float64 (zeros without input)."""
+    values = np.asarray(values, dtype=np.float64)
+    if len(times_in) == 0:
+        return np.zeros((len(times), values.shape[1]))
+    return np.stack([np.interp(times, times_in, col) for col in values.T], axis=1)
+
+
 def resample_motion(motion: np.ndarray, fps: float, target_fps: float) -> np.ndarray:
     """Resample motion (shape (n_frames, n_channels)) to ``target_fps`` by linear interpolation.
 
@@ -69,9 +78,7 @@ def resample_motion(motion: np.ndarray, fps: float, target_fps: float) -> np.nda
     if fps == target_fps:
         return np.asarray(motion, dtype=np.float64)
     n_out = max(1, int(round(len(motion) * target_fps / fps)))
-    t_in = np.arange(len(motion)) / fps
-    t_out = np.arange(n_out) / target_fps
-    return np.stack([np.interp(t_out, t_in, col) for col in np.asarray(motion).T], axis=1)
+    return interpolate(np.arange(len(motion)) / fps, motion, np.arange(n_out) / target_fps)
 
 
 def rigid_fit(points: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

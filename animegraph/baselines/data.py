@@ -19,6 +19,7 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
+from ingest.motion import interpolate
 from ingest.speech.features import mfcc
 
 #: Frame hop of the MFCC analysis (s) before it is interpolated to the requested times.
@@ -189,10 +190,7 @@ def resample_to(values: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray
     -------
     np.ndarray, shape (len(times), d), float64
     """
-    values = np.asarray(values, dtype=np.float64)
-    grid = frame_times(len(values), fps)
-    return np.stack([np.interp(times, grid, values[:, j]) for j in range(values.shape[1])],
-                    axis=1)
+    return interpolate(frame_times(len(values), fps), values, times)
 
 
 def phone_at(phones: Sequence[Segment], times: np.ndarray) -> list[str]:

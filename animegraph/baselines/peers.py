@@ -30,6 +30,7 @@ import numpy as np
 
 from animegraph.baselines.reference import FeatureLine
 from db.errors import DataError
+from ingest.motion import interpolate
 
 __all__ = ["PEERS", "OpenFaceFX", "PyLipSync"]
 
@@ -66,13 +67,6 @@ class _ShapeWeights(FeatureLine):
             _REMEMBERED[key] = self._weights(audio, sample_rate, times, phones)
         return _REMEMBERED[key]
 
-def _at(times_in: np.ndarray, values: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """``values`` (n_in, k) sampled at ``times`` by linear interpolation (held at the ends)."""
-    if len(times_in) == 0:
-        return np.zeros((len(times), values.shape[1]))
-    return np.column_stack([np.interp(times, times_in, values[:, k])
-                            for k in range(values.shape[1])])
-
 
 class OpenFaceFX(_ShapeWeights):
     """openfacefx's 15 viseme curves from timed phones, mapped linearly to the face.
@@ -101,7 +95,7 @@ class OpenFaceFX(_ShapeWeights):
         segments = [PhonemeSegment(SILENCE if p.phone == "SIL" else p.phone, float(p.start),
                                    float(p.end)) for p in phones]
         t, matrix = build_viseme_curves(segments, fps=PEER_FPS)
-        return _at(np.asarray(t), np.asarray(matrix, dtype=np.float64), times)
+        return interpolate(np.asarray(t), matrix, times)
 
 
 class PyLipSync(_ShapeWeights):
@@ -124,7 +118,7 @@ class PyLipSync(_ShapeWeights):
         centre = np.array([(f.start + f.end) / 2 for f in frames])
         w = np.array([[{p.name: p.target for p in f.phonemes}[n] for n in names]
                       for f in frames], dtype=np.float64)
-        return _at(centre, w, times)
+        return interpolate(centre, w, times)
 
 
 #: The peer rows, by name.

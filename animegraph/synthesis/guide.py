@@ -42,6 +42,7 @@ import numpy as np
 
 from animegraph.synthesis.assemble import output_frames
 from db.errors import ParameterError
+from ingest.motion import interpolate
 
 #: Baselines that can guide (``synth --guide``); ``"none"`` turns guiding off.
 GUIDES = ("mu-mlp", "av-hmm")
@@ -83,9 +84,7 @@ def guide_trajectory(model, predictor, audio: np.ndarray, sample_rate: int, phon
     pred = predictor.predict(audio, sample_rate, n_frames=m,
                              emotion=emotion if emotion in emotions else None)
     if m != n:  # another frame rate than the graph's: resample linearly
-        src = np.arange(m) / fps
-        dst = np.arange(n) / model.graph.fps
-        pred = np.stack([np.interp(dst, src, col) for col in pred.T], axis=1)
+        pred = interpolate(np.arange(m) / fps, pred, np.arange(n) / model.graph.fps)
     return model.decomposer.transform(pred)
 
 
