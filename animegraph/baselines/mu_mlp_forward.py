@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from animegraph.baselines.data import audio_features_at
-from animegraph.baselines.predicting import Predicting, implausible
+from animegraph.baselines.predicting import Predicting
 
 
 def mlp_forward(x: np.ndarray, weights: list[np.ndarray], biases: list[np.ndarray]) -> np.ndarray:
@@ -79,10 +79,7 @@ class MuMlpForward:
 
     def _predict(self, audio, sample_rate, times, emotion):
         z = (self._features(audio, sample_rate, times) - self.x_mean_) / self.x_std_
-        return self._from_mups(self._utterance_mups(z), emotion)
-
-    def _from_mups(self, u: np.ndarray, emotion) -> np.ndarray:
-        """Motion (n, n_channels) from estimated UMUPs ``u`` (n, A0) in ``emotion``."""
+        u = self._utterance_mups(z)
         if emotion is None or emotion == self.neutral_ or emotion not in self.expressions_:
             return self.m00_ + u @ self.m0_.T
         e = self.expressions_[emotion]
@@ -102,32 +99,6 @@ class MuMlpForward:
                              for i in range(len(self.subset_frames_))]
         self.expressions_ = {e: group(arrays, f"expr/{e}/") for e in self.emotions_
                              if group(arrays, f"expr/{e}/")}
-        self._check_restored()
-
-    def _check_restored(self) -> None:
-        """Plausibility of restored arrays, which come from a database folder (someone
-        else's): every mixture's weights positive and covariances
-        positive definite, and every network's shapes chaining from the audio features
-        to the database's channels (a dry run on one zero frame). DataError if not, so
-        that a corrupt model is one line, not a failure inside the prediction."""
-        nets = [self.pooled_mlp_, *(n for n in self.subset_mlps_ if n is not None)]
-        try:  # (finite values: db.store.arrays_from_table checks them on reading)
-            if any(np.any(np.asarray(g["weights"]) <= 0) for g in self.gmms_):
-                raise ValueError("a mixture weight is not positive")
-            if np.any(self.x_std_ <= 0) or np.any(self.u_std_ <= 0):
-                raise ValueError("a standard deviation is not positive")
-            z = np.zeros((1, (2 * self.context + 1) * self.n_mfcc))
-            for g in self.gmms_:
-                gmm_loglik(self._current(z), g)
-            for net in nets:
-                if _forward(net, z).shape != (1, len(self.u_mean_)):
-                    raise ValueError("a network's output is not the utterance MUPs")
-            for emotion in (None, *self.expressions_):
-                out = self._from_mups(np.zeros((1, len(self.u_mean_))), emotion)
-                if out.shape != (1, len(self.channels_)):
-                    raise ValueError("the motion is not the database's channels")
-        except (KeyError, ValueError, IndexError, TypeError) as exc:  # LinAlgError too
-            raise implausible(self.method, "(read from a database)", exc) from exc
 
 
 class StoredMuMlp(MuMlpForward, Predicting):
