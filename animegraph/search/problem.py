@@ -397,6 +397,16 @@ def k_best(graph: AnimeGraph, cands: Candidates, audio: Sequence[np.ndarray],
     return tuple(ranked)
 
 
+def concatenated(cands: Candidates) -> tuple[np.ndarray, np.ndarray]:
+    """Every input's candidates in one array, shape (N,) int64, and the layer offsets,
+    shape (n + 1,) int64 (input ``i``'s are ``[off[i], off[i + 1])``)."""
+    off = np.zeros(len(cands.nodes) + 1, dtype=np.int64)
+    np.cumsum([len(c) for c in cands.nodes], out=off[1:])
+    cn = (np.concatenate([np.asarray(c, dtype=np.int64) for c in cands.nodes])
+          if cands.nodes else np.zeros(0, dtype=np.int64))
+    return cn, off
+
+
 #: Viseme class of each phone index of :data:`ingest.speech.phones.PHONES`.
 _VISEME_INDEX = np.array([sorted(VISEME_CLASSES).index(VISEME_OF[p]) for p in PHONES],
                          dtype=np.int16)
@@ -436,9 +446,7 @@ def context_match(graph: AnimeGraph, cands: Candidates, cn: np.ndarray | None = 
         raise ParameterError(f"context needs the input phones, one per input ({n}), got "
                              f"{len(cands.phones)}")
     if cn is None or off is None:
-        cn = np.concatenate([np.asarray(c, dtype=np.int64) for c in cands.nodes])
-        off = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum([len(c) for c in cands.nodes], out=off[1:])
+        cn, off = concatenated(cands)
     sil = PHONE_INDEX[SILENCE]
     want = np.array([sil] + [PHONE_INDEX[p] for p in cands.phones] + [sil], dtype=np.int64)
     sizes = np.diff(off)
@@ -499,10 +507,8 @@ class Problem:
             raise ParameterError(f"audio must hold one cost array per input ({n}), got {got}")
         if graph.n_channels < 1:
             raise DataError(f"the graph's n_channels must be >= 1, got {graph.n_channels}")
-        sizes = np.array([len(c) for c in cands.nodes], dtype=np.int64)
-        off = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(sizes, out=off[1:])
-        cn = np.concatenate([np.asarray(c, dtype=np.int64) for c in cands.nodes])
+        cn, off = concatenated(cands)
+        sizes = np.diff(off)
         au = np.empty(off[-1], dtype=np.float64)
         for i in range(n):
             if sizes[i] == 0:
