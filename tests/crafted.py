@@ -175,6 +175,55 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
 }
 
 
+def _corrupted(how: str):
+    """A change of one array's values that keeps them finite (``cut``: its last column)."""
+    def change(row: dict) -> dict:
+        v = np.asarray(row["values"], dtype=np.float64)
+        if how == "cut":
+            shape = list(row["shape"])
+            shape[-1] -= 1
+            v = v.reshape(row["shape"])[..., :-1]
+            return {**row, "shape": shape, "values": v.ravel().tolist()}
+        v = {"negated": -np.abs(v) - 1, "zeroed": np.zeros_like(v), "huge": v * 1e30}[how]
+        return {**row, "values": v.tolist()}
+    return change
+
+
+def _array_corrupted(name: str, how: str):
+    def change(rows: dict) -> dict:
+        rows[name] = _corrupted(how)(rows[name])
+        return rows
+    return change
+
+
+#: array -> its corruptions that synthesis read silently before the arrays' invariants
+#: were checked (ingest.invariants); each must now be refused.
+ARRAY_CORRUPTIONS: dict[str, tuple[str, ...]] = {
+    "channel_mean": ("negated", "zeroed", "huge"),
+    "decomposer_params": ("negated", "zeroed", "huge"),
+    "pca_components": ("negated", "zeroed", "huge"),
+    "pca_explained_variance_ratio": ("negated", "zeroed", "huge", "cut"),
+    "ica_unmixing": ("negated", "zeroed", "huge"),
+    "ica_mixing": ("negated", "zeroed", "huge"),
+    "ica_mean": ("negated", "huge"),
+    "ic_cutoff_hz": ("huge",),
+    "head_reference": ("zeroed",),
+    "emotion/emotion_components": ("negated", "zeroed", "huge", "cut"),
+    "emotion/centroid/angry": ("negated", "zeroed", "huge", "cut"),
+    "emotion/offset/angry/happy": ("huge", "cut"),
+    "emotion/map/angry/happy/centres": ("negated", "zeroed", "huge", "cut"),
+    "emotion/map/angry/happy/targets": ("negated", "zeroed", "huge"),
+    "emotion/map/angry/happy/coef": ("negated", "zeroed", "huge"),
+    "emotion/map/angry/happy/offset": ("negated", "cut"),
+    "emotion/map/angry/happy/params": ("negated", "zeroed"),
+}
+#: name -> mutation, as :data:`DATABASE_MUTATIONS`, one per :data:`ARRAY_CORRUPTIONS`.
+ARRAY_MUTATIONS: dict[str, Callable[[Path], None]] = {
+    f"{how}:{name}": (lambda r, name=name, how=how: _arrays(r, _array_corrupted(name, how)))
+    for name, hows in ARRAY_CORRUPTIONS.items() for how in hows
+}
+
+
 def _symlink(path: Path, target: str) -> None:
     path.unlink()
     path.symlink_to(target)
@@ -193,7 +242,7 @@ class PicklePayload:
 def crafted_database(good: Path, dest: Path, mutation: str) -> Path:
     """A copy of the database ``good`` at ``dest`` damaged by ``mutation``."""
     shutil.copytree(good, dest, symlinks=True)
-    DATABASE_MUTATIONS[mutation](dest)
+    {**DATABASE_MUTATIONS, **ARRAY_MUTATIONS}[mutation](dest)
     return dest
 
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from animegraph.search.graph import AnimeGraph
-from db.errors import DataError
 from db.store import Database
-from ingest.emotion.model import EmotionModel
+from ingest.emotion.model import EmotionModel, NoEmotionModel
+from ingest.invariants import check_decomposition
 from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
 from ingest.unmixing import Unmixing
 
@@ -55,8 +55,14 @@ class Model:
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             raise db.damaged("model_arrays", f"{type(exc).__name__}: {exc}") from None
         try:
+            check_decomposition(arrays, names, float(db.manifest["fps"]),
+                                int(db.manifest["n_frames"]), head_points(groups),
+                                channel_ranges(db, channels))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise db.damaged("model_arrays", str(exc)) from None
+        try:
             emotion_model = EmotionModel.from_database(db)
-        except DataError:
+        except NoEmotionModel:
             emotion_model = None
         except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
             raise db.damaged("model_arrays", f"emotion model: {type(exc).__name__}: "
@@ -105,6 +111,15 @@ def _check_shapes(graph: AnimeGraph, decomposer: Unmixing, cutoffs: np.ndarray,
         raise ValueError("ic_cutoff_hz does not give one positive cutoff per component")
     if head_reference is not None and (head_reference.ndim != 2 or head_reference.shape[1] != 3):
         raise ValueError(f"head_reference has shape {head_reference.shape}")
+
+
+def channel_ranges(db: Database, channels: list[dict]) -> dict[str, tuple[float, float]] | None:
+    """Each channel's (min, max) over the database's frames: from the channels table, or
+    for a database written before it held them, from the frames' Parquet statistics
+    (:meth:`db.store.Database.column_ranges`); None if neither has them."""
+    if channels and "min" in channels[0] and "max" in channels[0]:
+        return {str(c["name"]): (float(c["min"]), float(c["max"])) for c in channels}
+    return db.column_ranges("frames")
 
 
 def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:
