@@ -3,7 +3,7 @@
 Usage::
 
     python scripts/check_model_arrays.py DB [DB ...]
-    python scripts/check_model_arrays.py --fuzz SPEECH.wav DB
+    python scripts/check_model_arrays.py --fuzz SPEECH.wav [--refresh-checksum] DB
 
 Without ``--fuzz``: for each database, whether it loads (``Model.load``, which checks
 every invariant), and the headroom of the round-off tolerances: the smallest multiple
@@ -16,6 +16,8 @@ With ``--fuzz``: each stored model array of ``DB`` (not the emotion classifier's
 the emotion mappings and offsets only angry -> happy's) is corrupted in a copy five
 ways (negated: -|v| - 1, zeroed, one NaN, its last column cut, times 1e30) and
 ``animegraph synth SPEECH.wav`` is run on it with and without ``--emotion happy``;
+``--refresh-checksum`` writes the corrupted file's checksum into the copy's manifest, as a
+deliberate editor would (without it a database with checksums refuses every change);
 printed: the (corruption, exit status) counts, the arrays whose corruption was
 accepted (exit 0), and the runs that were neither exit 0 nor one line (tracebacks).
 The copy of the exploratory fuzz of the hardening task (its counts before the
@@ -28,6 +30,7 @@ import argparse
 import collections
 import contextlib
 import io
+import json
 import shutil
 import tempfile
 from pathlib import Path
@@ -40,6 +43,7 @@ import ingest.invariants as invariants
 from animegraph.apps.cli import main
 from animegraph.synthesis.model import Model
 from db.errors import DataError
+from db.store import file_sha256
 
 HOWS = ("neg", "zero", "nan", "trunc", "huge")
 
@@ -91,7 +95,7 @@ def corrupt(values: np.ndarray, shape: list[int], how: str):
     return values.reshape(shape)[..., :-1].ravel(), cut
 
 
-def fuzz(db0: Path, wav: str) -> None:
+def fuzz(db0: Path, wav: str, refresh: bool) -> None:
     version = (db0 / "CURRENT").read_text().strip()
     table = pq.read_table(db0 / version / "model_arrays.parquet")
     rows0 = table.to_pylist()
@@ -111,8 +115,12 @@ def fuzz(db0: Path, wav: str) -> None:
                     changed = corrupt(np.asarray(r["values"], float), list(r["shape"]), how)
                     if changed is not None:
                         r["values"], r["shape"] = changed[0].tolist(), changed[1]
-            pq.write_table(pa.Table.from_pylist(rows, schema=table.schema),
-                           db / version / "model_arrays.parquet")
+            path = db / version / "model_arrays.parquet"
+            pq.write_table(pa.Table.from_pylist(rows, schema=table.schema), path)
+            if refresh:
+                manifest = json.loads((db / version / "manifest.json").read_text())
+                manifest["checksums"]["model_arrays"] = file_sha256(path)
+                (db / version / "manifest.json").write_text(json.dumps(manifest))
             for extra in ([], ["--emotion", "happy"]):
                 err = io.StringIO()
                 with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -143,9 +151,11 @@ def run() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("db", nargs="+")
     parser.add_argument("--fuzz", metavar="SPEECH.wav", help="corrupt the arrays of DB")
+    parser.add_argument("--refresh-checksum", action="store_true",
+                        help="update the manifest's checksum of each corrupted copy")
     args = parser.parse_args()
     if args.fuzz:
-        fuzz(Path(args.db[0]), args.fuzz)
+        fuzz(Path(args.db[0]), args.fuzz, args.refresh_checksum)
         return
     for db in args.db:
         headroom(db)

@@ -17,6 +17,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from db.store import file_sha256
+
 
 def _live(root: Path) -> Path:
     return root / (root / "CURRENT").read_text().strip()
@@ -51,7 +53,9 @@ def _animes(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "animes"), change)
 
 
-def _arrays(root: Path, change: Callable[[dict], dict]) -> None:
+def _arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
+    """Change the model arrays; with ``checksum``, as a deliberate editor would, the
+    manifest's checksum of them too (so that what is checked is the arrays)."""
     path = _live(root) / "model_arrays.parquet"
     t = pq.read_table(path)
     rows = {r["name"]: r for r in t.to_pylist()}
@@ -62,6 +66,9 @@ def _arrays(root: Path, change: Callable[[dict], dict]) -> None:
         "shape": pa.array([rows[n]["shape"] for n in names], pa.list_(pa.int64())),
         "values": pa.array([rows[n]["values"] for n in names], pa.list_(pa.float64())),
     }), path)
+    if checksum:
+        _manifest(root, lambda m: {**m, "checksums": {**m.get("checksums", {}),
+                                                      "model_arrays": file_sha256(path)}})
 
 
 def _array_edit(name: str, **fields):
@@ -159,6 +166,10 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
         "ic_cutoff_hz", values=[0.0] * len(rows["ic_cutoff_hz"]["values"]))(rows)),
     "arrays_head_reference_shape": lambda r: _arrays(r, _array_edit(
         "head_reference", values=[1.0, 2.0], shape=[2])),
+    # ica_mean zeroed is valid (the scores are centred): only the checksum tells.
+    "arrays_checksum_stale": lambda r: _arrays(r, lambda rows: _array_edit(
+        "ica_mean", values=[0.0] * len(rows["ica_mean"]["values"]))(rows), checksum=False),
+    "arrays_checksum_wrong": lambda r: _manifest(r, lambda m: {**m, "checksums": "x"}),
     "arrays_random": _bytes(lambda r: _live(r) / "model_arrays.parquet",
                             lambda b: np.random.default_rng(1).bytes(len(b))),
     "channels_empty": lambda r: pq.write_table(

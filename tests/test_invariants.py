@@ -60,6 +60,22 @@ def test_a_freshly_ingested_database_passes(tiny_db, speech, tmp_path):
                  "--emotion", "happy"]) == 0
 
 
+def test_a_changed_file_is_refused_by_its_checksum_an_old_database_opens(tiny_db, tmp_path):
+    import json
+
+    from db.errors import DataError
+
+    path = crafted_database(tiny_db[0], tmp_path / "stale", "arrays_checksum_stale")
+    with pytest.raises(DataError, match="SHA-256 differs"):
+        Model.load(path)
+    # The same database as written before checksums: the edit (a valid value) is read.
+    manifest = Database.open(path).version_dir / "manifest.json"
+    entry = json.loads(manifest.read_text())
+    del entry["checksums"]
+    manifest.write_text(json.dumps(entry))
+    assert not Model.load(path).decomposer.ica_mean_.any()
+
+
 def test_the_checks_see_what_synthesis_reads(tiny_db):
     db = Database.open(tiny_db[0])
     arrays = db.arrays()
