@@ -342,38 +342,6 @@ class Database:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise self.damaged(name, f"cannot be read: {first}") from None
 
-    def column_ranges(self, name: str) -> dict[str, tuple[float, float]] | None:
-        """Each floating-point column's (min, max) in table ``name``, from the Parquet
-        footers' statistics alone (no row is read).
-
-        Returns
-        -------
-        dict of str to (float, float), or None
-            None when the table cannot be read or a file holds no statistics for a column
-            (written without them): then nothing is known of the range.
-        """
-        path = self.table_path(name)
-        files = [path] if path.is_file() else sorted(path.rglob("*.parquet"))
-        ranges: dict[str, tuple[float, float]] = {}
-        try:
-            for f in files:
-                meta = pq.read_metadata(f)
-                for g in range(meta.num_row_groups):
-                    group = meta.row_group(g)
-                    for j in range(group.num_columns):
-                        column = group.column(j)
-                        if column.physical_type not in ("FLOAT", "DOUBLE"):
-                            continue
-                        stats = column.statistics
-                        if stats is None or not stats.has_min_max:
-                            return None
-                        lo, hi = ranges.get(column.path_in_schema, (np.inf, -np.inf))
-                        ranges[column.path_in_schema] = (min(lo, float(stats.min)),
-                                                         max(hi, float(stats.max)))
-        except (OSError, pa.ArrowException):
-            return None
-        return ranges if files else None
-
     def _check_sum(self, name: str) -> None:
         """DataError if the manifest holds a checksum of table ``name`` it does not match
         (none is held by a database written before checksums: nothing to check)."""

@@ -14,8 +14,9 @@ The relations, by where the arrays come from:
   components are orthonormal rows; the explained-variance ratios are in (0, 1],
   non-increasing (eigenvalues sorted), sum to at most 1, and are the fewest that reach
   the stored ``variance`` (the rule of ``fit``); the channel mean is a mean of the stored
-  frames, so it lies within each channel's recorded range (the frames table's Parquet
-  statistics, when it has them).
+  frames, so it lies within each channel's recorded range (the ``min`` and ``max`` of
+  the channels table, written by ingest; a database written before them has no range
+  to check against).
 * FastICA on the principal-component scores (§5.1, Eq. 7): the mixing matrix is the
   (pseudo-)inverse of the unmixing one (``ica_unmixing @ ica_mixing = I``); ``ica_mean``
   is the mean of the scores, which are centred by construction (about 0).
@@ -87,7 +88,8 @@ def check_decomposition(arrays: Mapping[str, np.ndarray], names: Sequence[str], 
     head_points : int
         Points of the channels' rigid head group.
     ranges : mapping of str to (float, float), optional
-        Each channel's recorded (min, max) over those frames, if known.
+        Each channel's recorded (min, max) over those frames, if known (None: not
+        checked).
 
     Raises
     ------
