@@ -156,7 +156,7 @@ def check_decomposition(arrays: Mapping[str, np.ndarray], names: Sequence[str], 
             raise ValueError(f"head_reference: shape {reference.shape}, the channels have "
                              f"{head_points} head points")
         sv = np.linalg.svd(reference - reference.mean(axis=0), compute_uv=False)
-        if not sv[1] > roundoff(head_points, sv[0]):
+        if head_points >= 3 and not sv[1] > roundoff(head_points, sv[0]):
             raise ValueError("head_reference: its points are collinear or coincide (no "
                              "rigid head frame)")
 

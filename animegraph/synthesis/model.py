@@ -54,12 +54,15 @@ class Model:
             _check_shapes(graph, decomposer, cutoffs, names, arrays.get("head_reference"))
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             raise db.damaged("model_arrays", f"{type(exc).__name__}: {exc}") from None
+        n_frames = db.manifest.get("n_frames")
+        if n_frames is None:
+            raise db.damaged("manifest.json", "n_frames is missing")
         try:
-            check_decomposition(arrays, names, float(db.manifest["fps"]),
-                                int(db.manifest["n_frames"]), head_points(groups),
-                                channel_ranges(channels))
+            check_decomposition(arrays, names, float(db.manifest["fps"]), n_frames,
+                                head_points(groups), channel_ranges(channels))
         except (KeyError, TypeError, ValueError) as exc:
-            raise db.damaged("model_arrays", str(exc)) from None
+            what = f"no array {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise db.damaged("model_arrays", what) from None
         try:
             emotion_model = EmotionModel.from_database(db)
         except NoEmotionModel:

@@ -301,12 +301,13 @@ class EmotionModel:
         arrays = db.arrays()
         split = ComponentSplit.from_columns(rows)
         frames: dict[str, int] = {}
-        for clip in db.table("clips", columns=["emotion", "n_frames"]).to_pylist():
-            frames[clip["emotion"]] = frames.get(clip["emotion"], 0) + int(clip["n_frames"])
         try:
+            for clip in db.table("clips", columns=["emotion", "n_frames"]).to_pylist():
+                frames[clip["emotion"]] = frames.get(clip["emotion"], 0) + int(clip["n_frames"])
             check_emotion(arrays, entry, split.emotion_components, len(rows), frames)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise db.damaged("model_arrays", f"emotion model: {exc}") from None
+        except (AttributeError, KeyError, TypeError, ValueError) as exc:
+            what = f"no array {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise db.damaged("model_arrays", f"emotion model: {what}") from None
         mappings, offsets, centroids = {}, {}, {}
         for pair in entry["mappings"]:
             src, dst = pair.split("->")
