@@ -214,9 +214,10 @@ def check_emotion(arrays: Mapping[str, np.ndarray], entry: Mapping, emotion_comp
         raise ValueError(f"{_EMOTION}centroid/*: the emotions' frame-weighted centroids sum "
                          f"to {np.abs(weighted).max() / n:.3g} a frame, not 0 (the "
                          "components' mean)")
+    shared: dict[bytes, np.ndarray] = {}  # one source emotion's mappings share centres
     for pair in entry.get("mappings", ()):
         src, _, dst = str(pair).partition("->")
-        _check_mapping(arrays, f"{_EMOTION}map/{src}/{dst}/", n_e, n, bound)
+        _check_mapping(arrays, f"{_EMOTION}map/{src}/{dst}/", n_e, n, bound, shared)
         key = f"{_EMOTION}offset/{src}/{dst}"
         if (np.abs(_sized(arrays, key, n_e)) > 2 * bound).any():
             raise ValueError(f"{key}: larger than a difference of two frames' components "
@@ -224,8 +225,9 @@ def check_emotion(arrays: Mapping[str, np.ndarray], entry: Mapping, emotion_comp
 
 
 def _check_mapping(arrays: Mapping[str, np.ndarray], prefix: str, n_e: int, n: int,
-                   bound: float) -> None:
-    """One stored RBF mapping (:class:`ingest.emotion.rbf.RbfMapping`)."""
+                   bound: float, shared: dict[bytes, np.ndarray]) -> None:
+    """One stored RBF mapping (:class:`ingest.emotion.rbf.RbfMapping`); ``shared`` holds
+    the distances between the centres of the mappings checked before, by centres."""
     d, kernel, n_centres, seed, n_samples = _sized(arrays, prefix + "params", 5)
     centres = np.asarray(arrays[prefix + "centres"], dtype=np.float64)
     k = centres.size // max(n_e, 1)
@@ -250,7 +252,10 @@ def _check_mapping(arrays: Mapping[str, np.ndarray], prefix: str, n_e: int, n: i
             raise ValueError(f"{prefix}{what}: {np.abs(values).max():.3g} is beyond what a "
                              f"mean of unit-variance components of {n} frames can be "
                              f"({limit:.3g})")
-    dist = distances(centres, centres)
+    key = centres.tobytes()
+    if key not in shared:
+        shared[key] = distances(centres, centres)
+    dist = shared[key]
     closest = dist[np.triu_indices(k, 1)].min()
     if not (d > 0 and abs(d - closest) <= roundoff(n_e, closest)):
         raise ValueError(f"{prefix}params: width d = {d:.6g} is not the distance between "
