@@ -214,7 +214,7 @@ def check_emotion(arrays: Mapping[str, np.ndarray], entry: Mapping, emotion_comp
         raise ValueError(f"{_EMOTION}centroid/*: the emotions' frame-weighted centroids sum "
                          f"to {np.abs(weighted).max() / n:.3g} a frame, not 0 (the "
                          "components' mean)")
-    shared: dict[bytes, np.ndarray] = {}  # one source emotion's mappings share centres
+    shared: dict = {}  # one source emotion's mappings share their centres and kernel
     for pair in entry.get("mappings", ()):
         src, _, dst = str(pair).partition("->")
         _check_mapping(arrays, f"{_EMOTION}map/{src}/{dst}/", n_e, n, bound, shared)
@@ -225,9 +225,10 @@ def check_emotion(arrays: Mapping[str, np.ndarray], entry: Mapping, emotion_comp
 
 
 def _check_mapping(arrays: Mapping[str, np.ndarray], prefix: str, n_e: int, n: int,
-                   bound: float, shared: dict[bytes, np.ndarray]) -> None:
+                   bound: float, shared: dict) -> None:
     """One stored RBF mapping (:class:`ingest.emotion.rbf.RbfMapping`); ``shared`` holds
-    the distances between the centres of the mappings checked before, by centres."""
+    the distances between the centres of the mappings checked before (by centres) and
+    their kernel matrices (by centres, width and kernel)."""
     d, kernel, n_centres, seed, n_samples = _sized(arrays, prefix + "params", 5)
     centres = np.asarray(arrays[prefix + "centres"], dtype=np.float64)
     k = centres.size // max(n_e, 1)
@@ -254,13 +255,15 @@ def _check_mapping(arrays: Mapping[str, np.ndarray], prefix: str, n_e: int, n: i
                              f"({limit:.3g})")
     key = centres.tobytes()
     if key not in shared:
-        shared[key] = distances(centres, centres)
-    dist = shared[key]
-    closest = dist[np.triu_indices(k, 1)].min()
+        dist = distances(centres, centres)
+        shared[key] = dist, dist[np.triu_indices(k, 1)].min()
+    dist, closest = shared[key]
     if not (d > 0 and abs(d - closest) <= roundoff(n_e, closest)):
         raise ValueError(f"{prefix}params: width d = {d:.6g} is not the distance between "
                          f"the two closest centres ({closest:.6g})")
-    phi = rbf(dist, d, KERNELS[int(kernel)])
+    if (key, d, kernel) not in shared:
+        shared[(key, d, kernel)] = rbf(dist, d, KERNELS[int(kernel)])
+    phi = shared[(key, d, kernel)]
     rhs = targets - centres - offset
     residual = phi @ coef - rhs
     if (np.abs(residual) > roundoff(k, np.abs(phi) @ np.abs(coef) + np.abs(rhs))).any():
