@@ -4,6 +4,7 @@ Usage::
 
     python scripts/check_model_arrays.py DB [DB ...]
     python scripts/check_model_arrays.py --fuzz SPEECH.wav [--refresh-checksum] DB
+    valgrind --tool=callgrind python scripts/check_model_arrays.py --load-once [--no-checks] DB
 
 Without ``--fuzz``: for each database, whether it loads (``Model.load``, which checks
 every invariant), and the headroom of the round-off tolerances: the smallest multiple
@@ -22,6 +23,9 @@ printed: the (corruption, exit status) counts, the arrays whose corruption was
 accepted (exit 0), and the runs that were neither exit 0 nor one line (tracebacks).
 The copy of the exploratory fuzz of the hardening task (its counts before the
 invariants are in docs/results.md).
+
+With ``--load-once``: ``Model.load(DB)`` once and nothing else, for an instruction count
+of the checks (``--no-checks`` replaces both check functions by no-ops).
 """
 
 from __future__ import annotations
@@ -153,7 +157,18 @@ def run() -> None:
     parser.add_argument("--fuzz", metavar="SPEECH.wav", help="corrupt the arrays of DB")
     parser.add_argument("--refresh-checksum", action="store_true",
                         help="update the manifest's checksum of each corrupted copy")
+    parser.add_argument("--load-once", action="store_true", help="load DB's model once")
+    parser.add_argument("--no-checks", action="store_true",
+                        help="with --load-once: without the invariants' checks")
     args = parser.parse_args()
+    if args.load_once:
+        if args.no_checks:
+            import animegraph.synthesis.model as model
+            import ingest.emotion.model as emotion
+
+            model.check_decomposition = emotion.check_emotion = lambda *a, **k: None
+        Model.load(args.db[0])
+        return
     if args.fuzz:
         fuzz(Path(args.db[0]), args.fuzz, args.refresh_checksum)
         return
