@@ -19,10 +19,17 @@ folder, renames it into place and only then replaces ``CURRENT`` (one atomic ren
 so a failed or killed write leaves the previous version live and unchanged. The
 version before the live one is kept for readers that still have it open; older ones
 are removed.
+
+The manifest holds the SHA-256 of the model arrays' file as written (``checksums``):
+reading the arrays checks it, so an accidental change of the file (a bad copy, a tool
+that rewrote it) is refused in one line. It is no protection against a deliberate edit
+(the editor can update the manifest too): :mod:`ingest.invariants` checks what the arrays
+must satisfy by construction. Databases written before it have no checksum and open.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import math
@@ -73,6 +80,8 @@ ANY_VERSION = object()
 _VERSION = re.compile(r"^v(\d{6})$")
 _STAGING = re.compile(r"^\.v\d{6}\.partial-(?:(\d+)-)?[0-9a-f]+$")
 _CURRENT = "CURRENT"
+#: Tables whose file's SHA-256 the manifest holds (``checksums``), checked when read.
+CHECKSUMMED = ("model_arrays",)
 
 
 def is_database(path: str | os.PathLike) -> bool:
@@ -150,6 +159,7 @@ def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
             "schema_version": SCHEMA_VERSION,
             "db_version": number,
             "tables": {t: int(tables[t].num_rows) for t in TABLES},
+            "checksums": {t: file_sha256(staging / f"{t}.parquet") for t in CHECKSUMMED},
         }
         (staging / "manifest.json").write_text(json.dumps(info, indent=1, default=_json))
         _fsync_tree(staging)
@@ -332,15 +342,35 @@ class Database:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise self.damaged(name, f"cannot be read: {first}") from None
 
+    def _check_sum(self, name: str) -> None:
+        """DataError if the manifest holds a checksum of table ``name`` it does not match
+        (none is held by a database written before checksums: nothing to check)."""
+        sums = self.manifest.get("checksums", {})
+        expected = sums.get(name) if isinstance(sums, dict) else sums
+        if expected is None:
+            return
+        path = self.table_path(name)
+        if not path.is_file():  # not a device or a pipe, which could be read forever
+            raise self.damaged(name, "is not a file")
+        try:
+            actual = file_sha256(path)
+        except OSError as exc:
+            raise self.damaged(name, f"cannot be read: {exc.strerror or exc}") from None
+        if actual != expected:
+            raise self.damaged(name, "its SHA-256 differs from the manifest's: the file "
+                               "was changed after the database was written")
+
     def arrays(self) -> dict[str, np.ndarray]:
         """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...).
 
         Raises
         ------
         DataError
-            If the table is not (name, shape, values) rows whose shapes fit their values,
-            or a value is not finite.
+            If the file differs from the checksum in the manifest, or the table is not
+            (name, shape, values) rows whose shapes fit their values, or a value is not
+            finite.
         """
+        self._check_sum("model_arrays")
         try:
             return arrays_from_table(self.table("model_arrays"))
         except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
@@ -386,6 +416,15 @@ def _read_file(path: Path, columns: list[str] | None) -> pa.Table | None:
     if columns is not None and not set(columns) <= set(file.schema_arrow.names):
         return None
     return file.read(columns=columns)
+
+
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of the file at ``path``."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def arrays_to_table(arrays: dict[str, np.ndarray]) -> pa.Table:

@@ -23,7 +23,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from db.errors import DataError, ParameterError
 from ingest.lowpass import ENERGY_KEPT, SMOOTHING_ORDER, cutoff_frequencies, smooth
-from ingest.unmixing import VARIANCE_KEPT, Unmixing
+from ingest.unmixing import VARIANCE_KEPT, VARIANCE_SLACK, Unmixing
 
 __all__ = ["ENERGY_KEPT", "SMOOTHING_ORDER", "VARIANCE_KEPT", "MotionDecomposer",
            "cutoff_frequencies", "smooth"]
@@ -48,7 +48,7 @@ class MotionDecomposer(Unmixing, TransformerMixin, BaseEstimator):
         # fast for motion's tall (many frames, few channels) matrices.
         pca = PCA(n_components=n_max, svd_solver="covariance_eigh").fit(X)
         cumulative = np.cumsum(pca.explained_variance_ratio_)
-        n_pcs = int(np.searchsorted(cumulative, self.variance - 1e-12) + 1)
+        n_pcs = int(np.searchsorted(cumulative, self.variance - VARIANCE_SLACK) + 1)
         n_pcs = min(n_pcs, n_max)
         self.mean_ = pca.mean_
         self.components_ = pca.components_[:n_pcs]

@@ -15,6 +15,9 @@ from db.errors import DataError, ParameterError
 
 #: Share of the motion's variance the PCA keeps (Cao et al. §4.1).
 VARIANCE_KEPT = 0.95
+#: Slack of the rule "the fewest components whose ratios reach ``variance``" (cumulative
+#: sums of ratios carry round-off).
+VARIANCE_SLACK = 1e-12
 
 
 class Unmixing:

@@ -17,6 +17,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from db.store import file_sha256
+
 
 def _live(root: Path) -> Path:
     return root / (root / "CURRENT").read_text().strip()
@@ -51,7 +53,9 @@ def _animes(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "animes"), change)
 
 
-def _arrays(root: Path, change: Callable[[dict], dict]) -> None:
+def _arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
+    """Change the model arrays; with ``checksum``, as a deliberate editor would, the
+    manifest's checksum of them too (so that what is checked is the arrays)."""
     path = _live(root) / "model_arrays.parquet"
     t = pq.read_table(path)
     rows = {r["name"]: r for r in t.to_pylist()}
@@ -62,6 +66,9 @@ def _arrays(root: Path, change: Callable[[dict], dict]) -> None:
         "shape": pa.array([rows[n]["shape"] for n in names], pa.list_(pa.int64())),
         "values": pa.array([rows[n]["values"] for n in names], pa.list_(pa.float64())),
     }), path)
+    if checksum:
+        _manifest(root, lambda m: {**m, "checksums": {**m.get("checksums", {}),
+                                                      "model_arrays": file_sha256(path)}})
 
 
 def _array_edit(name: str, **fields):
@@ -159,6 +166,10 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
         "ic_cutoff_hz", values=[0.0] * len(rows["ic_cutoff_hz"]["values"]))(rows)),
     "arrays_head_reference_shape": lambda r: _arrays(r, _array_edit(
         "head_reference", values=[1.0, 2.0], shape=[2])),
+    # ica_mean zeroed is valid (the scores are centred): only the checksum tells.
+    "arrays_checksum_stale": lambda r: _arrays(r, lambda rows: _array_edit(
+        "ica_mean", values=[0.0] * len(rows["ica_mean"]["values"]))(rows), checksum=False),
+    "arrays_checksum_wrong": lambda r: _manifest(r, lambda m: {**m, "checksums": "x"}),
     "arrays_random": _bytes(lambda r: _live(r) / "model_arrays.parquet",
                             lambda b: np.random.default_rng(1).bytes(len(b))),
     "channels_empty": lambda r: pq.write_table(
@@ -172,6 +183,55 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
         sorted((_live(r) / "clips").iterdir())[0],
         _live(r) / "clips" / "emotion=__HIVE_DEFAULT_PARTITION__"),
     "symlink_out": lambda r: _symlink(_live(r) / "channels.parquet", "/etc/passwd"),
+}
+
+
+def _corrupted(how: str):
+    """A change of one array's values that keeps them finite (``cut``: its last column)."""
+    def change(row: dict) -> dict:
+        v = np.asarray(row["values"], dtype=np.float64)
+        if how == "cut":
+            shape = list(row["shape"])
+            shape[-1] -= 1
+            v = v.reshape(row["shape"])[..., :-1]
+            return {**row, "shape": shape, "values": v.ravel().tolist()}
+        v = {"negated": -np.abs(v) - 1, "zeroed": np.zeros_like(v), "huge": v * 1e30}[how]
+        return {**row, "values": v.tolist()}
+    return change
+
+
+def _array_corrupted(name: str, how: str):
+    def change(rows: dict) -> dict:
+        rows[name] = _corrupted(how)(rows[name])
+        return rows
+    return change
+
+
+#: array -> its corruptions that synthesis read silently before the arrays' invariants
+#: were checked (ingest.invariants); each must now be refused.
+ARRAY_CORRUPTIONS: dict[str, tuple[str, ...]] = {
+    "channel_mean": ("negated", "zeroed", "huge"),
+    "decomposer_params": ("negated", "zeroed", "huge"),
+    "pca_components": ("negated", "zeroed", "huge"),
+    "pca_explained_variance_ratio": ("negated", "zeroed", "huge", "cut"),
+    "ica_unmixing": ("negated", "zeroed", "huge"),
+    "ica_mixing": ("negated", "zeroed", "huge"),
+    "ica_mean": ("negated", "huge"),
+    "ic_cutoff_hz": ("huge",),
+    "head_reference": ("zeroed",),
+    "emotion/emotion_components": ("negated", "zeroed", "huge", "cut"),
+    "emotion/centroid/angry": ("negated", "zeroed", "huge", "cut"),
+    "emotion/offset/angry/happy": ("huge", "cut"),
+    "emotion/map/angry/happy/centres": ("negated", "zeroed", "huge", "cut"),
+    "emotion/map/angry/happy/targets": ("negated", "zeroed", "huge"),
+    "emotion/map/angry/happy/coef": ("negated", "zeroed", "huge"),
+    "emotion/map/angry/happy/offset": ("negated", "cut"),
+    "emotion/map/angry/happy/params": ("negated", "zeroed"),
+}
+#: name -> mutation, as :data:`DATABASE_MUTATIONS`, one per :data:`ARRAY_CORRUPTIONS`.
+ARRAY_MUTATIONS: dict[str, Callable[[Path], None]] = {
+    f"{how}:{name}": (lambda r, name=name, how=how: _arrays(r, _array_corrupted(name, how)))
+    for name, hows in ARRAY_CORRUPTIONS.items() for how in hows
 }
 
 
@@ -193,7 +253,7 @@ class PicklePayload:
 def crafted_database(good: Path, dest: Path, mutation: str) -> Path:
     """A copy of the database ``good`` at ``dest`` damaged by ``mutation``."""
     shutil.copytree(good, dest, symlinks=True)
-    DATABASE_MUTATIONS[mutation](dest)
+    {**DATABASE_MUTATIONS, **ARRAY_MUTATIONS}[mutation](dest)
     return dest
 
 

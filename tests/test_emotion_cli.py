@@ -244,8 +244,8 @@ def test_old_stored_classifier_says_reingest(tiny_db, tiny_corpus):
     class OldDatabase:  # the real database, its classifier as an older animegraph stored it
         root, manifest = db.root, db.manifest
 
-        def table(self, name):
-            return db.table(name)
+        def table(self, name, columns=None):
+            return db.table(name, columns)
 
         def arrays(self):
             return {k: v for k, v in db.arrays().items() if k != "emotion/classifier/format"}

@@ -39,6 +39,7 @@ from ingest.emotion.components import (
     take_pairs,
 )
 from ingest.emotion.rbf import KERNEL, N_CENTRES, RbfMapping
+from ingest.invariants import check_emotion
 
 if TYPE_CHECKING:
     from ingest.emotion.classifier import EmotionClassifier
@@ -88,6 +89,10 @@ class _StoredClassifier:
 
     def __set__(self, model, value) -> None:
         model.__dict__["_" + self.name] = value
+
+
+class NoEmotionModel(DataError):
+    """The database was built before emotion models existed (it has none)."""
 
 
 @dataclass(frozen=True)
@@ -282,17 +287,27 @@ class EmotionModel:
 
         Raises
         ------
-        DataError
+        NoEmotionModel
             If the database was built before emotion models existed.
+        DataError
+            If its arrays contradict each other (:func:`ingest.invariants.check_emotion`).
         """
         entry = db.manifest.get("emotion")
         rows = db.table("components").to_pylist()
         if entry is None or not rows or "label" not in rows[0]:
-            raise DataError(f"database {db.root} has no emotion model (it was built by an "
-                            f"older animegraph): run 'animegraph ingest SRC --db {db.root}' "
-                            "once to learn it")
+            raise NoEmotionModel(f"database {db.root} has no emotion model (it was built by "
+                                 f"an older animegraph): run 'animegraph ingest SRC --db "
+                                 f"{db.root}' once to learn it")
         arrays = db.arrays()
         split = ComponentSplit.from_columns(rows)
+        frames: dict[str, int] = {}
+        try:
+            for clip in db.table("clips", columns=["emotion", "n_frames"]).to_pylist():
+                frames[clip["emotion"]] = frames.get(clip["emotion"], 0) + int(clip["n_frames"])
+            check_emotion(arrays, entry, split.emotion_components, len(rows), frames)
+        except (AttributeError, KeyError, TypeError, ValueError) as exc:
+            what = f"no array {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise db.damaged("model_arrays", f"emotion model: {what}") from None
         mappings, offsets, centroids = {}, {}, {}
         for pair in entry["mappings"]:
             src, dst = pair.split("->")
