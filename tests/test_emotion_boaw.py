@@ -83,19 +83,24 @@ def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
     np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
         weighted.normalizer_.transform(F, spk)), scaled * w)
     arrays = weighted.to_arrays()
-    assert int(arrays["format"]) == 3 and arrays["block_widths"].tolist() == [1, 4]
+    assert int(arrays["format"]) == 4 and arrays["block_widths"].tolist() == [1, 4]
+    assert arrays["block_widths_fitted"].tolist() == [1, 4] and "boaw_mean" not in arrays
     back = EmotionClassifier.from_arrays(arrays)
-    assert back.block_widths == (1, 4)
+    assert back.block_widths == back.block_widths_ == (1, 4)
     np.testing.assert_allclose(back.decision_function(F), weighted.decision_function(F))
-    # without block widths the stored format stays 2, readable as before
-    old = plain.to_arrays()
-    assert int(old["format"]) == 2 and "block_widths" not in old
-    np.testing.assert_array_equal(EmotionClassifier.from_arrays(old).predict(F),
+    # formats 3 (block widths, no fitted widths) and 2 (no block widths) stay readable
+    three = {**{k: v for k, v in arrays.items() if k != "block_widths_fitted"},
+             "format": np.array(3)}
+    np.testing.assert_allclose(EmotionClassifier.from_arrays(three).decision_function(F),
+                               weighted.decision_function(F))
+    two = {**{k: v for k, v in plain.to_arrays().items() if not k.startswith("block")},
+           "format": np.array(2)}
+    np.testing.assert_array_equal(EmotionClassifier.from_arrays(two).predict(F),
                                   plain.predict(F))
     from db.errors import DataError
 
     with pytest.raises(DataError, match="block_widths"):
-        EmotionClassifier.from_arrays({k: v for k, v in arrays.items()
+        EmotionClassifier.from_arrays({k: v for k, v in three.items()
                                        if k != "block_widths"})
     with pytest.raises(ParameterError, match="sum to 6"):
         EmotionClassifier(block_widths=(2, 4)).fit(F, y)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.errors import ParameterError
+from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "N_DESCRIPTORS", "BagOfAudioWords",
@@ -164,4 +164,51 @@ class BagOfAudioWords:
                 "boaw_codebook0": self.codebooks_[0].copy(),
                 "boaw_codebook1": self.codebooks_[1].copy(),
                 "boaw_assignments": np.array(self.assignments)}
+
+    @classmethod
+    def from_arrays(cls, arrays) -> BagOfAudioWords:
+        """Rebuild fitted codebooks from :meth:`to_arrays` output, checked.
+
+        Parameters
+        ----------
+        arrays : mapping of str to np.ndarray
+
+        Raises
+        ------
+        DataError
+            An array missing, of the wrong shape, or not finite (one line naming it).
+        """
+        try:
+            a = {k: np.asarray(arrays[k]) for k in ("boaw_mean", "boaw_scale",
+                                                     "boaw_codebook0", "boaw_codebook1",
+                                                     "boaw_assignments")}
+        except KeyError as exc:
+            raise DataError(f"stored bag-of-audio-words lacks array {exc.args[0]!r}") from None
+        for key, value in a.items():
+            if value.dtype.kind not in "biuf" or not np.all(np.isfinite(value)):
+                raise DataError(f"stored bag-of-audio-words: array {key!r} is not finite "
+                                "numbers")
+        width = a["boaw_mean"].shape
+        if len(width) != 1 or width[0] < 2 or width[0] % 2 or a["boaw_scale"].shape != width:
+            raise DataError(f"stored bag-of-audio-words: boaw_mean and boaw_scale must have "
+                            f"one even shape (n_descriptors,), got {a['boaw_mean'].shape} "
+                            f"and {a['boaw_scale'].shape}")
+        if not np.all(a["boaw_scale"] > 0):
+            raise DataError("stored bag-of-audio-words: boaw_scale must be positive")
+        half = width[0] // 2
+        size = a["boaw_codebook0"].shape[0] if a["boaw_codebook0"].ndim == 2 else -1
+        for key in ("boaw_codebook0", "boaw_codebook1"):
+            if a[key].shape != (size, half) or size < 1:
+                raise DataError(f"stored bag-of-audio-words: {key} must have shape "
+                                f"(n_words, {half}) as the other codebook, got {a[key].shape}")
+        k = a["boaw_assignments"]
+        if k.shape != () or not 1 <= float(k) <= size or float(k) != int(k):
+            raise DataError(f"stored bag-of-audio-words: boaw_assignments must be an integer "
+                            f"in [1, {size}], got {k.tolist()}")
+        bag = cls(size=size, assignments=int(k))
+        bag.mean_ = a["boaw_mean"].astype(np.float64)
+        bag.scale_ = a["boaw_scale"].astype(np.float64)
+        bag.codebooks_ = [a["boaw_codebook0"].astype(np.float64),
+                          a["boaw_codebook1"].astype(np.float64)]
+        return bag
 

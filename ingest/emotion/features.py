@@ -14,6 +14,9 @@ cepstrum the first :data:`CEPSTRUM_BLOCK` coefficients of the frame-averaged   5
          cepstrum (the paper's cepstrum, made robust to utterance length)
 egemaps  openSMILE eGeMAPS v02 functionals (Eyben et al. 2016)                 88
 compare  openSMILE ComParE 2016 functionals (Schuller et al. 2016)             6373
+boaw     bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`)  1000
+         (2 x 500 words learned at fit: computed by the classifier, not by
+         :func:`block_features`; its columns follow all the others)
 ======== ===================================================================== =========
 
 ``egemaps`` and ``compare`` need the optional ``opensmile`` package
@@ -42,6 +45,7 @@ __all__ = [
     "CEPSTRUM_FRAME",
     "CEPSTRUM_HOP",
     "N_CEPSTRUM",
+    "WORDS_BLOCK",
     "block_features",
     "emotion_features",
     "frame_analysis",
@@ -59,7 +63,9 @@ CEPSTRUM_HOP = 512
 #: in docs/results.md, "Emotion classification").
 CEPSTRUM_BLOCK = 50
 #: Feature blocks a specification may join with "+".
-BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare")
+BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare", "boaw")
+#: The block learned at fit (:class:`ingest.emotion.classifier.EmotionClassifier`).
+WORDS_BLOCK = "boaw"
 #: Width of each block (``paper``: 3 + n_cepstrum).
 RICH_WIDTH, EGEMAPS_WIDTH, COMPARE_WIDTH = 121, 88, 6373
 
@@ -323,6 +329,9 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
         In the order of ``spec``.
     """
     blocks = parse_features(spec)
+    if WORDS_BLOCK in blocks:
+        raise ParameterError(f"the {WORDS_BLOCK!r} block is learned at fit: compute it with "
+                             "EmotionClassifier, not block_features")
     if "paper" in blocks:
         _check_cepstrum(n_cepstrum, cepstrum)
     x = prepare_audio(audio, sample_rate)
