@@ -260,6 +260,7 @@ def test_old_stored_classifier_says_reingest(tiny_db, tiny_corpus):
 def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
     # Each labelled clip's classifier features come with the prepared clip (ingest's
     # workers); the stored classifier is the one fitted on features computed afterwards.
+    from ingest.emotion.classifier import SpeechFeatures
     from ingest.emotion.model import _fit_classifier, classifier_features
     from ingest.prepare import prepare_clip
     from ingest.readers import discover, load
@@ -267,17 +268,22 @@ def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
 
     source = next(s for s in discover([tiny_corpus]) if "_sad_" in s.clip_id)
     clip = prepare_clip(load(source))
-    assert clip.emotion == "sad" and isinstance(clip.emotion_features, np.ndarray)
-    np.testing.assert_array_equal(clip.emotion_features,
-                                  classifier_features(clip.audio, clip.sample_rate))
+    assert clip.emotion == "sad" and isinstance(clip.emotion_features, SpeechFeatures)
+    again = classifier_features(clip.audio, clip.sample_rate)
+    np.testing.assert_array_equal(clip.emotion_features.functionals, again.functionals)
+    assert len(clip.emotion_features.frames) == 1
+    np.testing.assert_array_equal(clip.emotion_features.frames[0], again.frames[0])
 
     stored = Model.load(tiny_db[0]).emotion_model.classifier
+    assert stored.bag_ is not None and stored.block_widths_ == (171, 1000)
     clips = prepared_from_database(Database.open(tiny_db[0]))
     assert all(c.emotion_features is None for c in clips)  # not stored in the database
+    # the order ingest met them in (the codebooks' random seeding depends on it)
+    order = {s.clip_id: k for k, s in enumerate(discover([tiny_corpus]))}
+    clips = sorted(clips, key=lambda c: order[c.clip_id])
     notes: list[str] = []
     refit = _fit_classifier([(c.audio, c.sample_rate) for c in clips],
                             [c.emotion for c in clips], [c.speaker for c in clips], notes)
-    # (the database lists its clips in another order than ingest met them: same model)
     X = [(c.audio, c.sample_rate) for c in clips]
     who = [c.speaker for c in clips]
     np.testing.assert_array_equal(stored.classes_, refit.classes_)
