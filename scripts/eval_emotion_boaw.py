@@ -22,7 +22,19 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
   ``default-weighted`` (plain concatenation would let the 1,000 words drown the 171
   functionals; ``scripts/eval_emotion_fusion.py --feature-level`` weights the blocks
   *before* the classifier's per-speaker normalisation and scaling, which undo any
-  per-column weight, so it measures plain concatenation).
+  per-column weight, so it measures plain concatenation);
+* ``stored``: default+boaw through the stored estimator, what ``ingest`` stores and
+  ``classify`` / ``synth --emotion auto`` use (issue #16, fourth session): kernel and C
+  chosen as ``default+boaw``'s, then ``EmotionClassifier()`` (features
+  ``rich+cepstrum+boaw``, probabilities) fitted on the outer training fold's
+  :class:`~ingest.emotion.classifier.SpeechFeatures` (functionals and frame descriptors:
+  it learns its codebooks itself), written with ``to_arrays``, read back with
+  ``from_arrays`` and scored; LOSO one utterance at a time is also scored by the
+  highest probability (what ``classify`` lists first).
+
+``--mcnemar A B`` compares two systems' per-utterance correctness (LOSO, one utterance
+at a time; and the grouped LOSO and 10-fold predictions) with McNemar's exact test
+(two-sided binomial test on the discordant utterances; McNemar 1947, Dietterich 1998).
 
 The codebooks (and their standardisation) are learned on the outer training fold's frames
 alone, anew for every outer fold; the inner tuning folds use that fold's codebooks (they
@@ -51,9 +63,9 @@ from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
 from tqdm import tqdm
 
 from ingest.emotion.boaw import BagOfAudioWords, frame_descriptors
-from ingest.emotion.classifier import EmotionClassifier
+from ingest.emotion.classifier import EmotionClassifier, SpeechFeatures
 
-SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw")
+SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw", "stored")
 
 
 def cached_frames(utt, cache: Path) -> list[np.ndarray]:
@@ -78,10 +90,35 @@ def boaw_features(frames, default: np.ndarray, with_default: bool):
     return make
 
 
+def stored_final(frames, F, y, spk):
+    """``final`` of :func:`eval_emotion.nested`: the stored estimator, fitted on the fold's
+    functionals and frames (it learns the codebooks), round-tripped through its arrays."""
+    def fit(params, train, test):
+        model = EmotionClassifier(kernel=params["kernel"], C=params["C"], probability=True)
+        model.fit(SpeechFeatures(F[train], [frames[i] for i in train]), y[train],
+                  speakers=spk[train])
+        back = EmotionClassifier.from_arrays(model.to_arrays())
+        return back, SpeechFeatures(F[test], [frames[i] for i in test])
+    return fit
+
+
+def mcnemar(y, a, b) -> dict:
+    """McNemar's exact test of two systems' per-utterance correctness (two-sided)."""
+    from scipy.stats import binomtest
+
+    ra, rb = np.asarray(a) == y, np.asarray(b) == y
+    only_a, only_b = int(np.sum(ra & ~rb)), int(np.sum(~ra & rb))
+    p = binomtest(min(only_a, only_b), only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
+    return {"only_first_right": only_a, "only_second_right": only_b, "p": float(p),
+            "first": float(ra.mean()), "second": float(rb.mean())}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     common_arguments(parser)
     parser.add_argument("--systems", nargs="+", default=list(SYSTEMS), choices=SYSTEMS)
+    parser.add_argument("--mcnemar", nargs=2, metavar=("A", "B"), choices=SYSTEMS,
+                        help="McNemar's exact test between two of the systems run")
     args = parser.parse_args()
 
     t0 = time.perf_counter()
@@ -101,12 +138,24 @@ def main() -> int:
                                              block_widths=(F.shape[1], n_words)),
                              fold_features=boaw_features(frames, F, True)),
     }
-    report = {}
+    setups["stored"] = dict(setups["default+boaw"], final=stored_final(frames, F, y, spk))
+    report, preds = {}, {}
     for label in args.systems:
         t = time.perf_counter()
         r = nested(F, y, spk, dict(normalize="speaker"), GRID, kinds=tuple(args.kinds),
                    **setups[label])
+        preds[label] = {f"{k}/{m}": r[k][m] for k in r for m in r[k] if m.startswith("pred")}
         report[label] = report_row(label, r, args.kinds, y, time.perf_counter() - t)
+        report[label]["per_utterance"] = {k: v.tolist() for k, v in preds[label].items()}
+    if args.mcnemar:
+        a, b = args.mcnemar
+        report["mcnemar"] = {}
+        for key in sorted(set(preds.get(a, {})) & set(preds.get(b, {}))):
+            m = mcnemar(y, preds[a][key], preds[b][key])
+            report["mcnemar"][key] = m
+            print(f"McNemar {a} vs {b}, {key}: {100 * m['first']:.1f} vs "
+                  f"{100 * m['second']:.1f} %; only {a} right {m['only_first_right']}, only "
+                  f"{b} right {m['only_second_right']}; exact p = {m['p']:.3f}")
     return finish(report, t0, args.json)
 
 

@@ -125,8 +125,10 @@ class BagOfAudioWords:
                                  f"got {self.assignments}")
         X = np.vstack(list(frames))
         if X.shape[0] < self.size:
-            raise ParameterError(f"{X.shape[0]} training frames for a codebook of "
-                                 f"{self.size} words")
+            raise ParameterError(
+                f"a codebook of {self.size} audio words needs at least "
+                f"{self.size * _HOP_S:.1f} s of training speech ({self.size} frames), got "
+                f"{X.shape[0] * _HOP_S:.2f} s")
         self.mean_ = X.mean(0)
         sd = X.std(0)
         self.scale_ = np.where(sd > 0, sd, 1.0)

@@ -56,6 +56,7 @@ __all__ = [
     "DEFAULT_FEATURES",
     "EMODB_EMOTIONS",
     "FEATURE_SAMPLE_RATE",
+    "FUNCTIONALS",
     "MIN_DURATION",
     "N_CEPSTRUM",
     "EmotionClassifier",
