@@ -173,3 +173,15 @@ def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
         with pytest.raises(DataError, match=needle) as info:
             EmotionClassifier.from_arrays({**arrays, key: bad})
         assert "\n" not in str(info.value)
+
+
+def test_too_little_labelled_speech_for_the_words_is_a_note(rng):
+    # 4 clips of 0.5 s: two per emotion, but 2 s of speech for 500 audio words. Ingest's
+    # classifier step says so in a note and goes on without a classifier.
+    from ingest.emotion.model import _fit_classifier
+
+    audio = [(_voice(rng, f0=f, seconds=0.5), SR) for f in (110.0, 120.0, 250.0, 260.0)]
+    notes: list[str] = []
+    assert _fit_classifier(audio, ["sad", "sad", "happy", "happy"], None, notes) is None
+    assert notes == ["the emotion classifier could not be trained: a codebook of 500 audio "
+                     "words needs at least 5.0 s of training speech (500 frames), got 2.04 s"]
