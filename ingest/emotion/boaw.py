@@ -31,7 +31,7 @@ from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "N_DESCRIPTORS", "BagOfAudioWords",
-           "frame_descriptors"]
+           "descriptors", "frame_descriptors"]
 
 #: Words per codebook (openXBOW's default ``-size``).
 CODEBOOK_SIZE = 500
@@ -58,11 +58,21 @@ def frame_descriptors(audio, sample_rate) -> np.ndarray:
         Per 10 ms frame: 20 MFCCs, log RMS energy, F0 in semitones above 27.5 Hz (0 when
         unvoiced), then the deltas of these 22 (5-frame regression), float64.
     """
-    import librosa
-
     from ingest.emotion.features import frame_analysis  # the ``rich`` block's frames
 
-    fr = frame_analysis(prepare_audio(audio, sample_rate))
+    return descriptors(frame_analysis(prepare_audio(audio, sample_rate)))
+
+
+def descriptors(fr: dict) -> np.ndarray:
+    """:func:`frame_descriptors` from an utterance's
+    :func:`ingest.emotion.features.frame_analysis` (shared with the ``rich`` block).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 2 * N_DESCRIPTORS)
+    """
+    import librosa
+
     mfcc, rms, f0 = fr["mfcc"], fr["rms"], fr["f0"]
     n = min(mfcc.shape[1], rms.size, f0.size)
     mfcc, rms, f0 = mfcc[:, :n], rms[:n], f0[:n]

@@ -37,7 +37,7 @@ from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, MIN_DURATION, utterances
-from ingest.emotion.boaw import BagOfAudioWords, frame_descriptors
+from ingest.emotion.boaw import BagOfAudioWords
 from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
 from ingest.emotion.features import (
     N_CEPSTRUM,
@@ -397,19 +397,17 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             return SpeechFeatures(check_array(arr, dtype=np.float64))  # sklearn's checks
         if not items:
             raise DataError("X holds no utterances")
-        blocks = parse_features(self.features)
-        spec = "+".join(b for b in blocks if b != WORDS_BLOCK)
-        words = WORDS_BLOCK in blocks
+        words = WORDS_BLOCK in parse_features(self.features)
         rows, frames = [], [] if words else None
         for i, (audio, sr) in enumerate(items):
             try:
-                part = block_features(audio, sr, spec, n_cepstrum=self.n_cepstrum,
-                                      cepstrum=self.cepstrum) if spec else {}
-                rows.append(np.concatenate([np.zeros(0), *part.values()]))
-                if words:
-                    frames.append(frame_descriptors(audio, sr))
+                part = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
+                                      cepstrum=self.cepstrum)
             except DataError as exc:
                 raise DataError(f"utterance {i}: {exc}") from exc
+            if words:
+                frames.append(part.pop(WORDS_BLOCK))
+            rows.append(np.concatenate([np.zeros(0), *part.values()]))
         return SpeechFeatures(np.vstack(rows), frames)
 
     @staticmethod
