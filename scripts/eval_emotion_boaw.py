@@ -42,6 +42,9 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
 stored estimator's default parameters (trained on one corpus, codebooks included, tested
 on the other; the target's speakers normalised together, and one utterance at a time).
 
+``--seed S`` seeds the codebooks (``BagOfAudioWords(random_state=S)``, the estimator's
+``random_state``; 0 is the stored default's): their random variation, measured.
+
 ``--mcnemar A B`` compares two systems' per-utterance correctness (LOSO, one utterance
 at a time; and the grouped LOSO and 10-fold predictions) with McNemar's exact test
 (two-sided binomial test on the discordant utterances; McNemar 1947, Dietterich 1998).
@@ -97,20 +100,21 @@ def cached_frames(utt, cache: Path, name: str = "emodb") -> list[np.ndarray]:
     return [X[a:b] for a, b in zip(off[:-1], off[1:], strict=True)]
 
 
-def boaw_features(frames, default: np.ndarray, with_default: bool):
+def boaw_features(frames, default: np.ndarray, with_default: bool, seed: int = 0):
     """``fold_features``: the bag of words learned on the training fold (with the
-    functionals in front if ``with_default``)."""
+    functionals in front if ``with_default``; codebooks seeded by ``seed``)."""
     def make(train):
-        H = BagOfAudioWords().fit([frames[i] for i in train]).transform(frames)
+        H = BagOfAudioWords(random_state=seed).fit([frames[i] for i in train]).transform(frames)
         return np.hstack([default, H]) if with_default else H
     return make
 
 
-def stored_final(frames, F, y, spk):
+def stored_final(frames, F, y, spk, seed: int = 0):
     """``final`` of :func:`eval_emotion.nested`: the stored estimator, fitted on the fold's
     functionals and frames (it learns the codebooks), round-tripped through its arrays."""
     def fit(params, train, test):
-        model = EmotionClassifier(kernel=params["kernel"], C=params["C"], probability=True)
+        model = EmotionClassifier(kernel=params["kernel"], C=params["C"], probability=True,
+                                  random_state=seed)
         model.fit(SpeechFeatures(F[train], [frames[i] for i in train]), y[train],
                   speakers=spk[train])
         back = EmotionClassifier.from_arrays(model.to_arrays())
@@ -200,6 +204,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     common_arguments(parser)
     parser.add_argument("--systems", nargs="*", default=list(SYSTEMS), choices=SYSTEMS)
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the codebooks (the estimator's random_state)")
     parser.add_argument("--choose", action="store_true")
     parser.add_argument("--synthetic", action="store_true")
     parser.add_argument("--mcnemar", nargs=2, metavar=("A", "B"), choices=SYSTEMS,
@@ -218,12 +224,13 @@ def main() -> int:
         "default-weighted": dict(factory=partial(
             EmotionClassifier, block_widths=(feats["rich"].shape[1],
                                              feats["cepstrum"].shape[1]))),
-        "boaw": dict(fold_features=boaw_features(frames, F, False)),
+        "boaw": dict(fold_features=boaw_features(frames, F, False, args.seed)),
         "default+boaw": dict(factory=partial(EmotionClassifier,
                                              block_widths=(F.shape[1], n_words)),
-                             fold_features=boaw_features(frames, F, True)),
+                             fold_features=boaw_features(frames, F, True, args.seed)),
     }
-    setups["stored"] = dict(setups["default+boaw"], final=stored_final(frames, F, y, spk))
+    setups["stored"] = dict(setups["default+boaw"],
+                            final=stored_final(frames, F, y, spk, args.seed))
     report, preds = {}, {}
     for label in args.systems:
         t = time.perf_counter()

@@ -100,6 +100,12 @@ class BagOfAudioWords:
         Words per codebook (one for the descriptors, one for their deltas).
     assignments : int, optional
         Nearest words counted per frame.
+    local_trials : int or None, optional
+        Candidates drawn per k-means++ step, the nearest-to-optimal kept: 1 is the
+        k-means++ seeding of Arthur & Vassilvitskii (2007) and openXBOW's ``random++``
+        (its ``CodebookNumeric.randomSamplingPlusPlus``: one draw per word); None is
+        scikit-learn's greedy default, ``2 + ln(size)`` draws (what issue #16's third
+        session measured; 8 times the distance computations).
     max_frames : int, optional
         Training frames the codebooks are seeded from (a random subset when there are
         more; k-means++ seeding costs frames x words).
@@ -114,9 +120,11 @@ class BagOfAudioWords:
     """
 
     def __init__(self, size: int = CODEBOOK_SIZE, assignments: int = ASSIGNMENTS,
-                 max_frames: int = 50_000, random_state: int = 0):
+                 local_trials: int | None = 1, max_frames: int = 50_000,
+                 random_state: int = 0):
         self.size = size
         self.assignments = assignments
+        self.local_trials = local_trials
         self.max_frames = max_frames
         self.random_state = random_state
 
@@ -149,6 +157,7 @@ class BagOfAudioWords:
         half = Z.shape[1] // 2
         self.codebooks_ = [
             kmeans_plusplus(np.ascontiguousarray(part), self.size,
+                            n_local_trials=self.local_trials,
                             random_state=self.random_state + i)[0]
             for i, part in enumerate((Z[:, :half], Z[:, half:]))]
         return self
