@@ -18,8 +18,10 @@ comparable with published figures on the full recordings):
   together, label-free). LOSO is also scored one utterance at a time without a speaker
   (the ``classify`` case: the population fallback) and, for comparison, with a second SVM
   trained without speaker normalisation;
-* the confusion matrix of the default pipeline (LOSO), feature times per utterance and
-  fit times;
+* the confusion matrix of the functionals pipeline (``rich+cepstrum``, the default until
+  issue #16's fourth session; LOSO), feature times per utterance and fit times. The
+  stored default adds the bag-of-audio-words, learned in each training fold:
+  ``scripts/eval_emotion_boaw.py --systems stored`` measures it;
 * ``--opensmile``: eGeMAPS and ComParE functionals (openSMILE) with the same SVM, alone and
   fused (concatenated) with the default features;
 * ``--synthetic``: the synthetic corpus (40 sentences, 240 clips, 5 emotions, one
