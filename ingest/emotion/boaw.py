@@ -13,9 +13,10 @@ histogram says *which* short-time sounds occur how often, where functionals
 * :class:`BagOfAudioWords` -- openXBOW's recipe with its defaults where it has them:
   descriptors standardised by the training frames (``-standardizeInput``), one codebook
   for the descriptors and one for their deltas (``-attributes``), each of
-  :data:`CODEBOOK_SIZE` words (openXBOW's default) picked by k-means++ seeding without
-  the k-means updates (openXBOW's default codebook: "random sampling is much faster than
-  clustering while obtaining almost the same final performance"), :data:`ASSIGNMENTS`
+  :data:`CODEBOOK_SIZE` words (openXBOW's default) picked by k-means++ seeding, one draw
+  per word, without the k-means updates (openXBOW's default codebook ``-c random++``:
+  "random sampling is much faster than clustering while obtaining almost the same final
+  performance"; seeded here from at most 50,000 training frames), :data:`ASSIGNMENTS`
   nearest words counted per frame (multi-assignment ``-a``; 10 as in openXBOW's
   tutorial), counts per second of speech (``-norm``, utterances differ in length) and
   logarithmic term frequency ``lg(TF + 1)`` (``-log``).
