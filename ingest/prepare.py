@@ -48,8 +48,9 @@ class PreparedClip:
         ARPAbet phone segments tiling the audio.
     prosody : np.ndarray, shape (n_prosody_frames, 9), float32
         RASTA-PLP curve of the whole clip, 100 frames per second.
-    emotion_features : np.ndarray of shape (n_features,), str or None
-        Raw features of the database's emotion classifier
+    emotion_features : SpeechFeatures, str or None
+        What the database's emotion classifier computes from the clip before fitting
+        (functionals and frame descriptors)
         (:func:`ingest.emotion.model.classifier_features`; a str: why the audio has none),
         computed with the clip so that ingest's workers do it in parallel; None: not
         computed (no emotion label, a clip read back from a database, a slice), the
@@ -78,7 +79,7 @@ class PreparedClip:
     sentence_id: str | None
     text: str | None
     extra: dict = field(default_factory=dict)
-    emotion_features: np.ndarray | str | None = None
+    emotion_features: object | str | None = None  # SpeechFeatures (ingest.emotion.classifier)
     posteriors: np.ndarray | None = None
 
     @property

@@ -60,20 +60,28 @@ def save_inputs(corpus: Path, out: Path, workers: int) -> int:
         audio, rate = captured["audio"][k]
         arrays[f"audio/{k}"] = audio
         arrays[f"rate/{k}"] = np.array(rate)
-        row = captured["classifier_rows"][k]
-        arrays[f"row/{k}"] = np.array(row if row is not None else "")
+        row = captured["classifier_rows"][k]  # SpeechFeatures, a reason (str) or None
+        if row is None or isinstance(row, str):
+            arrays[f"row/{k}"] = np.array(row or "")
+        else:
+            arrays[f"row/{k}"] = row.functionals
+            if row.frames is not None:
+                arrays[f"frames/{k}"] = row.frames[0]
     np.savez(out, **arrays)
     print(f"saved the inputs of {len(captured['sources'])} clips to {out}")
     return 0
 
 
 def load_inputs(path: Path) -> tuple[tuple, dict]:
+    from ingest.emotion.classifier import SpeechFeatures
+
     z = np.load(path, allow_pickle=False)
     n = int(z["n"])
     rows = []
     for k in range(n):
         r = z[f"row/{k}"]
-        rows.append((str(r) or None) if r.dtype.kind == "U" else r)
+        frames = [z[f"frames/{k}"]] if f"frames/{k}" in z else None
+        rows.append((str(r) or None) if r.dtype.kind == "U" else SpeechFeatures(r, frames))
     args = ([z[f"sources/{k}"] for k in range(n)], [z[f"motions/{k}"] for k in range(n)],
             [str(e) for e in z["emotions"]], [str(s) or None for s in z["sentence_ids"]],
             [(z[f"audio/{k}"], int(z[f"rate/{k}"])) for k in range(n)], z["loadings"],

@@ -18,8 +18,10 @@ comparable with published figures on the full recordings):
   together, label-free). LOSO is also scored one utterance at a time without a speaker
   (the ``classify`` case: the population fallback) and, for comparison, with a second SVM
   trained without speaker normalisation;
-* the confusion matrix of the default pipeline (LOSO), feature times per utterance and
-  fit times;
+* the confusion matrix of the functionals pipeline (``rich+cepstrum``, the default until
+  issue #16's fourth session; LOSO), feature times per utterance and fit times. The
+  stored default adds the bag-of-audio-words, learned in each training fold:
+  ``scripts/eval_emotion_boaw.py --systems stored`` measures it;
 * ``--opensmile``: eGeMAPS and ComParE functionals (openSMILE) with the same SVM, alone and
   fused (concatenated) with the default features;
 * ``--synthetic``: the synthetic corpus (40 sentences, 240 clips, 5 emotions, one
@@ -51,7 +53,7 @@ from sklearn.model_selection import (
 )
 from tqdm import tqdm
 
-from ingest.emotion.classifier import DEFAULT_C, DEFAULT_FEATURES, EmotionClassifier, load_emodb
+from ingest.emotion.classifier import DEFAULT_C, FUNCTIONALS, EmotionClassifier, load_emodb
 from ingest.emotion.features import CEPSTRUM_BLOCK, block_features
 
 N_CEPS = (50, 100, 500, 1000)
@@ -131,11 +133,14 @@ def _inner(F, y, spk, train, kind):
 
 
 def _outer_fold(F, y, spk, train, test, kind, base, grid, factory=EmotionClassifier,
-                fold_features=None):
+                fold_features=None, final=None):
     """Tune inside ``train``; score on ``test`` (with, and for LOSO without, speakers).
 
     ``factory(**params)`` makes the estimator; ``fold_features(train)``, if given, makes
-    the feature matrix from what is learned on the training fold alone (e.g. a codebook).
+    the feature matrix from what is learned on the training fold alone (e.g. a codebook);
+    ``final(params, train, test)``, if given, fits the scored model on the training fold
+    its own way and returns it with the test fold's ``X`` (e.g. the stored estimator
+    learning its codebook from audio descriptors).
     """
     if fold_features is not None:
         F = fold_features(train)
@@ -148,15 +153,20 @@ def _outer_fold(F, y, spk, train, test, kind, base, grid, factory=EmotionClassif
         if s > best_score:
             best, best_score = p, s
     t = time.perf_counter()
-    model = factory(**best).fit(Ft, yt, speakers=st)
+    if final is None:
+        model, Xte = factory(**best).fit(Ft, yt, speakers=st), F[test]
+    else:
+        model, Xte = final(best, train, test)
     fit_s = time.perf_counter() - t
-    pred = model.predict(F[test], speakers=spk[test])
+    pred = model.predict(Xte, speakers=spk[test])
     chosen = f"{best['kernel']} C={best['C']:g}"
     if best.get("class_weight"):
         chosen += f" {best['class_weight']}"
     out = {"pred": pred, "chosen": chosen, "fit_s": fit_s}
     if kind == "loso":
-        out["pred_single"] = model.predict(F[test])  # one utterance at a time: fallback
+        out["pred_single"] = model.predict(Xte)  # one utterance at a time: fallback
+        if getattr(model, "probability", False):  # what classify lists first
+            out["pred_proba_single"] = model.classes_[model.predict_proba(Xte).argmax(1)]
         if best.get("normalize") == "speaker":
             raw = factory(**{**best, "normalize": "none"}).fit(Ft, yt)
             out["pred_raw_model"] = raw.predict(F[test])
@@ -164,15 +174,15 @@ def _outer_fold(F, y, spk, train, test, kind, base, grid, factory=EmotionClassif
 
 
 def nested(F, y, spk, base: dict, grid=GRID, kinds=("10fold", "loso"),
-           factory=EmotionClassifier, fold_features=None) -> dict:
+           factory=EmotionClassifier, fold_features=None, final=None) -> dict:
     """Outer 10-fold and LOSO accuracy with every choice made inside the training folds
-    (``factory`` and ``fold_features`` as :func:`_outer_fold`'s)."""
+    (``factory``, ``fold_features`` and ``final`` as :func:`_outer_fold`'s)."""
     res = {}
     for kind in kinds:
         splits = (list(StratifiedKFold(10, shuffle=True, random_state=SEED).split(F, y))
                   if kind == "10fold" else list(LeaveOneGroupOut().split(F, y, spk)))
         folds = Parallel(n_jobs=2)(delayed(_outer_fold)(F, y, spk, tr, te, kind, base, grid,
-                                                        factory, fold_features)
+                                                        factory, fold_features, final)
                                    for tr, te in splits)
         pred = np.empty(y.size, dtype=y.dtype)
         accs = []
@@ -182,8 +192,11 @@ def nested(F, y, spk, base: dict, grid=GRID, kinds=("10fold", "loso"),
         r = {"acc": float(np.mean(accs)), "std": float(np.std(accs)), "folds": accs,
              "chosen": sorted({f["chosen"] for f in folds}),
              "fit_s": float(np.mean([f["fit_s"] for f in folds])), "pred": pred}
-        for extra in ("pred_single", "pred_raw_model"):
+        for extra in ("pred_single", "pred_proba_single", "pred_raw_model"):
             if extra in folds[0]:
+                r[extra] = np.empty(y.size, dtype=y.dtype)
+                for (_, te), f in zip(splits, folds, strict=True):
+                    r[extra][te] = f[extra]
                 r[extra.replace("pred_", "acc_")] = float(np.mean(
                     [np.mean(f[extra] == y[te]) for (_, te), f in zip(splits, folds,
                                                                      strict=True)]))
@@ -215,7 +228,7 @@ def emodb_default(emodb: Path, cache: Path):
     feature matrix (n, 171)."""
     utt, y, spk = load_emodb(emodb)
     feats, _ = cached_features("emodb", utt, cache, ["paper_frames", "rich"])
-    return utt, y, spk, feats, matrix(feats, DEFAULT_FEATURES)
+    return utt, y, spk, feats, matrix(feats, FUNCTIONALS)
 
 
 def report_row(label: str, r: dict, kinds, y, seconds: float) -> dict:
@@ -223,6 +236,8 @@ def report_row(label: str, r: dict, kinds, y, seconds: float) -> dict:
     cells = "".join(f"{k} {100 * r[k]['acc']:.1f} ± {100 * r[k]['std']:.1f}  " for k in kinds)
     if "loso" in r:
         cells += f"LOSO 1 utt. {100 * r['loso']['acc_single']:.1f}  "
+        if "acc_proba_single" in r["loso"]:
+            cells += f"(by probability {100 * r['loso']['acc_proba_single']:.1f})  "
     chosen = sorted({c for k in kinds for c in r[k]["chosen"]})
     print(f"  {label:<22}{cells}chosen {', '.join(chosen)}  ({seconds:.0f} s)", flush=True)
     out = {k: {m: v for m, v in r[k].items() if not m.startswith("pred")} for k in r}
@@ -348,17 +363,17 @@ def main() -> int:
     none = dict(normalize="none")
     configs = [
         ("paper (500 coefficients), no norm.", "paper", none, LINEAR_GRID),
-        (f"{DEFAULT_FEATURES}, no norm.", DEFAULT_FEATURES, none, GRID),
-        (f"{DEFAULT_FEATURES} + speaker norm. (default)", DEFAULT_FEATURES, sp, GRID),
+        (f"{FUNCTIONALS}, no norm.", FUNCTIONALS, none, GRID),
+        (f"{FUNCTIONALS} + speaker norm. (the default to session 3)", FUNCTIONALS, sp, GRID),
     ]
     if args.balanced:
-        configs.append((f"{DEFAULT_FEATURES} + speaker norm., class weights tuned",
-                        DEFAULT_FEATURES, sp, BALANCED_GRID))
+        configs.append((f"{FUNCTIONALS} + speaker norm., class weights tuned",
+                        FUNCTIONALS, sp, BALANCED_GRID))
     if args.opensmile:
         configs += [("egemaps + speaker norm.", "egemaps", sp, GRID),
                     ("compare + speaker norm.", "compare", sp, LINEAR_GRID),
-                    (f"compare+{DEFAULT_FEATURES} + speaker norm.",
-                     f"compare+{DEFAULT_FEATURES}", sp, LINEAR_GRID)]
+                    (f"compare+{FUNCTIONALS} + speaker norm.",
+                     f"compare+{FUNCTIONALS}", sp, LINEAR_GRID)]
     res = evaluate_configs("EmoDB", feats, y, spk, configs)
     default = res[configs[2][0]]
     report["emodb_confusion_loso"] = print_confusion(
@@ -368,7 +383,7 @@ def main() -> int:
     for kind in ("probability=False", "probability=True"):
         t = time.perf_counter()
         EmotionClassifier(probability=kind.endswith("True")).fit(
-            matrix(feats, DEFAULT_FEATURES), y, speakers=spk)
+            matrix(feats, FUNCTIONALS), y, speakers=spk)
         report[f"fit_all_{kind}_s"] = time.perf_counter() - t
         print(f"default pipeline fitted on all of EmoDB, {kind}: "
               f"{report[f'fit_all_{kind}_s']:.2f} s")
@@ -393,7 +408,7 @@ def main() -> int:
                                for k, r in s_res.items()}
         keep_s = np.isin(s_y, list(SHARED_EMOTIONS))
         keep_e = np.isin(y, list(SHARED_EMOTIONS.values()))
-        Fs, Fe = matrix(s_feats, DEFAULT_FEATURES), matrix(feats, DEFAULT_FEATURES)
+        Fs, Fe = matrix(s_feats, FUNCTIONALS), matrix(feats, FUNCTIONALS)
         ys = np.array([SHARED_EMOTIONS[v] for v in s_y[keep_s]])
         report["cross"] = {
             "synthetic->emodb": cross_corpus("synthetic", Fs[keep_s], ys, s_spk[keep_s],

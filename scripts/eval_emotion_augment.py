@@ -45,14 +45,14 @@ from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedK
 from tqdm import tqdm
 
 from ingest.emotion.audio import speed_perturb
-from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier
+from ingest.emotion.classifier import FUNCTIONALS, EmotionClassifier
 from ingest.emotion.features import block_features
 
 #: Speed factors of the perturbed copies (Ko et al. 2015).
 FACTORS = (0.9, 1.1)
 
 
-def perturbed_features(utt, cache: Path, factor: float, spec: str = DEFAULT_FEATURES):
+def perturbed_features(utt, cache: Path, factor: float, spec: str = FUNCTIONALS):
     """Features (n, width) of every utterance played ``factor`` times as fast (cached)."""
     path = cache_folder("emodb", utt, cache) / f"speed{factor:g}-{spec}.npy"
     if path.exists():

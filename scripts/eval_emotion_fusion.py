@@ -60,10 +60,10 @@ from sklearn.linear_model import LogisticRegression
 from sklearn.model_selection import LeaveOneGroupOut, ParameterGrid, StratifiedKFold
 from tqdm import tqdm
 
-from ingest.emotion.classifier import DEFAULT_FEATURES, EmotionClassifier, load_emodb
+from ingest.emotion.classifier import FUNCTIONALS, EmotionClassifier, load_emodb
 
 #: Base feature sets and their tuning grids (ComParE: linear only, as in eval_emotion.py).
-BASES = {"default": (DEFAULT_FEATURES, GRID), "egemaps": ("egemaps", GRID),
+BASES = {"default": (FUNCTIONALS, GRID), "egemaps": ("egemaps", GRID),
          "compare": ("compare", LINEAR_GRID), "paper": ("paper", LINEAR_GRID)}
 #: Penalty of the fusion's logistic regressions (scikit-learn's default; not tuned).
 FUSION_C = 1.0

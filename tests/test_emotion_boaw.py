@@ -62,7 +62,7 @@ def test_bag_of_audio_words_counts_nearest_words(rng):
     assert arrays["boaw_codebook0"].shape == (20, N_DESCRIPTORS)
     with pytest.raises(ParameterError, match="assignments"):
         BagOfAudioWords(size=5, assignments=6).fit(low)
-    with pytest.raises(ParameterError, match="training frames"):
+    with pytest.raises(ParameterError, match="needs at least 10.0 s of training speech"):
         BagOfAudioWords(size=1000).fit(low[:1])
 
 
@@ -83,22 +83,105 @@ def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
     np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
         weighted.normalizer_.transform(F, spk)), scaled * w)
     arrays = weighted.to_arrays()
-    assert int(arrays["format"]) == 3 and arrays["block_widths"].tolist() == [1, 4]
+    assert int(arrays["format"]) == 4 and arrays["block_widths"].tolist() == [1, 4]
+    assert arrays["block_widths_fitted"].tolist() == [1, 4] and "boaw_mean" not in arrays
     back = EmotionClassifier.from_arrays(arrays)
-    assert back.block_widths == (1, 4)
+    assert back.block_widths == back.block_widths_ == (1, 4)
     np.testing.assert_allclose(back.decision_function(F), weighted.decision_function(F))
-    # without block widths the stored format stays 2, readable as before
-    old = plain.to_arrays()
-    assert int(old["format"]) == 2 and "block_widths" not in old
-    np.testing.assert_array_equal(EmotionClassifier.from_arrays(old).predict(F),
+    # formats 3 (block widths, no fitted widths) and 2 (no block widths) stay readable
+    three = {**{k: v for k, v in arrays.items() if k != "block_widths_fitted"},
+             "format": np.array(3)}
+    np.testing.assert_allclose(EmotionClassifier.from_arrays(three).decision_function(F),
+                               weighted.decision_function(F))
+    two = {**{k: v for k, v in plain.to_arrays().items() if not k.startswith("block")},
+           "format": np.array(2)}
+    np.testing.assert_array_equal(EmotionClassifier.from_arrays(two).predict(F),
                                   plain.predict(F))
     from db.errors import DataError
 
     with pytest.raises(DataError, match="block_widths"):
-        EmotionClassifier.from_arrays({k: v for k, v in arrays.items()
+        EmotionClassifier.from_arrays({k: v for k, v in three.items()
                                        if k != "block_widths"})
     with pytest.raises(ParameterError, match="sum to 6"):
         EmotionClassifier(block_widths=(2, 4)).fit(F, y)
     for bad in ((0, 5), (1.5, 3.5), "15", ()):
         with pytest.raises(ParameterError, match="block_widths"):
             EmotionClassifier(block_widths=bad).fit(F, y)
+
+
+def test_stored_codebooks_are_checked(rng):
+    from db.errors import DataError
+
+    frames = [frame_descriptors(_voice(rng, f0=f), SR) for f in (110.0, 180.0, 260.0)]
+    bag = BagOfAudioWords(size=20, assignments=3).fit(frames)
+    arrays = bag.to_arrays()
+    back = BagOfAudioWords.from_arrays(arrays)
+    np.testing.assert_array_equal(back.transform(frames), bag.transform(frames))
+    book = arrays["boaw_codebook1"]
+    nan = book.copy()
+    nan[0, 0] = np.nan
+    for key, bad, needle in [("boaw_codebook1", book[:-1], "boaw_codebook1"),
+                             ("boaw_codebook0", book[:, :5], "boaw_codebook0"),
+                             ("boaw_codebook1", nan, "not finite"),
+                             ("boaw_mean", arrays["boaw_mean"][:-1], "boaw_mean"),
+                             ("boaw_scale", -arrays["boaw_scale"], "positive"),
+                             ("boaw_assignments", np.array(21), "boaw_assignments"),
+                             ("boaw_assignments", np.array(2.5), "boaw_assignments"),
+                             ("boaw_mean", np.array(["a"] * 44), "not finite")]:
+        with pytest.raises(DataError, match=needle):
+            BagOfAudioWords.from_arrays({**arrays, key: bad})
+    with pytest.raises(DataError, match="lacks array 'boaw_scale'"):
+        BagOfAudioWords.from_arrays({k: v for k, v in arrays.items() if k != "boaw_scale"})
+
+
+def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
+    from db.errors import DataError
+    from ingest.emotion.classifier import EmotionClassifier, SpeechFeatures
+
+    f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
+    audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]
+    y = np.repeat(list(f0s), 4)
+    spk = np.tile(["a", "b"], 4)
+    model = EmotionClassifier(C=1.0, probability=True, calibration_cv=2)
+    described = model.describe(audio)
+    assert described.functionals.shape == (8, 171) and len(described.frames) == 8
+    model.fit(audio, y, speakers=spk)
+    assert model.bag_ is not None and model.block_widths_ == (171, 1000)
+    assert model.n_features_in_ == 1171 and model.featurize(audio).shape == (8, 1171)
+    # the same fit from what ingest's workers compute per clip
+    again = EmotionClassifier(C=1.0, probability=True, calibration_cv=2).fit(
+        SpeechFeatures(described.functionals, described.frames), y, speakers=spk)
+    np.testing.assert_array_equal(again.bag_.codebooks_[1], model.bag_.codebooks_[1])
+    arrays = model.to_arrays()
+    assert int(arrays["format"]) == 4 and arrays["boaw_codebook0"].shape == (500, 22)
+    back = EmotionClassifier.from_arrays(arrays)
+    np.testing.assert_allclose(back.decision_function(audio), model.decision_function(audio))
+    np.testing.assert_allclose(back.predict_proba(audio[:2]), model.predict_proba(audio[:2]))
+    # a feature matrix is used as given: no words learned, the old format-2-like model
+    plain = EmotionClassifier(C=1.0).fit(described.functionals, y)
+    assert plain.bag_ is None and plain.block_widths_ is None
+    assert "boaw_mean" not in plain.to_arrays()
+    # the stored arrays are checked when read, each failure one line
+    for key, bad, needle in [
+            ("support_vectors", arrays["support_vectors"][:, :-1], "support_vectors"),
+            ("dual_coef", np.full_like(arrays["dual_coef"], np.inf), "not finite"),
+            ("n_support", arrays["n_support"] + 1, "n_support"),
+            ("calib_coef", np.ones((2, 2)), "calib_coef"),
+            ("block_widths_fitted", np.array([171, 999]), "block widths"),
+            ("boaw_codebook0", arrays["boaw_codebook0"][:, :3], "boaw_codebook0"),
+            ("format", np.array("4"), "older animegraph")]:
+        with pytest.raises(DataError, match=needle) as info:
+            EmotionClassifier.from_arrays({**arrays, key: bad})
+        assert "\n" not in str(info.value)
+
+
+def test_too_little_labelled_speech_for_the_words_is_a_note(rng):
+    # 4 clips of 0.5 s: two per emotion, but 2 s of speech for 500 audio words. Ingest's
+    # classifier step says so in a note and goes on without a classifier.
+    from ingest.emotion.model import _fit_classifier
+
+    audio = [(_voice(rng, f0=f, seconds=0.5), SR) for f in (110.0, 120.0, 250.0, 260.0)]
+    notes: list[str] = []
+    assert _fit_classifier(audio, ["sad", "sad", "happy", "happy"], None, notes) is None
+    assert notes == ["the emotion classifier could not be trained: a codebook of 500 audio "
+                     "words needs at least 5.0 s of training speech (500 frames), got 2.04 s"]

@@ -260,6 +260,7 @@ def test_old_stored_classifier_says_reingest(tiny_db, tiny_corpus):
 def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
     # Each labelled clip's classifier features come with the prepared clip (ingest's
     # workers); the stored classifier is the one fitted on features computed afterwards.
+    from ingest.emotion.classifier import SpeechFeatures
     from ingest.emotion.model import _fit_classifier, classifier_features
     from ingest.prepare import prepare_clip
     from ingest.readers import discover, load
@@ -267,17 +268,22 @@ def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
 
     source = next(s for s in discover([tiny_corpus]) if "_sad_" in s.clip_id)
     clip = prepare_clip(load(source))
-    assert clip.emotion == "sad" and isinstance(clip.emotion_features, np.ndarray)
-    np.testing.assert_array_equal(clip.emotion_features,
-                                  classifier_features(clip.audio, clip.sample_rate))
+    assert clip.emotion == "sad" and isinstance(clip.emotion_features, SpeechFeatures)
+    again = classifier_features(clip.audio, clip.sample_rate)
+    np.testing.assert_array_equal(clip.emotion_features.functionals, again.functionals)
+    assert len(clip.emotion_features.frames) == 1
+    np.testing.assert_array_equal(clip.emotion_features.frames[0], again.frames[0])
 
     stored = Model.load(tiny_db[0]).emotion_model.classifier
+    assert stored.bag_ is not None and stored.block_widths_ == (171, 1000)
     clips = prepared_from_database(Database.open(tiny_db[0]))
     assert all(c.emotion_features is None for c in clips)  # not stored in the database
+    # the order ingest met them in (the codebooks' random seeding depends on it)
+    order = {s.clip_id: k for k, s in enumerate(discover([tiny_corpus]))}
+    clips = sorted(clips, key=lambda c: order[c.clip_id])
     notes: list[str] = []
     refit = _fit_classifier([(c.audio, c.sample_rate) for c in clips],
                             [c.emotion for c in clips], [c.speaker for c in clips], notes)
-    # (the database lists its clips in another order than ingest met them: same model)
     X = [(c.audio, c.sample_rate) for c in clips]
     who = [c.speaker for c in clips]
     np.testing.assert_array_equal(stored.classes_, refit.classes_)
@@ -285,3 +291,54 @@ def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
                                atol=1e-8)
     np.testing.assert_allclose(stored.predict_proba(X), refit.predict_proba(X), atol=1e-6)
     assert classifier_features(np.zeros(16000, np.int16), 16000).startswith("audio is silence")
+
+
+def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_path, capsys):
+    """The stored classifier is someone else's data: a codebook cut short or of the wrong
+    shape, a zero or non-finite number, any array cut short or made negative (picked at
+    random, fixed seed) gives classify one error line, never a traceback."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    from db.store import arrays_from_table, arrays_to_table
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    path = Database.open(db).table_path("model_arrays")
+    table = pq.read_table(path)
+    arrays = arrays_from_table(table)
+    pre = "emotion/classifier/"
+    wav = str(_clip(tiny_corpus, "sad").with_suffix(".wav"))
+
+    def classify(corrupt):
+        pq.write_table(arrays_to_table(corrupt).replace_schema_metadata(
+            table.schema.metadata), path)
+        code = main(["classify", wav, "--db", str(db)])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert not any("Traceback" in e for e in err), err
+        return code, err
+
+    book = arrays[pre + "boaw_codebook0"]
+    nan = book.copy()
+    nan[3, 4] = np.nan
+    for name, bad, needle in [
+            ("boaw_codebook0", book[:, :-1], "boaw_codebook0"),
+            ("boaw_codebook1", book.T, "boaw_codebook1"),
+            ("boaw_codebook0", nan, "not finite"),
+            ("boaw_scale", np.zeros_like(arrays[pre + "boaw_scale"]), "boaw_scale"),
+            ("boaw_assignments", np.array(0.0), "boaw_assignments"),
+            ("block_widths_fitted", np.array([171.0, 999.0]), "block widths")]:
+        code, err = classify({**arrays, pre + name: bad})
+        assert code == 1 and len(err) == 1 and needle in err[0], (name, err)
+    rng = np.random.default_rng(0)
+    names = [k for k, v in arrays.items() if k.startswith(pre) and v.ndim >= 1
+             and v.shape[-1] >= 2]
+    for name in rng.choice(names, size=6, replace=False):
+        for bad in (arrays[name][..., :-1], -np.abs(arrays[name]) - 1.0):
+            code, err = classify({**arrays, name: bad})
+            if code != 0:  # a change the model tolerates may still classify
+                assert code == 1 and len(err) == 1 \
+                    and err[0].startswith("animegraph: error:"), (name, err)
+    code, err = classify(arrays)  # the database as it was
+    assert code == 0 and err == []

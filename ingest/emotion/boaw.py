@@ -13,9 +13,10 @@ histogram says *which* short-time sounds occur how often, where functionals
 * :class:`BagOfAudioWords` -- openXBOW's recipe with its defaults where it has them:
   descriptors standardised by the training frames (``-standardizeInput``), one codebook
   for the descriptors and one for their deltas (``-attributes``), each of
-  :data:`CODEBOOK_SIZE` words (openXBOW's default) picked by k-means++ seeding without
-  the k-means updates (openXBOW's default codebook: "random sampling is much faster than
-  clustering while obtaining almost the same final performance"), :data:`ASSIGNMENTS`
+  :data:`CODEBOOK_SIZE` words (openXBOW's default) picked by k-means++ seeding, one draw
+  per word, without the k-means updates (openXBOW's default codebook ``-c random++``:
+  "random sampling is much faster than clustering while obtaining almost the same final
+  performance"; seeded here from at most 50,000 training frames), :data:`ASSIGNMENTS`
   nearest words counted per frame (multi-assignment ``-a``; 10 as in openXBOW's
   tutorial), counts per second of speech (``-norm``, utterances differ in length) and
   logarithmic term frequency ``lg(TF + 1)`` (``-log``).
@@ -27,11 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from db.errors import ParameterError
+from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "N_DESCRIPTORS", "BagOfAudioWords",
-           "frame_descriptors"]
+           "descriptors", "frame_descriptors"]
 
 #: Words per codebook (openXBOW's default ``-size``).
 CODEBOOK_SIZE = 500
@@ -58,11 +59,21 @@ def frame_descriptors(audio, sample_rate) -> np.ndarray:
         Per 10 ms frame: 20 MFCCs, log RMS energy, F0 in semitones above 27.5 Hz (0 when
         unvoiced), then the deltas of these 22 (5-frame regression), float64.
     """
-    import librosa
-
     from ingest.emotion.features import frame_analysis  # the ``rich`` block's frames
 
-    fr = frame_analysis(prepare_audio(audio, sample_rate))
+    return descriptors(frame_analysis(prepare_audio(audio, sample_rate)))
+
+
+def descriptors(fr: dict) -> np.ndarray:
+    """:func:`frame_descriptors` from an utterance's
+    :func:`ingest.emotion.features.frame_analysis` (shared with the ``rich`` block).
+
+    Returns
+    -------
+    np.ndarray, shape (n_frames, 2 * N_DESCRIPTORS)
+    """
+    import librosa
+
     mfcc, rms, f0 = fr["mfcc"], fr["rms"], fr["f0"]
     n = min(mfcc.shape[1], rms.size, f0.size)
     mfcc, rms, f0 = mfcc[:, :n], rms[:n], f0[:n]
@@ -90,6 +101,12 @@ class BagOfAudioWords:
         Words per codebook (one for the descriptors, one for their deltas).
     assignments : int, optional
         Nearest words counted per frame.
+    local_trials : int or None, optional
+        Candidates drawn per k-means++ step, the nearest-to-optimal kept: 1 is the
+        k-means++ seeding of Arthur & Vassilvitskii (2007) and openXBOW's ``random++``
+        (its ``CodebookNumeric.randomSamplingPlusPlus``: one draw per word); None is
+        scikit-learn's greedy default, ``2 + ln(size)`` draws (what issue #16's third
+        session measured; 8 times the distance computations).
     max_frames : int, optional
         Training frames the codebooks are seeded from (a random subset when there are
         more; k-means++ seeding costs frames x words).
@@ -104,9 +121,11 @@ class BagOfAudioWords:
     """
 
     def __init__(self, size: int = CODEBOOK_SIZE, assignments: int = ASSIGNMENTS,
-                 max_frames: int = 50_000, random_state: int = 0):
+                 local_trials: int | None = 1, max_frames: int = 50_000,
+                 random_state: int = 0):
         self.size = size
         self.assignments = assignments
+        self.local_trials = local_trials
         self.max_frames = max_frames
         self.random_state = random_state
 
@@ -125,8 +144,10 @@ class BagOfAudioWords:
                                  f"got {self.assignments}")
         X = np.vstack(list(frames))
         if X.shape[0] < self.size:
-            raise ParameterError(f"{X.shape[0]} training frames for a codebook of "
-                                 f"{self.size} words")
+            raise ParameterError(
+                f"a codebook of {self.size} audio words needs at least "
+                f"{self.size * _HOP_S:.1f} s of training speech ({self.size} frames), got "
+                f"{X.shape[0] * _HOP_S:.2f} s")
         self.mean_ = X.mean(0)
         sd = X.std(0)
         self.scale_ = np.where(sd > 0, sd, 1.0)
@@ -137,6 +158,7 @@ class BagOfAudioWords:
         half = Z.shape[1] // 2
         self.codebooks_ = [
             kmeans_plusplus(np.ascontiguousarray(part), self.size,
+                            n_local_trials=self.local_trials,
                             random_state=self.random_state + i)[0]
             for i, part in enumerate((Z[:, :half], Z[:, half:]))]
         return self
@@ -164,4 +186,51 @@ class BagOfAudioWords:
                 "boaw_codebook0": self.codebooks_[0].copy(),
                 "boaw_codebook1": self.codebooks_[1].copy(),
                 "boaw_assignments": np.array(self.assignments)}
+
+    @classmethod
+    def from_arrays(cls, arrays) -> BagOfAudioWords:
+        """Rebuild fitted codebooks from :meth:`to_arrays` output, checked.
+
+        Parameters
+        ----------
+        arrays : mapping of str to np.ndarray
+
+        Raises
+        ------
+        DataError
+            An array missing, of the wrong shape, or not finite (one line naming it).
+        """
+        try:
+            a = {k: np.asarray(arrays[k]) for k in ("boaw_mean", "boaw_scale",
+                                                     "boaw_codebook0", "boaw_codebook1",
+                                                     "boaw_assignments")}
+        except KeyError as exc:
+            raise DataError(f"stored bag-of-audio-words lacks array {exc.args[0]!r}") from None
+        for key, value in a.items():
+            if value.dtype.kind not in "biuf" or not np.all(np.isfinite(value)):
+                raise DataError(f"stored bag-of-audio-words: array {key!r} is not finite "
+                                "numbers")
+        width = a["boaw_mean"].shape
+        if len(width) != 1 or width[0] < 2 or width[0] % 2 or a["boaw_scale"].shape != width:
+            raise DataError(f"stored bag-of-audio-words: boaw_mean and boaw_scale must have "
+                            f"one even shape (n_descriptors,), got {a['boaw_mean'].shape} "
+                            f"and {a['boaw_scale'].shape}")
+        if not np.all(a["boaw_scale"] > 0):
+            raise DataError("stored bag-of-audio-words: boaw_scale must be positive")
+        half = width[0] // 2
+        size = a["boaw_codebook0"].shape[0] if a["boaw_codebook0"].ndim == 2 else -1
+        for key in ("boaw_codebook0", "boaw_codebook1"):
+            if a[key].shape != (size, half) or size < 1:
+                raise DataError(f"stored bag-of-audio-words: {key} must have shape "
+                                f"(n_words, {half}) as the other codebook, got {a[key].shape}")
+        k = a["boaw_assignments"]
+        if k.shape != () or not 1 <= float(k) <= size or float(k) != int(k):
+            raise DataError(f"stored bag-of-audio-words: boaw_assignments must be an integer "
+                            f"in [1, {size}], got {k.tolist()}")
+        bag = cls(size=size, assignments=int(k))
+        bag.mean_ = a["boaw_mean"].astype(np.float64)
+        bag.scale_ = a["boaw_scale"].astype(np.float64)
+        bag.codebooks_ = [a["boaw_codebook0"].astype(np.float64),
+                          a["boaw_codebook1"].astype(np.float64)]
+        return bag
 

@@ -21,6 +21,7 @@ deprecated); without them :meth:`~EmotionClassifier.fit` fits the SVM once.
 from __future__ import annotations
 
 import json
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import issparse
@@ -36,9 +37,11 @@ from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, MIN_DURATION, utterances
+from ingest.emotion.boaw import BagOfAudioWords
 from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
 from ingest.emotion.features import (
     N_CEPSTRUM,
+    WORDS_BLOCK,
     block_features,
     emotion_features,
     parse_features,
@@ -53,9 +56,11 @@ __all__ = [
     "DEFAULT_FEATURES",
     "EMODB_EMOTIONS",
     "FEATURE_SAMPLE_RATE",
+    "FUNCTIONALS",
     "MIN_DURATION",
     "N_CEPSTRUM",
     "EmotionClassifier",
+    "SpeechFeatures",
     "emotion_features",
     "load_emodb",
     "real_cepstrum",
@@ -66,16 +71,20 @@ __all__ = [
 #: Kernel the paper settles on (§6, Table I); also the best measured with the default
 #: features.
 KERNEL = "linear"
-#: Feature blocks of the default pipeline (measured best, docs/results.md issue #16).
-DEFAULT_FEATURES = "rich+cepstrum"
+#: Feature blocks of the default pipeline (measured best, docs/results.md issue #16:
+#: the functionals and the bag-of-audio-words, "Issue 16, fourth session").
+DEFAULT_FEATURES = "rich+cepstrum+boaw"
+#: The functionals alone (the default until issue #16's fourth session).
+FUNCTIONALS = "rich+cepstrum"
 #: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
 DEFAULT_C = 0.1
 #: Version of the stored arrays; older databases hold none and must be re-ingested.
-#: Format 3 is written only by a classifier with ``block_widths`` (an animegraph that
-#: reads format 2 alone would ignore the weights); the default still writes format 2.
-CLASSIFIER_FORMAT = 3
+#: Format 2: no block weights; 3: ``block_widths``; 4 (what is written): the fitted
+#: block widths (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks
+#: (``boaw_*``, when the ``boaw`` block is used).
+CLASSIFIER_FORMAT = 4
 #: Formats :meth:`EmotionClassifier.from_arrays` reads.
-READABLE_FORMATS = (2, 3)
+READABLE_FORMATS = (2, 3, 4)
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
@@ -131,12 +140,89 @@ def _weight_from_text(text: str):
     return text
 
 
+_NUMERIC = ("n_cepstrum", "C", "calibration_cv", "random_state", "gamma", "scale_min",
+            "scale_scale", "support_vectors", "support", "n_support", "dual_coef",
+            "intercept", "norm_mean", "norm_scale", "norm_means", "norm_scales",
+            "norm_min_utterances", "calib_coef", "calib_intercept")
+
+
+def _stored_widths(arrays, key: str) -> tuple | None:
+    if key not in arrays:
+        return None
+    w = np.asarray(arrays[key])
+    if w.ndim != 1 or w.size == 0 or w.dtype.kind not in "iuf" or not np.all(np.isfinite(w)) \
+            or np.any(w < 1) or np.any(w != np.round(w)):
+        raise DataError(f"stored emotion classifier: {key} must be positive integers, "
+                        f"got {w.tolist()}")
+    return tuple(int(v) for v in w)
+
+
+def _check_stored(a: dict, arrays, probability: bool) -> None:
+    """Shapes and finiteness of a stored classifier's arrays (one line naming the array).
+
+    ``a``: the needed arrays of :meth:`EmotionClassifier.from_arrays`; ``arrays`` all of
+    them (for the calibration's)."""
+    a = {**a, **({k: np.asarray(arrays[k]) for k in ("calib_coef", "calib_intercept")}
+                 if probability else {})}
+    for key in _NUMERIC:
+        if key in a and (a[key].dtype.kind not in "biuf" or not np.all(np.isfinite(a[key]))):
+            raise DataError(f"stored emotion classifier: array {key!r} is not finite numbers")
+    n_classes = a["classes"].size
+    n_sv = a["support_vectors"].shape[0] if a["support_vectors"].ndim == 2 else -1
+    n_features = a["scale_min"].shape[0] if a["scale_min"].ndim == 1 else -1
+    n_dec = n_classes if n_classes > 2 else 1
+    shapes = {"classes": (n_classes,), "scale_min": (n_features,),
+              "scale_scale": (n_features,), "support_vectors": (n_sv, n_features),
+              "support": (n_sv,), "n_support": (n_classes,), "dual_coef": (n_classes - 1, n_sv),
+              "intercept": (n_classes * (n_classes - 1) // 2,),
+              "norm_mean": (n_features,), "norm_scale": (n_features,),
+              "calib_coef": (n_dec, n_dec), "calib_intercept": (n_dec,)}
+    if n_classes < 2 or n_sv < 1 or n_features < 1:
+        raise DataError(f"stored emotion classifier: {n_classes} classes, support vectors "
+                        f"of shape {a['support_vectors'].shape}, scaler of shape "
+                        f"{a['scale_min'].shape}")
+    for key, shape in shapes.items():
+        if key in a and a[key].shape != shape:
+            raise DataError(f"stored emotion classifier: array {key!r} has shape "
+                            f"{a[key].shape}, expected {shape}")
+    if np.any(a["n_support"] < 0) or int(a["n_support"].sum()) != n_sv:
+        raise DataError(f"stored emotion classifier: n_support {a['n_support'].tolist()} "
+                        f"does not count its {n_sv} support vectors")
+    if "norm_means" in a:
+        n_speakers = np.asarray(a["norm_speakers"]).size
+        for key in ("norm_means", "norm_scales"):
+            if a[key].size != n_speakers * n_features:
+                raise DataError(f"stored emotion classifier: array {key!r} holds "
+                                f"{a[key].size} numbers, expected {n_speakers} speakers x "
+                                f"{n_features} features")
+
+
+class SpeechFeatures(NamedTuple):
+    """What :class:`EmotionClassifier` computes from audio before anything is fitted.
+
+    What ingest's workers compute per clip (:func:`ingest.emotion.model.classifier_features`)
+    so that fitting needs no audio; accepted as ``X`` wherever audio is.
+
+    Attributes
+    ----------
+    functionals : np.ndarray, shape (n, n_functionals)
+        The blocks of ``features`` other than ``boaw``, in their order.
+    frames : list of np.ndarray, each (n_frames_k, 2 * N_DESCRIPTORS), or None
+        Each utterance's frame descriptors (:func:`ingest.emotion.boaw.frame_descriptors`)
+        when ``features`` holds ``boaw``; the codebooks are learned from them at fit.
+    """
+
+    functionals: np.ndarray
+    frames: list | None = None
+
+
 class EmotionClassifier(ClassifierMixin, BaseEstimator):
     """Speech emotion classifier: audio -> features -> speaker normalisation -> SVM.
 
     ``X`` is a sequence (list, generator, object array) of ``(audio, sample_rate)`` pairs
-    -- any rate, mono or ``(n_samples, n_channels)``, integer or float PCM -- or an
-    already computed feature matrix (used as given). ``speakers`` (shape (n,)), passed to
+    -- any rate, mono or ``(n_samples, n_channels)``, integer or float PCM --, their
+    :class:`SpeechFeatures` (:meth:`describe`), or an already computed feature matrix
+    (used as given: no audio words are learned or added). ``speakers`` (shape (n,)), passed to
     :meth:`fit` and optionally to the prediction methods, groups utterances by speaker
     for per-speaker normalisation; without it (a lone utterance of an unknown speaker)
     the training population's statistics are used.
@@ -145,7 +231,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
     ----------
     features : str, optional
         Feature blocks joined by ``+`` (``paper``, ``rich``, ``cepstrum``, ``egemaps``,
-        ``compare``; see :mod:`ingest.emotion.features`).
+        ``compare``, ``boaw``; see :mod:`ingest.emotion.features`). With ``boaw`` the
+        bag-of-audio-words (:class:`ingest.emotion.boaw.BagOfAudioWords`, openXBOW's
+        defaults: 2 x 500 words, 10 assignments, k-means++ seeding on at most 50,000
+        training frames drawn at random) is learned at :meth:`fit` from the training
+        utterances' frames only, and its 1,000 columns follow the other blocks'.
     n_cepstrum : int, optional
         Real-cepstrum coefficients of the ``paper`` block (500).
     cepstrum : {"utterance", "frames"}, optional
@@ -163,8 +253,10 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
     block_widths : sequence of int, optional
         Widths of consecutive blocks of feature columns (summing to the feature width):
         after scaling, each block is weighted by :func:`block_weights` so that a wide
-        block does not drown a narrow one. None (default): every column counts the same.
-        Measured with the bag-of-audio-words (``scripts/eval_emotion_boaw.py``).
+        block does not drown a narrow one. None (default): with audio words learned, two
+        blocks (the functionals, the words) when there are functionals; otherwise every
+        column counts the same. Measured with the bag-of-audio-words
+        (``scripts/eval_emotion_boaw.py``).
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -180,6 +272,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
     n_features_in_ : int
         Feature width.
     normalizer_ : SpeakerNormalizer or None
+    bag_ : BagOfAudioWords or None
+        The codebooks, when ``features`` holds ``boaw`` and :meth:`fit` was given audio or
+        :class:`SpeechFeatures`.
+    block_widths_ : tuple of int or None
+        The block widths the pipeline weights by.
     pipeline_ : sklearn.pipeline.Pipeline
         ``MinMaxScaler((-1, 1))`` then ``SVC``.
     calibrator_ : LogisticRegression or None
@@ -263,17 +360,90 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 f"calibration_cv must be an integer >= 2, got {self.calibration_cv!r}"
             )
 
-    def featurize(self, X) -> np.ndarray:
-        """Raw (unnormalised) feature matrix of ``X``.
-
-        A feature matrix (2-D numeric array or nested lists of numbers) is used as given:
-        its width is not checked against ``features``, which only governs features
-        computed from audio.
+    def describe(self, X) -> SpeechFeatures:
+        """What is computed from ``X`` before anything is fitted (for ingest's workers).
 
         Parameters
         ----------
-        X : np.ndarray, shape (n, n_features), or sequence of (audio, sample_rate)
-            Features, or utterances (a list, tuple, generator or object array of pairs).
+        X : np.ndarray, shape (n, n_features), SpeechFeatures, or sequence of (audio, sample_rate)
+            Features (used as given: ``frames`` None), or utterances (a list, tuple,
+            generator or object array of pairs).
+
+        Returns
+        -------
+        SpeechFeatures
+            ``functionals`` (n, n_functionals) float64; ``frames`` when ``features``
+            holds ``boaw`` and ``X`` is audio (or was given with them).
+
+        Raises
+        ------
+        DataError
+            An utterance that is too short, silent or non-finite (naming it).
+        """
+        if isinstance(X, SpeechFeatures):
+            return self._checked_described(X)
+        if issparse(X):
+            raise ParameterError("X must be dense: sparse input is not supported")
+        items = utterances(X)
+        if items is None:
+            if isinstance(X, list | tuple):
+                return SpeechFeatures(check_array(X, dtype=np.float64))  # nested lists
+            arr = np.asarray(X)
+            if arr.ndim != 2:
+                raise ParameterError(
+                    f"X must be a 2-D feature matrix or a sequence of (audio, sample_rate) "
+                    f"pairs, got an array of shape {arr.shape}. Reshape your data"
+                )
+            return SpeechFeatures(check_array(arr, dtype=np.float64))  # sklearn's checks
+        if not items:
+            raise DataError("X holds no utterances")
+        words = WORDS_BLOCK in parse_features(self.features)
+        rows, frames = [], [] if words else None
+        for i, (audio, sr) in enumerate(items):
+            try:
+                part = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
+                                      cepstrum=self.cepstrum)
+            except DataError as exc:
+                raise DataError(f"utterance {i}: {exc}") from exc
+            if words:
+                frames.append(part.pop(WORDS_BLOCK))
+            rows.append(np.concatenate([np.zeros(0), *part.values()]))
+        return SpeechFeatures(np.vstack(rows), frames)
+
+    @staticmethod
+    def _checked_described(X: SpeechFeatures) -> SpeechFeatures:
+        F = check_array(X.functionals, dtype=np.float64, ensure_min_features=0)
+        if X.frames is None:
+            return SpeechFeatures(F)
+        frames = [np.asarray(f, dtype=np.float64) for f in X.frames]
+        if len(frames) != F.shape[0]:
+            raise ParameterError(f"SpeechFeatures holds {F.shape[0]} functionals rows but "
+                                 f"{len(frames)} frame arrays")
+        for i, f in enumerate(frames):
+            if f.ndim != 2 or f.shape[0] == 0 or f.shape[1] != frames[0].shape[1] \
+                    or not np.all(np.isfinite(f)):
+                raise DataError(f"utterance {i}: frame descriptors must be a non-empty "
+                                f"finite (n_frames, {frames[0].shape[-1]}) array, got shape "
+                                f"{f.shape}")
+        return SpeechFeatures(F, frames)
+
+    def _words(self, described: SpeechFeatures) -> np.ndarray:
+        """The full raw feature matrix: functionals, then (fitted) audio words."""
+        if described.frames is None or self.bag_ is None:
+            return described.functionals
+        return np.hstack([described.functionals, self.bag_.transform(described.frames)])
+
+    def featurize(self, X) -> np.ndarray:
+        """Raw (unnormalised) feature matrix of ``X``, as the fitted pipeline takes it.
+
+        A feature matrix (2-D numeric array or nested lists of numbers) is used as given:
+        its width is not checked against ``features``, which only governs features
+        computed from audio. The ``boaw`` block's words need the fitted codebooks: before
+        :meth:`fit` only the other blocks are returned (:meth:`describe` has the frames).
+
+        Parameters
+        ----------
+        X : np.ndarray, shape (n, n_features), SpeechFeatures, or sequence of (audio, sample_rate)
 
         Returns
         -------
@@ -285,36 +455,14 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         DataError
             An utterance that is too short, silent or non-finite (naming it).
         """
-        if issparse(X):
-            raise ParameterError("X must be dense: sparse input is not supported")
-        items = utterances(X)
-        if items is None:
-            if isinstance(X, list | tuple):
-                return check_array(X, dtype=np.float64)  # nested lists of numbers
-            arr = np.asarray(X)
-            if arr.ndim != 2:
-                raise ParameterError(
-                    f"X must be a 2-D feature matrix or a sequence of (audio, sample_rate) "
-                    f"pairs, got an array of shape {arr.shape}. Reshape your data"
-                )
-            return check_array(arr, dtype=np.float64)  # sklearn's checks (ValueError)
-        if not items:
-            raise DataError("X holds no utterances")
-        rows = []
-        for i, (audio, sr) in enumerate(items):
-            try:
-                blocks = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
-                                        cepstrum=self.cepstrum)
-            except DataError as exc:
-                raise DataError(f"utterance {i}: {exc}") from exc
-            rows.append(np.concatenate(list(blocks.values())))
-        return np.vstack(rows)
+        described = self.describe(X)
+        return self._words(described) if hasattr(self, "bag_") else described.functionals
 
-    def _make_pipeline(self) -> Pipeline:
+    def _make_pipeline(self, widths=None) -> Pipeline:
         steps = [("scale", MinMaxScaler(feature_range=(-1, 1)))]
-        if self.block_widths is not None:
+        if widths is not None:
             steps.append(("weigh", FunctionTransformer(
-                _weigh, kw_args={"w": block_weights(self.block_widths)})))
+                _weigh, kw_args={"w": block_weights(widths)})))
         steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
                                  class_weight=self.class_weight,
                                  decision_function_shape="ovr")))
@@ -348,7 +496,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             ``self``.
         """
         self._check_params()
-        F = self.featurize(X)
+        described = self.describe(X)
+        F = described.functionals
         if y is None:
             raise ParameterError(
                 "EmotionClassifier requires y to be passed, but the target y is None"
@@ -365,9 +514,18 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 f"y has {classes.size} class; need at least two emotion classes, "
                 f"got {classes.tolist()}"
             )
-        if self.block_widths is not None and sum(self.block_widths) != F.shape[1]:
-            raise ParameterError(f"block_widths sum to {sum(self.block_widths)}, but X has "
+        self.bag_ = None
+        widths = self.block_widths
+        if described.frames is not None and WORDS_BLOCK in parse_features(self.features):
+            self.bag_ = BagOfAudioWords(random_state=self.random_state).fit(described.frames)
+            F = self._words(described)
+            n_words = F.shape[1] - described.functionals.shape[1]
+            if widths is None and described.functionals.shape[1]:
+                widths = (described.functionals.shape[1], n_words)
+        if widths is not None and sum(widths) != F.shape[1]:
+            raise ParameterError(f"block_widths sum to {sum(widths)}, but X has "
                                  f"{F.shape[1]} features")
+        self.block_widths_ = None if widths is None else tuple(int(w) for w in widths)
         self.normalizer_ = None
         if self.normalize == "speaker":
             self.normalizer_ = SpeakerNormalizer().fit(F, speakers)
@@ -375,7 +533,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.calibrator_ = None
         if self.probability:
             self.calibrator_ = self._fit_calibration(Fn, y, int(counts.min()))
-        self.pipeline_ = self._make_pipeline().fit(Fn, y)
+        self.pipeline_ = self._make_pipeline(self.block_widths_).fit(Fn, y)
         self.classes_ = self.pipeline_.classes_
         self.n_features_in_ = F.shape[1]
         return self
@@ -388,7 +546,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         oof = None
         for train, test in StratifiedKFold(folds, shuffle=True,
                                            random_state=self.random_state).split(F, y):
-            d = self._as_2d(self._make_pipeline().fit(F[train], y[train])
+            d = self._as_2d(self._make_pipeline(self.block_widths_).fit(F[train], y[train])
                             .decision_function(F[test]))
             if oof is None:
                 oof = np.zeros((F.shape[0], d.shape[1]))
@@ -397,7 +555,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
 
     def _checked(self, X, speakers) -> np.ndarray:
         check_is_fitted(self, ["pipeline_"])
-        F = self.featurize(X)
+        F = self._words(self.describe(X))
         if F.shape[1] != self.n_features_in_:
             raise ParameterError(
                 f"X has {F.shape[1]} features, but EmotionClassifier is expecting "
@@ -471,8 +629,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Returns
         -------
         dict of str to np.ndarray
-            ``format`` (2, or :data:`CLASSIFIER_FORMAT` with ``block_widths``, then
-            stored as an int array), the parameters (``features``,
+            ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
             ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
             ``class_weight`` (``"none"``, ``"balanced"`` or a JSON object),
             ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
@@ -481,12 +638,17 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             (n_features,), the SVM's ``classes`` (n_classes,), ``support_vectors``
             (n_sv, n_features), ``support`` (n_sv,), ``n_support`` (n_classes,),
             ``dual_coef`` (n_classes - 1, n_sv), ``intercept`` (n_classes * (n_classes -
-            1) / 2,), and, with probabilities, ``calib_coef`` and ``calib_intercept``.
+            1) / 2,), with probabilities ``calib_coef`` and ``calib_intercept``, with
+            block widths ``block_widths`` (the parameter) and ``block_widths_fitted``
+            (what the pipeline weights by), with audio words the codebooks
+            (:meth:`ingest.emotion.boaw.BagOfAudioWords.to_arrays`: ``boaw_mean``,
+            ``boaw_scale`` (n_descriptors,), ``boaw_codebook0``/``1`` (n_words,
+            n_descriptors / 2), ``boaw_assignments``).
         """
         check_is_fitted(self, ["pipeline_"])
         scaler, svm = self.pipeline_["scale"], self.pipeline_["svm"]
         out = {
-            "format": np.array(2 if self.block_widths is None else CLASSIFIER_FORMAT),
+            "format": np.array(CLASSIFIER_FORMAT),
             "features": np.array(self.features),
             "n_cepstrum": np.array(self.n_cepstrum),
             "cepstrum": np.array(self.cepstrum),
@@ -508,6 +670,10 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         }
         if self.block_widths is not None:
             out["block_widths"] = np.array([int(w) for w in self.block_widths])
+        if self.block_widths_ is not None:
+            out["block_widths_fitted"] = np.array(self.block_widths_)
+        if self.bag_ is not None:
+            out.update(self.bag_.to_arrays())
         if self.normalizer_ is not None:
             out.update(self.normalizer_.to_arrays())
         if self.calibrator_ is not None:
@@ -536,13 +702,34 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Raises
         ------
         DataError
-            Arrays missing, or stored by an older animegraph (no ``format``; its features
-            were not level-normalised): re-ingest.
+            Arrays missing, stored by an older animegraph (no ``format``; its features
+            were not level-normalised), or damaged (a shape that does not fit the others,
+            numbers that are not finite, a model that fails on a row of zeros): one line;
+            re-ingest.
         """
-        if "format" not in arrays or int(np.asarray(arrays["format"])) not in READABLE_FORMATS:
+        fmt = np.asarray(arrays["format"]) if "format" in arrays else None
+        if fmt is None or fmt.shape != () or fmt.dtype.kind not in "iuf" \
+                or float(fmt) not in READABLE_FORMATS:
             raise DataError("the stored emotion classifier is from an older animegraph: "
                             "re-ingest the database (animegraph ingest SRC --db DB) to "
                             "replace it")
+        try:
+            model = cls._restore(arrays, int(fmt))
+            model.decision_function(np.zeros((1, model.n_features_in_)))  # a dry run
+            if model.calibrator_ is not None:
+                model.predict_proba(np.zeros((1, model.n_features_in_)))
+        except DataError as exc:
+            raise DataError(f"the stored emotion classifier is damaged ({exc}): re-ingest "
+                            "the database (animegraph ingest SRC --db DB)") from None
+        except (ValueError, TypeError, IndexError, AttributeError) as exc:
+            raise DataError(f"the stored emotion classifier is damaged ({type(exc).__name__}: "
+                            f"{str(exc).splitlines()[0] if str(exc) else exc!r}): re-ingest "
+                            "the database (animegraph ingest SRC --db DB)") from None
+        return model
+
+    @classmethod
+    def _restore(cls, arrays, fmt: int) -> EmotionClassifier:
+        """:meth:`from_arrays` after the format check (arrays checked, not tried)."""
         needed = ["features", "n_cepstrum", "cepstrum", "normalize", "kernel", "C",
                   "calibration_cv", "random_state", "gamma", "scale_min", "scale_scale",
                   "classes", "support_vectors", "support", "n_support", "dual_coef",
@@ -555,13 +742,21 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         except KeyError as exc:
             raise DataError(f"stored emotion classifier lacks array {exc.args[0]!r}") from None
         probability = "calib_coef" in arrays and "calib_intercept" in arrays
+        _check_stored(a, arrays, probability)
         weight = _weight_from_text(str(np.asarray(arrays["class_weight"]))
                                    if "class_weight" in arrays else "none")
-        widths = None
-        if int(np.asarray(arrays["format"])) >= 3:
-            if "block_widths" not in arrays:
-                raise DataError("stored emotion classifier lacks array 'block_widths'")
-            widths = tuple(int(w) for w in np.asarray(arrays["block_widths"]).ravel())
+        widths = fitted = None
+        if fmt == 3 and "block_widths" not in arrays:
+            raise DataError("stored emotion classifier lacks array 'block_widths'")
+        if "block_widths" in arrays:
+            widths = _stored_widths(arrays, "block_widths")
+        fitted = _stored_widths(arrays, "block_widths_fitted") if fmt >= 4 else widths
+        if fitted is not None and sum(fitted) != a["scale_min"].shape[0]:
+            raise DataError(f"stored emotion classifier: block widths {list(fitted)} do not "
+                            f"sum to its {a['scale_min'].shape[0]} features")
+        bag = None
+        if fmt >= 4 and "boaw_mean" in arrays:
+            bag = BagOfAudioWords.from_arrays(arrays)
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
@@ -571,7 +766,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         model._check_params()
         n_features = a["scale_min"].shape[0]
         classes = a["classes"]
-        pipe = model._make_pipeline()
+        model.bag_ = bag
+        model.block_widths_ = fitted
+        pipe = model._make_pipeline(fitted)
         scaler, svm = pipe["scale"], pipe["svm"]
         scaler.min_ = a["scale_min"].astype(np.float64)
         scaler.scale_ = a["scale_scale"].astype(np.float64)

@@ -14,6 +14,9 @@ cepstrum the first :data:`CEPSTRUM_BLOCK` coefficients of the frame-averaged   5
          cepstrum (the paper's cepstrum, made robust to utterance length)
 egemaps  openSMILE eGeMAPS v02 functionals (Eyben et al. 2016)                 88
 compare  openSMILE ComParE 2016 functionals (Schuller et al. 2016)             6373
+boaw     bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`)  1000
+         (2 x 500 words learned at fit by the classifier, its columns after all
+         the others; :func:`block_features` gives the frame descriptors)
 ======== ===================================================================== =========
 
 ``egemaps`` and ``compare`` need the optional ``opensmile`` package
@@ -42,6 +45,7 @@ __all__ = [
     "CEPSTRUM_FRAME",
     "CEPSTRUM_HOP",
     "N_CEPSTRUM",
+    "WORDS_BLOCK",
     "block_features",
     "emotion_features",
     "frame_analysis",
@@ -59,7 +63,9 @@ CEPSTRUM_HOP = 512
 #: in docs/results.md, "Emotion classification").
 CEPSTRUM_BLOCK = 50
 #: Feature blocks a specification may join with "+".
-BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare")
+BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare", "boaw")
+#: The block learned at fit (:class:`ingest.emotion.classifier.EmotionClassifier`).
+WORDS_BLOCK = "boaw"
 #: Width of each block (``paper``: 3 + n_cepstrum).
 RICH_WIDTH, EGEMAPS_WIDTH, COMPARE_WIDTH = 121, 88, 6373
 
@@ -202,12 +208,12 @@ def frame_analysis(x: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _rich(x: np.ndarray) -> np.ndarray:
+def _rich(x: np.ndarray, fr: dict | None = None) -> np.ndarray:
     import librosa
 
     sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
     xf = x.astype(np.float32)
-    fr = frame_analysis(x)
+    fr = frame_analysis(x) if fr is None else fr
     spec, mfcc, rms, f0 = fr["spec"], fr["mfcc"], fr["rms"], fr["f0"]
     d1 = librosa.feature.delta(mfcc, width=5)
     d2 = librosa.feature.delta(mfcc, order=2, width=5)
@@ -320,18 +326,26 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
     Returns
     -------
     dict of str to np.ndarray, each shape (block_width,)
-        In the order of ``spec``.
+        In the order of ``spec``; ``boaw``'s entry is not a vector but the frame
+        descriptors, shape (n_frames, 44) (:func:`ingest.emotion.boaw.frame_descriptors`:
+        the words are learned from them at fit), sharing the ``rich`` block's frame
+        analysis.
     """
     blocks = parse_features(spec)
     if "paper" in blocks:
         _check_cepstrum(n_cepstrum, cepstrum)
     x = prepare_audio(audio, sample_rate)
+    fr = frame_analysis(x) if "rich" in blocks or WORDS_BLOCK in blocks else None
     out = {}
     for block in blocks:
         if block == "paper":
             out[block] = _paper(x, n_cepstrum, cepstrum)
         elif block == "rich":
-            out[block] = _rich(x)
+            out[block] = _rich(x, fr)
+        elif block == WORDS_BLOCK:
+            from ingest.emotion.boaw import descriptors
+
+            out[block] = descriptors(fr)
         elif block == "cepstrum":
             out[block] = _frame_cepstrum(x, CEPSTRUM_BLOCK)
         else:

@@ -42,7 +42,7 @@ from ingest.emotion.rbf import KERNEL, N_CENTRES, RbfMapping
 from ingest.invariants import check_emotion
 
 if TYPE_CHECKING:
-    from ingest.emotion.classifier import EmotionClassifier
+    from ingest.emotion.classifier import EmotionClassifier, SpeechFeatures
     from ingest.emotion.mapping import EmotionMapping
 
 logger = logging.getLogger(__name__)
@@ -449,8 +449,9 @@ def database_classifier() -> EmotionClassifier:
     return EmotionClassifier(probability=True)
 
 
-def classifier_features(audio: np.ndarray, sample_rate: float) -> np.ndarray | str:
-    """One clip's raw features for :func:`database_classifier`, or why there are none.
+def classifier_features(audio: np.ndarray, sample_rate: float) -> SpeechFeatures | str:
+    """What :func:`database_classifier` computes from one clip before fitting, or why there
+    is nothing.
 
     Computed per clip (in ingest's workers, :func:`ingest.prepare.prepare_clip`) so that
     :func:`fit_emotion_model` does not compute them one clip after another.
@@ -464,12 +465,13 @@ def classifier_features(audio: np.ndarray, sample_rate: float) -> np.ndarray | s
 
     Returns
     -------
-    np.ndarray, shape (n_features,), or str
-        The features, or the one-line reason the audio cannot be classified (too short,
-        silent).
+    SpeechFeatures or str
+        The clip's functionals (1, n_functionals) and frame descriptors (one array of
+        (n_frames, 44); the codebooks are learned from them at fit), or the one-line
+        reason the audio cannot be classified (too short, silent).
     """
     try:
-        return database_classifier().featurize([(audio, sample_rate)])[0]
+        return database_classifier().describe([(audio, sample_rate)])
     except AnimeGraphError as exc:  # featurize names the utterance ("utterance 0: ..."):
         return str(exc.__cause__ or exc)  # one clip here, its reason is enough
 
@@ -479,11 +481,16 @@ def _fit_classifier(audio, emotions, speakers, notes,
     """The default :class:`EmotionClassifier` (with probabilities) on the labelled clips.
 
     ``features`` (one entry per clip, optional) holds what :func:`classifier_features`
-    returned for a clip, or None where it is computed here. Clips whose audio is unusable
+    returned for a clip, or None where it is computed here. The frame descriptors are
+    held for every clip until the fit (44 float64 per 10 ms: about 130 MB per hour of
+    speech); the codebooks are seeded from at most 50,000 of them drawn at random
+    (:class:`ingest.emotion.boaw.BagOfAudioWords`). Clips whose audio is unusable
     (too short, silent) are left out with a note; emotions with fewer than
     :data:`MIN_CLASSIFIER_CLIPS` usable clips too. Never raises for data: what could not be
     done is a note.
     """
+    from ingest.emotion.classifier import SpeechFeatures
+
     model = database_classifier()
     rows, labels, who, dropped = [], [], [], []
     for i, (a, sr) in enumerate(audio):
@@ -495,7 +502,7 @@ def _fit_classifier(audio, emotions, speakers, notes,
         if isinstance(row, str):
             dropped.append(f"clip {i} ({row})")
             continue
-        rows.append(np.asarray(row, dtype=np.float64))
+        rows.append(row)
         labels.append(emotions[i])
         who.append(speakers[i] if speakers is not None and speakers[i] else "unknown")
     if dropped:
@@ -514,9 +521,10 @@ def _fit_classifier(audio, emotions, speakers, notes,
         notes.append("emotion classifier: left out emotions with fewer than "
                      f"{MIN_CLASSIFIER_CLIPS} clips: "
                      + ", ".join(sorted(set(names) - usable)))
+    frames = None if rows[0].frames is None else [rows[k].frames[0] for k in keep]
+    X = SpeechFeatures(np.vstack([rows[k].functionals for k in keep]), frames)
     try:
-        return model.fit(np.vstack([rows[k] for k in keep]), labels[keep].astype(str),
-                         speakers=np.array([who[k] for k in keep]))
+        return model.fit(X, labels[keep].astype(str), speakers=np.array([who[k] for k in keep]))
     except AnimeGraphError as exc:
         notes.append(f"the emotion classifier could not be trained: {exc}")
         return None
