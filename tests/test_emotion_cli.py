@@ -301,6 +301,7 @@ def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_pat
 
     import pyarrow.parquet as pq
 
+    from crafted import refresh_checksum
     from db.store import arrays_from_table, arrays_to_table
 
     db = tmp_path / "db"
@@ -314,6 +315,7 @@ def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_pat
     def classify(corrupt):
         pq.write_table(arrays_to_table(corrupt).replace_schema_metadata(
             table.schema.metadata), path)
+        refresh_checksum(db)  # a deliberate edit: the classifier's own checks must tell
         code = main(["classify", wav, "--db", str(db)])
         err = capsys.readouterr().err.strip().splitlines()
         assert not any("Traceback" in e for e in err), err
