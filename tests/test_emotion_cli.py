@@ -300,8 +300,8 @@ def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_pat
     import shutil
 
     import pyarrow.parquet as pq
-
     from crafted import refresh_checksum
+
     from db.store import arrays_from_table, arrays_to_table
 
     db = tmp_path / "db"
