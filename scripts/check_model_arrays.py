@@ -166,7 +166,7 @@ def run() -> None:
             import animegraph.synthesis.model as model
             import ingest.emotion.model as emotion
 
-            model.check_decomposition = emotion.check_emotion = lambda *a, **k: None
+            model.check_stored_decomposition = emotion.check_emotion = lambda *a, **k: None
         Model.load(args.db[0])
         return
     if args.fuzz:

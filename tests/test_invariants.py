@@ -10,10 +10,10 @@ import pytest
 from crafted import ARRAY_MUTATIONS, crafted_database
 
 from animegraph.apps.cli import main
-from animegraph.synthesis.model import Model, channel_ranges
+from animegraph.synthesis.model import Model
 from db.store import Database
 from ingest.decompose import MotionDecomposer
-from ingest.invariants import check_decomposition, check_emotion
+from ingest.invariants import channel_ranges, check_decomposition, check_emotion
 from ingest.motion import head_points
 
 
@@ -127,3 +127,14 @@ def test_no_false_alarm_on_fresh_decompositions(rng, variance, shape):
     names = [f"c{k}" for k in range(c)]
     ranges = {f"c{k}": (X[:, k].min(), X[:, k].max()) for k in range(c)}
     check_decomposition(arrays, names, 30.0, n, 0, ranges)
+
+
+@pytest.mark.parametrize("mutation", ["zeroed:pca_components", "negated:ica_mixing",
+                                      "huge:channel_mean"])
+def test_the_emotion_evaluation_reads_the_same_checked_model(tiny_db, tmp_path, mutation):
+    from animegraph.emotion.evaluate import EmotionData
+    from db.errors import DataError
+
+    path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
+    with pytest.raises(DataError, match="is damaged.*" + mutation.partition(":")[2]):
+        EmotionData.load(Database.open(path))

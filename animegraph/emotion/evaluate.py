@@ -36,6 +36,7 @@ from ingest.emotion.align import sample_at
 from ingest.emotion.components import Aligner, parallel_groups, take_pairs
 from ingest.emotion.mapping import KERNEL, N_CENTRES
 from ingest.emotion.model import MIN_PARALLEL, EmotionModel, ParallelData, fit_mapping
+from ingest.invariants import check_stored_decomposition
 
 #: The paper's figure for its neutral -> happy cross-validation case (§5.2).
 PAPER_RMS = 0.0117
@@ -61,7 +62,9 @@ class EmotionData:
         from ingest.tables import prepared_from_database
 
         clips = prepared_from_database(db)
-        dec = MotionDecomposer.from_arrays(db.arrays())
+        arrays = db.arrays()
+        check_stored_decomposition(db, arrays, db.table("channels").to_pylist())
+        dec = MotionDecomposer.from_arrays(arrays)
         return cls(
             clip_ids=tuple(c.clip_id for c in clips),
             motions=tuple(c.motion.astype(np.float64) for c in clips),

@@ -9,7 +9,7 @@ import numpy as np
 from animegraph.search.graph import AnimeGraph
 from db.store import Database
 from ingest.emotion.model import EmotionModel, NoEmotionModel
-from ingest.invariants import check_decomposition
+from ingest.invariants import check_stored_decomposition
 from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
 from ingest.unmixing import Unmixing
 
@@ -54,15 +54,7 @@ class Model:
             _check_shapes(graph, decomposer, cutoffs, names, arrays.get("head_reference"))
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             raise db.damaged("model_arrays", f"{type(exc).__name__}: {exc}") from None
-        n_frames = db.manifest.get("n_frames")
-        if n_frames is None:
-            raise db.damaged("manifest.json", "n_frames is missing")
-        try:
-            check_decomposition(arrays, names, float(db.manifest["fps"]), n_frames,
-                                head_points(groups), channel_ranges(channels))
-        except (KeyError, TypeError, ValueError) as exc:
-            what = f"no array {exc}" if isinstance(exc, KeyError) else str(exc)
-            raise db.damaged("model_arrays", what) from None
+        check_stored_decomposition(db, arrays, channels)
         try:
             emotion_model = EmotionModel.from_database(db)
         except NoEmotionModel:
@@ -114,15 +106,6 @@ def _check_shapes(graph: AnimeGraph, decomposer: Unmixing, cutoffs: np.ndarray,
         raise ValueError("ic_cutoff_hz does not give one positive cutoff per component")
     if head_reference is not None and (head_reference.ndim != 2 or head_reference.shape[1] != 3):
         raise ValueError(f"head_reference has shape {head_reference.shape}")
-
-
-def channel_ranges(channels: list[dict]) -> dict[str, tuple[float, float]] | None:
-    """Each channel's (min, max) over the database's frames, from the channels table; None
-    for a database written before it held them (its frames' Parquet statistics would
-    tell, but reading them costs 0.1-0.4 s for a database of per-clip row groups)."""
-    if channels and "min" in channels[0] and "max" in channels[0]:
-        return {str(c["name"]): (float(c["min"]), float(c["max"])) for c in channels}
-    return None
 
 
 def to_world(motion: np.ndarray, groups, head_reference: np.ndarray | None) -> np.ndarray:
