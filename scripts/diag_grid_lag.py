@@ -45,11 +45,7 @@ def main() -> int:
     args = parser.parse_args()
     eval_lipsync.SYSTEMS[:] = ["anime-graph"]
     db = Database.open(args.grid_db)
-    clips = sorted(prepared_from_database(db), key=lambda c: c.clip_id)
-    hold = eval_lipsync.GRID_HOLDOUT
-    train = [c for k, c in enumerate(clips) if k % hold != hold - 1]
-    test = [c for k, c in enumerate(clips) if k % hold == hold - 1]
-    del clips
+    train, test = evaluate.grid_split(prepared_from_database(db))
     fold = eval_lipsync.fit_fold(Path(tempfile.mkdtemp()), "grid", train,
                                  db.arrays().get("head_reference"))
     del train

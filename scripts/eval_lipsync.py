@@ -249,26 +249,20 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
     return out
 
 
-#: GRID: every GRID_HOLDOUT-th clip in clip-id order is held out (index % 5 == 4).
-GRID_HOLDOUT = 5
-
-
 def grid(tmp: Path, workers: int, db: Path | None,
          engines: list[str] | None = None) -> dict[str, list[dict]]:
     if db is not None:
         from db.store import Database
 
-        clips = sorted(prepared_from_database(Database.open(db)), key=lambda c: c.clip_id)
+        clips = prepared_from_database(Database.open(db))
         reference = Database.open(db).arrays().get("head_reference")
     else:
         clips, reference = prepare_sources(discover([SHARED / "grid" / "s1"]),
                                            workers=workers)
-        clips = sorted(clips, key=lambda c: c.clip_id)
-    train = [c for k, c in enumerate(clips) if k % GRID_HOLDOUT != GRID_HOLDOUT - 1]
-    test = [c for k, c in enumerate(clips) if k % GRID_HOLDOUT == GRID_HOLDOUT - 1]
+    train, test = evaluate.grid_split(clips)
     print(f"# grid: database {len(train)} clips, held out {len(test)} (every "
-          f"{GRID_HOLDOUT}th in clip-id order); phones: {sorted({c.segmentation for c in clips})}",
-          flush=True)
+          f"{evaluate.GRID_HOLDOUT}th in clip-id order); phones: "
+          f"{sorted({c.segmentation for c in clips})}", flush=True)
     del clips
     fold = fit_fold(tmp, "grid", train, reference)
     del train

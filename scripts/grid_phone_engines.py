@@ -35,14 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from animegraph.apps.evaluate import GRID_HOLDOUT, grid_split
 from db.store import Database
 from ingest.speech.engines import ENGINES
 from ingest.speech.phones import SILENCE, VISEME_OF
 from ingest.speech.segment import phone_error_rate, segment
 from ingest.tables import prepared_from_database
 
-#: As scripts/eval_lipsync.py: every fifth clip in clip-id order is held out.
-GRID_HOLDOUT = 5
 STEP_S = 0.01
 
 
@@ -93,9 +92,7 @@ def main() -> int:
     parser.add_argument("--scores", type=Path, help="an eval_lipsync.py --json run (grid)")
     parser.add_argument("--system", default="kbest20")
     args = parser.parse_args()
-    clips = sorted(prepared_from_database(Database.open(args.grid_db)), key=lambda c: c.clip_id)
-    test = [c for k, c in enumerate(clips) if k % GRID_HOLDOUT == GRID_HOLDOUT - 1]
-    del clips
+    test = grid_split(prepared_from_database(Database.open(args.grid_db)))[1]
     test = test[:args.clips]
     rows: dict[str, list[dict]] = {e: [] for e in args.engines}
     for clip in test:

@@ -24,3 +24,12 @@ def test_kbest_ctx_row_ranks_by_context_and_scores(tiny_db):
     assert set(row["methods"]) == {"kbest20", "kbest20-ctx"}
     for scores in row["methods"].values():
         assert np.isfinite(scores["mouth_r"]) and scores["synth_s"] > 0
+
+
+def test_grid_split_holds_out_every_fifth_clip_in_clip_id_order():
+    from types import SimpleNamespace
+
+    clips = [SimpleNamespace(clip_id=f"c{k:02d}") for k in (7, 3, 9, 0, 1, 2, 8, 4, 5, 6, 10)]
+    train, test = evaluate.grid_split(clips)
+    assert [c.clip_id for c in test] == ["c04", "c09"]
+    assert [c.clip_id for c in train] == [f"c{k:02d}" for k in (0, 1, 2, 3, 5, 6, 7, 8, 10)]

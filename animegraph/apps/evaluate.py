@@ -64,6 +64,19 @@ GUIDE_SUFFIXES = ("-guided-blend", "-guided", "-blend")
 OPTIONAL_METHODS = tuple(f"exact-{mode}" for mode in HELPER_MODES)
 
 
+#: GRID's within-speaker split (docs/results.md): in clip-id order every GRID_HOLDOUT-th clip
+#: is held out (index % 5 == 4), the others are the database.
+GRID_HOLDOUT = 5
+
+
+def grid_split(clips: Sequence) -> tuple[list, list]:
+    """``(database, held out)`` of GRID clips by :data:`GRID_HOLDOUT`, in clip-id order."""
+    ordered = sorted(clips, key=lambda c: c.clip_id)
+    held = [k % GRID_HOLDOUT == GRID_HOLDOUT - 1 for k in range(len(ordered))]
+    return ([c for c, h in zip(ordered, held, strict=True) if not h],
+            [c for c, h in zip(ordered, held, strict=True) if h])
+
+
 def split_method(method: str) -> tuple[str, str, str]:
     """``"kbest20-pg-likely"`` -> ``("kbest20", "posteriorgram", "likely")``; no suffix: the
     paper's ``"plp"`` cost over the ``"label"`` candidates."""
