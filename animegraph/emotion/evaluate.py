@@ -72,7 +72,7 @@ class EmotionData:
             emotions=tuple(c.emotion for c in clips),
             sentence_ids=tuple(c.sentence_id for c in clips),
             names=tuple(clips[0].schema.names), fps=float(db.manifest["fps"]),
-            decomposer=dec, model=EmotionModel.from_database(db),
+            decomposer=dec, model=EmotionModel.from_database(db, arrays),
         )
 
     def parallel(self) -> ParallelData:

@@ -56,7 +56,7 @@ class Model:
             raise db.damaged("model_arrays", f"{type(exc).__name__}: {exc}") from None
         check_stored_decomposition(db, arrays, channels)
         try:
-            emotion_model = EmotionModel.from_database(db)
+            emotion_model = EmotionModel.from_database(db, arrays)
         except NoEmotionModel:
             emotion_model = None
         except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:

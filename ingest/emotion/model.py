@@ -282,8 +282,9 @@ class EmotionModel:
         return arrays, manifest, self.split.columns()
 
     @classmethod
-    def from_database(cls, db) -> EmotionModel:
-        """Read the emotion model of ``db`` (a :class:`db.store.Database`).
+    def from_database(cls, db, arrays: dict | None = None) -> EmotionModel:
+        """Read the emotion model of ``db`` (a :class:`db.store.Database`); ``arrays``:
+        its model arrays if the caller has read them already (``db.arrays()``).
 
         Raises
         ------
@@ -298,7 +299,7 @@ class EmotionModel:
             raise NoEmotionModel(f"database {db.root} has no emotion model (it was built by "
                                  f"an older animegraph): run 'animegraph ingest SRC --db "
                                  f"{db.root}' once to learn it")
-        arrays = db.arrays()
+        arrays = db.arrays() if arrays is None else arrays
         split = ComponentSplit.from_columns(rows)
         frames: dict[str, int] = {}
         try:
