@@ -45,6 +45,7 @@ from ingest.formats.phones_csv import Segment, read_phones_csv
 from ingest.formats.wav import read_wav
 from ingest.speech import ctc
 from ingest.speech import segment as ps
+from ingest.speech.engines import aligner, recognizer
 from ingest.speech.g2p import pronounce
 from ingest.speech.phones import SILENCE
 from ingest.speech.segment import boundary_errors, edit_alignment, phone_error_rate
@@ -86,6 +87,7 @@ def _engines(names: list[str]) -> dict[str, dict[str, Callable]]:
     table = {
         "hama": {"align": ctc.align, "recognize": ctc.recognize},
         "pocketsphinx": {"align": ps.align, "recognize": ps.recognize},
+        "auto": {"align": aligner("auto"), "recognize": recognizer("auto")},
     }
     return {name: table[name] for name in names}
 
@@ -319,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", nargs="+", choices=("synthetic", "emodb", "grid"),
                         default=["synthetic", "emodb", "grid"], help="data sets")
-    parser.add_argument("--engines", nargs="+", choices=("hama", "pocketsphinx"),
+    parser.add_argument("--engines", nargs="+", choices=("auto", "hama", "pocketsphinx"),
                         default=["hama", "pocketsphinx"])
     parser.add_argument("--corpus", type=Path, help="an existing synthetic corpus folder")
     parser.add_argument("--shared", type=Path, default=SHARED,

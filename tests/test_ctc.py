@@ -14,7 +14,13 @@ from ingest.speech import ctc
 from ingest.speech.engines import ENGINES, aligner, check_engine, recognizer
 from ingest.speech.espeak import Voice, speak
 from ingest.speech.phones import PHONE_SET, PHONES, SILENCE
-from ingest.speech.segment import boundary_errors, phone_error_rate, segment
+from ingest.speech.segment import (
+    BOUNDARY_OFFSET,
+    align_phones,
+    boundary_errors,
+    phone_error_rate,
+    segment,
+)
 
 pytestmark = pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
 
@@ -135,7 +141,7 @@ def test_engine_choice(spoken, caplog):
         check_engine("festival")
     with pytest.raises(ParameterError, match="phone engine"):
         segment(u.audio, u.sample_rate, engine="festival")
-    assert recognizer("auto") is ctc.recognize
+    assert recognizer("hama") is ctc.recognize
     assert aligner("hama") is ctc.align
     assert aligner("auto") is not ctc.align  # PocketSphinx aligns by default
     hama, method = segment(u.audio, u.sample_rate, engine="hama")
@@ -164,3 +170,30 @@ def test_trailing_silence_starts_at_the_first_pause_after_the_last_phone():
     samples = (rng.standard_normal(50 * hop) * np.repeat(level, hop)).astype(np.float64)
     segs = ctc._timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
     assert segs[-1].phone == SILENCE and segs[-1].start == pytest.approx(33 / ctc.FRAME_RATE)
+
+
+def test_auto_recognition_names_phones_with_hama_and_places_them_with_pocketsphinx(spoken):
+    auto = recognizer("auto")
+    for u in spoken:
+        duration = len(u.audio) / u.sample_rate
+        named = ctc.recognize(u.audio, u.sample_rate)
+        placed = auto(u.audio, u.sample_rate, refine=False)
+        _check_tiling(placed, duration)
+        assert [s.phone for s in placed if s.phone != SILENCE] == \
+            [s.phone for s in named if s.phone != SILENCE]
+        # PocketSphinx's timing: every interior boundary on its 10 ms frame grid
+        frames = (np.array([s.start for s in placed[1:]]) - BOUNDARY_OFFSET) * 100
+        np.testing.assert_allclose(frames, np.round(frames), atol=1e-3)
+        onset = boundary_errors(_reference(u), auto(u.audio, u.sample_rate))
+        assert np.median(np.abs(onset)) < 0.015
+
+
+def test_align_phones_without_a_path_or_phones():
+    u = speak(SENTENCES[0], Voice())
+    assert align_phones(u.audio, u.sample_rate, [SILENCE]) is None
+    assert align_phones(np.zeros(800), 16000, ["AA"]) is None  # too short to hold a phone
+    with pytest.raises(ParameterError, match="phone set"):
+        align_phones(u.audio, u.sample_rate, ["AA", "Q9"])
+    # far more phones than 0.3 s can hold: no path, and "auto" keeps hama's own timing
+    short = u.audio[: int(0.3 * u.sample_rate)]
+    assert align_phones(short, u.sample_rate, ["AA", "B"] * 60) is None

@@ -102,6 +102,7 @@ __all__ = [
     "MIN_DURATION",
     "SAMPLE_RATE",
     "align",
+    "align_phones",
     "boundary_errors",
     "edit_alignment",
     "phone_error_rate",
@@ -560,6 +561,75 @@ def _align_phones(decoder, words: str, pcm: bytes) -> list[tuple[str, int]] | No
         return None
     entries = [(phone.name, phone.start) for phone in alignment.phones()]
     return entries or None
+
+
+def _phone_word(phone: str) -> str:
+    """The dictionary word of a one-phone pseudo-word (no transcript word has ``_``)."""
+    return f"_{phone.lower()}_"
+
+
+def align_phones(
+    audio: np.ndarray, sample_rate: int, phones: Sequence[str], *, refine: bool = True
+) -> list[Segment] | None:
+    """Place a known phone sequence in speech: PocketSphinx forced alignment of phones.
+
+    Each phone is aligned as a word of one phone, so that PocketSphinx's silence model may
+    put a pause between any two of them, and before and after them. This is how
+    recognition by another engine is timed (:func:`ingest.speech.engines.recognizer`,
+    ``"auto"``): that engine names the phones, PocketSphinx's 10 ms frames and its
+    silence model place them.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray, shape (n_samples,)
+        Mono audio, float (in [-1, 1]) or integer PCM, any level.
+    sample_rate : int
+        Its sampling rate in Hz.
+    phones : sequence of str
+        ARPAbet phones of :data:`~ingest.speech.phones.PHONE_SET` in the order spoken;
+        ``SIL`` entries are dropped (PocketSphinx finds the pauses).
+    refine : bool, optional
+        Move boundaries to the nearest spectral change (see the module docstring).
+
+    Returns
+    -------
+    list of Segment or None
+        The phones and ``SIL`` tiling ``[0, len(audio) / sample_rate]``; None when there
+        is no phone to place, the audio is too short, or PocketSphinx finds no path.
+
+    Raises
+    ------
+    ParameterError
+        Bad audio or sample rate, or a phone outside the phone set.
+    DataError
+        If PocketSphinx or its models are unusable.
+    """
+    samples, sample_rate = _check_audio(audio, sample_rate)
+    spoken = [p for p in phones if p != SILENCE]
+    unknown = sorted({p for p in spoken if p not in PHONE_SET})
+    if unknown:
+        raise ParameterError(f"phones: not ARPAbet phones of the phone set: {unknown[:4]}")
+    duration = len(samples) / sample_rate
+    if not spoken or duration < MIN_DURATION:
+        return None
+    prepared = _prepare(samples, sample_rate)
+    engine = _engine("align")
+    with engine.lock:
+        new = sorted({_phone_word(p) for p in spoken} - engine.added)
+        for k, word in enumerate(new):
+            try:
+                engine.decoder.add_word(word, word.strip("_").upper(), k == len(new) - 1)
+            except RuntimeError as exc:
+                raise DataError(f"cannot add phone {word!r} to the dictionary: {exc}") from exc
+            engine.added.add(word)
+        entries = _align_phones(engine.decoder, " ".join(_phone_word(p) for p in spoken),
+                                prepared.pcm)
+    if entries is None:
+        return None
+    onsets = [(_as_phone(name), _frame_time(frame)) for name, frame in entries]
+    if refine:
+        onsets = _refine(onsets, prepared.samples, REFINE_WINDOW)
+    return _tile(onsets, duration)
 
 
 # ---------------------------------------------------------------------------------------------
