@@ -33,3 +33,27 @@ def test_grid_split_holds_out_every_fifth_clip_in_clip_id_order():
     train, test = evaluate.grid_split(clips)
     assert [c.clip_id for c in test] == ["c04", "c09"]
     assert [c.clip_id for c in train] == [f"c{k:02d}" for k in (0, 1, 2, 3, 5, 6, 7, 8, 10)]
+
+
+def test_frames_filled_across_a_gap_are_not_scored(tiny_db):
+    """A frame without observed truth (e.g. a video frame with no face, filled by holding
+    the first tracked frame) is left out of every score."""
+    from dataclasses import replace
+
+    model = Model.load(tiny_db[0])
+    clip = prepared_from_database(Database.open(tiny_db[0]))[0]
+    missing = clip.missing.copy()  # the synthetic capture's own dropouts, and 15 frames more
+    missing[:15] = True
+    wild = clip.motion.copy()
+    wild[:15] = wild[15]  # the filler's guess: the first observed frame held
+    methods = ("kbest20",)
+    clean = evaluate.score_heldout(model, replace(clip, missing=missing), methods=methods)
+    held = evaluate.score_heldout(model, replace(clip, motion=wild, missing=missing),
+                                  methods=methods)
+    scored_all = evaluate.score_heldout(model, replace(clip, motion=wild), methods=methods)
+    assert held["frames_scored"] == int((~missing.any(axis=1)).sum())
+    assert scored_all["frames_scored"] == int((~clip.missing.any(axis=1)).sum())
+    assert held["frames_scored"] < scored_all["frames_scored"] <= held["frames"]
+    for key in ("mouth_r", "rmse_all", "rmse_lips"):
+        assert held["methods"]["kbest20"][key] == clean["methods"]["kbest20"][key]
+    assert held["methods"]["kbest20"]["rmse_all"] != scored_all["methods"]["kbest20"]["rmse_all"]

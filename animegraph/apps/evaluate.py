@@ -175,6 +175,9 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
         Fitted on the same training clips: the guide of the methods with a guide suffix
         (:data:`GUIDE_SUFFIXES`, :mod:`animegraph.synthesis.guide`).
 
+    Only the frames whose truth was observed are scored (``frames_scored`` of ``frames``):
+    frames filled across a gap in the capture (``clip.missing``) are left out.
+
     Every row has ``synth_s`` (seconds to synthesize the clip: the prosody query, search
     and rendering for the Anime Graph, ``predict`` for a baseline; phone labels given)
     and ``rtf`` (``synth_s`` over the clip's duration).
@@ -205,11 +208,17 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
     lips = lip_channels(model.names, model.groups)
     rows = {}
 
+    # Only frames whose truth was observed are scored: a frame filled across a gap (a
+    # video frame without a face, a dropped marker) is the filler's guess, not the actor.
+    observed = ~np.asarray(clip.missing, dtype=bool).any(axis=1)
+
     def record(name, pred, extra):
-        row = {**motion_scores(pred, truth, model.names, model.groups, model.kind, active),
-               **extra}
+        n = min(len(pred), len(truth))
+        keep = observed[:n]
+        p, t = pred[:n][keep], truth[:n][keep]
+        row = {**motion_scores(p, t, model.names, model.groups, model.kind, active), **extra}
         if norm is not None:
-            row |= paper_scores(pred, truth, active, lips, norm)
+            row |= paper_scores(p, t, active, lips, norm)
         row["rtf"] = row["synth_s"] / clip.duration
         rows[name] = row
         if predictions is not None:
@@ -240,4 +249,5 @@ def score_heldout(model, clip, *, methods: Sequence[str] = DEFAULT_METHODS,
                            emotion=clip.emotion if clip.emotion in est.emotions_ else None)
         record(name, pred, {"synth_s": time.perf_counter() - t0})
     return {"clip": clip.clip_id, "emotion": clip.emotion, "n_phones": len(phones),
-            "seconds": round(clip.duration, 2), "methods": rows}
+            "seconds": round(clip.duration, 2), "frames_scored": int(observed.sum()),
+            "frames": len(truth), "methods": rows}
