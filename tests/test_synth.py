@@ -139,7 +139,7 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
         assert not np.allclose(kbest["motion"], exact["motion"])
     assert main([*base, "-o", str(tmp_path / "b.npz")]) == 0
     err = capsys.readouterr().err
-    assert "path: audio only (phones recognised by the auto phone engine)" in err
+    assert "path: audio only (phones named by hama, placed by PocketSphinx)" in err
     assert "mean of its 20 best animes" in err and "(recognized)" in err
     assert main([*base, "--exact", "--phones-engine", "pocketsphinx",
                  "-o", str(tmp_path / "c.npz")]) == 0

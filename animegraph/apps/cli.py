@@ -60,8 +60,9 @@ def _phones_engine_option(parser, transcript: str) -> None:
     """``--phones-engine`` of ``ingest`` and ``synth`` (``transcript``: what they call one)."""
     parser.add_argument("--phones-engine", choices=ENGINES, default=None,
                         help=f"phone engine when there are no labels: auto (default: "
-                        f"PocketSphinx aligns {transcript}, hama recognises phones without "
-                        "one: each measured best at it), hama (CTC phone model shipped in "
+                        f"PocketSphinx aligns {transcript}; without one hama names the "
+                        "phones and PocketSphinx places them: each measured best at it), "
+                        "hama (CTC phone model shipped in "
                         "its wheel) or pocketsphinx")
 
 def build_parser() -> argparse.ArgumentParser:
@@ -961,7 +962,9 @@ def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
     elif args.text is not None:
         given = f"transcript given (aligned by the {engine} phone engine)"
     else:
-        given = f"audio only (phones recognised by the {engine} phone engine)"
+        how = ("named by hama, placed by PocketSphinx" if engine == "auto"
+               else f"recognised by the {engine} phone engine")
+        given = f"audio only (phones {how})"
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
     return given, args.labels is not None or args.text is not None, searched
