@@ -11,6 +11,8 @@ the US-English acoustic model, CMUdict and phone language model its wheel ships:
 * :func:`recognize` — phone recognition without a transcript (PocketSphinx's *allphone*
   search with its phone trigram model). Much less accurate than alignment: use it only
   when no transcript exists.
+* :func:`align_phones` — forced alignment of a known phone sequence (each phone a word of
+  one phone): how the ``"auto"`` engine times the phones hama recognises.
 * :func:`segment` — the front door: given labels (checked and snapped to the audio), else
   alignment of a transcript, else recognition.
 
