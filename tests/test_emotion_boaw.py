@@ -83,7 +83,7 @@ def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
     np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
         weighted.normalizer_.transform(F, spk)), scaled * w)
     arrays = weighted.to_arrays()
-    assert int(arrays["format"]) == 4 and arrays["block_widths"].tolist() == [1, 4]
+    assert int(arrays["format"]) == 5 and arrays["block_widths"].tolist() == [1, 4]
     assert arrays["block_widths_fitted"].tolist() == [1, 4] and "boaw_mean" not in arrays
     back = EmotionClassifier.from_arrays(arrays)
     assert back.block_widths == back.block_widths_ == (1, 4)
@@ -153,7 +153,7 @@ def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
         SpeechFeatures(described.functionals, described.frames), y, speakers=spk)
     np.testing.assert_array_equal(again.bag_.codebooks_[1], model.bag_.codebooks_[1])
     arrays = model.to_arrays()
-    assert int(arrays["format"]) == 4 and arrays["boaw_codebook0"].shape == (500, 22)
+    assert int(arrays["format"]) == 5 and arrays["boaw_codebook0"].shape == (500, 22)
     back = EmotionClassifier.from_arrays(arrays)
     np.testing.assert_allclose(back.decision_function(audio), model.decision_function(audio))
     np.testing.assert_allclose(back.predict_proba(audio[:2]), model.predict_proba(audio[:2]))

@@ -79,12 +79,13 @@ FUNCTIONALS = "rich+cepstrum"
 #: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
 DEFAULT_C = 0.1
 #: Version of the stored arrays; older databases hold none and must be re-ingested.
-#: Format 2: no block weights; 3: ``block_widths``; 4 (what is written): the fitted
-#: block widths (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks
-#: (``boaw_*``, when the ``boaw`` block is used).
-CLASSIFIER_FORMAT = 4
+#: Format 2: no block weights; 3: ``block_widths``; 4: the fitted block widths
+#: (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks (``boaw_*``,
+#: when the ``boaw`` block is used); 5 (what is written): ``n_codebooks`` and the
+#: ensemble's codebooks (``boaw_n_codebooks``, ``boaw_codebook0`` ... ``2K - 1``).
+CLASSIFIER_FORMAT = 5
 #: Formats :meth:`EmotionClassifier.from_arrays` reads.
-READABLE_FORMATS = (2, 3, 4)
+READABLE_FORMATS = (2, 3, 4, 5)
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
@@ -140,7 +141,8 @@ def _weight_from_text(text: str):
     return text
 
 
-_NUMERIC = ("n_cepstrum", "C", "calibration_cv", "random_state", "gamma", "scale_min",
+_NUMERIC = ("n_cepstrum", "C", "calibration_cv", "random_state", "n_codebooks", "gamma",
+            "scale_min",
             "scale_scale", "support_vectors", "support", "n_support", "dual_coef",
             "intercept", "norm_mean", "norm_scale", "norm_means", "norm_scales",
             "norm_min_utterances", "calib_coef", "calib_intercept")
@@ -235,7 +237,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         bag-of-audio-words (:class:`ingest.emotion.boaw.BagOfAudioWords`, openXBOW's
         defaults: 2 x 500 words, 10 assignments, k-means++ seeding on at most 50,000
         training frames drawn at random) is learned at :meth:`fit` from the training
-        utterances' frames only, and its 1,000 columns follow the other blocks'.
+        utterances' frames only, and its ``n_codebooks`` x 1,000 columns follow the other
+        blocks'.
     n_cepstrum : int, optional
         Real-cepstrum coefficients of the ``paper`` block (500).
     cepstrum : {"utterance", "frames"}, optional
@@ -257,6 +260,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         blocks (the functionals, the words) when there are functionals; otherwise every
         column counts the same. Measured with the bag-of-audio-words
         (``scripts/eval_emotion_boaw.py``).
+    n_codebooks : int, optional
+        Codebook pairs of the bag-of-audio-words drawn with different seeds, their
+        histograms concatenated as one block (:mod:`ingest.emotion.boaw`: the ensemble
+        that averages out the codebook's random draw; K =
+        :data:`ingest.emotion.boaw.ENSEMBLE` decided before measuring; 1: one pair, the
+        stored default of issue #16's fourth session).
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -264,7 +273,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Folds for the out-of-fold decision values of the calibration (reduced to the
         smallest class size when needed, at least 2).
     random_state : int, optional
-        Seed of the calibration folds.
+        Seed of the calibration folds and of the first codebook pair.
 
     Attributes
     ----------
@@ -304,6 +313,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         C: float = DEFAULT_C,
         class_weight: str | dict | None = None,
         block_widths: tuple | None = None,
+        n_codebooks: int = 1,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
@@ -316,6 +326,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.C = C
         self.class_weight = class_weight
         self.block_widths = block_widths
+        self.n_codebooks = n_codebooks
         self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
@@ -354,6 +365,10 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if self.cepstrum not in ("utterance", "frames"):
             raise ParameterError(f"cepstrum must be one of ('utterance', 'frames'), "
                                  f"got {self.cepstrum!r}")
+        if isinstance(self.n_codebooks, bool) or not isinstance(
+                self.n_codebooks, int | np.integer) or self.n_codebooks < 1:
+            raise ParameterError(f"n_codebooks must be an integer >= 1, "
+                                 f"got {self.n_codebooks!r}")
         if isinstance(self.calibration_cv, bool) or not isinstance(
                 self.calibration_cv, int | np.integer) or self.calibration_cv < 2:
             raise ParameterError(
@@ -517,7 +532,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.bag_ = None
         widths = self.block_widths
         if described.frames is not None and WORDS_BLOCK in parse_features(self.features):
-            self.bag_ = BagOfAudioWords(random_state=self.random_state).fit(described.frames)
+            self.bag_ = BagOfAudioWords(n_codebooks=int(self.n_codebooks),
+                                        random_state=self.random_state).fit(described.frames)
             F = self._words(described)
             n_words = F.shape[1] - described.functionals.shape[1]
             if widths is None and described.functionals.shape[1]:
@@ -632,7 +648,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
             ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
             ``class_weight`` (``"none"``, ``"balanced"`` or a JSON object),
-            ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
+            ``calibration_cv``, ``random_state``, ``n_codebooks``, ``gamma``), the normalisation's
             ``norm_mean``/``norm_scale`` (n_features,) and ``norm_min_utterances`` (when
             ``normalize="speaker"``), the scaler's ``scale_min``/``scale_scale``
             (n_features,), the SVM's ``classes`` (n_classes,), ``support_vectors``
@@ -642,8 +658,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             block widths ``block_widths`` (the parameter) and ``block_widths_fitted``
             (what the pipeline weights by), with audio words the codebooks
             (:meth:`ingest.emotion.boaw.BagOfAudioWords.to_arrays`: ``boaw_mean``,
-            ``boaw_scale`` (n_descriptors,), ``boaw_codebook0``/``1`` (n_words,
-            n_descriptors / 2), ``boaw_assignments``).
+            ``boaw_scale`` (n_descriptors,), ``boaw_codebook0`` ... ``boaw_codebook{2K -
+            1}`` (n_words, n_descriptors / 2), ``boaw_assignments``,
+            ``boaw_n_codebooks``).
         """
         check_is_fitted(self, ["pipeline_"])
         scaler, svm = self.pipeline_["scale"], self.pipeline_["svm"]
@@ -658,6 +675,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             "class_weight": np.array(_weight_text(self.class_weight)),
             "calibration_cv": np.array(self.calibration_cv),
             "random_state": np.array(self.random_state),
+            "n_codebooks": np.array(int(self.n_codebooks)),
             "gamma": np.array(svm._gamma),
             "scale_min": scaler.min_.copy(),
             "scale_scale": scaler.scale_.copy(),
@@ -754,13 +772,38 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if fitted is not None and sum(fitted) != a["scale_min"].shape[0]:
             raise DataError(f"stored emotion classifier: block widths {list(fitted)} do not "
                             f"sum to its {a['scale_min'].shape[0]} features")
+        n_codebooks = 1
+        if fmt >= 5:
+            if "n_codebooks" not in arrays:
+                raise DataError("stored emotion classifier lacks array 'n_codebooks'")
+            n_codebooks = np.asarray(arrays["n_codebooks"])
+            if n_codebooks.shape != () or n_codebooks.dtype.kind not in "iuf" \
+                    or not np.isfinite(n_codebooks) or float(n_codebooks) < 1 \
+                    or float(n_codebooks) != int(n_codebooks):
+                raise DataError(f"stored emotion classifier: n_codebooks must be an "
+                                f"integer >= 1, got {n_codebooks.tolist()}")
+            n_codebooks = int(n_codebooks)
         bag = None
         if fmt >= 4 and "boaw_mean" in arrays:
+            if fmt >= 5 and "boaw_n_codebooks" not in arrays:
+                raise DataError("stored bag-of-audio-words lacks array 'boaw_n_codebooks'")
             bag = BagOfAudioWords.from_arrays(arrays)
+            if bag.n_codebooks != n_codebooks:
+                raise DataError(f"stored emotion classifier: {bag.n_codebooks} codebook "
+                                f"pairs stored, n_codebooks says {n_codebooks}")
+            words = bag.n_words
+            # the words are the last columns; fitted on its own, one block of them
+            if words > a["scale_min"].shape[0] or widths is None and fitted is not None \
+                    and fitted[-1] != words:
+                raise DataError(f"stored emotion classifier: its codebooks give {words} "
+                                f"words, not its last block of columns "
+                                f"({a['scale_min'].shape[0]} features, block widths "
+                                f"{list(fitted) if fitted else None})")
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
-                    class_weight=weight, block_widths=widths, probability=probability,
+                    class_weight=weight, block_widths=widths, n_codebooks=n_codebooks,
+                    probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
         model._check_params()
