@@ -117,6 +117,16 @@ def boaw_features(frames, default: np.ndarray, with_default: bool, seed: int = 0
     return make
 
 
+class EnsembleOnFeatures(EmotionClassifier):
+    """The tuning stage of ``ensemble``: :class:`EmotionClassifier` on a feature matrix
+    whose last ``ENSEMBLE * 1000`` columns are the ensemble's words, with the kernel's
+    scale the estimator gives them (``kernel_width_``: one pair's width), so that the C
+    tuned here is the C of the stored estimator."""
+
+    def _kernel_width(self, n_features: int) -> int:
+        return int(n_features - (ENSEMBLE - 1) * 2 * BagOfAudioWords().size)
+
+
 def stored_final(frames, F, y, spk, seed: int = 0, n_codebooks: int = 1):
     """``final`` of :func:`eval_emotion.nested`: the stored estimator, fitted on the fold's
     functionals and frames (it learns the codebooks), round-tripped through its arrays."""
@@ -240,7 +250,7 @@ def main() -> int:
     setups["stored"] = dict(setups["default+boaw"],
                             final=stored_final(frames, F, y, spk, args.seed))
     setups["ensemble"] = dict(
-        factory=partial(EmotionClassifier, block_widths=(F.shape[1], ENSEMBLE * n_words)),
+        factory=partial(EnsembleOnFeatures, block_widths=(F.shape[1], ENSEMBLE * n_words)),
         fold_features=boaw_features(frames, F, True, args.seed, ENSEMBLE),
         final=stored_final(frames, F, y, spk, args.seed, ENSEMBLE))
     report, preds = {}, {}

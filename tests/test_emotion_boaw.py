@@ -247,8 +247,12 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     described = EmotionClassifier().describe(audio)
     model = EmotionClassifier(C=1.0, n_codebooks=2, probability=True, calibration_cv=2)
     model.fit(described, y, speakers=spk)
-    # the two pairs' 2,000 words are one block against the functionals
+    # the two pairs' 2,000 words are one block against the functionals, and the kernel's
+    # scale is one pair's (C means the same whatever the number of pairs)
     assert model.block_widths_ == (171, 2000) and model.n_features_in_ == 2171
+    w = model.pipeline_["weigh"].kw_args["w"]
+    assert model.kernel_width_ == 1171 and (w**2).sum() == pytest.approx(1171)
+    assert (w[:171] ** 2).sum() == pytest.approx((w[171:] ** 2).sum())
     arrays = model.to_arrays()
     assert int(arrays["format"]) == 5 and int(arrays["n_codebooks"]) == 2
     assert int(arrays["boaw_n_codebooks"]) == 2 and arrays["boaw_codebook3"].shape == (500, 22)

@@ -92,26 +92,30 @@ _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 _NORMALIZE = ("speaker", "none")
 
 
-def block_weights(widths) -> np.ndarray:
+def block_weights(widths, total: float | None = None) -> np.ndarray:
     """Column weights giving every block of columns the same share of the variance.
 
-    Block b of ``width_b`` columns is multiplied by ``sqrt(n / (n_blocks * width_b))``
-    (n the total width): after scaling every column to [-1, 1], each block holds
-    ``n / n_blocks`` of the total variance whatever its width (the equal-trace
-    normalisation of multiple kernel learning), and the total stays ``n`` (so that
-    ``gamma="auto"`` keeps its meaning).
+    Block b of ``width_b`` columns is multiplied by ``sqrt(total / (n_blocks * width_b))``:
+    after scaling every column to [-1, 1], each block holds ``total / n_blocks`` of the
+    total variance whatever its width (the equal-trace normalisation of multiple kernel
+    learning), and the total is ``total`` -- by default the width ``n``, so that
+    ``gamma="auto"`` keeps its meaning.
 
     Parameters
     ----------
     widths : sequence of int
         Width of each block, in column order.
+    total : float, optional
+        Total variance (the kernel's scale; default ``sum(widths)``). An ensemble of K
+        codebook pairs uses the width of one pair's features
+        (:meth:`EmotionClassifier.fit`), so that C means the same whatever K.
 
     Returns
     -------
     np.ndarray, shape (sum(widths),)
     """
     widths = [int(w) for w in widths]
-    total = float(sum(widths))
+    total = float(sum(widths)) if total is None else float(total)
     return np.concatenate([np.full(w, np.sqrt(total / (len(widths) * w))) for w in widths])
 
 
@@ -286,6 +290,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         :class:`SpeechFeatures`.
     block_widths_ : tuple of int or None
         The block widths the pipeline weights by.
+    kernel_width_ : int
+        The total variance of the weighted columns (the linear kernel's scale): the
+        feature width, or with an ensemble of K codebook pairs the width one pair would
+        give (``n_features_in_ - (K - 1) * 2 * size``): the K pairs' words are scaled as
+        the mean of K one-pair kernels, so that C and the RBF's ``gamma = 1 /
+        kernel_width_`` mean what they mean with one pair.
     pipeline_ : sklearn.pipeline.Pipeline
         ``MinMaxScaler((-1, 1))`` then ``SVC``.
     calibrator_ : LogisticRegression or None
@@ -473,12 +483,27 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         described = self.describe(X)
         return self._words(described) if hasattr(self, "bag_") else described.functionals
 
-    def _make_pipeline(self, widths=None) -> Pipeline:
+    def _kernel_width(self, n_features: int) -> int:
+        """:attr:`kernel_width_` of a fitted bag of words and ``n_features`` columns."""
+        bag = getattr(self, "bag_", None)
+        if bag is None or bag.n_codebooks == 1:
+            return int(n_features)
+        return int(n_features - (bag.n_codebooks - 1) * 2 * bag.codebooks_[0].shape[0])
+
+    def _make_pipeline(self, widths=None, n_features=None) -> Pipeline:
+        """Scaler, block weights, SVM; ``n_features`` (needed with an ensemble of
+        codebooks, or without ``widths``) sets :attr:`kernel_width_`'s scale."""
+        n = sum(widths) if widths is not None else n_features
+        total = n if n is None else self._kernel_width(n)
         steps = [("scale", MinMaxScaler(feature_range=(-1, 1)))]
         if widths is not None:
             steps.append(("weigh", FunctionTransformer(
-                _weigh, kw_args={"w": block_weights(widths)})))
-        steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
+                _weigh, kw_args={"w": block_weights(widths, total)})))
+        elif total != n:  # the ensemble's words alone: one block
+            steps.append(("weigh", FunctionTransformer(
+                _weigh, kw_args={"w": block_weights((n,), total)})))
+        gamma = "auto" if total == n else 1.0 / total  # "auto" is 1 / n_features
+        steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma=gamma,
                                  class_weight=self.class_weight,
                                  decision_function_shape="ovr")))
         return Pipeline(steps)
@@ -549,7 +574,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.calibrator_ = None
         if self.probability:
             self.calibrator_ = self._fit_calibration(Fn, y, int(counts.min()))
-        self.pipeline_ = self._make_pipeline(self.block_widths_).fit(Fn, y)
+        self.kernel_width_ = self._kernel_width(F.shape[1])
+        self.pipeline_ = self._make_pipeline(self.block_widths_, F.shape[1]).fit(Fn, y)
         self.classes_ = self.pipeline_.classes_
         self.n_features_in_ = F.shape[1]
         return self
@@ -562,7 +588,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         oof = None
         for train, test in StratifiedKFold(folds, shuffle=True,
                                            random_state=self.random_state).split(F, y):
-            d = self._as_2d(self._make_pipeline(self.block_widths_).fit(F[train], y[train])
+            d = self._as_2d(self._make_pipeline(self.block_widths_, F.shape[1])
+                            .fit(F[train], y[train])
                             .decision_function(F[test]))
             if oof is None:
                 oof = np.zeros((F.shape[0], d.shape[1]))
@@ -811,7 +838,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         classes = a["classes"]
         model.bag_ = bag
         model.block_widths_ = fitted
-        pipe = model._make_pipeline(fitted)
+        model.kernel_width_ = model._kernel_width(n_features)
+        pipe = model._make_pipeline(fitted, n_features)
         scaler, svm = pipe["scale"], pipe["svm"]
         scaler.min_ = a["scale_min"].astype(np.float64)
         scaler.scale_ = a["scale_scale"].astype(np.float64)
