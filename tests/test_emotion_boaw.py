@@ -146,8 +146,10 @@ def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
     described = model.describe(audio)
     assert described.functionals.shape == (8, 171) and len(described.frames) == 8
     model.fit(audio, y, speakers=spk)
-    assert model.bag_ is not None and model.block_widths_ == (171, 1000)
-    assert model.n_features_in_ == 1171 and model.featurize(audio).shape == (8, 1171)
+    # the default: an ensemble of 5 codebook pairs, 5,000 words as one block
+    assert model.bag_ is not None and model.block_widths_ == (171, 5000)
+    assert model.n_features_in_ == 5171 and model.featurize(audio).shape == (8, 5171)
+    assert model.bag_.n_codebooks == model.n_codebooks == 5 and model.kernel_width_ == 1171
     # the same fit from what ingest's workers compute per clip
     again = EmotionClassifier(C=1.0, probability=True, calibration_cv=2).fit(
         SpeechFeatures(described.functionals, described.frames), y, speakers=spk)
@@ -273,7 +275,7 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
         with pytest.raises(DataError, match=f"lacks array '{key}'"):
             EmotionClassifier.from_arrays({k: v for k, v in arrays.items() if k != key})
     # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it
-    single = EmotionClassifier(C=1.0, probability=True, calibration_cv=2).fit(
+    single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2).fit(
         described, y, speakers=spk)
     four = {**{k: v for k, v in single.to_arrays().items()
                if k not in ("n_codebooks", "boaw_n_codebooks")}, "format": np.array(4)}

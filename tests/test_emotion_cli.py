@@ -275,7 +275,7 @@ def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
     np.testing.assert_array_equal(clip.emotion_features.frames[0], again.frames[0])
 
     stored = Model.load(tiny_db[0]).emotion_model.classifier
-    assert stored.bag_ is not None and stored.block_widths_ == (171, 1000)
+    assert stored.bag_ is not None and stored.block_widths_ == (171, 5000)  # 5 pairs
     clips = prepared_from_database(Database.open(tiny_db[0]))
     assert all(c.emotion_features is None for c in clips)  # not stored in the database
     # the order ingest met them in (the codebooks' random seeding depends on it)

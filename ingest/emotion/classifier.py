@@ -37,7 +37,7 @@ from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, MIN_DURATION, utterances
-from ingest.emotion.boaw import BagOfAudioWords
+from ingest.emotion.boaw import ENSEMBLE, BagOfAudioWords
 from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
 from ingest.emotion.features import (
     N_CEPSTRUM,
@@ -72,7 +72,8 @@ __all__ = [
 #: features.
 KERNEL = "linear"
 #: Feature blocks of the default pipeline (measured best, docs/results.md issue #16:
-#: the functionals and the bag-of-audio-words, "Issue 16, fourth session").
+#: the functionals and the bag-of-audio-words, "Issue 16, fourth session"; its ensemble
+#: of codebooks, ``n_codebooks``, "Issue 16, fifth session").
 DEFAULT_FEATURES = "rich+cepstrum+boaw"
 #: The functionals alone (the default until issue #16's fourth session).
 FUNCTIONALS = "rich+cepstrum"
@@ -267,9 +268,10 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
     n_codebooks : int, optional
         Codebook pairs of the bag-of-audio-words drawn with different seeds, their
         histograms concatenated as one block (:mod:`ingest.emotion.boaw`: the ensemble
-        that averages out the codebook's random draw; K =
-        :data:`ingest.emotion.boaw.ENSEMBLE` decided before measuring; 1: one pair, the
-        stored default of issue #16's fourth session).
+        that averages out the codebook's random draw; the default K =
+        :data:`ingest.emotion.boaw.ENSEMBLE` = 5 was decided before measuring and made
+        the default by it, ``docs/results.md`` "Issue 16, fifth session"; 1: one pair,
+        the stored default of issue #16's fourth session).
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -323,7 +325,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         C: float = DEFAULT_C,
         class_weight: str | dict | None = None,
         block_widths: tuple | None = None,
-        n_codebooks: int = 1,
+        n_codebooks: int = ENSEMBLE,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
