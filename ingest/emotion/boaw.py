@@ -68,6 +68,12 @@ ASSIGNMENTS = 10
 N_DESCRIPTORS = 22
 #: Codebook pairs of the ensemble (module docstring: decided before measuring).
 ENSEMBLE = 5
+#: BLAS threads of the words' matrix products: one. They are small (an utterance's
+#: frames x 22 x 500, a seeding step's frames x 22), and OpenBLAS's threads spin-waiting
+#: on a loaded machine made the classifier's fit on the demo corpus 11 times as costly
+#: in CPU (22 CPU-s with the default threads, 2 with one, at load 3.5; docs/results.md,
+#: issue 16 fifth session), with the same results.
+BLAS_THREADS = 1
 _HOP_S = 0.01  # frame hop of :func:`frame_descriptors`, seconds
 
 
@@ -193,6 +199,12 @@ class BagOfAudioWords:
         frames : sequence of np.ndarray, each (n_frames_k, n_descriptors)
             :func:`frame_descriptors` of the training utterances.
         """
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+            return self._fit(frames)
+
+    def _fit(self, frames) -> BagOfAudioWords:
         from sklearn.cluster import kmeans_plusplus
 
         if not 1 <= self.assignments <= self.size:
@@ -227,6 +239,12 @@ class BagOfAudioWords:
     def transform(self, frames) -> np.ndarray:
         """Histograms, shape (n_utterances, :attr:`n_words`): ``lg(1 + counts per
         second)`` of the descriptors' words, then of the deltas' words, pair after pair."""
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+            return self._transform(frames)
+
+    def _transform(self, frames) -> np.ndarray:
         rows = []
         for F in frames:
             Z = (np.asarray(F, dtype=np.float64) - self.mean_) / self.scale_
