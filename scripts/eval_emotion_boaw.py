@@ -34,8 +34,9 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
   (``n_codebooks=1``: the stored default of issue #16's fourth session);
 * ``ensemble``: ``stored`` with the ensemble of :data:`ingest.emotion.boaw.ENSEMBLE`
   codebook pairs (``EmotionClassifier(n_codebooks=5)``, issue #16's fifth session; their
-  histograms one block), tuned on the same ensemble's features; its first pair is
-  ``stored``'s (the same seed), the others drawn from it.
+  histograms one block), tuned on the same ensemble's features at the estimator's kernel
+  scale (``kernel_width``: one pair's width); its first pair is ``stored``'s (the same
+  seed), the others drawn from it.
 
 ``--choose`` prints the kernel and C the stored default's tuning picks on all of EmoDB
 (the grid above, inner leave-one-speaker-out over the 10 speakers and inner stratified
@@ -115,16 +116,6 @@ def boaw_features(frames, default: np.ndarray, with_default: bool, seed: int = 0
             [frames[i] for i in train]).transform(frames)
         return np.hstack([default, H]) if with_default else H
     return make
-
-
-class EnsembleOnFeatures(EmotionClassifier):
-    """The tuning stage of ``ensemble``: :class:`EmotionClassifier` on a feature matrix
-    whose last ``ENSEMBLE * 1000`` columns are the ensemble's words, with the kernel's
-    scale the estimator gives them (``kernel_width_``: one pair's width), so that the C
-    tuned here is the C of the stored estimator."""
-
-    def _kernel_width(self, n_features: int) -> int:
-        return int(n_features - (ENSEMBLE - 1) * 2 * BagOfAudioWords().size)
 
 
 def stored_final(frames, F, y, spk, seed: int = 0, n_codebooks: int = 1):
@@ -250,7 +241,8 @@ def main() -> int:
     setups["stored"] = dict(setups["default+boaw"],
                             final=stored_final(frames, F, y, spk, args.seed))
     setups["ensemble"] = dict(
-        factory=partial(EnsembleOnFeatures, block_widths=(F.shape[1], ENSEMBLE * n_words)),
+        factory=partial(EmotionClassifier, block_widths=(F.shape[1], ENSEMBLE * n_words),
+                        kernel_width=F.shape[1] + n_words),  # the estimator's kernel scale
         fold_features=boaw_features(frames, F, True, args.seed, ENSEMBLE),
         final=stored_final(frames, F, y, spk, args.seed, ENSEMBLE))
     report, preds = {}, {}

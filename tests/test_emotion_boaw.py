@@ -274,6 +274,22 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     for key in ("n_codebooks", "boaw_n_codebooks"):
         with pytest.raises(DataError, match=f"lacks array '{key}'"):
             EmotionClassifier.from_arrays({k: v for k, v in arrays.items() if k != key})
+    # on the precomputed matrix, kernel_width gives the estimator's kernel (what the
+    # evaluation tunes on: scripts/eval_emotion_boaw.py, system "ensemble")
+    X = model.featurize(described)
+    on_matrix = EmotionClassifier(C=1.0, block_widths=(171, 2000), kernel_width=1171).fit(
+        X, y, speakers=spk)
+    np.testing.assert_allclose(on_matrix.decision_function(X), model.decision_function(X))
+    plain = EmotionClassifier(C=1.0, block_widths=(171, 2000)).fit(X, y, speakers=spk)
+    assert plain.kernel_width_ == 2171
+    stored = on_matrix.to_arrays()
+    assert int(stored["kernel_width"]) == 1171
+    assert EmotionClassifier.from_arrays(stored).kernel_width == 1171
+    with pytest.raises(DataError, match="kernel_width"):
+        EmotionClassifier.from_arrays({**stored, "kernel_width": np.array(-3.0)})
+    for bad in (0, 1.5, True):
+        with pytest.raises(ParameterError, match="kernel_width"):
+            EmotionClassifier(kernel_width=bad).fit(X, y)
     # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it
     single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2).fit(
         described, y, speakers=spk)

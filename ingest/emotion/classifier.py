@@ -164,6 +164,18 @@ def _stored_widths(arrays, key: str) -> tuple | None:
     return tuple(int(v) for v in w)
 
 
+def _stored_width(arrays) -> int | None:
+    """The stored ``kernel_width`` parameter (format 5), checked; None when absent."""
+    if "kernel_width" not in arrays:
+        return None
+    w = np.asarray(arrays["kernel_width"])
+    if w.shape != () or w.dtype.kind not in "iuf" or not np.isfinite(w) or float(w) < 1 \
+            or float(w) != int(w):
+        raise DataError(f"stored emotion classifier: kernel_width must be a positive "
+                        f"integer, got {w.tolist()}")
+    return int(w)
+
+
 def _check_stored(a: dict, arrays, probability: bool) -> None:
     """Shapes and finiteness of a stored classifier's arrays (one line naming the array).
 
@@ -272,6 +284,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         :data:`ingest.emotion.boaw.ENSEMBLE` = 5 was decided before measuring and made
         the default by it, ``docs/results.md`` "Issue 16, fifth session"; 1: one pair,
         the stored default of issue #16's fourth session).
+    kernel_width : int, optional
+        The total variance of the weighted columns (the linear kernel's scale, and
+        ``gamma = 1 / kernel_width``). None (default): :attr:`kernel_width_` as described
+        there. Set it when fitting on a precomputed feature matrix that holds an
+        ensemble's words (e.g. 1,171 for the functionals and five pairs' 5,000 words), to
+        get the kernel the estimator gives them when it learns the words itself.
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -326,6 +344,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         class_weight: str | dict | None = None,
         block_widths: tuple | None = None,
         n_codebooks: int = ENSEMBLE,
+        kernel_width: int | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
@@ -339,6 +358,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.class_weight = class_weight
         self.block_widths = block_widths
         self.n_codebooks = n_codebooks
+        self.kernel_width = kernel_width
         self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
@@ -381,6 +401,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 self.n_codebooks, int | np.integer) or self.n_codebooks < 1:
             raise ParameterError(f"n_codebooks must be an integer >= 1, "
                                  f"got {self.n_codebooks!r}")
+        kw = self.kernel_width
+        if kw is not None and (isinstance(kw, bool) or not isinstance(kw, int | np.integer)
+                               or kw < 1):
+            raise ParameterError(f"kernel_width must be None or a positive integer, "
+                                 f"got {kw!r}")
         if isinstance(self.calibration_cv, bool) or not isinstance(
                 self.calibration_cv, int | np.integer) or self.calibration_cv < 2:
             raise ParameterError(
@@ -487,6 +512,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
 
     def _kernel_width(self, n_features: int) -> int:
         """:attr:`kernel_width_` of a fitted bag of words and ``n_features`` columns."""
+        if self.kernel_width is not None:
+            return int(self.kernel_width)
         bag = getattr(self, "bag_", None)
         if bag is None or bag.n_codebooks == 1:
             return int(n_features)
@@ -684,7 +711,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             (n_sv, n_features), ``support`` (n_sv,), ``n_support`` (n_classes,),
             ``dual_coef`` (n_classes - 1, n_sv), ``intercept`` (n_classes * (n_classes -
             1) / 2,), with probabilities ``calib_coef`` and ``calib_intercept``, with
-            block widths ``block_widths`` (the parameter) and ``block_widths_fitted``
+            ``kernel_width`` set ``kernel_width``, with block widths ``block_widths`` (the
+            parameter) and ``block_widths_fitted``
             (what the pipeline weights by), with audio words the codebooks
             (:meth:`ingest.emotion.boaw.BagOfAudioWords.to_arrays`: ``boaw_mean``,
             ``boaw_scale`` (n_descriptors,), ``boaw_codebook0`` ... ``boaw_codebook{2K -
@@ -717,6 +745,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         }
         if self.block_widths is not None:
             out["block_widths"] = np.array([int(w) for w in self.block_widths])
+        if self.kernel_width is not None:
+            out["kernel_width"] = np.array(int(self.kernel_width))
         if self.block_widths_ is not None:
             out["block_widths_fitted"] = np.array(self.block_widths_)
         if self.bag_ is not None:
@@ -832,6 +862,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
                     class_weight=weight, block_widths=widths, n_codebooks=n_codebooks,
+                    kernel_width=_stored_width(arrays),
                     probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
