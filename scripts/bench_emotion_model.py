@@ -4,6 +4,7 @@ Usage::
 
     python scripts/bench_emotion_model.py --corpus DIR --save INPUTS.npz [--workers 2]
     python scripts/bench_emotion_model.py --inputs INPUTS.npz [--repeat 3] [--profile]
+                                          [--n-codebooks K]
 
 ``--save``: ingest ``DIR`` into a temporary database once, keeping what
 :func:`ingest.emotion.model.fit_emotion_model` received (plain arrays, ``np.savez``).
@@ -12,6 +13,9 @@ print, for each part (the speech / emotion split of the components, the emotion 
 the classifier), its wall and CPU seconds (the median over the repeats), the machine's
 load average, and a digest of the fitted model's arrays (equal digests: equal results).
 ``--profile``: also the top of a cProfile of one run, by cumulative time.
+``--n-codebooks K``: the database's classifier with K codebook pairs instead of the
+default's (:func:`ingest.emotion.model.database_classifier` replaced for the run; issue
+#16's fifth session, the ensemble of codebooks).
 """
 
 from __future__ import annotations
@@ -132,8 +136,12 @@ def timed_parts():
             setattr(emotion_model, name, real)
 
 
-def time_inputs(path: Path, repeat: int, profile: bool) -> int:
+def time_inputs(path: Path, repeat: int, profile: bool, n_codebooks: int | None = None) -> int:
     args, kw = load_inputs(path)
+    if n_codebooks is not None:
+        default = emotion_model.database_classifier
+        emotion_model.database_classifier = lambda: default().set_params(
+            n_codebooks=n_codebooks)
     runs = []
     for _ in range(repeat):
         w, c = time.perf_counter(), time.process_time()
@@ -141,7 +149,9 @@ def time_inputs(path: Path, repeat: int, profile: bool) -> int:
             model = emotion_model.fit_emotion_model(*args, **kw)
         runs.append((time.perf_counter() - w, time.process_time() - c, parts, digest(model)))
     print(f"fit_emotion_model on {len(args[0])} clips, {repeat} run(s), load average "
-          f"{os.getloadavg()[0]:.1f}; children's CPU is not in 'CPU (this process)'")
+          f"{os.getloadavg()[0]:.1f}; classifier n_codebooks="
+          f"{emotion_model.database_classifier().n_codebooks}; children's CPU is not in "
+          "'CPU (this process)'")
     print(f"  {'part':<22}{'wall (s)':>10}{'CPU, this process (s)':>24}")
     for name in PARTS:
         if name in runs[0][2]["wall"]:
@@ -169,11 +179,12 @@ def main() -> int:
     parser.add_argument("--inputs", type=Path)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--n-codebooks", type=int, help="codebook pairs of the classifier")
     args = parser.parse_args()
     if args.corpus and args.save:
         return save_inputs(args.corpus, args.save, args.workers)
     if args.inputs:
-        return time_inputs(args.inputs, args.repeat, args.profile)
+        return time_inputs(args.inputs, args.repeat, args.profile, args.n_codebooks)
     parser.error("give --corpus DIR --save FILE, or --inputs FILE")
     return 2
 

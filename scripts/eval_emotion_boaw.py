@@ -30,7 +30,13 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
   :class:`~ingest.emotion.classifier.SpeechFeatures` (functionals and frame descriptors:
   it learns its codebooks itself), written with ``to_arrays``, read back with
   ``from_arrays`` and scored; LOSO one utterance at a time is also scored by the
-  highest probability (what ``classify`` lists first).
+  highest probability (what ``classify`` lists first). One codebook pair
+  (``n_codebooks=1``: the stored default of issue #16's fourth session);
+* ``ensemble``: ``stored`` with the ensemble of :data:`ingest.emotion.boaw.ENSEMBLE`
+  codebook pairs (``EmotionClassifier(n_codebooks=5)``, issue #16's fifth session; their
+  histograms one block), tuned on the same ensemble's features at the estimator's kernel
+  scale (``kernel_width``: one pair's width); its first pair is ``stored``'s (the same
+  seed), the others drawn from it.
 
 ``--choose`` prints the kernel and C the stored default's tuning picks on all of EmoDB
 (the grid above, inner leave-one-speaker-out over the 10 speakers and inner stratified
@@ -43,7 +49,8 @@ stored estimator's default parameters (trained on one corpus, codebooks included
 on the other; the target's speakers normalised together, and one utterance at a time).
 
 ``--seed S`` seeds the codebooks (``BagOfAudioWords(random_state=S)``, the estimator's
-``random_state``; 0 is the stored default's): their random variation, measured.
+``random_state``; 0 is the stored default's; the seed of the ensemble's first pair):
+their random variation, measured.
 
 ``--mcnemar A B`` compares two systems' per-utterance correctness (LOSO, one utterance
 at a time; and the grouped LOSO and 10-fold predictions) with McNemar's exact test
@@ -81,10 +88,10 @@ from eval_emotion import (  # scripts/ is sys.path[0] when run as a script
 )
 from tqdm import tqdm
 
-from ingest.emotion.boaw import BagOfAudioWords, frame_descriptors
+from ingest.emotion.boaw import ENSEMBLE, BagOfAudioWords, frame_descriptors
 from ingest.emotion.classifier import FUNCTIONALS, EmotionClassifier, SpeechFeatures
 
-SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw", "stored")
+SYSTEMS = ("default", "default-weighted", "boaw", "default+boaw", "stored", "ensemble")
 
 
 def cached_frames(utt, cache: Path, name: str = "emodb") -> list[np.ndarray]:
@@ -100,21 +107,23 @@ def cached_frames(utt, cache: Path, name: str = "emodb") -> list[np.ndarray]:
     return [X[a:b] for a, b in zip(off[:-1], off[1:], strict=True)]
 
 
-def boaw_features(frames, default: np.ndarray, with_default: bool, seed: int = 0):
+def boaw_features(frames, default: np.ndarray, with_default: bool, seed: int = 0,
+                  n_codebooks: int = 1):
     """``fold_features``: the bag of words learned on the training fold (with the
     functionals in front if ``with_default``; codebooks seeded by ``seed``)."""
     def make(train):
-        H = BagOfAudioWords(random_state=seed).fit([frames[i] for i in train]).transform(frames)
+        H = BagOfAudioWords(n_codebooks=n_codebooks, random_state=seed).fit(
+            [frames[i] for i in train]).transform(frames)
         return np.hstack([default, H]) if with_default else H
     return make
 
 
-def stored_final(frames, F, y, spk, seed: int = 0):
+def stored_final(frames, F, y, spk, seed: int = 0, n_codebooks: int = 1):
     """``final`` of :func:`eval_emotion.nested`: the stored estimator, fitted on the fold's
     functionals and frames (it learns the codebooks), round-tripped through its arrays."""
     def fit(params, train, test):
         model = EmotionClassifier(kernel=params["kernel"], C=params["C"], probability=True,
-                                  random_state=seed)
+                                  n_codebooks=n_codebooks, random_state=seed)
         model.fit(SpeechFeatures(F[train], [frames[i] for i in train]), y[train],
                   speakers=spk[train])
         back = EmotionClassifier.from_arrays(model.to_arrays())
@@ -231,6 +240,11 @@ def main() -> int:
     }
     setups["stored"] = dict(setups["default+boaw"],
                             final=stored_final(frames, F, y, spk, args.seed))
+    setups["ensemble"] = dict(
+        factory=partial(EmotionClassifier, block_widths=(F.shape[1], ENSEMBLE * n_words),
+                        kernel_width=F.shape[1] + n_words),  # the estimator's kernel scale
+        fold_features=boaw_features(frames, F, True, args.seed, ENSEMBLE),
+        final=stored_final(frames, F, y, spk, args.seed, ENSEMBLE))
     report, preds = {}, {}
     for label in args.systems:
         t = time.perf_counter()

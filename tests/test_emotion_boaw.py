@@ -83,7 +83,7 @@ def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
     np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
         weighted.normalizer_.transform(F, spk)), scaled * w)
     arrays = weighted.to_arrays()
-    assert int(arrays["format"]) == 4 and arrays["block_widths"].tolist() == [1, 4]
+    assert int(arrays["format"]) == 5 and arrays["block_widths"].tolist() == [1, 4]
     assert arrays["block_widths_fitted"].tolist() == [1, 4] and "boaw_mean" not in arrays
     back = EmotionClassifier.from_arrays(arrays)
     assert back.block_widths == back.block_widths_ == (1, 4)
@@ -146,14 +146,16 @@ def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
     described = model.describe(audio)
     assert described.functionals.shape == (8, 171) and len(described.frames) == 8
     model.fit(audio, y, speakers=spk)
-    assert model.bag_ is not None and model.block_widths_ == (171, 1000)
-    assert model.n_features_in_ == 1171 and model.featurize(audio).shape == (8, 1171)
+    # the default: an ensemble of 5 codebook pairs, 5,000 words as one block
+    assert model.bag_ is not None and model.block_widths_ == (171, 5000)
+    assert model.n_features_in_ == 5171 and model.featurize(audio).shape == (8, 5171)
+    assert model.bag_.n_codebooks == model.n_codebooks == 5 and model.kernel_width_ == 1171
     # the same fit from what ingest's workers compute per clip
     again = EmotionClassifier(C=1.0, probability=True, calibration_cv=2).fit(
         SpeechFeatures(described.functionals, described.frames), y, speakers=spk)
     np.testing.assert_array_equal(again.bag_.codebooks_[1], model.bag_.codebooks_[1])
     arrays = model.to_arrays()
-    assert int(arrays["format"]) == 4 and arrays["boaw_codebook0"].shape == (500, 22)
+    assert int(arrays["format"]) == 5 and arrays["boaw_codebook0"].shape == (500, 22)
     back = EmotionClassifier.from_arrays(arrays)
     np.testing.assert_allclose(back.decision_function(audio), model.decision_function(audio))
     np.testing.assert_allclose(back.predict_proba(audio[:2]), model.predict_proba(audio[:2]))
@@ -185,3 +187,117 @@ def test_too_little_labelled_speech_for_the_words_is_a_note(rng):
     assert _fit_classifier(audio, ["sad", "sad", "happy", "happy"], None, notes) is None
     assert notes == ["the emotion classifier could not be trained: a codebook of 500 audio "
                      "words needs at least 5.0 s of training speech (500 frames), got 2.04 s"]
+
+
+def test_an_ensemble_of_codebooks_starts_with_the_single_pair_and_round_trips(rng):
+    from db.errors import DataError
+    from ingest.emotion.boaw import codebook_seeds
+
+    frames = [frame_descriptors(_voice(rng, f0=f, seconds=0.6), SR)
+              for f in (100.0, 130.0, 170.0, 220.0, 260.0)]
+    one = BagOfAudioWords(size=20, assignments=3).fit(frames)
+    ens = BagOfAudioWords(size=20, assignments=3, n_codebooks=3).fit(frames)
+    H1, H3 = one.transform(frames), ens.transform(frames)
+    assert H1.shape == (5, 40) and H3.shape == (5, 120) and ens.n_words == 120
+    np.testing.assert_array_equal(H3[:, :40], H1)  # the first pair is the one pair
+    assert not np.array_equal(ens.codebooks_[2], ens.codebooks_[0])
+    # ensembles of different seeds share no codebook
+    assert not set(codebook_seeds(0, 5)) & set(codebook_seeds(1, 5))
+    arrays = ens.to_arrays()
+    assert int(arrays["boaw_n_codebooks"]) == 3 and "boaw_codebook5" in arrays \
+        and "boaw_codebook6" not in arrays
+    np.testing.assert_array_equal(BagOfAudioWords.from_arrays(arrays).transform(frames), H3)
+    for key, bad, needle in [("boaw_n_codebooks", np.array(4), "lacks array 'boaw_codebook6'"),
+                             ("boaw_n_codebooks", np.array(0), "boaw_n_codebooks"),
+                             ("boaw_n_codebooks", np.array(2.5), "boaw_n_codebooks"),
+                             ("boaw_codebook5", arrays["boaw_codebook5"][:-1], "boaw_codebook5"),
+                             ("boaw_codebook4", arrays["boaw_codebook4"].T, "boaw_codebook4")]:
+        with pytest.raises(DataError, match=needle):
+            BagOfAudioWords.from_arrays({**arrays, key: bad})
+    for bad in (0, True, 1.5):
+        with pytest.raises(ParameterError, match="n_codebooks"):
+            BagOfAudioWords(size=20, n_codebooks=bad).fit(frames)
+
+
+def test_the_ensemble_kernel_varies_less_with_the_seed(rng):
+    # The reason for the ensemble (ingest.emotion.boaw): the linear kernel between two
+    # utterances' histograms is a random draw through the codebook; the mean of K draws
+    # varies less from seed to seed than one draw.
+    frames = [frame_descriptors(_voice(rng, f0=f, seconds=0.5), SR)
+              for f in np.linspace(90.0, 300.0, 8)]
+
+    def spread(k):
+        kernels = []
+        for seed in range(6):
+            H = BagOfAudioWords(size=30, assignments=3, n_codebooks=k,
+                                random_state=10 * seed).fit(frames).transform(frames)
+            H = H - H.mean(0)
+            kernels.append(H @ H.T / k)
+        return np.std(kernels, axis=0).mean() / np.abs(np.mean(kernels, axis=0)).mean()
+
+    assert spread(4) < 0.7 * spread(1)
+
+
+def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
+    from db.errors import DataError
+    from ingest.emotion.classifier import EmotionClassifier
+
+    f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
+    audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]
+    y = np.repeat(list(f0s), 4)
+    spk = np.tile(["a", "b"], 4)
+    described = EmotionClassifier().describe(audio)
+    model = EmotionClassifier(C=1.0, n_codebooks=2, probability=True, calibration_cv=2)
+    model.fit(described, y, speakers=spk)
+    # the two pairs' 2,000 words are one block against the functionals, and the kernel's
+    # scale is one pair's (C means the same whatever the number of pairs)
+    assert model.block_widths_ == (171, 2000) and model.n_features_in_ == 2171
+    w = model.pipeline_["weigh"].kw_args["w"]
+    assert model.kernel_width_ == 1171 and (w**2).sum() == pytest.approx(1171)
+    assert (w[:171] ** 2).sum() == pytest.approx((w[171:] ** 2).sum())
+    arrays = model.to_arrays()
+    assert int(arrays["format"]) == 5 and int(arrays["n_codebooks"]) == 2
+    assert int(arrays["boaw_n_codebooks"]) == 2 and arrays["boaw_codebook3"].shape == (500, 22)
+    back = EmotionClassifier.from_arrays(arrays)
+    assert back.n_codebooks == 2 and back.bag_.n_codebooks == 2
+    np.testing.assert_allclose(back.decision_function(audio), model.decision_function(audio))
+    np.testing.assert_allclose(back.predict_proba(audio[:2]), model.predict_proba(audio[:2]))
+    for key, bad, needle in [
+            ("n_codebooks", np.array(3), "2 codebook pairs stored, n_codebooks says 3"),
+            ("n_codebooks", np.array(0.5), "n_codebooks must be"),
+            ("boaw_n_codebooks", np.array(1), "codebook pairs stored"),
+            ("boaw_codebook3", arrays["boaw_codebook3"][:, :-2], "boaw_codebook3"),
+            ("block_widths_fitted", np.array([1171, 1000]), "not its last block")]:
+        with pytest.raises(DataError, match=needle) as info:
+            EmotionClassifier.from_arrays({**arrays, key: bad})
+        assert "\n" not in str(info.value)
+    for key in ("n_codebooks", "boaw_n_codebooks"):
+        with pytest.raises(DataError, match=f"lacks array '{key}'"):
+            EmotionClassifier.from_arrays({k: v for k, v in arrays.items() if k != key})
+    # on the precomputed matrix, kernel_width gives the estimator's kernel (what the
+    # evaluation tunes on: scripts/eval_emotion_boaw.py, system "ensemble")
+    X = model.featurize(described)
+    on_matrix = EmotionClassifier(C=1.0, block_widths=(171, 2000), kernel_width=1171).fit(
+        X, y, speakers=spk)
+    np.testing.assert_allclose(on_matrix.decision_function(X), model.decision_function(X))
+    plain = EmotionClassifier(C=1.0, block_widths=(171, 2000)).fit(X, y, speakers=spk)
+    assert plain.kernel_width_ == 2171
+    stored = on_matrix.to_arrays()
+    assert int(stored["kernel_width"]) == 1171
+    assert EmotionClassifier.from_arrays(stored).kernel_width == 1171
+    with pytest.raises(DataError, match="kernel_width"):
+        EmotionClassifier.from_arrays({**stored, "kernel_width": np.array(-3.0)})
+    for bad in (0, 1.5, True):
+        with pytest.raises(ParameterError, match="kernel_width"):
+            EmotionClassifier(kernel_width=bad).fit(X, y)
+    # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it
+    single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2).fit(
+        described, y, speakers=spk)
+    four = {**{k: v for k, v in single.to_arrays().items()
+               if k not in ("n_codebooks", "boaw_n_codebooks")}, "format": np.array(4)}
+    old = EmotionClassifier.from_arrays(four)
+    assert old.n_codebooks == 1 and old.bag_.n_codebooks == 1
+    np.testing.assert_allclose(old.decision_function(audio), single.decision_function(audio))
+    np.testing.assert_allclose(old.predict_proba(audio), single.predict_proba(audio))
+    # the first pair of the ensemble is the single model's (the same seed)
+    np.testing.assert_array_equal(model.bag_.codebooks_[1], single.bag_.codebooks_[1])

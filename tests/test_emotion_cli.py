@@ -275,7 +275,7 @@ def test_classifier_features_are_computed_in_the_workers(tiny_db, tiny_corpus):
     np.testing.assert_array_equal(clip.emotion_features.frames[0], again.frames[0])
 
     stored = Model.load(tiny_db[0]).emotion_model.classifier
-    assert stored.bag_ is not None and stored.block_widths_ == (171, 1000)
+    assert stored.bag_ is not None and stored.block_widths_ == (171, 5000)  # 5 pairs
     clips = prepared_from_database(Database.open(tiny_db[0]))
     assert all(c.emotion_features is None for c in clips)  # not stored in the database
     # the order ingest met them in (the codebooks' random seeding depends on it)
@@ -324,12 +324,17 @@ def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_pat
     book = arrays[pre + "boaw_codebook0"]
     nan = book.copy()
     nan[3, 4] = np.nan
+    pairs = int(arrays[pre + "n_codebooks"])  # the ensemble's codebook pairs
+    last = f"boaw_codebook{2 * pairs - 1}"
     for name, bad, needle in [
             ("boaw_codebook0", book[:, :-1], "boaw_codebook0"),
             ("boaw_codebook1", book.T, "boaw_codebook1"),
             ("boaw_codebook0", nan, "not finite"),
+            (last, arrays[pre + last][:-1], last),
             ("boaw_scale", np.zeros_like(arrays[pre + "boaw_scale"]), "boaw_scale"),
             ("boaw_assignments", np.array(0.0), "boaw_assignments"),
+            ("boaw_n_codebooks", np.array(pairs + 1.0), f"boaw_codebook{2 * pairs}"),
+            ("n_codebooks", np.array(pairs + 1.0), "codebook pairs stored"),
             ("block_widths_fitted", np.array([171.0, 999.0]), "block widths")]:
         code, err = classify({**arrays, pre + name: bad})
         assert code == 1 and len(err) == 1 and needle in err[0], (name, err)

@@ -37,7 +37,7 @@ from sklearn.utils.validation import check_array, check_is_fitted, column_or_1d
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, MIN_DURATION, utterances
-from ingest.emotion.boaw import BagOfAudioWords
+from ingest.emotion.boaw import ENSEMBLE, BagOfAudioWords
 from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
 from ingest.emotion.features import (
     N_CEPSTRUM,
@@ -72,45 +72,51 @@ __all__ = [
 #: features.
 KERNEL = "linear"
 #: Feature blocks of the default pipeline (measured best, docs/results.md issue #16:
-#: the functionals and the bag-of-audio-words, "Issue 16, fourth session").
+#: the functionals and the bag-of-audio-words, "Issue 16, fourth session"; its ensemble
+#: of codebooks, ``n_codebooks``, "Issue 16, fifth session").
 DEFAULT_FEATURES = "rich+cepstrum+boaw"
 #: The functionals alone (the default until issue #16's fourth session).
 FUNCTIONALS = "rich+cepstrum"
 #: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
 DEFAULT_C = 0.1
 #: Version of the stored arrays; older databases hold none and must be re-ingested.
-#: Format 2: no block weights; 3: ``block_widths``; 4 (what is written): the fitted
-#: block widths (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks
-#: (``boaw_*``, when the ``boaw`` block is used).
-CLASSIFIER_FORMAT = 4
+#: Format 2: no block weights; 3: ``block_widths``; 4: the fitted block widths
+#: (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks (``boaw_*``,
+#: when the ``boaw`` block is used); 5 (what is written): ``n_codebooks`` and the
+#: ensemble's codebooks (``boaw_n_codebooks``, ``boaw_codebook0`` ... ``2K - 1``).
+CLASSIFIER_FORMAT = 5
 #: Formats :meth:`EmotionClassifier.from_arrays` reads.
-READABLE_FORMATS = (2, 3, 4)
+READABLE_FORMATS = (2, 3, 4, 5)
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
 _NORMALIZE = ("speaker", "none")
 
 
-def block_weights(widths) -> np.ndarray:
+def block_weights(widths, total: float | None = None) -> np.ndarray:
     """Column weights giving every block of columns the same share of the variance.
 
-    Block b of ``width_b`` columns is multiplied by ``sqrt(n / (n_blocks * width_b))``
-    (n the total width): after scaling every column to [-1, 1], each block holds
-    ``n / n_blocks`` of the total variance whatever its width (the equal-trace
-    normalisation of multiple kernel learning), and the total stays ``n`` (so that
-    ``gamma="auto"`` keeps its meaning).
+    Block b of ``width_b`` columns is multiplied by ``sqrt(total / (n_blocks * width_b))``:
+    after scaling every column to [-1, 1], each block holds ``total / n_blocks`` of the
+    total variance whatever its width (the equal-trace normalisation of multiple kernel
+    learning), and the total is ``total`` -- by default the width ``n``, so that
+    ``gamma="auto"`` keeps its meaning.
 
     Parameters
     ----------
     widths : sequence of int
         Width of each block, in column order.
+    total : float, optional
+        Total variance (the kernel's scale; default ``sum(widths)``). An ensemble of K
+        codebook pairs uses the width of one pair's features
+        (:meth:`EmotionClassifier.fit`), so that C means the same whatever K.
 
     Returns
     -------
     np.ndarray, shape (sum(widths),)
     """
     widths = [int(w) for w in widths]
-    total = float(sum(widths))
+    total = float(sum(widths)) if total is None else float(total)
     return np.concatenate([np.full(w, np.sqrt(total / (len(widths) * w))) for w in widths])
 
 
@@ -140,7 +146,8 @@ def _weight_from_text(text: str):
     return text
 
 
-_NUMERIC = ("n_cepstrum", "C", "calibration_cv", "random_state", "gamma", "scale_min",
+_NUMERIC = ("n_cepstrum", "C", "calibration_cv", "random_state", "n_codebooks", "gamma",
+            "scale_min",
             "scale_scale", "support_vectors", "support", "n_support", "dual_coef",
             "intercept", "norm_mean", "norm_scale", "norm_means", "norm_scales",
             "norm_min_utterances", "calib_coef", "calib_intercept")
@@ -155,6 +162,18 @@ def _stored_widths(arrays, key: str) -> tuple | None:
         raise DataError(f"stored emotion classifier: {key} must be positive integers, "
                         f"got {w.tolist()}")
     return tuple(int(v) for v in w)
+
+
+def _stored_width(arrays) -> int | None:
+    """The stored ``kernel_width`` parameter (format 5), checked; None when absent."""
+    if "kernel_width" not in arrays:
+        return None
+    w = np.asarray(arrays["kernel_width"])
+    if w.shape != () or w.dtype.kind not in "iuf" or not np.isfinite(w) or float(w) < 1 \
+            or float(w) != int(w):
+        raise DataError(f"stored emotion classifier: kernel_width must be a positive "
+                        f"integer, got {w.tolist()}")
+    return int(w)
 
 
 def _check_stored(a: dict, arrays, probability: bool) -> None:
@@ -235,7 +254,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         bag-of-audio-words (:class:`ingest.emotion.boaw.BagOfAudioWords`, openXBOW's
         defaults: 2 x 500 words, 10 assignments, k-means++ seeding on at most 50,000
         training frames drawn at random) is learned at :meth:`fit` from the training
-        utterances' frames only, and its 1,000 columns follow the other blocks'.
+        utterances' frames only, and its ``n_codebooks`` x 1,000 columns follow the other
+        blocks'.
     n_cepstrum : int, optional
         Real-cepstrum coefficients of the ``paper`` block (500).
     cepstrum : {"utterance", "frames"}, optional
@@ -257,6 +277,19 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         blocks (the functionals, the words) when there are functionals; otherwise every
         column counts the same. Measured with the bag-of-audio-words
         (``scripts/eval_emotion_boaw.py``).
+    n_codebooks : int, optional
+        Codebook pairs of the bag-of-audio-words drawn with different seeds, their
+        histograms concatenated as one block (:mod:`ingest.emotion.boaw`: the ensemble
+        that averages out the codebook's random draw; the default K =
+        :data:`ingest.emotion.boaw.ENSEMBLE` = 5 was decided before measuring and made
+        the default by it, ``docs/results.md`` "Issue 16, fifth session"; 1: one pair,
+        the stored default of issue #16's fourth session).
+    kernel_width : int, optional
+        The total variance of the weighted columns (the linear kernel's scale, and
+        ``gamma = 1 / kernel_width``). None (default): :attr:`kernel_width_` as described
+        there. Set it when fitting on a precomputed feature matrix that holds an
+        ensemble's words (e.g. 1,171 for the functionals and five pairs' 5,000 words), to
+        get the kernel the estimator gives them when it learns the words itself.
     probability : bool, optional
         Fit the probability calibration (costs ``calibration_cv`` extra SVM fits);
         :meth:`predict_proba` needs it.
@@ -264,7 +297,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         Folds for the out-of-fold decision values of the calibration (reduced to the
         smallest class size when needed, at least 2).
     random_state : int, optional
-        Seed of the calibration folds.
+        Seed of the calibration folds and of the first codebook pair.
 
     Attributes
     ----------
@@ -277,6 +310,12 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         :class:`SpeechFeatures`.
     block_widths_ : tuple of int or None
         The block widths the pipeline weights by.
+    kernel_width_ : int
+        The total variance of the weighted columns (the linear kernel's scale): the
+        feature width, or with an ensemble of K codebook pairs the width one pair would
+        give (``n_features_in_ - (K - 1) * 2 * size``): the K pairs' words are scaled as
+        the mean of K one-pair kernels, so that C and the RBF's ``gamma = 1 /
+        kernel_width_`` mean what they mean with one pair.
     pipeline_ : sklearn.pipeline.Pipeline
         ``MinMaxScaler((-1, 1))`` then ``SVC``.
     calibrator_ : LogisticRegression or None
@@ -304,6 +343,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         C: float = DEFAULT_C,
         class_weight: str | dict | None = None,
         block_widths: tuple | None = None,
+        n_codebooks: int = ENSEMBLE,
+        kernel_width: int | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
         random_state: int = 0,
@@ -316,6 +357,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.C = C
         self.class_weight = class_weight
         self.block_widths = block_widths
+        self.n_codebooks = n_codebooks
+        self.kernel_width = kernel_width
         self.probability = probability
         self.calibration_cv = calibration_cv
         self.random_state = random_state
@@ -354,6 +397,15 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if self.cepstrum not in ("utterance", "frames"):
             raise ParameterError(f"cepstrum must be one of ('utterance', 'frames'), "
                                  f"got {self.cepstrum!r}")
+        if isinstance(self.n_codebooks, bool) or not isinstance(
+                self.n_codebooks, int | np.integer) or self.n_codebooks < 1:
+            raise ParameterError(f"n_codebooks must be an integer >= 1, "
+                                 f"got {self.n_codebooks!r}")
+        kw = self.kernel_width
+        if kw is not None and (isinstance(kw, bool) or not isinstance(kw, int | np.integer)
+                               or kw < 1):
+            raise ParameterError(f"kernel_width must be None or a positive integer, "
+                                 f"got {kw!r}")
         if isinstance(self.calibration_cv, bool) or not isinstance(
                 self.calibration_cv, int | np.integer) or self.calibration_cv < 2:
             raise ParameterError(
@@ -458,12 +510,29 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         described = self.describe(X)
         return self._words(described) if hasattr(self, "bag_") else described.functionals
 
-    def _make_pipeline(self, widths=None) -> Pipeline:
+    def _kernel_width(self, n_features: int) -> int:
+        """:attr:`kernel_width_` of a fitted bag of words and ``n_features`` columns."""
+        if self.kernel_width is not None:
+            return int(self.kernel_width)
+        bag = getattr(self, "bag_", None)
+        if bag is None or bag.n_codebooks == 1:
+            return int(n_features)
+        return int(n_features - (bag.n_codebooks - 1) * 2 * bag.codebooks_[0].shape[0])
+
+    def _make_pipeline(self, widths=None, n_features=None) -> Pipeline:
+        """Scaler, block weights, SVM; ``n_features`` (needed with an ensemble of
+        codebooks, or without ``widths``) sets :attr:`kernel_width_`'s scale."""
+        n = sum(widths) if widths is not None else n_features
+        total = n if n is None else self._kernel_width(n)
         steps = [("scale", MinMaxScaler(feature_range=(-1, 1)))]
         if widths is not None:
             steps.append(("weigh", FunctionTransformer(
-                _weigh, kw_args={"w": block_weights(widths)})))
-        steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma="auto",
+                _weigh, kw_args={"w": block_weights(widths, total)})))
+        elif total != n:  # the ensemble's words alone: one block
+            steps.append(("weigh", FunctionTransformer(
+                _weigh, kw_args={"w": block_weights((n,), total)})))
+        gamma = "auto" if total == n else 1.0 / total  # "auto" is 1 / n_features
+        steps.append(("svm", SVC(kernel=self.kernel, C=float(self.C), gamma=gamma,
                                  class_weight=self.class_weight,
                                  decision_function_shape="ovr")))
         return Pipeline(steps)
@@ -517,7 +586,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.bag_ = None
         widths = self.block_widths
         if described.frames is not None and WORDS_BLOCK in parse_features(self.features):
-            self.bag_ = BagOfAudioWords(random_state=self.random_state).fit(described.frames)
+            self.bag_ = BagOfAudioWords(n_codebooks=int(self.n_codebooks),
+                                        random_state=self.random_state).fit(described.frames)
             F = self._words(described)
             n_words = F.shape[1] - described.functionals.shape[1]
             if widths is None and described.functionals.shape[1]:
@@ -533,7 +603,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.calibrator_ = None
         if self.probability:
             self.calibrator_ = self._fit_calibration(Fn, y, int(counts.min()))
-        self.pipeline_ = self._make_pipeline(self.block_widths_).fit(Fn, y)
+        self.kernel_width_ = self._kernel_width(F.shape[1])
+        self.pipeline_ = self._make_pipeline(self.block_widths_, F.shape[1]).fit(Fn, y)
         self.classes_ = self.pipeline_.classes_
         self.n_features_in_ = F.shape[1]
         return self
@@ -546,7 +617,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         oof = None
         for train, test in StratifiedKFold(folds, shuffle=True,
                                            random_state=self.random_state).split(F, y):
-            d = self._as_2d(self._make_pipeline(self.block_widths_).fit(F[train], y[train])
+            d = self._as_2d(self._make_pipeline(self.block_widths_, F.shape[1])
+                            .fit(F[train], y[train])
                             .decision_function(F[test]))
             if oof is None:
                 oof = np.zeros((F.shape[0], d.shape[1]))
@@ -632,18 +704,20 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             ``format`` (:data:`CLASSIFIER_FORMAT`), the parameters (``features``,
             ``n_cepstrum``, ``cepstrum``, ``normalize``, ``kernel``, ``C``,
             ``class_weight`` (``"none"``, ``"balanced"`` or a JSON object),
-            ``calibration_cv``, ``random_state``, ``gamma``), the normalisation's
+            ``calibration_cv``, ``random_state``, ``n_codebooks``, ``gamma``), the normalisation's
             ``norm_mean``/``norm_scale`` (n_features,) and ``norm_min_utterances`` (when
             ``normalize="speaker"``), the scaler's ``scale_min``/``scale_scale``
             (n_features,), the SVM's ``classes`` (n_classes,), ``support_vectors``
             (n_sv, n_features), ``support`` (n_sv,), ``n_support`` (n_classes,),
             ``dual_coef`` (n_classes - 1, n_sv), ``intercept`` (n_classes * (n_classes -
             1) / 2,), with probabilities ``calib_coef`` and ``calib_intercept``, with
-            block widths ``block_widths`` (the parameter) and ``block_widths_fitted``
+            ``kernel_width`` set ``kernel_width``, with block widths ``block_widths`` (the
+            parameter) and ``block_widths_fitted``
             (what the pipeline weights by), with audio words the codebooks
             (:meth:`ingest.emotion.boaw.BagOfAudioWords.to_arrays`: ``boaw_mean``,
-            ``boaw_scale`` (n_descriptors,), ``boaw_codebook0``/``1`` (n_words,
-            n_descriptors / 2), ``boaw_assignments``).
+            ``boaw_scale`` (n_descriptors,), ``boaw_codebook0`` ... ``boaw_codebook{2K -
+            1}`` (n_words, n_descriptors / 2), ``boaw_assignments``,
+            ``boaw_n_codebooks``).
         """
         check_is_fitted(self, ["pipeline_"])
         scaler, svm = self.pipeline_["scale"], self.pipeline_["svm"]
@@ -658,6 +732,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             "class_weight": np.array(_weight_text(self.class_weight)),
             "calibration_cv": np.array(self.calibration_cv),
             "random_state": np.array(self.random_state),
+            "n_codebooks": np.array(int(self.n_codebooks)),
             "gamma": np.array(svm._gamma),
             "scale_min": scaler.min_.copy(),
             "scale_scale": scaler.scale_.copy(),
@@ -670,6 +745,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         }
         if self.block_widths is not None:
             out["block_widths"] = np.array([int(w) for w in self.block_widths])
+        if self.kernel_width is not None:
+            out["kernel_width"] = np.array(int(self.kernel_width))
         if self.block_widths_ is not None:
             out["block_widths_fitted"] = np.array(self.block_widths_)
         if self.bag_ is not None:
@@ -754,13 +831,39 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if fitted is not None and sum(fitted) != a["scale_min"].shape[0]:
             raise DataError(f"stored emotion classifier: block widths {list(fitted)} do not "
                             f"sum to its {a['scale_min'].shape[0]} features")
+        n_codebooks = 1
+        if fmt >= 5:
+            if "n_codebooks" not in arrays:
+                raise DataError("stored emotion classifier lacks array 'n_codebooks'")
+            n_codebooks = np.asarray(arrays["n_codebooks"])
+            if n_codebooks.shape != () or n_codebooks.dtype.kind not in "iuf" \
+                    or not np.isfinite(n_codebooks) or float(n_codebooks) < 1 \
+                    or float(n_codebooks) != int(n_codebooks):
+                raise DataError(f"stored emotion classifier: n_codebooks must be an "
+                                f"integer >= 1, got {n_codebooks.tolist()}")
+            n_codebooks = int(n_codebooks)
         bag = None
         if fmt >= 4 and "boaw_mean" in arrays:
+            if fmt >= 5 and "boaw_n_codebooks" not in arrays:
+                raise DataError("stored bag-of-audio-words lacks array 'boaw_n_codebooks'")
             bag = BagOfAudioWords.from_arrays(arrays)
+            if bag.n_codebooks != n_codebooks:
+                raise DataError(f"stored emotion classifier: {bag.n_codebooks} codebook "
+                                f"pairs stored, n_codebooks says {n_codebooks}")
+            words = bag.n_words
+            # the words are the last columns; fitted on its own, one block of them
+            if words > a["scale_min"].shape[0] or widths is None and fitted is not None \
+                    and fitted[-1] != words:
+                raise DataError(f"stored emotion classifier: its codebooks give {words} "
+                                f"words, not its last block of columns "
+                                f"({a['scale_min'].shape[0]} features, block widths "
+                                f"{list(fitted) if fitted else None})")
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
-                    class_weight=weight, block_widths=widths, probability=probability,
+                    class_weight=weight, block_widths=widths, n_codebooks=n_codebooks,
+                    kernel_width=_stored_width(arrays),
+                    probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))
         model._check_params()
@@ -768,7 +871,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         classes = a["classes"]
         model.bag_ = bag
         model.block_widths_ = fitted
-        pipe = model._make_pipeline(fitted)
+        model.kernel_width_ = model._kernel_width(n_features)
+        pipe = model._make_pipeline(fitted, n_features)
         scaler, svm = pipe["scale"], pipe["svm"]
         scaler.min_ = a["scale_min"].astype(np.float64)
         scaler.scale_ = a["scale_scale"].astype(np.float64)
