@@ -164,16 +164,16 @@ def _stored_widths(arrays, key: str) -> tuple | None:
     return tuple(int(v) for v in w)
 
 
-def _stored_width(arrays) -> int | None:
-    """The stored ``kernel_width`` parameter (format 5), checked; None when absent."""
-    if "kernel_width" not in arrays:
+def _stored_count(arrays, key: str) -> int | None:
+    """The stored integer ``arrays[key]`` (>= 1), checked; None when absent."""
+    if key not in arrays:
         return None
-    w = np.asarray(arrays["kernel_width"])
-    if w.shape != () or w.dtype.kind not in "iuf" or not np.isfinite(w) or float(w) < 1 \
-            or float(w) != int(w):
-        raise DataError(f"stored emotion classifier: kernel_width must be a positive "
-                        f"integer, got {w.tolist()}")
-    return int(w)
+    v = np.asarray(arrays[key])
+    if v.shape != () or v.dtype.kind not in "iuf" or not np.isfinite(v) or float(v) < 1 \
+            or float(v) != int(v):
+        raise DataError(f"stored emotion classifier: {key} must be an integer >= 1, "
+                        f"got {v.tolist()}")
+    return int(v)
 
 
 def _check_stored(a: dict, arrays, probability: bool) -> None:
@@ -831,17 +831,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         if fitted is not None and sum(fitted) != a["scale_min"].shape[0]:
             raise DataError(f"stored emotion classifier: block widths {list(fitted)} do not "
                             f"sum to its {a['scale_min'].shape[0]} features")
-        n_codebooks = 1
-        if fmt >= 5:
-            if "n_codebooks" not in arrays:
-                raise DataError("stored emotion classifier lacks array 'n_codebooks'")
-            n_codebooks = np.asarray(arrays["n_codebooks"])
-            if n_codebooks.shape != () or n_codebooks.dtype.kind not in "iuf" \
-                    or not np.isfinite(n_codebooks) or float(n_codebooks) < 1 \
-                    or float(n_codebooks) != int(n_codebooks):
-                raise DataError(f"stored emotion classifier: n_codebooks must be an "
-                                f"integer >= 1, got {n_codebooks.tolist()}")
-            n_codebooks = int(n_codebooks)
+        n_codebooks = _stored_count(arrays, "n_codebooks") if fmt >= 5 else 1
+        if n_codebooks is None:
+            raise DataError("stored emotion classifier lacks array 'n_codebooks'")
         bag = None
         if fmt >= 4 and "boaw_mean" in arrays:
             if fmt >= 5 and "boaw_n_codebooks" not in arrays:
@@ -862,7 +854,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
                     class_weight=weight, block_widths=widths, n_codebooks=n_codebooks,
-                    kernel_width=_stored_width(arrays),
+                    kernel_width=_stored_count(arrays, "kernel_width"),
                     probability=probability,
                     calibration_cv=int(a["calibration_cv"]),
                     random_state=int(a["random_state"]))

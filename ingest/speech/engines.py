@@ -20,6 +20,7 @@ import logging
 from collections.abc import Callable
 
 from db.errors import ParameterError
+from ingest.speech.phones import SILENCE
 
 logger = logging.getLogger(__name__)
 
@@ -74,7 +75,7 @@ def recognize_auto(audio, sample_rate, *, refine: bool = True) -> list:
     named = recognize(audio, sample_rate, refine=refine)
     placed = align_phones(audio, sample_rate, [s.phone for s in named], refine=refine)
     if placed is None:
-        if any(s.phone != "SIL" for s in named):
+        if any(s.phone != SILENCE for s in named):
             logger.debug("PocketSphinx found no path through hama's %d segments: hama's "
                          "timing kept", len(named))
         return named

@@ -473,16 +473,22 @@ def _dictionary_words(engine: _Engine, text: str) -> list[str]:
         logger.debug("out-of-vocabulary word %r pronounced %s", word, " ".join(phones))
         new.append((word, " ".join(phones)))
         words.append(word)
+    _add_words(engine, new)
+    if not words:
+        raise ParameterError(f"text: the transcript has no words to align ({text[:60]!r})")
+    return words
+
+
+def _add_words(engine: _Engine, new: Sequence[tuple[str, str]]) -> None:
+    """Add ``(word, "PH ON ES")`` pairs to the decoder's dictionary (the search updated
+    once, after the last). Call with ``engine.lock`` held."""
     for k, (word, phones) in enumerate(new):
         try:
-            decoder.add_word(word, phones, k == len(new) - 1)
+            engine.decoder.add_word(word, phones, k == len(new) - 1)
         except RuntimeError as exc:
             raise DataError(f"cannot add word {word!r} /{phones}/ to the dictionary: {exc}") \
                 from exc
         engine.added.add(word)
-    if not words:
-        raise ParameterError(f"text: the transcript has no words to align ({text[:60]!r})")
-    return words
 
 
 def align(
@@ -617,13 +623,8 @@ def align_phones(
     prepared = _prepare(samples, sample_rate)
     engine = _engine("align")
     with engine.lock:
-        new = sorted({_phone_word(p) for p in spoken} - engine.added)
-        for k, word in enumerate(new):
-            try:
-                engine.decoder.add_word(word, word.strip("_").upper(), k == len(new) - 1)
-            except RuntimeError as exc:
-                raise DataError(f"cannot add phone {word!r} to the dictionary: {exc}") from exc
-            engine.added.add(word)
+        _add_words(engine, [(_phone_word(p), p) for p in sorted(set(spoken))
+                            if _phone_word(p) not in engine.added])
         entries = _align_phones(engine.decoder, " ".join(_phone_word(p) for p in spoken),
                                 prepared.pcm)
     if entries is None:
