@@ -4,7 +4,7 @@ Usage::
 
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
                                 [--phones-engine auto|hama|pocketsphinx] [--k-best K]
-                                [--guide mu-mlp|av-hmm [--guide-blend W]]
+                                [--guide mu-mlp|av-hmm|ppg-ridge|mu-mlp+ppg-ridge [--guide-blend W]]
 
 Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
@@ -23,6 +23,8 @@ import sys
 import time
 from pathlib import Path
 
+from animegraph.apps.cli import SYNTH_GUIDES
+
 TEXT = ("The quick brown fox jumps over the lazy dog while the children watch from the "
         "garden, and everybody laughs when the old farmer finally catches it near the river.")
 
@@ -40,7 +42,7 @@ def main() -> int:
     parser.add_argument("--audio-cost", default=None,
                         help="synthesize's audio_cost (default plp; posteriorgram, "
                              "plp+posteriorgram)")
-    parser.add_argument("--guide", choices=("mu-mlp", "av-hmm"), default=None,
+    parser.add_argument("--guide", choices=SYNTH_GUIDES, default=None,
                         help="trajectory-guided selection by this stored baseline")
     parser.add_argument("--guide-blend", type=float, default=0.5,
                         help="with --guide: the guide's share of the output (0.5)")
@@ -65,13 +67,16 @@ def main() -> int:
     if args.guide is not None:
         from animegraph.baselines.stored import load_forward
 
-        t = time.perf_counter()
-        guide = load_forward(args.db, args.guide)
-        if guide is None:
-            from animegraph.baselines.base import fitted_model
+        guides = []
+        for name in args.guide.split("+"):  # a mean of several: each stored apart
+            t = time.perf_counter()
+            guides.append(load_forward(args.db, name))
+            if guides[-1] is None:
+                from animegraph.baselines.base import fitted_model
 
-            guide = fitted_model(args.db, args.guide)
-            print(f"# {args.guide} fitted and stored in {time.perf_counter() - t:.1f} s")
+                guides[-1] = fitted_model(args.db, name)
+                print(f"# {name} fitted and stored in {time.perf_counter() - t:.1f} s")
+        guide = guides[0] if len(guides) == 1 else tuple(guides)
         kwargs |= {"guide": guide, "guide_blend": args.guide_blend}
     if args.segmentation == "aligned":
         kwargs["text"] = TEXT

@@ -5,19 +5,24 @@ Usage::
     python scripts/compare_systems.py RUN.json --dataset grid [--part aligned]
                                       [--system kbest20] [--against exact mu-mlp ...]
                                       [--measures mouth_r lve] [--seed 0] [--per-clip]
+                                      [--other-run RUN2.json] [--clips REGEX]
 
 Reads the per-clip scores of ``scripts/eval_lipsync.py --json RUN.json`` and prints, per
 measure, the mean per-clip difference (system minus the other), its 95 % bootstrap
 confidence interval (2,000 resamples of the clips, percentile method; Efron & Tibshirani,
 An Introduction to the Bootstrap, 1993, ch. 13) and the share of clips on which the system
 is better (higher mouth R, lower errors). ``--per-clip`` also lists every clip's values
-(e.g. the folds of a leave-one-clip-out run).
+(e.g. the folds of a leave-one-clip-out run). ``--other-run`` takes the ``--against``
+systems from a second run of the same deterministic split (clips paired by id), so that
+two settings of one row (e.g. two guides) are compared; ``--clips`` keeps the clips whose
+id matches a regular expression (e.g. talkingface's within-speaker ``_last30`` clips).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -39,16 +44,29 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--per-clip", action="store_true",
                         help="also print each clip's values of every system and measure")
+    parser.add_argument("--other-run", type=Path,
+                        help="take the --against systems from this run (same split)")
+    parser.add_argument("--clips", default=None, help="only clips whose id matches this regex")
     args = parser.parse_args()
     try:
-        data = json.loads(args.run.read_text())[args.dataset]
-        if args.part:
-            data = data[args.part]
-        rows = data["clips"] if isinstance(data, dict) else data
+        rows = _rows(args.run, args.dataset, args.part)
+        others = _rows(args.other_run, args.dataset, args.part) if args.other_run else None
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        print(f"compare_systems: cannot read {args.dataset} {args.part or ''} from "
-              f"{args.run}: {exc}", file=sys.stderr)
+        print(f"compare_systems: cannot read {args.dataset} {args.part or ''}: {exc}",
+              file=sys.stderr)
         return 1
+    if args.clips:
+        rows = [r for r in rows if re.search(args.clips, r["clip"])]
+    if others is not None:
+        if not args.against:
+            print("compare_systems: --other-run needs --against", file=sys.stderr)
+            return 1
+        other = {r["clip"]: r["methods"] for r in others}
+        rows = [{**r, "methods": {args.system: r["methods"].get(args.system, {}),
+                                  **{f"{s} (other run)": other.get(r["clip"], {}).get(s, {})
+                                     for s in args.against}}}
+                for r in rows if r["clip"] in other]
+        args.against = [f"{s} (other run)" for s in args.against]
     systems = list(dict.fromkeys(m for r in rows for m in r["methods"]))
     if args.system not in systems:
         print(f"compare_systems: no {args.system!r} in the run ({', '.join(systems)})",
@@ -78,6 +96,14 @@ def main() -> int:
             print(f"  {other:28s} {measure:8s} {diff.mean():+.3f}  95 % CI [{lo:+.3f}, "
                   f"{hi:+.3f}]  better on {100 * better.mean():.0f} % of {diff.size} clips")
     return 0
+
+
+def _rows(run: Path, dataset: str, part: str | None) -> list[dict]:
+    """Per-clip rows of ``dataset`` (and ``part``) in an eval_lipsync JSON run."""
+    data = json.loads(run.read_text())[dataset]
+    if part:
+        data = data[part]
+    return data["clips"] if isinstance(data, dict) else data
 
 
 if __name__ == "__main__":

@@ -73,6 +73,7 @@ from animegraph.baselines.peers import PEERS
 from animegraph.baselines.reference import Loudness, MeanPose
 from animegraph.motion import measures
 from animegraph.synthesis import Model
+from animegraph.synthesis.guide import GUIDES
 from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.pipeline import IngestConfig, build_database, prepare_sources
@@ -179,8 +180,9 @@ def score_fold(fold: dict, name: str, test) -> list[dict]:
     rows = []
     for k, clip in enumerate(test):
         preds = {} if k == 0 else None
-        guide = estimators.get(label(GUIDE[0])) if GUIDE else None
-        if GUIDE and guide is None:  # the guide could not be fitted on this fold
+        guide = [estimators.get(label(g)) for g in GUIDE]
+        guide = None if not GUIDE or None in guide else guide[0] if len(guide) == 1 else guide
+        if GUIDE and guide is None:  # a guide could not be fitted on this fold
             methods = [m for m in methods if evaluate.split_guide(m) == (m, False, False)]
         row = evaluate.score_heldout(model, clip, methods=methods, estimators=estimators,
                                      norm=norm, rng=rng, predictions=preds, guide=guide)
@@ -336,7 +338,7 @@ def main() -> int:
                              "(parts recognized-ENGINE; default: one part, --phones-engine)")
     parser.add_argument("--grid-db", type=Path,
                         help="database ingested from grid/s1 (default: prepare the clips)")
-    parser.add_argument("--guide", choices=("mu-mlp", "av-hmm"), default="mu-mlp",
+    parser.add_argument("--guide", choices=GUIDES, default="mu-mlp",
                         help="the baseline guiding the -guided / -blend rows (fitted on each "
                              "fold's training clips, as its own row; default mu-mlp)")
     parser.add_argument("--json", type=Path)
@@ -352,9 +354,9 @@ def main() -> int:
     INGEST["posteriorgrams"] = any(
         evaluate.split_method(evaluate.split_guide(m)[0])[1] != "plp" for m in args.graph_methods)
     guided = [m for m in args.graph_methods if evaluate.split_guide(m) != (m, False, False)]
-    if guided and args.guide not in args.systems:
+    if guided and not set(args.guide.split("+")) <= set(args.systems):
         parser.error(f"{', '.join(guided)} need the guide {args.guide} among --systems")
-    GUIDE[:] = [args.guide] if guided else []
+    GUIDE[:] = args.guide.split("+") if guided else []
     GRAPH_METHODS[:] = args.graph_methods
     PEER_ROWS[:] = args.peers
     for method, name, value in args.param:

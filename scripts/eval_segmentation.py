@@ -48,7 +48,7 @@ from ingest.speech import segment as ps
 from ingest.speech.engines import aligner, recognizer
 from ingest.speech.g2p import pronounce
 from ingest.speech.phones import SILENCE
-from ingest.speech.segment import boundary_errors, edit_alignment, phone_error_rate
+from ingest.speech.segment import boundary_errors, edit_alignment, matched_onsets, phone_error_rate
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 #: EmoDB's copy is cut to this many seconds.
@@ -204,7 +204,9 @@ def _synthetic(folder: Path, engines, limit: int | None) -> list[dict]:
             row["align_signed"] = boundary_errors(reference, aligned, signed=True).tolist()
             row["align_per"] = phone_error_rate(reference, aligned)
             rec, row["recognize_time"] = _timed(funcs["recognize"], audio, rate)
-            row["recognize_errors"] = boundary_errors(reference, rec).tolist()
+            index, signed = matched_onsets(reference, rec)
+            row["recognize_errors"] = np.abs(signed).tolist()
+            row["recognize_matched"] = index.tolist()
             row["recognize_per"] = phone_error_rate(reference, rec)
             rows.append(row)
     return rows
@@ -224,8 +226,10 @@ def _emodb(folder: Path, engines, limit: int | None) -> list[dict]:
             row = {"data": "emodb", "engine": name, "clip": wav.stem,
                    "seconds": len(audio) / rate}
             rec, row["recognize_time"] = _timed(funcs["recognize"], audio, rate)
-            row["recognize_errors"] = boundary_errors(reference, rec).tolist()
-            row["recognize_signed"] = boundary_errors(reference, rec, signed=True).tolist()
+            index, signed = matched_onsets(reference, rec)
+            row["recognize_errors"] = np.abs(signed).tolist()
+            row["recognize_signed"] = signed.tolist()
+            row["recognize_matched"] = index.tolist()
             row["recognize_per"] = phone_error_rate(reference, rec)
             rows.append(row)
     return rows
@@ -299,6 +303,38 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
+def common_onsets(rows: list[dict], engines: list[str]) -> dict[str, dict]:
+    """Recognised onset errors of each engine over the reference phones that **every**
+    engine matched (per clip): the engines then answer for the same boundaries, where
+    each one's own median is over the phones it happened to find (a better recogniser
+    finds more, and harder, ones).
+
+    Returns
+    -------
+    dict
+        ``{engine: {"recognize_common_median_ms", "recognize_common_p90_ms",
+        "recognize_common_n"}}``; empty unless every engine has matched-phone rows.
+    """
+    by_clip: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        if "recognize_matched" in r:
+            by_clip.setdefault(r["clip"], {})[r["engine"]] = r
+    errors: dict[str, list[float]] = {e: [] for e in engines}
+    for runs in by_clip.values():
+        if set(runs) != set(engines):
+            continue
+        common = set.intersection(*(set(runs[e]["recognize_matched"]) for e in engines))
+        for e in engines:
+            errors[e] += [err for i, err in zip(runs[e]["recognize_matched"],
+                                                runs[e]["recognize_errors"], strict=True)
+                          if i in common]
+    if not errors or not all(errors.values()):
+        return {}
+    return {e: {"recognize_common_median_ms": _stat(np.asarray(v) * 1000, 50),
+                "recognize_common_p90_ms": _stat(np.asarray(v) * 1000, 90),
+                "recognize_common_n": len(v)} for e, v in errors.items()}
+
+
 def _table(groups: dict[tuple[str, str], dict]) -> str:
     cols = [("align_per", "aPER", ".3f"), ("align_median_ms", "a med", ".1f"),
             ("align_p90_ms", "a p90", ".1f"), ("align_bias_ms", "a bias", ".1f"),
@@ -306,6 +342,8 @@ def _table(groups: dict[tuple[str, str], dict]) -> str:
             ("offset_median_ms", "w off", ".1f"), ("offset_p90_ms", "w off90", ".1f"),
             ("recognize_per", "rPER", ".3f"), ("recognize_median_ms", "r med", ".1f"),
             ("recognize_p90_ms", "r p90", ".1f"), ("recognize_n", "r bnd", "d"),
+            ("recognize_common_median_ms", "rc med", ".1f"),
+            ("recognize_common_p90_ms", "rc p90", ".1f"), ("recognize_common_n", "rc bnd", "d"),
             ("align_s_per_s", "a s/s", ".3f"), ("recognize_s_per_s", "r s/s", ".3f")]
     head = f"{'data':<10} {'engine':<13} {'clips':>5} " + " ".join(f"{c[1]:>7}" for c in cols)
     lines = [head, "-" * len(head)]
@@ -361,10 +399,15 @@ def main(argv: list[str] | None = None) -> int:
             part = [r for r in rows if r["data"] == data and r["engine"] == engine]
             if part:
                 groups[(data, engine)] = summarize(part)
+        if len(args.engines) > 1:
+            common = common_onsets([r for r in rows if r["data"] == data], args.engines)
+            for engine, stats in common.items():
+                groups[(data, engine)].update(stats)
     print(_table(groups))
     print("aPER/rPER: phone error rate of alignment/recognition; a med/p90/bias: phone onset "
           "error of alignment (ms); w on/off: GRID word onset/offset error (ms); r med/p90: "
           "onset error of recognised phones matched to the reference (ms), r bnd: how many; "
+          "rc med/p90/bnd: the same over the reference phones every engine matched; "
           "s/s: compute seconds per audio second")
     if args.json:
         args.json.write_text(json.dumps({"summary": {f"{d}/{e}": s for (d, e), s in

@@ -137,9 +137,10 @@ def evaluate_segment(phone):
 
 
 def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
-    """Audio only, ``synth`` averages its motion with the stored mu-mlp's by default and
-    says so; ``--guide none`` turns it off, ``--guide-rank`` ranks by it, ``--guide-blend
-    1`` writes the guide's motion; bad uses are one line."""
+    """Audio only, ``synth`` averages its motion with the mean of mu-mlp's and ppg-ridge's
+    by default (fitting the one not stored) and says so; ``--guide none`` turns it off,
+    ``--guide-rank`` ranks by it, ``--guide-blend 1`` writes the guide's motion; bad uses
+    are one line."""
     import shutil
 
     from animegraph.apps.cli import SYNTH_GUIDES, main
@@ -155,8 +156,10 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
     base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
     assert main([*base, "-o", str(tmp_path / "g.npz"), "--explain"]) == 0
     captured = capsys.readouterr()
-    assert "the output the mean of that and mu-mlp's predicted motion (measured" in captured.err
-    assert "fitting" not in captured.err and "mu-mlp's predicted motion" in captured.out
+    assert ("the output the mean of that and the mean of mu-mlp's and ppg-ridge's predicted "
+            "motion (measured") in captured.err
+    assert "fitting ppg-ridge" in captured.err and "fitting mu-mlp" not in captured.err
+    assert "ppg-ridge's predicted motion" in captured.out
     assert main([*base, "-o", str(tmp_path / "p.npz"), "--guide", "none"]) == 0
     assert "predicted motion" not in capsys.readouterr().err
     assert main([*base, "-o", str(tmp_path / "r.npz"), "--guide", "mu-mlp", "--guide-rank",
@@ -164,7 +167,8 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "the output 0.5 mu-mlp's predicted motion, each phone's animes ranked" in \
         captured.err and "target_cost" in captured.out
-    assert main([*base, "-o", str(tmp_path / "w.npz"), "--guide-blend", "1"]) == 0
+    assert main([*base, "-o", str(tmp_path / "w.npz"), "--guide", "mu-mlp",
+                 "--guide-blend", "1"]) == 0
     assert main(["synth", str(wav), "--db", str(db), "--method", "mu-mlp",
                  "-o", str(tmp_path / "m.npz")]) == 0
     capsys.readouterr()
@@ -190,10 +194,49 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
         assert len(err) == 1 and needle in err[0], err
 
 
+def test_cli_synth_mean_of_two_guides(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
+    """``--guide mu-mlp+ppg-ridge``: the guide is the mean of the two models' motion (with
+    ``--guide-blend 1`` the output is that mean, as the database's components hold it),
+    fitted and stored on first use; the path line names both."""
+    import shutil
+
+    from animegraph.apps.cli import main
+    from animegraph.baselines.base import load_model, save_model
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    save_model(mlp, db)
+    wav = tmp_path / "speech.wav"
+    shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
+    base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
+    assert main([*base, "-o", str(tmp_path / "b.npz"), "--guide", "mu-mlp+ppg-ridge",
+                 "--guide-blend", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "fitting ppg-ridge" in err and "fitting mu-mlp" not in err
+    assert "the output 1 the mean of mu-mlp's and ppg-ridge's predicted motion" in err
+    assert load_model(db, "ppg-ridge") is not None  # stored: not fitted again
+    held = Model.load(db)
+
+    def components(path):  # written in world coordinates: back to the database's components
+        with np.load(path) as f:
+            return held.decomposer.transform(held.to_local(f["motion"]))
+
+    parts = []
+    for method in ("mu-mlp", "ppg-ridge"):
+        assert main(["synth", str(wav), "--db", str(db), "--method", method,
+                     "-o", str(tmp_path / f"{method}.npz")]) == 0
+        parts.append(components(tmp_path / f"{method}.npz"))
+    capsys.readouterr()
+    both = components(tmp_path / "b.npz")
+    n = min(len(both), *(len(p) for p in parts)) - 1
+    np.testing.assert_allclose(both[:n], (parts[0][:n] + parts[1][:n]) / 2, atol=1e-4)
+
+
 def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corpus, tmp_path,
                                                               capsys):
     """The tiny database has too little speech for the paper's mu-mlp: audio-only synth
-    warns and averages the animes alone; asked for by name, it is one error line."""
+    warns and is guided by ppg-ridge alone (the default guide's other half); asked for by
+    name, mu-mlp is one error line."""
     import shutil
 
     from animegraph.apps.cli import main
@@ -207,12 +250,16 @@ def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corp
     err = capsys.readouterr().err
     assert "warning: no mu-mlp guide (too little data" in err
     assert "but without its mu-mlp guide, which could not be fitted" in err
+    assert "fitting ppg-ridge" in err
     # The failure is kept with this version of the database: the next run does not fit
     # again (no "fitting" line), and says why.
     assert main([*base, "-o", str(tmp_path / "a2.npz")]) == 0
     err = capsys.readouterr().err
-    assert "fitting mu-mlp" not in err
+    assert "fitting" not in err
     assert "no mu-mlp guide (too little data" in err and "kept from an earlier run" in err
+    assert "but without its mu-mlp guide" in err
+    with np.load(tmp_path / "a2.npz") as a, np.load(tmp_path / "a.npz") as b:
+        np.testing.assert_array_equal(a["motion"], b["motion"])  # ppg-ridge stored, reused
     assert main([*base, "-o", str(tmp_path / "b.npz"), "--guide", "mu-mlp"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert "too little data" in err[-1] and not any("Traceback" in e for e in err)
@@ -256,7 +303,7 @@ def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, m
 
 
 def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, mlp, tmp_path):
-    """Audio only, the default guide (a stored mu-mlp) adds no library to a one-shot
+    """Audio only, a stored guide (mu-mlp or ppg-ridge) adds no library to a one-shot
     ``synth``'s imports: not scikit-learn, librosa or pandas (tests/test_startup.py)."""
     import json
     import shutil
@@ -270,10 +317,11 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
     db = tmp_path / "db"
     shutil.copytree(tiny_db[0], db)
     save_model(mlp, db)
+    save_model(make_estimator("ppg-ridge").fit(db), db)
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
     loaded = {}
-    for guide in ("mu-mlp", "none"):
+    for guide in ("mu-mlp", "ppg-ridge", "none"):
         code = (
             "import json, sys\n"
             "from animegraph.apps.cli import main\n"
@@ -285,7 +333,7 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
                              check=True)
         status, loaded[guide] = json.loads(out.stdout.strip().splitlines()[-1])
         assert status == 0
-    assert loaded["mu-mlp"] == loaded["none"]
+    assert loaded["mu-mlp"] == loaded["ppg-ridge"] == loaded["none"]
     assert not {"sklearn", "librosa", "pandas"} & set(loaded["mu-mlp"])
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from ingest.speech.segment import (
     align,
     boundary_errors,
     edit_alignment,
+    matched_onsets,
     phone_error_rate,
     recognize,
     segment,
@@ -298,6 +300,8 @@ def test_edit_alignment_and_scores():
     errors = boundary_errors(ref, hyp)
     np.testing.assert_allclose(errors, [0.02, 0.0, 0.02])  # AA, B, SIL onsets
     np.testing.assert_allclose(boundary_errors(ref, hyp, signed=True), [0.02, 0.0, 0.02])
+    index, signed = matched_onsets(ref, hyp)  # which reference phones: AA, B, the last SIL
+    assert index.tolist() == [1, 2, 3] and np.allclose(signed, [0.02, 0.0, 0.02])
     assert phone_error_rate(ref, hyp) == 0.0
     assert phone_error_rate(ref, [Segment("AA", 0, 0.6)]) == 0.5
     with pytest.raises(ParameterError):
@@ -368,3 +372,25 @@ def test_transcript_words():
     assert transcript_words("  ...  ") == []
     with pytest.raises(ParameterError):
         transcript_words(None)  # type: ignore[arg-type]
+
+
+def test_engines_compared_on_the_phones_both_matched():
+    """scripts/eval_segmentation.py's paired onset errors: only reference phones that
+    every engine matched in a clip count, each engine with its own error on them."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "eval_segmentation.py"
+    spec = importlib.util.spec_from_file_location("eval_segmentation", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    rows = [{"clip": "a", "engine": "x", "recognize_matched": [1, 2, 5],
+             "recognize_errors": [0.010, 0.050, 0.002]},
+            {"clip": "a", "engine": "y", "recognize_matched": [2, 5, 7],
+             "recognize_errors": [0.004, 0.006, 0.100]},
+            {"clip": "b", "engine": "x", "recognize_matched": [3],  # y missing: left out
+             "recognize_errors": [0.5]}]
+    out = script.common_onsets(rows, ["x", "y"])
+    assert out["x"]["recognize_common_n"] == out["y"]["recognize_common_n"] == 2
+    assert out["x"]["recognize_common_median_ms"] == pytest.approx(26.0)  # 50 and 2 ms
+    assert out["y"]["recognize_common_median_ms"] == pytest.approx(5.0)  # 4 and 6 ms
+    assert script.common_onsets(rows[:1], ["x", "y"]) == {}

@@ -200,7 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--method", choices=METHODS, default="anime-graph",
                      help="synthesis system: anime-graph (default, Cao et al.), or a baseline "
                      "fitted on the database on first use and stored in it: mu-mlp (Hong et "
-                     "al. 2002), hier-pca (Cosker et al.), av-hmm (Terissi et al. 2013)")
+                     "al. 2002), hier-pca (Cosker et al.), av-hmm (Terissi et al. 2013), "
+                     "ppg-ridge (beyond the papers: phone posteriors, speaker-independent)")
     syn.add_argument("--refit", action="store_true",
                      help="refit a baseline even if the database has it stored")
     mode = syn.add_mutually_exclusive_group()
@@ -251,7 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--guide", choices=(*SYNTH_GUIDES, "none"), default=None,
                      help="beyond the paper: a baseline fitted on the database (on first use, "
                      "then stored) predicts the motion, and the output is the mean of it and "
-                     "the animes' (default with audio only: mu-mlp; none: off)")
+                     "the animes' (default with audio only: mu-mlp+ppg-ridge, the mean of the "
+                     "two; none: off)")
     syn.add_argument("--guide-blend", type=_number, default=None, metavar="W",
                      help="the guide's share of the output motion, in [0, 1] (default 0.5; "
                      "0 with --guide-rank: ranking only)")
@@ -771,8 +773,13 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     t_guide = time.perf_counter()
     guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
-    if guide is None and guide_name is not None:
-        path += f"; but without its {guide_name} guide, which could not be fitted"
+    if guide_name is not None:
+        got = {g.method for g in (guide if isinstance(guide, tuple) else (guide,))
+               if g is not None}
+        missing = [part for part in guide_name.split("+") if part not in got]
+        if missing:
+            path += (f"; but without its {' and '.join(missing)} guide, which could not be "
+                     "fitted")
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -891,7 +898,7 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 
 #: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
-SYNTH_GUIDES = ("mu-mlp", "av-hmm")
+SYNTH_GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
 
 
 def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
@@ -910,7 +917,7 @@ def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
             else None if args.guide == "none" else args.guide)
     if name is None and (args.guide_blend is not None or args.guide_rank):
         flag = "--guide-rank" if args.guide_rank else "--guide-blend"
-        raise UsageError(f"animegraph synth: {flag} needs a guide (--guide mu-mlp or av-hmm; "
+        raise UsageError(f"animegraph synth: {flag} needs a guide (e.g. --guide mu-mlp; "
                          f"the default one is for audio only without a search option)")
     if name is not None and share == 0 and not args.guide_rank:
         raise UsageError("animegraph synth: --guide-blend 0 leaves the guide nothing to do: "
@@ -919,13 +926,18 @@ def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
 
 
 def _load_guide(db, name: str | None, *, asked: bool = True):
-    """The guiding baseline stored with the database ``db`` (mu-mlp restored without
-    scikit-learn), fitted and stored on first use (saying so on stderr), or None.
+    """The guiding baseline stored with the database ``db`` (mu-mlp and ppg-ridge restored
+    without scikit-learn), fitted and stored on first use (saying so on stderr), or None;
+    for a mean of several (``mu-mlp+ppg-ridge``), the tuple of those that could be had.
 
     A default guide (not ``asked``) that cannot be fitted or stored is left out with a
-    warning line: the path falls back to k-best alone."""
+    warning line: the path falls back to k-best alone (or the other guides)."""
     if name is None:
         return None
+    if "+" in name:
+        parts = [_load_guide(db, part, asked=asked) for part in name.split("+")]
+        parts = [p for p in parts if p is not None]
+        return None if not parts else parts[0] if len(parts) == 1 else tuple(parts)
     from animegraph.baselines.stored import load_forward, model_path, record_unfit, unfit_reason
 
     model = load_forward(db, name)

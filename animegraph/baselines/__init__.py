@@ -3,7 +3,9 @@
 Methods (:data:`METHODS`): ``anime-graph`` (this project: search of recorded motion,
 :mod:`animegraph.synthesis`), ``mu-mlp`` (Hong, Wen & Huang 2002, :mod:`.mu_mlp`),
 ``hier-pca`` (Cosker et al., :mod:`.hier_pca`) and ``av-hmm`` (Terissi et al. 2013,
-:mod:`.av_hmm`). The last three are compact statistical audio-to-visual mappings.
+:mod:`.av_hmm`), the three papers' compact statistical audio-to-visual mappings; and,
+beyond the papers, ``ppg-ridge`` (:mod:`.ppg_ridge`: a ridge regression of phone
+posteriorgrams, a speaker-independent guide for the audio-only path).
 
 The contract every baseline follows
 -----------------------------------
@@ -41,12 +43,13 @@ from importlib import import_module
 from db.errors import ParameterError
 
 #: Every synthesis method, the project's own first.
-METHODS = ("anime-graph", "mu-mlp", "hier-pca", "av-hmm")
+METHODS = ("anime-graph", "mu-mlp", "hier-pca", "av-hmm", "ppg-ridge")
 #: Where each baseline's estimator lives.
 ESTIMATORS = {
     "mu-mlp": "animegraph.baselines.mu_mlp:MuMlp",
     "hier-pca": "animegraph.baselines.hier_pca:HierPca",
     "av-hmm": "animegraph.baselines.av_hmm:AVHMMBaseline",
+    "ppg-ridge": "animegraph.baselines.ppg_ridge:PpgRidge",
 }
 BASELINES = tuple(ESTIMATORS)
 

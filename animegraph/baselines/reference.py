@@ -23,54 +23,11 @@ from typing import ClassVar
 import numpy as np
 
 from animegraph.baselines.base import BaselineModel, check_enough
-from animegraph.baselines.data import TrainingSet
+from animegraph.baselines.data import RMS_WINDOW, SMOOTH_SECONDS, TrainingSet, rms_envelope
 from db.errors import ParameterError
 
 __all__ = ["RMS_WINDOW", "SMOOTH_SECONDS", "FeatureLine", "Loudness", "MeanPose",
            "rms_envelope"]
-
-#: Length (s) of the window each RMS value is taken over, centred on its frame.
-RMS_WINDOW = 0.04
-#: Length (s) of the moving average smoothing the envelope (the issue's 80 ms).
-SMOOTH_SECONDS = 0.08
-
-
-def rms_envelope(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
-                 window: float = RMS_WINDOW, smooth: float = SMOOTH_SECONDS) -> np.ndarray:
-    """Smoothed RMS loudness of ``audio`` at ``times``.
-
-    Parameters
-    ----------
-    audio : np.ndarray, shape (n_samples,)
-        Mono speech, float.
-    sample_rate : int
-        Hz.
-    times : np.ndarray, shape (n_frames,)
-        Seconds.
-    window, smooth : float
-        RMS window and moving-average length (s).
-
-    Returns
-    -------
-    np.ndarray, shape (n_frames,), float64
-    """
-    x = np.asarray(audio, dtype=np.float64)
-    if x.size == 0:
-        return np.zeros(len(times))
-    power = np.concatenate(([0.0], np.cumsum(x * x)))
-    half = max(1, int(round(window * sample_rate / 2)))
-    centre = np.clip(np.round(np.asarray(times) * sample_rate).astype(np.int64), 0, len(x))
-    lo, hi = np.clip(centre - half, 0, len(x)), np.clip(centre + half, 0, len(x))
-    env = np.sqrt((power[hi] - power[lo]) / np.maximum(hi - lo, 1))
-    if len(times) > 1 and smooth > 0:
-        step = float(np.median(np.diff(times)))
-        width = max(1, int(round(smooth / step)))
-        if width > 1:
-            kernel = np.ones(width) / width
-            env = np.convolve(np.pad(env, (width // 2, width - 1 - width // 2), mode="edge"),
-                              kernel, mode="valid")
-    return env
-
 
 class MeanPose(BaselineModel):
     """Every frame the training motion's mean (a reference row, not a method)."""

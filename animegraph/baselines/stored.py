@@ -1,5 +1,5 @@
-"""Which baseline models are stored with a database, and (mu-mlp) the model itself,
-read without scikit-learn.
+"""Which baseline models are stored with a database, and (mu-mlp, ppg-ridge) the model
+itself, read without scikit-learn.
 
 ``animegraph info`` lists them, and a one-shot ``synth --guide mu-mlp`` predicts with the
 stored model (:func:`load_forward`); importing :mod:`animegraph.baselines.base` (the
@@ -91,7 +91,8 @@ def record_unfit(db_root, method: str, reason: str) -> None:
         pass
 
 #: Stored models :func:`load_forward` restores without scikit-learn: method -> class.
-FORWARD = {"mu-mlp": "animegraph.baselines.mu_mlp_forward:StoredMuMlp"}
+FORWARD = {"mu-mlp": "animegraph.baselines.mu_mlp_forward:StoredMuMlp",
+           "ppg-ridge": "animegraph.baselines.ppg_forward:StoredPpgRidge"}
 
 
 def load_forward(db_root, method: str):

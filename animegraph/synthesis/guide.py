@@ -44,8 +44,9 @@ from animegraph.synthesis.assemble import output_frames
 from db.errors import ParameterError
 from ingest.motion import interpolate
 
-#: Baselines that can guide (``synth --guide``); ``"none"`` turns guiding off.
-GUIDES = ("mu-mlp", "av-hmm")
+#: Baselines that can guide (``synth --guide``), and a mean of two (``a+b``: the mean of
+#: their predictions); ``"none"`` turns guiding off.
+GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
 #: Weight of the target cost against the audio cost, both scaled to the same median over
 #: a phone's candidates (equal weights, as chosen before measuring).
 TARGET_WEIGHT = 1.0
@@ -62,8 +63,9 @@ def guide_trajectory(model, predictor, audio: np.ndarray, sample_rate: int, phon
     Parameters
     ----------
     model : animegraph.synthesis.Model
-    predictor : animegraph.baselines.base.BaselineModel
-        Fitted on the same database (its channels are the database's).
+    predictor : animegraph.baselines.base.BaselineModel, or a sequence of them
+        Fitted on the same database (its channels are the database's). Several: the
+        mean of their predictions (equal weights, as :func:`blend_guide`).
     audio : np.ndarray, shape (n_samples,)
     sample_rate : int
     phones : sequence of Phone
@@ -76,6 +78,9 @@ def guide_trajectory(model, predictor, audio: np.ndarray, sample_rate: int, phon
     np.ndarray, shape (n_frames, n_ics)
         At ``model.graph.fps``, ``n_frames`` as :func:`output_frames`.
     """
+    if isinstance(predictor, list | tuple):
+        return np.mean([guide_trajectory(model, p, audio, sample_rate, phones, emotion=emotion)
+                        for p in predictor], axis=0)
     predictor.check_channels(model.names, f"database {model.db.root}")
     n, _ = output_frames(phones, model.graph.fps)
     emotions = getattr(predictor, "emotions_", ())

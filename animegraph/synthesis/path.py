@@ -8,9 +8,9 @@ al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search`
 script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
 too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
 single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results.md, issues 13
-and 14); and, beyond that, averaged 50/50 with the motion a statistical model (mu-mlp,
-:data:`AUDIO_ONLY_GUIDE`) predicts for the speech (:mod:`animegraph.synthesis.guide`;
-``synth --guide``). ``synth`` and ``batch`` both decide here.
+and 14); and, beyond that, averaged 50/50 with the motion two statistical models (mu-mlp
+and ppg-ridge, :data:`AUDIO_ONLY_GUIDE`) predict for the speech
+(:mod:`animegraph.synthesis.guide`; ``synth --guide``). ``synth`` and ``batch`` both decide here.
 
 Why: on the one real database with transcripts (GRID s1, 640 clips of one speaker, 159
 held out: docs/results.md, issue 14) k-best 20 was ahead of the paper's exact and
@@ -47,14 +47,17 @@ KNOWN_PHONES_CONTEXT = True
 #: What the path line says of it.
 CONTEXT_PHRASE = ", ranked by phonetic context first"
 
-#: The baseline whose predicted motion the audio-only path averages with the animes'
+#: The baseline(s) whose predicted motion the audio-only path averages with the animes'
 #: (:mod:`animegraph.synthesis.guide`, share ``GUIDE_BLEND``); None: the animes alone.
-#: mu-mlp (Hong et al. 2002): with it the audio-only path beat k-best 20 alone and mu-mlp
-#: alone on FACEGOOD and on talkingface within and across speakers (docs/results.md,
-#: "Issue 13, third session"); the two err differently (recorded motion of possibly
-#: wrong phones; a frame-wise regression that under-articulates), and the mean of two
-#: such predictors is the plainest ensemble (Hastie et al., ESL §8.8).
-AUDIO_ONLY_GUIDE: str | None = "mu-mlp"
+#: The mean of mu-mlp (Hong et al. 2002: MFCCs, so it hears the speaker as well as the
+#: phone) and ppg-ridge (:mod:`animegraph.baselines.ppg_ridge`: a recogniser's phone
+#: posteriors, speaker-independent): each alone guided better than the other on some data
+#: (mu-mlp within a speaker, ppg-ridge across speakers), and their mean beat both on
+#: FACEGOOD, talkingface within speaker and GRID, and mu-mlp alone across talkingface's
+#: speakers (docs/results.md, "Session 9"); forecast combination with equal weights
+#: (Bates & Granger 1969), as the blend with the animes is. mu-mlp alone was the guide
+#: from issue 13's third session to session 8.
+AUDIO_ONLY_GUIDE: str | None = "mu-mlp+ppg-ridge"
 
 
 def audio_only_guide(*, known_phones: bool, searched: bool = False) -> str | None:
@@ -71,11 +74,14 @@ def guide_line(name: str | None, share: float, rank: bool, *, known_phones: bool
         return ""
     ranked = (", each phone's animes ranked by their distance to it beside the audio cost"
               if rank else "")
+    parts = name.split("+")
+    motion = (f"{name}'s predicted motion" if len(parts) == 1 else
+              "the mean of " + " and ".join(f"{p}'s" for p in parts) + " predicted motion")
     if not asked and not known_phones:
-        return (f"; the output the mean of that and {name}'s predicted motion{ranked} (measured "
-                f"best on real speech without a transcript, FACEGOOD and talkingface; "
+        return (f"; the output the mean of that and {motion}{ranked} (measured "
+                f"best on real speech without a transcript, FACEGOOD, talkingface and GRID; "
                 f"--guide none for the animes alone)")
-    return f"; the output {share:g} {name}'s predicted motion{ranked} (beyond the paper)"
+    return f"; the output {share:g} {motion}{ranked} (beyond the paper)"
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,

@@ -149,7 +149,7 @@ def synthesize(
         ``"label"`` (the paper: animes of the input's phone) or ``"likely"`` (also those of
         the phones its posteriorgram makes likely,
         :func:`animegraph.synthesis.audio.likely_candidates`; needs posteriorgrams).
-    guide : animegraph.baselines.base.BaselineModel, optional
+    guide : animegraph.baselines.base.BaselineModel, or a tuple of them, optional
         Beyond the paper (:mod:`animegraph.synthesis.guide`): a baseline fitted on this
         database whose predicted motion for the audio is averaged with the synthesized
         motion (``guide_blend``) and, with ``guide_rank``, guides the choice of animes.

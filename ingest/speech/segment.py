@@ -107,6 +107,7 @@ __all__ = [
     "align_phones",
     "boundary_errors",
     "edit_alignment",
+    "matched_onsets",
     "phone_error_rate",
     "recognize",
     "segment",
@@ -936,15 +937,29 @@ def boundary_errors(
     ParameterError
         A bad segment.
     """
+    errors = matched_onsets(reference, hypothesis)[1]
+    return errors if signed else np.abs(errors)
+
+
+def matched_onsets(reference: Sequence[Segment],
+                   hypothesis: Sequence[Segment]) -> tuple[np.ndarray, np.ndarray]:
+    """The reference phones :func:`boundary_errors` compares, and their signed errors.
+
+    Returns
+    -------
+    index : numpy.ndarray, shape (n_matched,), int64
+        Each matched phone's position in ``reference``: two hypotheses can then be
+        compared on the phones both matched.
+    errors : numpy.ndarray, shape (n_matched,), float64
+        ``hypothesis.start - reference.start`` (s).
+    """
     ref = _phones_of(reference, "reference")
     hyp = _phones_of(hypothesis, "hypothesis")
-    pairs = edit_alignment([s.phone for s in ref], [s.phone for s in hyp])
-    errors = np.asarray([
-        hyp[j].start - ref[i].start
-        for i, j in pairs
-        if i is not None and j is not None and ref[i].phone == hyp[j].phone and ref[i].start > 0
-    ], dtype=np.float64)
-    return errors if signed else np.abs(errors)
+    pairs = [(i, j) for i, j in edit_alignment([s.phone for s in ref], [s.phone for s in hyp])
+             if i is not None and j is not None and ref[i].phone == hyp[j].phone
+             and ref[i].start > 0]
+    return (np.asarray([i for i, _ in pairs], dtype=np.int64),
+            np.asarray([hyp[j].start - ref[i].start for i, j in pairs], dtype=np.float64))
 
 
 def phone_error_rate(reference: Sequence[Segment], hypothesis: Sequence[Segment]) -> float:

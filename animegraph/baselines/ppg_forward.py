@@ -1,0 +1,125 @@
+"""ppg-ridge's prediction (:mod:`animegraph.baselines.ppg_ridge`) from its arrays, NumPy only.
+
+:func:`ppg_features` is the regression's input (the hama posteriorgram, the CTC blank and
+the relative loudness, each in context); :class:`PpgForward` applies the stored affine
+map; :class:`StoredPpgRidge` restores a stored model without scikit-learn, so that a
+one-shot ``synth`` guided by ppg-ridge does not import it (as
+:mod:`animegraph.baselines.mu_mlp_forward` does for mu-mlp).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from animegraph.baselines.data import rms_envelope
+from animegraph.baselines.predicting import Predicting
+from ingest.speech import ctc
+from ingest.speech.phones import PHONES, SILENCE
+from ingest.speech.posteriorgram import HOP_S, fold
+
+#: Context each side of a frame (s) and the step between context frames (s).
+CONTEXT_S = 0.2
+CONTEXT_STEP_S = 0.04
+#: The clip's loud level, against which each frame's log loudness is taken (percentile of
+#: the frames' RMS); and the floor of that ratio (-60 dB).
+LOUD_PERCENTILE = 95.0
+LOUDNESS_FLOOR = 1e-3
+#: RMS window of the loudness feature (s): one 25 ms analysis frame.
+RMS_WINDOW_S = 0.025
+#: Columns per context offset: the posteriorgram's phones, the blank, the loudness.
+N_PER_OFFSET = len(PHONES) + 1
+
+
+def context_offsets(context_s: float, step_s: float) -> np.ndarray:
+    """Offsets (s) of the context frames, earliest first: shape (2 k + 1,)."""
+    k = int(round(context_s / step_s))
+    return np.arange(-k, k + 1) * step_s
+
+
+def _at(values: np.ndarray, hop_s: float, times: np.ndarray) -> np.ndarray:
+    """Rows of ``values`` (frame ``t`` centred at ``(t + 0.5) * hop_s``) linearly
+    interpolated at ``times`` (edge rows held): shape (len(times), n_columns)."""
+    pos = np.clip(np.asarray(times) / hop_s - 0.5, 0.0, len(values) - 1.0)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, len(values) - 1)
+    frac = (pos - lo)[:, None]
+    return values[lo] * (1.0 - frac) + values[hi] * frac
+
+
+def ppg_features(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
+                 context_s: float = CONTEXT_S, step_s: float = CONTEXT_STEP_S) -> np.ndarray:
+    """The regression's input at ``times`` (s).
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (n_samples,), float in [-1, 1]
+    sample_rate : int
+    times : np.ndarray, shape (n,)
+    context_s, step_s : float
+        Context each side and step (s).
+
+    Returns
+    -------
+    np.ndarray, shape (n, N_PER_OFFSET * n_offsets), float64
+        Per context offset (earliest first): the 39 posteriorgram columns, the blank's
+        probability and the log loudness relative to the clip's loud frames.
+    """
+    probs = ctc.posteriors(audio, sample_rate)
+    frames = np.column_stack([fold(probs), probs[:, PHONES.index(SILENCE)]])
+    n_frames = len(frames)
+    level = rms_envelope(audio, sample_rate, (np.arange(n_frames) + 0.5) * HOP_S,
+                         window=RMS_WINDOW_S, smooth=0.0)
+    loud = float(np.percentile(level, LOUD_PERCENTILE)) if n_frames else 0.0
+    rel = (np.log(np.maximum(level / loud, LOUDNESS_FLOOR)) if loud > 0
+           else np.full(n_frames, np.log(LOUDNESS_FLOOR)))
+    frames = np.column_stack([frames.astype(np.float64), rel])
+    times = np.asarray(times, dtype=np.float64)
+    return np.concatenate([_at(frames, HOP_S, times + o)
+                           for o in context_offsets(context_s, step_s)], axis=1)
+
+
+class PpgForward:
+    """The prediction half of ppg-ridge: motion = [1, features] @ ``coef_``."""
+
+    context_s = CONTEXT_S
+    step_s = CONTEXT_STEP_S
+
+    def features(self, audio: np.ndarray, sample_rate: int, times: np.ndarray) -> np.ndarray:
+        """:func:`ppg_features` with this model's context."""
+        return ppg_features(audio, sample_rate, times, context_s=self.context_s,
+                            step_s=self.step_s)
+
+    def _predict(self, audio, sample_rate, times, emotion):
+        x = self.features(audio, sample_rate, times)
+        return self.coef_[0] + x @ self.coef_[1:]  # (n_frames, n_channels)
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        return {"coef": self.coef_, "alpha": np.array([self.alpha_])}
+
+    def _restore(self, arrays: dict[str, np.ndarray]) -> None:
+        self.coef_ = np.asarray(arrays["coef"], dtype=np.float64)
+        self.alpha_ = float(np.asarray(arrays["alpha"]).reshape(-1)[0])
+
+
+class StoredPpgRidge(PpgForward, Predicting):
+    """A stored ppg-ridge model that predicts without scikit-learn (:meth:`from_arrays`)."""
+
+    method = "ppg-ridge"
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], description: dict) -> StoredPpgRidge:
+        """The model of ``arrays`` and its ``description``.
+
+        Raises
+        ------
+        KeyError, ValueError, TypeError
+            On a description or arrays that do not hold a ppg-ridge model.
+        """
+        if description.get("method") != cls.method:
+            raise ValueError(f"stored model is {description.get('method')!r}, not ppg-ridge")
+        self = cls()
+        params = description["params"]
+        self.context_s, self.step_s = float(params["context_s"]), float(params["step_s"])
+        self._set_described(description)
+        self._restore(dict(arrays))
+        return self

@@ -1,0 +1,100 @@
+"""``ppg-ridge``: motion as a ridge regression of phonetic posteriorgrams (beyond the papers).
+
+Not one of the three papers Cao et al. is measured against: a speaker-independent
+statistical mapping added as a **guide** for the audio-only path
+(:mod:`animegraph.synthesis.guide`), and measured beside them as a row of its own.
+
+Why: the papers' mappings hear speech through spectral features (MFCCs), which carry
+the speaker and the channel as much as the phone, so a mapping fitted on one voice is a
+weak guide for another (mu-mlp across talkingface's speakers, docs/results.md). Speech-
+driven animation that must hold across speakers maps the output of a speech
+*recogniser's* acoustic model instead: VOCA (D. Cudeiro, T. Bolkart, C. Laidlaw,
+A. Ranjan & M. J. Black, "Capture, learning, and synthesis of 3D speaking styles",
+CVPR 2019, §4) feeds DeepSpeech's per-frame character distributions to its decoder for
+that reason, and voice conversion maps *phonetic posteriorgrams* (PPGs) for the same one
+(L. Sun, K. Li, H. Wang, S. Kang & H. Meng, "Phonetic posteriorgrams for many-to-one voice
+conversion without parallel data training", ICME 2016). Here:
+
+* **Features** (:func:`.ppg_forward.ppg_features`), at each motion frame: the hama posteriorgram
+  (:mod:`ingest.speech.posteriorgram`: CTC blank removed, renormalised over the 39
+  phones), the blank's own probability (a frame between phones), and the frame's log
+  loudness relative to the clip's loud frames (its :data:`LOUD_PERCENTILE`: gain-free,
+  so a quiet microphone is not a closed mouth), each at :data:`CONTEXT_OFFSETS` — every
+  :data:`CONTEXT_STEP_S` within ±:data:`CONTEXT_S` of the frame (about a syllable each
+  side: coarticulation reaches that far, and the within-clip reference of
+  ``scripts/diag_within_clip.py`` uses the same ±200 ms).
+* **Mapping**: one linear map to every motion channel, fitted by ridge regression on
+  standardised features and channels, its penalty chosen from :data:`ALPHAS` by
+  generalised cross-validation (Golub, Heath & Wahba 1979; scikit-learn's ``RidgeCV``),
+  so nothing is tuned by hand. Stored as the affine map of
+  :class:`~animegraph.baselines.reference.FeatureLine` (prediction is NumPy only).
+
+The settings were fixed before the lip-sync evaluation and not tuned on it. The model has
+no notion of emotion (``emotion`` is ignored) and needs ``hama`` (a core dependency).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from animegraph.baselines.base import BaselineModel, check_enough, sample_times
+from animegraph.baselines.data import TrainingSet
+from animegraph.baselines.ppg_forward import CONTEXT_S, CONTEXT_STEP_S, PpgForward
+from db.errors import ParameterError
+from ingest.speech import ctc
+
+#: Ridge penalties tried by generalised cross-validation (standardised data).
+ALPHAS = tuple(float(a) for a in np.logspace(-2, 6, 17))
+
+
+class PpgRidge(PpgForward, BaselineModel):
+    """Motion as a ridge regression of the speech's posteriorgram and loudness in context.
+
+    Parameters
+    ----------
+    context_s : float
+        Context each side of a frame (s), default :data:`.ppg_forward.CONTEXT_S`.
+    step_s : float
+        Step between context frames (s), default :data:`.ppg_forward.CONTEXT_STEP_S`.
+
+    Attributes
+    ----------
+    coef_ : np.ndarray, shape (1 + n_features, n_channels)
+        Intercept row, then one row per feature (raw, not standardised).
+    alpha_ : float
+        The penalty generalised cross-validation chose.
+    """
+
+    method: ClassVar[str] = "ppg-ridge"
+
+    def __init__(self, context_s: float = CONTEXT_S, step_s: float = CONTEXT_STEP_S):
+        self.context_s = context_s
+        self.step_s = step_s
+
+    def _fit(self, data: TrainingSet) -> None:
+        from sklearn.linear_model import RidgeCV
+
+        if not (self.context_s >= 0 and self.step_s > 0):
+            raise ParameterError(f"context_s must be >= 0 and step_s > 0, got "
+                                 f"{self.context_s}, {self.step_s}")
+        # No more motion frames than the posteriorgram has (50 a second): a 120 fps
+        # capture's extra frames repeat what their neighbours say, at 2.4 x the memory.
+        rate = min(float(data.fps), float(ctc.FRAME_RATE))
+        x, y = [], []
+        for clip, times, motion in sample_times(data.clips, rate):
+            x.append(self.features(clip.audio, clip.sample_rate, times))
+            y.append(motion)
+        x, y = np.concatenate(x), np.concatenate(y)
+        check_enough(len(x), x.shape[1] + 1, "the ppg-ridge mapping")
+        # Standardised both ways, so that the penalty treats every feature alike and the
+        # cross-validation weighs every channel alike; then mapped back to raw units.
+        x_mean, x_sd = x.mean(axis=0), x.std(axis=0)
+        x_sd[x_sd == 0] = 1.0
+        y_mean, y_sd = y.mean(axis=0), y.std(axis=0)
+        y_sd[y_sd == 0] = 1.0
+        ridge = RidgeCV(alphas=ALPHAS).fit((x - x_mean) / x_sd, (y - y_mean) / y_sd)
+        weights = ridge.coef_.T / x_sd[:, None] * y_sd[None, :]  # (n_features, n_channels)
+        self.coef_ = np.vstack([y_mean - x_mean @ weights, weights])
+        self.alpha_ = float(ridge.alpha_)
