@@ -35,6 +35,7 @@ no notion of emotion (``emotion`` is ignored) and needs ``hama`` (a core depende
 
 from __future__ import annotations
 
+import sys
 from typing import ClassVar
 
 import numpy as np
@@ -75,6 +76,7 @@ class PpgRidge(PpgForward, BaselineModel):
 
     def _fit(self, data: TrainingSet) -> None:
         from sklearn.linear_model import RidgeCV
+        from tqdm import tqdm
 
         if not (self.context_s >= 0 and self.step_s > 0):
             raise ParameterError(f"context_s must be >= 0 and step_s > 0, got "
@@ -83,7 +85,10 @@ class PpgRidge(PpgForward, BaselineModel):
         # capture's extra frames repeat what their neighbours say, at 2.4 x the memory.
         rate = min(float(data.fps), float(ctc.FRAME_RATE))
         x, y = [], []
-        for clip, times, motion in sample_times(data.clips, rate):
+        # hama hears every clip (about 0.1 s a second of speech): a bar on a terminal.
+        clips = tqdm(data.clips, unit="clip", desc="ppg-ridge: phone posteriors",
+                     leave=False, disable=None, file=sys.stderr, dynamic_ncols=True)
+        for clip, times, motion in sample_times(clips, rate):
             x.append(self.features(clip.audio, clip.sample_rate, times))
             y.append(motion)
         x, y = np.concatenate(x), np.concatenate(y)
