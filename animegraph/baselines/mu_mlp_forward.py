@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from animegraph.baselines.data import audio_features_at
-from animegraph.baselines.predicting import Predicting
+from animegraph.baselines.predicting import Stored
 
 
 def mlp_forward(x: np.ndarray, weights: list[np.ndarray], biases: list[np.ndarray]) -> np.ndarray:
@@ -101,32 +101,16 @@ class MuMlpForward:
                              if group(arrays, f"expr/{e}/")}
 
 
-class StoredMuMlp(MuMlpForward, Predicting):
+class StoredMuMlp(MuMlpForward, Stored):
     """A stored mu-mlp model that predicts (:meth:`Predicting.predict`) without
-    scikit-learn; built by :meth:`from_arrays` from what
+    scikit-learn; built by :meth:`Stored.from_arrays` from what
     :func:`animegraph.baselines.base.save_model` wrote."""
 
     method = "mu-mlp"
 
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], description: dict) -> StoredMuMlp:
-        """The model of ``arrays`` and its ``description`` (method, params, channels,
-        groups, kind, fps, emotions).
-
-        Raises
-        ------
-        KeyError, ValueError, TypeError
-            On a description or arrays that do not hold a mu-mlp model.
-        """
-        if description.get("method") != cls.method:
-            raise ValueError(f"stored model is {description.get('method')!r}, not mu-mlp")
-        self = cls()
-        params = description["params"]
+    def _set_params(self, params: dict) -> None:
         self.n_mfcc, self.context = int(params["n_mfcc"]), int(params["context"])
         self.frame_rate = float(params["frame_rate"])
-        self._set_described(description)
-        self._restore(dict(arrays))
-        return self
 
 
 def group(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:

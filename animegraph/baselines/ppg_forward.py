@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from animegraph.baselines.data import rms_envelope
-from animegraph.baselines.predicting import Predicting
+from animegraph.baselines.predicting import Stored
 from ingest.speech import ctc
 from ingest.speech.phones import PHONES, SILENCE
 from ingest.speech.posteriorgram import HOP_S, fold
@@ -101,25 +101,11 @@ class PpgForward:
         self.alpha_ = float(np.asarray(arrays["alpha"]).reshape(-1)[0])
 
 
-class StoredPpgRidge(PpgForward, Predicting):
-    """A stored ppg-ridge model that predicts without scikit-learn (:meth:`from_arrays`)."""
+class StoredPpgRidge(PpgForward, Stored):
+    """A stored ppg-ridge model that predicts without scikit-learn
+    (:meth:`~animegraph.baselines.predicting.Stored.from_arrays`)."""
 
     method = "ppg-ridge"
 
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], description: dict) -> StoredPpgRidge:
-        """The model of ``arrays`` and its ``description``.
-
-        Raises
-        ------
-        KeyError, ValueError, TypeError
-            On a description or arrays that do not hold a ppg-ridge model.
-        """
-        if description.get("method") != cls.method:
-            raise ValueError(f"stored model is {description.get('method')!r}, not ppg-ridge")
-        self = cls()
-        params = description["params"]
+    def _set_params(self, params: dict) -> None:
         self.context_s, self.step_s = float(params["context_s"]), float(params["step_s"])
-        self._set_described(description)
-        self._restore(dict(arrays))
-        return self

@@ -132,3 +132,33 @@ class Predicting:
                 f"the {self.method} model has {len(self.channels_)} channels and {where} "
                 f"{len(names)}: they do not match (e.g. new {extra or 'none'}, missing "
                 f"{lacking or 'none'}); refit the model on it")
+
+
+class Stored(Predicting):
+    """A stored model restored for prediction alone, without scikit-learn (a mixin beside
+    the method's prediction half): :meth:`from_arrays` checks the method, sets the
+    hyper-parameters prediction needs (``_set_params``), the described attributes and the
+    learned arrays."""
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], description: dict):
+        """The model of ``arrays`` and its ``description`` (method, params, channels,
+        groups, kind, fps, emotions), as :func:`animegraph.baselines.base.save_model`
+        wrote them.
+
+        Raises
+        ------
+        KeyError, ValueError, TypeError
+            On a description or arrays that do not hold a model of this method.
+        """
+        if description.get("method") != cls.method:
+            raise ValueError(f"stored model is {description.get('method')!r}, not {cls.method}")
+        self = cls()
+        self._set_params(description["params"])
+        self._set_described(description)
+        self._restore(dict(arrays))
+        return self
+
+    def _set_params(self, params: dict) -> None:
+        """The stored hyper-parameters that prediction needs."""
+        raise NotImplementedError
