@@ -20,6 +20,7 @@ from animegraph.baselines.base import (
 from animegraph.baselines.data import audio_features, training_set
 from animegraph.baselines.hier_pca import HierPca, _pca, _speech_to_d
 from animegraph.baselines.mu_mlp import MuMlp
+from animegraph.baselines.ppg_forward import N_PER_OFFSET
 from animegraph.baselines.ppg_ridge import ALPHAS, PpgRidge
 from animegraph.baselines.stored import FORWARD, load_forward
 from animegraph.motion import measures
@@ -169,11 +170,12 @@ def test_ppg_ridge_features_are_gain_free_and_in_context(split):
     times = np.arange(len(clip.motion)) / clip.fps
     est = PpgRidge()
     f = est.features(audio, clip.sample_rate, times)
-    assert f.shape == (len(times), 41 * 11) and np.isfinite(f).all()
+    assert f.shape == (len(times), N_PER_OFFSET * 11) and np.isfinite(f).all()
     np.testing.assert_allclose(est.features(audio * 0.1, clip.sample_rate, times), f,
                                atol=1e-3)  # float32 rounding in the model
     shifted = est.features(audio, clip.sample_rate, times + 0.04)  # one step later
-    np.testing.assert_allclose(shifted[:, 5 * 41:6 * 41], f[:, 6 * 41:7 * 41], atol=1e-9)
+    k = N_PER_OFFSET  # offset 0 is block 5 of 11, +40 ms block 6
+    np.testing.assert_allclose(shifted[:, 5 * k:6 * k], f[:, 6 * k:7 * k], atol=1e-9)
     with pytest.raises(ParameterError, match="step_s"):
         PpgRidge(step_s=0).fit(split[0])
 

@@ -15,21 +15,23 @@ that reason, and voice conversion maps *phonetic posteriorgrams* (PPGs) for the 
 (L. Sun, K. Li, H. Wang, S. Kang & H. Meng, "Phonetic posteriorgrams for many-to-one voice
 conversion without parallel data training", ICME 2016). Here:
 
-* **Features** (:func:`.ppg_forward.ppg_features`), at each motion frame: the hama posteriorgram
-  (:mod:`ingest.speech.posteriorgram`: CTC blank removed, renormalised over the 39
-  phones), the blank's own probability (a frame between phones), and the frame's log
-  loudness relative to the clip's loud frames (its :data:`LOUD_PERCENTILE`: gain-free,
-  so a quiet microphone is not a closed mouth), each at :data:`CONTEXT_OFFSETS` — every
-  :data:`CONTEXT_STEP_S` within ±:data:`CONTEXT_S` of the frame (about a syllable each
-  side: coarticulation reaches that far, and the within-clip reference of
-  ``scripts/diag_within_clip.py`` uses the same ±200 ms).
-* **Mapping**: one linear map to every motion channel, fitted by ridge regression on
-  standardised features and channels, its penalty chosen from :data:`ALPHAS` by
-  generalised cross-validation (Golub, Heath & Wahba 1979; scikit-learn's ``RidgeCV``),
-  so nothing is tuned by hand. Stored as the affine map of
-  :class:`~animegraph.baselines.reference.FeatureLine` (prediction is NumPy only).
+* **Features** (:func:`.ppg_forward.ppg_features`), at each motion frame: the hama
+  posteriorgram (:mod:`ingest.speech.posteriorgram`: CTC blank removed, renormalised over
+  the 39 phones), the blank's own probability (a frame between phones), and the frame's
+  log loudness relative to the clip's loud frames (:data:`.ppg_forward.LOUD_PERCENTILE`:
+  gain-free, so a quiet microphone is not a closed mouth), each at every
+  :data:`.ppg_forward.CONTEXT_STEP_S` within ±:data:`.ppg_forward.CONTEXT_S` of the frame
+  (about a syllable each side: coarticulation reaches that far, and the within-clip
+  reference of ``scripts/diag_within_clip.py`` uses the same ±200 ms).
+* **Mapping**: one affine map to every motion channel, fitted by ridge regression on
+  standardised features and channels (motion sampled at most at the posteriorgram's
+  50 frames a second), its penalty chosen from :data:`ALPHAS` by generalised
+  cross-validation (Golub, Heath & Wahba 1979; scikit-learn's ``RidgeCV``), so nothing
+  is tuned by hand. Stored as its coefficients; prediction is NumPy only
+  (:class:`.ppg_forward.StoredPpgRidge`).
 
-The settings were fixed before the lip-sync evaluation and not tuned on it. The model has
+The settings were fixed before the lip-sync evaluation and not tuned on it (the range of
+penalties was widened once, when the first one's largest value was chosen). The model has
 no notion of emotion (``emotion`` is ignored) and needs ``hama`` (a core dependency).
 """
 
