@@ -378,3 +378,35 @@ def test_stored_model_with_arrays_that_do_not_fit_is_one_line(method, fitted, ti
             if code != 0:  # a change the model tolerates may still predict
                 assert code == 1 and err[-1].startswith("animegraph: error:") \
                     and not out.exists(), (name, err)
+
+
+@pytest.mark.parametrize(("method", "params"), [
+    ("mu-mlp", {"context": 10**9}), ("mu-mlp", {"frame_rate": 0.0}),
+    ("ppg-ridge", {"step_s": 1e-12}), ("ppg-ridge", {"context_s": float("nan")})])
+def test_stored_settings_that_do_not_fit_the_arrays_are_one_line(method, params, fitted, split,
+                                                                 tiny_db, tiny_corpus,
+                                                                 tmp_path, capsys):
+    """A stored model's description is someone else's data too: a context of 10**9 frames
+    (or a step of 1e-12 s) would have the dry run build features for ever. Read as the
+    model of ``synth --method`` and as a stored guide, it is one error line."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from animegraph.baselines.stored import META_KEY
+
+    est = fitted.get(method) or make_estimator(method, **SMALL[method]).fit(split[0])
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    path = save_model(est, db)
+    table = pq.read_table(path)
+    meta = json.loads(table.schema.metadata[META_KEY])
+    meta["params"] |= params
+    pq.write_table(table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()}), path)
+    wav = sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0]
+    for flags in (["--method", method], ["--guide", method, "--phones-engine", "pocketsphinx"]):
+        out = tmp_path / "out.npz"
+        assert main(["synth", str(wav), "--db", str(db), *flags, "-o", str(out)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("animegraph: error:") and not out.exists(), err
+        assert not any("Traceback" in e for e in err)

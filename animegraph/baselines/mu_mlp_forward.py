@@ -88,6 +88,14 @@ class MuMlpForward:
         return self.m00_ + v[:, :a0] @ self.m0_.T + e["mk0"] + v[:, a0:] @ e["mk"].T
 
     def _restore(self, arrays: dict[str, np.ndarray]) -> None:
+        # Checked before any prediction: a stored context out of step with the features'
+        # mean (e.g. a context of 10**9 frames) would build features no weight reads.
+        width = self.n_mfcc * (2 * self.context + 1)
+        if not (self.n_mfcc >= 1 and self.context >= 0 and np.isfinite(self.frame_rate)
+                and self.frame_rate > 0 and np.shape(arrays["x_mean"]) == (width,)):
+            raise ValueError(f"n_mfcc {self.n_mfcc}, context {self.context} and frame rate "
+                             f"{self.frame_rate} do not fit its features' mean of shape "
+                             f"{np.shape(arrays['x_mean'])}")
         for name in ("m00", "m0", "x_mean", "x_std", "u_mean", "u_std"):
             setattr(self, f"{name}_", arrays[name])
         self.utterance_variance_ = float(arrays["utterance_variance"])

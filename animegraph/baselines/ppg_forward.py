@@ -13,6 +13,7 @@ import numpy as np
 
 from animegraph.baselines.data import rms_envelope
 from animegraph.baselines.predicting import Stored
+from db.errors import ParameterError
 from ingest.speech import ctc
 from ingest.speech.phones import PHONES, SILENCE
 from ingest.speech.posteriorgram import HOP_S, fold
@@ -30,9 +31,24 @@ RMS_WINDOW_S = 0.025
 N_PER_OFFSET = len(PHONES) + 1
 
 
+def n_offsets(context_s: float, step_s: float) -> int:
+    """How many context frames ``context_s`` and ``step_s`` give (2 k + 1), computed
+    without building them: a stored model's settings are someone else's data.
+
+    Raises
+    ------
+    ParameterError
+        Unless ``context_s >= 0`` and ``step_s > 0``, both finite.
+    """
+    if not (np.isfinite(context_s) and np.isfinite(step_s) and context_s >= 0 and step_s > 0):
+        raise ParameterError(f"context_s must be >= 0 and step_s > 0, got {context_s}, "
+                             f"{step_s}")
+    return 2 * int(round(context_s / step_s)) + 1
+
+
 def context_offsets(context_s: float, step_s: float) -> np.ndarray:
-    """Offsets (s) of the context frames, earliest first: shape (2 k + 1,)."""
-    k = int(round(context_s / step_s))
+    """Offsets (s) of the context frames, earliest first: shape (:func:`n_offsets`,)."""
+    k = n_offsets(context_s, step_s) // 2
     return np.arange(-k, k + 1) * step_s
 
 
@@ -97,7 +113,14 @@ class PpgForward:
         return {"coef": self.coef_, "alpha": np.array([self.alpha_])}
 
     def _restore(self, arrays: dict[str, np.ndarray]) -> None:
-        self.coef_ = np.asarray(arrays["coef"], dtype=np.float64)
+        coef = np.asarray(arrays["coef"], dtype=np.float64)
+        # Checked before any prediction: a context out of step with the coefficients
+        # (e.g. a stored step of 1e-9 s) would build features no coefficient reads.
+        if coef.ndim != 2 or len(coef) != 1 + N_PER_OFFSET * n_offsets(self.context_s,
+                                                                        self.step_s):
+            raise ValueError(f"coefficients of shape {coef.shape} do not fit a context of "
+                             f"{self.context_s} s every {self.step_s} s")
+        self.coef_ = coef
         self.alpha_ = float(np.asarray(arrays["alpha"]).reshape(-1)[0])
 
 

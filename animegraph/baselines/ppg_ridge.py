@@ -44,8 +44,7 @@ import numpy as np
 
 from animegraph.baselines.base import BaselineModel, check_enough, sample_times
 from animegraph.baselines.data import TrainingSet
-from animegraph.baselines.ppg_forward import CONTEXT_S, CONTEXT_STEP_S, PpgForward
-from db.errors import ParameterError
+from animegraph.baselines.ppg_forward import CONTEXT_S, CONTEXT_STEP_S, PpgForward, n_offsets
 from ingest.speech import ctc
 
 #: Ridge penalties tried by generalised cross-validation (standardised data).
@@ -80,9 +79,7 @@ class PpgRidge(PpgForward, BaselineModel):
         from sklearn.linear_model import RidgeCV
         from tqdm import tqdm
 
-        if not (self.context_s >= 0 and self.step_s > 0):
-            raise ParameterError(f"context_s must be >= 0 and step_s > 0, got "
-                                 f"{self.context_s}, {self.step_s}")
+        n_offsets(self.context_s, self.step_s)  # ParameterError on a bad context
         # No more motion frames than the posteriorgram has (50 a second): a 120 fps
         # capture's extra frames repeat what their neighbours say, at 2.4 x the memory.
         rate = min(float(data.fps), float(ctc.FRAME_RATE))
