@@ -32,6 +32,7 @@ from scipy.special import logsumexp
 
 from animegraph.baselines.base import BaselineModel, sample_times
 from animegraph.baselines.data import audio_features_at, resample_to
+from animegraph.baselines.predicting import MAX_STORED_COUNT, MAX_STORED_RATE, check_stored_setting
 from db.errors import DataError, ParameterError
 
 # --- the paper's constants -------------------------------------------------------------
@@ -715,8 +716,18 @@ class AVHMMBaseline(BaselineModel):
             self.explained_variance_ratio_ = np.asarray(arrays["explained_variance_ratio"])
         except KeyError as exc:
             raise DataError(f"stored av-hmm model lacks {exc}") from None
+        # Checked before any prediction: stored settings are someone else's data (a context
+        # of 10**9 frames, a feature rate of 0 Hz or 10**12 inversion steps would be a
+        # hang or a crash); the features they give must be the HMM's audio dimension.
+        self._validate_features()
+        self._hmm()._validate()
+        check_stored_setting("feature_fps", self.feature_fps, MAX_STORED_RATE)
+        check_stored_setting("max_iter", self.max_iter, MAX_STORED_COUNT)
         self.hmm_ = self._hmm().set_state(
             {k[len("hmm_"):]: v for k, v in arrays.items() if k.startswith("hmm_")})
+        if self.hmm_.n_audio_ != self.n_mfcc * (2 * self.context + 1):
+            raise ValueError(f"{self.n_mfcc} cepstra with {self.context} frames of context do "
+                             f"not fit the HMM's {self.hmm_.n_audio_} audio dimensions")
         if (self.components_.ndim != 2 or self.components_.shape[1] != len(self.channels_)
                 or self.motion_mean_.shape != (len(self.channels_),)
                 or self.components_.shape[0] != self.hmm_.n_visual_):

@@ -47,6 +47,7 @@ from sklearn.mixture import GaussianMixture
 
 from animegraph.baselines.base import BaselineModel, check_enough, sample_times
 from animegraph.baselines.data import TrainingSet, audio_features_at, resample_to
+from animegraph.baselines.predicting import MAX_STORED_COUNT, MAX_STORED_RATE, check_stored_setting
 from animegraph.motion.measures import lip_channels
 from db.errors import DataError, ParameterError
 
@@ -153,7 +154,8 @@ class HierPca(BaselineModel):
         return audio_features_at(audio, sample_rate, times, n_mfcc=self.n_mfcc, context=0,
                                  context_hop_s=1.0 / self.frame_rate)
 
-    def _fit(self, data: TrainingSet) -> None:
+    def _check_params(self) -> None:
+        """ParameterError unless the hyper-parameters are valid (on fit and on restore)."""
         for name in ("n_clusters", "n_mfcc", "average_frames"):
             value = getattr(self, name)
             if not isinstance(value, int | np.integer) or value < 1:
@@ -162,6 +164,9 @@ class HierPca(BaselineModel):
             raise ParameterError("frame_rate and clamp_sd must be positive")
         if not 0 < self.speech_variance <= 1:
             raise ParameterError(f"speech_variance must be in (0, 1], got {self.speech_variance!r}")
+
+    def _fit(self, data: TrainingSet) -> None:
+        self._check_params()
         speech, motion = [], []
         for clip, times, m in sample_times(data.clips, self.frame_rate):
             speech.append(self._speech_vectors(clip.audio, clip.sample_rate, times))
@@ -247,6 +252,14 @@ class HierPca(BaselineModel):
 
     def _restore(self, arrays: dict[str, np.ndarray]) -> None:
         self.a_mean_, self.a_p_, self.s_icov_ = arrays["a_mean"], arrays["a_p"], arrays["s_icov"]
+        # Checked before any prediction: stored settings are someone else's data (a rate
+        # of 10**12 Hz, 10**9 cepstra or frames averaged would be a hang, 0 Hz a crash).
+        self._check_params()
+        check_stored_setting("frame_rate", self.frame_rate, MAX_STORED_RATE)
+        check_stored_setting("average_frames", self.average_frames, MAX_STORED_COUNT)
+        if np.shape(self.a_mean_) != (self.n_mfcc,):
+            raise ValueError(f"a speech mean of shape {np.shape(self.a_mean_)} does not fit "
+                             f"{self.n_mfcc} cepstra")
         self.node_channels_, self.nodes_ = {}, {}
         for name in NODES:
             if f"{name}/mean" not in arrays:

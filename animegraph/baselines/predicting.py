@@ -21,6 +21,21 @@ from db.errors import DataError, ParameterError
 BLAS_THREADS = 1
 
 
+#: The largest frame rate (Hz) and count (frames averaged, iterations) a *stored* model's
+#: settings may ask for. A stored description is someone else's data: a feature rate of
+#: 10**9 Hz or an inversion of 10**12 iterations is a hang, not a model (motion is
+#: captured at 24-240 fps; the papers iterate tens of times).
+MAX_STORED_RATE = 1000.0
+MAX_STORED_COUNT = 10_000
+
+
+def check_stored_setting(name: str, value: object, high: float) -> None:
+    """ValueError unless a stored setting is a finite number in (0, ``high``]."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
+            or not (np.isfinite(value) and 0 < value <= high):
+        raise ValueError(f"its {name} {value!r} is not in (0, {high:g}]")
+
+
 def implausible(method: str, where: str, exc: Exception) -> DataError:
     """The one-line error of a stored ``method`` model whose arrays do not work."""
     return DataError(f"stored {method} model {where} is implausible ({exc}); "
