@@ -255,6 +255,62 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
         synthesize(model, audio, sr, labels=labels, k_best=0)
 
 
+def test_recording_means_are_each_clips_mean_motion(model):
+    from animegraph.synthesis.assemble import recording_means
+
+    graph = model.graph
+    means = recording_means(graph)
+    assert means.shape == (len(graph.clip_ids), graph.motion_values.shape[1])
+    for c in (0, len(graph.clip_ids) - 1):
+        nodes = np.flatnonzero(graph.node_clip == c)
+        frames = np.concatenate([graph.motion_values[graph.motion_offsets[a]:
+                                                     graph.motion_offsets[a + 1]]
+                                 for a in nodes])
+        np.testing.assert_allclose(means[c], frames.mean(axis=0, dtype=np.float64), rtol=1e-9,
+                                   atol=1e-9)
+
+
+def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
+    from animegraph.synthesis import recentres
+    from animegraph.synthesis.assemble import output_frames, recording_means
+
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    # By default only with several speakers: the tiny corpus has one.
+    assert PostOptions().recentre is None and model.speakers == ("synth01",)
+    assert not recentres(model) and recentres(model, PostOptions(recentre=True))
+    raw = synthesize(model, audio, sr, labels=labels, k_best=4,
+                     options=PostOptions(smooth=False, recentre=False))
+    rc = synthesize(model, audio, sr, labels=labels, k_best=4,
+                    options=PostOptions(smooth=False, recentre=True))
+    default = synthesize(model, audio, sr, labels=labels, k_best=4,
+                         options=PostOptions(smooth=False))
+    np.testing.assert_array_equal(default.ics, raw.ics)
+    picked = [[(a["node"], a["weight"]) for a in animes] for animes in rc.blended]
+    assert picked == [[(a["node"], a["weight"]) for a in animes] for animes in raw.blended]
+    # Unsmoothed, each phone's frames move by one pose: minus the weighted mean of its
+    # animes' recording means, plus the utterance's offset (their mean over its frames).
+    means = recording_means(model.graph)
+    _, ranges = output_frames(rc.phones, model.graph.fps)
+    shift = np.zeros_like(rc.ics)
+    for animes, (s, b) in zip(picked, ranges, strict=True):
+        nodes, w = zip(*animes, strict=True)
+        w = np.array(w) / np.sum(w)  # the explained weights are rounded
+        shift[s:b] = -w @ means[model.graph.node_clip[list(nodes)]]
+    shift -= shift.mean(axis=0)
+    np.testing.assert_allclose(rc.ics - raw.ics, shift, atol=1e-3 * np.abs(shift).max())
+    assert np.abs(shift).max() > 1e-3  # the tiny corpus' recordings differ in pose
+    args = ["synth", str(stem.with_suffix(".wav")), "--db", str(model.db.root),
+            "--labels", f"{stem}.phones.csv", "-o", str(stem.parent / "x.npz")]
+    assert main([*args, "--exact", "--recentre"]) == 2  # one anime a phone: nothing to do
+    capsys.readouterr()
+    assert main([*args, "--k-best", "4", "--recentre"]) == 0
+    assert "recording's mean pose (as asked)" in capsys.readouterr().err
+    assert main([*args, "--k-best", "4"]) == 0
+    assert "mean pose" not in capsys.readouterr().err
+
+
 def test_k_best_ranks_by_phonetic_context_when_asked(model, held_out):
     from animegraph.search import problem
     from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT

@@ -237,6 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
+                     help="beyond the paper: k-best averages each anime relative to its "
+                     "recording's mean pose, the utterance taking the mean pose of the "
+                     "recordings drawn on (default: on when the database's clips name more "
+                     "than one speaker, whose rest poses differ; off with one)")
     syn.add_argument("--context-ranking", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: rank each phone's k-best animes by phonetic "
                      "context (their recorded neighbour phones against the input's) before "
@@ -705,6 +710,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         Model,
         PostOptions,
         backoffs,
+        recentres,
         synthesize,
         write_explain,
         write_motion,
@@ -742,6 +748,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.helper is not None and k_best:
         raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
                          "phone) at its jumps; --k-best averages animes instead: give one")
+    if args.recentre is not None and not k_best:
+        raise UsageError("animegraph synth: --recentre changes how k-best averages "
+                         "animes; the paper's search (--exact, --window, --search) takes one "
+                         "anime a phone")
     audio_cost = args.audio_cost or "plp"
     if audio_cost != "plp":
         path += f"; audio cost {audio_cost} (beyond the paper)"
@@ -784,7 +794,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
-                          smooth=not args.no_smooth, helper=args.helper or PostOptions.helper)
+                          smooth=not args.no_smooth, helper=args.helper or PostOptions.helper,
+                          recentre=args.recentre)
     if choice.probabilities is not None:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
@@ -809,6 +820,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path = path.replace(CONTEXT_PHRASE, "")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
+    if k_best and recentres(model, options):
+        why = "as asked" if args.recentre else f"{len(model.speakers)} speakers"
+        path += f"; each anime relative to its recording's mean pose ({why})"
     print(f"animegraph: path: {path}", file=sys.stderr)
     for warning in out.warnings:
         print(f"animegraph: warning: {warning}", file=sys.stderr)
@@ -1017,7 +1031,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--audio-cost", args.audio_cost is not None),
         ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
         ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank),
-        ("--context-ranking", args.context_ranking is not None)) if on]
+        ("--context-ranking", args.context_ranking is not None),
+        ("--recentre", args.recentre is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "

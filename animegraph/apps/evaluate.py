@@ -45,10 +45,20 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
            "kbest20-pg", "kbest20-mix", "kbest20-pg-likely", "kbest20-mix-likely",
            "kbest20-guided", "kbest20-guided-blend", "kbest20-blend", "kbest20-ctx",
-           "kbest20-ctx-blend")
+           "kbest20-ctx-blend", "kbest20-raw", "kbest20-ctx-raw", "kbest20-raw-blend",
+           "kbest20-ctx-raw-blend", "kbest20-rc", "kbest20-ctx-rc", "kbest20-rc-blend",
+           "kbest20-ctx-rc-blend")
 #: The methods scored unless others are asked for (those of the paper's audio cost;
 #: ``kbest20-ctx`` is ``synth``'s default with known phones).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
+#: ``kbest<K>[-ctx]-raw``: the K animes averaged as recorded, never relative to their
+#: recordings' mean poses (``PostOptions(recentre=False)``; the k-best rows recentre as
+#: ``synth`` does by default: with more than one speaker in the database).
+RAW_SUFFIX = "-raw"
+#: ``kbest<K>[-ctx]-rc``: always recentred (``PostOptions(recentre=True)``), whatever the
+#: number of speakers.
+RECENTRE_SUFFIX = "-rc"
+RECENTRE_SUFFIXES = {RAW_SUFFIX: False, RECENTRE_SUFFIX: True}
 #: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
 #: (``animegraph.search.k_best(..., context=True)``; beyond the paper).
 CONTEXT_SUFFIX = "-ctx"
@@ -140,10 +150,12 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     search input of :func:`heldout_query`, and its number of jump matches."""
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
+        recentre = RECENTRE_SUFFIXES.get(method[method.rfind("-"):])  # None: synth's default
+        method = method.removesuffix(RAW_SUFFIX).removesuffix(RECENTRE_SUFFIX)
         context = method.endswith(CONTEXT_SUFFIX)
         k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,
-                             context=context)[0], jumps
+                             context=context, options=PostOptions(recentre=recentre))[0], jumps
     options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
                else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps

@@ -28,6 +28,7 @@ from animegraph.synthesis.pipeline import (
     Synthesis,
     map_emotion,
     query_phones,
+    recentres,
     render_k_best,
     render_nodes,
     score_candidates,
@@ -37,6 +38,6 @@ from animegraph.synthesis.pipeline import (
 __all__ = [
     "HELPER_MODES", "Model", "Phone", "PostOptions", "Synthesis", "backoffs", "blend_k_best",
     "explain_record", "map_emotion", "query_phones", "rank_weights", "read_database_motion",
-    "render_k_best", "render_nodes", "score_candidates", "synthesize", "to_world",
+    "recentres", "render_k_best", "render_nodes", "score_candidates", "synthesize", "to_world",
     "warp_positions", "write_explain", "write_motion",
 ]

@@ -56,7 +56,8 @@ class Phone:
 
 @dataclass(frozen=True)
 class PostOptions:
-    """Which post-processing steps run (all, as in the paper, by default)."""
+    """Which post-processing steps run (all, as in the paper, by default), and how k-best
+    averages (beyond the paper)."""
 
     time_warp: bool = True  # DTW on prosody; False: stretch each anime uniformly
     blend: bool = True  # blend at jump matches
@@ -65,6 +66,12 @@ class PostOptions:
     #: "anchored" displaced onto the two animes' poses at the blend's ends (:func:`anchor`);
     #: "anchored-nonspeech" the same for all but the speech components (§5.1.3).
     helper: str = "paper"
+    #: Beyond the paper, k-best only (:func:`blend_k_best`): each anime enters the mean
+    #: relative to its recording's mean pose, and the utterance takes the mean pose of the
+    #: recordings it draws on. None (the default): when the database's clips name more
+    #: than one speaker (:func:`animegraph.synthesis.recentres`); False: the animes as
+    #: recorded.
+    recentre: bool | None = None
 
     def __post_init__(self) -> None:
         if self.helper not in HELPER_MODES:
@@ -305,6 +312,27 @@ def rank_weights(n: int) -> np.ndarray:
     return w / w.sum()
 
 
+def recording_means(graph: AnimeGraph) -> np.ndarray:
+    """Each recording's mean motion over its animes' frames.
+
+    Returns
+    -------
+    np.ndarray, shape (len(graph.clip_ids), n_ics)
+        Row ``c``: the mean of ``graph.motion_values`` over the frames of the animes of
+        clip ``c`` (zeros for a clip without frames).
+    """
+    off = graph.motion_offsets
+    counts = np.diff(off).astype(np.float64)
+    sums = np.zeros((len(counts), graph.motion_values.shape[1]))
+    full = counts > 0
+    sums[full] = np.add.reduceat(graph.motion_values, off[:-1][full], axis=0, dtype=np.float64)
+    n_clips = len(graph.clip_ids)
+    total = np.zeros((n_clips, sums.shape[1]))
+    np.add.at(total, graph.node_clip, sums)
+    frames = np.bincount(graph.node_clip, weights=counts, minlength=n_clips)
+    return total / np.maximum(frames, 1.0)[:, None]
+
+
 def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequence[Phone], *,
                  cutoffs: np.ndarray | None = None,
                  options: PostOptions | None = None) -> np.ndarray:
@@ -318,6 +346,21 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     real data with recognized phones, docs/results.md). Averaging replaces the blending
     at jump matches (``options.blend`` is not used): averaged neighbours are no longer
     single recordings to join.
+
+    With ``options.recentre`` true each anime enters the mean as its motion
+    relative to its recording's mean pose (:func:`recording_means`), and the utterance's
+    motion is then offset by the mean pose of the recordings it drew on (weighted as the
+    animes, over all its frames). Recordings differ in their rest pose (another speaker,
+    session, head placement or tracking), and a phone's animes drawn from several of them
+    carry those differences as a jump from phone to phone that no speech made: the
+    per-speaker and per-session mean normalisation of speech features (cepstral mean
+    normalisation), and the motion relative to the speaker's own face that speech-driven
+    animation across speakers predicts (Cudeiro et al., "Capture, learning, and synthesis
+    of 3D speaking styles", CVPR 2019, §4: displacements from each subject's template).
+    One offset for the whole utterance keeps what the recordings share, such as an
+    emotion's expression when the animes are of one emotion. ``recentre`` False or None
+    averages the animes as recorded (synthesis decides None beforehand:
+    :func:`animegraph.synthesis.recentres`).
 
     Parameters
     ----------
@@ -338,10 +381,20 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     opts = options or PostOptions()
     n, ranges = output_frames(phones, graph.fps)
     motion = np.zeros((n, graph.motion_values.shape[1]))
+    means = recording_means(graph) if opts.recentre else None
+    offset, used = np.zeros(motion.shape[1]), 0.0
     for nodes, phone, (s, b) in zip(ranked, phones, ranges, strict=True):
-        pieces = [warp_anime(graph, int(a), phone, b - s, time_warp=opts.time_warp)
-                  for a in nodes]
-        motion[s:b] = np.tensordot(rank_weights(len(nodes)), np.array(pieces), axes=1)
+        pieces = np.array([warp_anime(graph, int(a), phone, b - s, time_warp=opts.time_warp)
+                           for a in nodes])
+        w = rank_weights(len(nodes))
+        if means is not None and b > s:
+            own = means[graph.node_clip[np.asarray(nodes, dtype=np.int64)]]  # (k, n_ics)
+            pieces = pieces - own[:, None, :]
+            offset += (b - s) * (w @ own)
+            used += b - s
+        motion[s:b] = np.tensordot(w, pieces, axes=1)
+    if means is not None and used > 0:
+        motion += offset / used
     if opts.smooth and cutoffs is not None:
         motion = smooth(motion, cutoffs, graph.fps)
     return motion

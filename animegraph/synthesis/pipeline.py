@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -347,8 +347,21 @@ def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
                   context: bool = False) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
     """Motion (independent components) averaging the ``k`` best animes of each phone around
     the matched ``nodes`` (beyond the paper; :func:`animegraph.search.k_best`, ranked by
-    phonetic context first with ``context``), and those animes per phone, best first."""
+    phonetic context first with ``context``), and those animes per phone, best first.
+    ``options.recentre`` None is decided by :func:`recentres`."""
     ranked = ranked_candidates(model.graph, cands, audio_cost, nodes, k, weights=weights,
                                emotion=emotion, context=context)
+    options = options or PostOptions()
+    options = replace(options, recentre=recentres(model, options))
     return blend_k_best(model.graph, ranked, phones, cutoffs=model.cutoffs,
                         options=options), ranked
+
+
+def recentres(model: Model, options: PostOptions | None = None) -> bool:
+    """Whether k-best recentres each anime on its recording (``PostOptions.recentre``):
+    as asked, else when the database's clips name more than one speaker. Rest poses differ
+    between speakers (and their sessions); within one speaker a short recording's mean
+    pose is mostly what it says, and subtracting it costs a little (docs/results.md,
+    "Session 10")."""
+    asked = (options or PostOptions()).recentre
+    return len(model.speakers) > 1 if asked is None else bool(asked)
