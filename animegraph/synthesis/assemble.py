@@ -24,6 +24,7 @@ database's frame rate.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -312,8 +313,9 @@ def rank_weights(n: int) -> np.ndarray:
     return w / w.sum()
 
 
+@functools.lru_cache(maxsize=2)  # per graph (hashed by identity): batch reuses it
 def recording_means(graph: AnimeGraph) -> np.ndarray:
-    """Each recording's mean motion over its animes' frames.
+    """Each recording's mean motion over its animes' frames (read-only).
 
     Returns
     -------
@@ -330,7 +332,9 @@ def recording_means(graph: AnimeGraph) -> np.ndarray:
     total = np.zeros((n_clips, sums.shape[1]))
     np.add.at(total, graph.node_clip, sums)
     frames = np.bincount(graph.node_clip, weights=counts, minlength=n_clips)
-    return total / np.maximum(frames, 1.0)[:, None]
+    means = total / np.maximum(frames, 1.0)[:, None]
+    means.flags.writeable = False
+    return means
 
 
 def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequence[Phone], *,
