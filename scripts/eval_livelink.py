@@ -4,7 +4,8 @@ and a held-out synthesis scored against the capture.
 Usage::
 
     python scripts/eval_livelink.py [--capture ../shared/data/livelink/neurosync_testset.csv]
-                                    [--train-fraction 0.7] [--json OUT]
+                                    [--train-fraction 0.7] [--phones-engine ENGINE]
+                                    [--json OUT]
 
 Prints, for the real capture of ``../shared/data/livelink``:
 
@@ -14,7 +15,8 @@ Prints, for the real capture of ``../shared/data/livelink``:
 3. the round trip read -> write (``.livelink.csv``) -> read: the largest value difference
    and whether every value cell is the capture's, character for character;
 4. a held-out synthesis: a database from the first ``--train-fraction`` of the take
-   (phones recognised by PocketSphinx, as at ingest), the rest synthesized from its audio
+   (phones recognised as at ingest, by ``--phones-engine``: the default engine unless
+   named), the rest synthesized from its audio
    and phones and scored against the capture (ARKit weights; :func:`animegraph.apps.evaluate
    .score_heldout`): the exact search, the paper's look-ahead windows, the naive random /
    first-anime baselines, and the k-best average (beyond the paper). One 20 s take of one
@@ -35,11 +37,12 @@ import numpy as np
 from animegraph.apps import evaluate
 from animegraph.synthesis import Model
 from ingest.formats.livelink import format_timecode, read_livelink, write_livelink
-from ingest.pipeline import build_database, prepare_sources
+from ingest.pipeline import IngestConfig, build_database, prepare_sources
 from ingest.prepare import slice_clip
 from ingest.readers import discover, estimate_lag, load, shift_motion
 from ingest.readers.livelink import frame_steps, mouth_activity
 from ingest.readers.sync import audio_envelope
+from ingest.speech.engines import ENGINES
 
 CAPTURE = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "livelink"
            / "neurosync_testset.csv")
@@ -86,9 +89,9 @@ def round_trip(capture: Path, folder: Path) -> dict:
             "max_timecode_diff_frames": round(float(np.abs(again.frames - take.frames).max()), 4)}
 
 
-def heldout(capture: Path, fraction: float, folder: Path) -> dict:
+def heldout(capture: Path, fraction: float, folder: Path, engine: str | None = None) -> dict:
     t0 = time.perf_counter()
-    (clip,), reference = prepare_sources(discover([capture]))
+    (clip,), reference = prepare_sources(discover([capture]), IngestConfig(phones_engine=engine))
     cut = round(fraction * clip.duration, 2)
     train = slice_clip(clip, 0.0, cut, suffix="_train")
     test = slice_clip(clip, cut, clip.duration, suffix="_test")
@@ -105,6 +108,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--capture", type=Path, default=CAPTURE)
     parser.add_argument("--train-fraction", type=float, default=0.7)
+    parser.add_argument("--phones-engine", choices=ENGINES, default=None,
+                        help="phone engine of the held-out synthesis (default: ingest's)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     if not args.capture.is_file():
@@ -119,7 +124,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out["round_trip"] = round_trip(args.capture, Path(tmp))
         print("round trip:", json.dumps(out["round_trip"]))
-        out["heldout"] = heldout(args.capture, args.train_fraction, Path(tmp))
+        out["heldout"] = heldout(args.capture, args.train_fraction, Path(tmp),
+                                 args.phones_engine)
     h = out["heldout"]
     print(f"held out: database from the first {h['train_s']} s ({h['animes']} animes), "
           f"synthesized the last {h['test_s']} s ({h['n_phones']} phones)")
