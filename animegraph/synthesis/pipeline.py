@@ -137,7 +137,9 @@ def synthesize(
         instead of the single picked anime joined at jumps (§4.3). None (default): the
         paper's synthesis. On real data with recognized phones 20 measured best; with
         exact phone labels (the synthetic corpus) the paper's synthesis is better
-        (docs/results.md). ``joins`` is then empty.
+        (docs/results.md). ``joins`` is then empty. ``options.recentre`` says whether each
+        anime is averaged relative to its recording's mean pose (None: when the database
+        names more than one speaker, :func:`recentres`).
     phones_engine : str, optional
         The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
         default, PocketSphinx alignment of a transcript, hama recognition without one).
