@@ -150,8 +150,10 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     search input of :func:`heldout_query`, and its number of jump matches."""
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
-        recentre = RECENTRE_SUFFIXES.get(method[method.rfind("-"):])  # None: synth's default
-        method = method.removesuffix(RAW_SUFFIX).removesuffix(RECENTRE_SUFFIX)
+        recentre = None  # synth's default
+        for suffix, on in RECENTRE_SUFFIXES.items():
+            if method.endswith(suffix):
+                recentre, method = on, method.removesuffix(suffix)
         context = method.endswith(CONTEXT_SUFFIX)
         k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,

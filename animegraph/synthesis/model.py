@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -27,9 +28,6 @@ class Model:
     kind: str
     head_reference: np.ndarray | None
     emotion_model: EmotionModel | None = None  # None: a database built before emotion models
-    #: The speakers its clips name (sorted; an unnamed speaker is ""): k-best recentres
-    #: each anime on its recording by default when there is more than one.
-    speakers: tuple[str, ...] = ()
 
     @classmethod
     def load(cls, path) -> Model:
@@ -65,17 +63,22 @@ class Model:
         except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
             raise db.damaged("model_arrays", f"emotion model: {type(exc).__name__}: "
                              f"{exc}") from None
-        try:
-            speakers = tuple(sorted({str(s or "") for s in
-                                     db.table("clips", columns=["speaker"]).column("speaker")
-                                     .to_pylist()}))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
         return cls(
             db=db, graph=graph, decomposer=decomposer, cutoffs=cutoffs, names=names,
             groups=groups, kind=kind, head_reference=arrays.get("head_reference"),
-            emotion_model=emotion_model, speakers=speakers,
+            emotion_model=emotion_model,
         )
+
+    @cached_property
+    def speakers(self) -> tuple[str, ...]:
+        """The speakers the database's clips name (sorted; an unnamed speaker is ""): k-best
+        recentres each anime on its recording by default when there is more than one.
+        Read on first use, not at load: only k-best asks."""
+        try:
+            return tuple(sorted({str(s or "") for s in self.db.table(
+                "clips", columns=["speaker"]).column("speaker").to_pylist()}))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise self.db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
 
     def to_channels(self, ics: np.ndarray) -> np.ndarray:
         """Motion in the database's channels (world coordinates for a head group)."""
