@@ -270,6 +270,18 @@ def test_recording_means_are_each_clips_mean_motion(model):
                                    atol=1e-9)
 
 
+def test_sessions_are_speakers_within_corpus_folders():
+    from animegraph.synthesis.model import sessions_of
+
+    # GRID: one folder, no speaker named -> one session (recentring off by default).
+    assert sessions_of(["s1"] * 3, [None] * 3) == (("s1", ""),)
+    # Two folders of unnamed speakers (two actors, or two days) -> two sessions.
+    assert sessions_of(["day1", "day2", "day1"], [None, None, ""]) == (
+        ("day1", ""), ("day2", ""))
+    # Named speakers in one folder -> one session each.
+    assert len(sessions_of(["tf"] * 4, ["a", "b", "a", None])) == 3
+
+
 def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     from animegraph.synthesis import recentres
     from animegraph.synthesis.assemble import output_frames, recording_means
@@ -277,8 +289,9 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     stem, _ = held_out
     audio, sr = read_wav(stem.with_suffix(".wav"))
     labels = read_phones_csv(f"{stem}.phones.csv")
-    # By default only with several speakers: the tiny corpus has one.
-    assert PostOptions().recentre is None and model.speakers == ("synth01",)
+    # By default only with several speakers or sessions: the tiny corpus has one.
+    assert PostOptions().recentre is None and len(model.sessions) == 1
+    assert model.sessions[0][1] == "synth01"
     assert not recentres(model) and recentres(model, PostOptions(recentre=True))
     raw = synthesize(model, audio, sr, labels=labels, k_best=4,
                      options=PostOptions(smooth=False, recentre=False))

@@ -240,8 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: k-best averages each anime relative to its "
                      "recording's mean pose, the utterance taking the mean pose of the "
-                     "recordings drawn on (default: on when the database's clips name more "
-                     "than one speaker, whose rest poses differ; off with one)")
+                     "recordings drawn on (default: on when the database's clips come from "
+                     "more than one speaker or corpus folder, whose rest poses differ; off "
+                     "with one)")
     syn.add_argument("--context-ranking", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: rank each phone's k-best animes by phonetic "
                      "context (their recorded neighbour phones against the input's) before "
@@ -821,7 +822,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
     if k_best and recentres(model, options):
-        why = "as asked" if args.recentre else f"{len(model.speakers)} speakers"
+        why = "as asked" if args.recentre else f"{len(model.sessions)} speakers or sessions"
         path += f"; each anime relative to its recording's mean pose ({why})"
     print(f"animegraph: path: {path}", file=sys.stderr)
     for warning in out.warnings:

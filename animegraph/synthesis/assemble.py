@@ -69,9 +69,9 @@ class PostOptions:
     helper: str = "paper"
     #: Beyond the paper, k-best only (:func:`blend_k_best`): each anime enters the mean
     #: relative to its recording's mean pose, and the utterance takes the mean pose of the
-    #: recordings it draws on. None (the default): when the database's clips name more
-    #: than one speaker (:func:`animegraph.synthesis.recentres`); False: the animes as
-    #: recorded.
+    #: recordings it draws on. None (the default): when the database's clips come from
+    #: more than one speaker or session (:func:`animegraph.synthesis.recentres`); False:
+    #: the animes as recorded.
     recentre: bool | None = None
 
     def __post_init__(self) -> None:

@@ -15,6 +15,18 @@ from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_
 from ingest.unmixing import Unmixing
 
 
+def sessions_of(corpora, speakers) -> tuple[tuple[str, str], ...]:
+    """The distinct (corpus, speaker) pairs of clips, sorted; a missing value is "".
+
+    A session is what ingest pools a lip-audio lag over (:func:`ingest.lag.group_key`):
+    one speaker in one corpus folder, and the clips of a folder that name no speaker are
+    one speaker's. Two folders of unnamed speakers (two actors, or one actor on two
+    days, framed and tracked afresh) are two sessions, as two named speakers are.
+    """
+    return tuple(sorted({(str(c or ""), str(s or ""))
+                         for c, s in zip(corpora, speakers, strict=True)}))
+
+
 @dataclass(frozen=True, eq=False)
 class Model:
     """Everything synthesis needs from a database, loaded once."""
@@ -70,13 +82,15 @@ class Model:
         )
 
     @cached_property
-    def speakers(self) -> tuple[str, ...]:
-        """The speakers the database's clips name (sorted; an unnamed speaker is ""): k-best
-        recentres each anime on its recording by default when there is more than one.
-        Read on first use, not at load: only k-best asks."""
+    def sessions(self) -> tuple[tuple[str, str], ...]:
+        """The recording sessions of the database's clips, sorted: :func:`sessions_of`
+        their corpus and speaker columns. k-best recentres each anime on its recording by
+        default when there is more than one. Read on first use, not at load: only k-best
+        asks."""
         try:
-            return tuple(sorted({str(s or "") for s in self.db.table(
-                "clips", columns=["speaker"]).column("speaker").to_pylist()}))
+            table = self.db.table("clips", columns=["corpus", "speaker"])
+            return sessions_of(table.column("corpus").to_pylist(),
+                               table.column("speaker").to_pylist())
         except (KeyError, TypeError, ValueError) as exc:
             raise self.db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
 

@@ -361,9 +361,10 @@ def render_k_best(model: Model, phones, cands, audio_cost, nodes, k: int, *,
 
 def recentres(model: Model, options: PostOptions | None = None) -> bool:
     """Whether k-best recentres each anime on its recording (``PostOptions.recentre``):
-    as asked, else when the database's clips name more than one speaker. Rest poses differ
-    between speakers (and their sessions); within one speaker a short recording's mean
-    pose is mostly what it says, and subtracting it costs a little (docs/results.md,
+    as asked, else when the database's clips come from more than one recording session
+    (:attr:`Model.sessions`: speakers, or corpus folders). Rest poses differ between
+    speakers and their sessions; within one session a short recording's mean pose is
+    mostly what it says, and subtracting it costs a little (docs/results.md,
     "Session 10")."""
     asked = (options or PostOptions()).recentre
-    return len(model.speakers) > 1 if asked is None else bool(asked)
+    return len(model.sessions) > 1 if asked is None else bool(asked)
