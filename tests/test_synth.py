@@ -300,6 +300,10 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     default = synthesize(model, audio, sr, labels=labels, k_best=4,
                          options=PostOptions(smooth=False))
     np.testing.assert_array_equal(default.ics, raw.ics)
+    # The record says how the animes were averaged (labels: ranked by context first).
+    assert (rc.recentred, default.recentred) == (True, False)
+    assert explain_record(rc)["recentred"] and not explain_record(default)["recentred"]
+    assert explain_record(rc)["k_best_ranking"] == "context"
     picked = [[(a["node"], a["weight"]) for a in animes] for animes in rc.blended]
     assert picked == [[(a["node"], a["weight"]) for a in animes] for animes in raw.blended]
     # Unsmoothed, each phone's frames move by one pose: minus the weighted mean of its

@@ -711,7 +711,6 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         Model,
         PostOptions,
         backoffs,
-        recentres,
         synthesize,
         write_explain,
         write_motion,
@@ -821,7 +820,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         path = path.replace(CONTEXT_PHRASE, "")
     if args.text is not None and out.segmentation == "recognized":
         path += " (transcript alignment failed: fell back to phone recognition)"
-    if k_best and recentres(model, options):
+    if out.recentred:
         why = "as asked" if args.recentre else f"{len(model.sessions)} speakers or sessions"
         path += f"; each anime relative to its recording's mean pose ({why})"
     print(f"animegraph: path: {path}", file=sys.stderr)

@@ -72,6 +72,8 @@ def explain_record(synth: Synthesis) -> dict:
               "timings": synth.timings}
     if synth.blended:
         record["k_best"] = list(synth.blended)
+        record["k_best_ranking"] = "context" if synth.context_ranked else "audio cost"
+        record["recentred"] = synth.recentred
     return record
 
 

@@ -80,6 +80,9 @@ class Synthesis:
     context_ranked : bool
         With ``k_best``: the animes were ranked by phonetic context first
         (:func:`animegraph.search.k_best` with ``context``).
+    recentred : bool
+        With ``k_best``: each anime entered the mean relative to its recording's mean pose
+        (:func:`recentres`).
     """
 
     motion: np.ndarray
@@ -96,6 +99,7 @@ class Synthesis:
     blended: tuple[list[dict], ...] = ()
     warnings: tuple[str, ...] = ()
     context_ranked: bool = False
+    recentred: bool = False
 
 
 def synthesize(
@@ -249,7 +253,8 @@ def synthesize(
     return Synthesis(motion=motion, ics=ics, fps=model.graph.fps, phones=phones,
                      segmentation=method_used, result=result, joins=joins, explain=explain,
                      timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
-                     warnings=tuple(warnings), context_ranked=bool(k_best and context))
+                     warnings=tuple(warnings), context_ranked=bool(k_best and context),
+                     recentred=k_best is not None and recentres(model, options))
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
