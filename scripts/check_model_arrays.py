@@ -34,22 +34,21 @@ import argparse
 import collections
 import contextlib
 import io
-import json
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pyarrow.parquet as pq
 
 import ingest.invariants as invariants
 from animegraph.apps.cli import main
 from animegraph.synthesis.model import Model
 from db.errors import DataError
-from db.store import file_sha256
 
-HOWS = ("neg", "zero", "nan", "trunc", "huge")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from crafted import CORRUPTIONS, array_corrupted, edit_arrays  # noqa: E402  (the fuzz tests')
 
 
 def loads(db: str, safety: float) -> bool:
@@ -79,52 +78,20 @@ def headroom(db: str) -> None:
           f"{db}: FALSE ALARM at the default")
 
 
-def corrupt(values: np.ndarray, shape: list[int], how: str):
-    """``values`` (flat) of an array of ``shape`` corrupted ``how``, or None if it cannot be."""
-    if values.size == 0:
-        return None
-    if how == "neg":
-        return -np.abs(values) - 1, shape
-    if how == "zero":
-        return np.zeros_like(values), shape
-    if how == "nan":
-        values = values.copy()
-        values[0] = np.nan
-        return values, shape
-    if how == "huge":
-        return values * 1e30, shape
-    if len(shape) == 0 or shape[-1] < 2:
-        return None
-    cut = [*shape[:-1], shape[-1] - 1]
-    return values.reshape(shape)[..., :-1].ravel(), cut
-
-
 def fuzz(db0: Path, wav: str, refresh: bool) -> None:
     version = (db0 / "CURRENT").read_text().strip()
-    table = pq.read_table(db0 / version / "model_arrays.parquet")
-    rows0 = table.to_pylist()
+    rows0 = pq.read_table(db0 / version / "model_arrays.parquet").to_pylist()
     names = [r["name"] for r in rows0 if not r["name"].startswith("emotion/classifier")
              and not (r["name"].startswith("emotion/map/") and "/angry/happy/" not in r["name"])
              and not (r["name"].startswith("emotion/offset/")
                       and not r["name"].endswith("angry/happy"))]
     runs, bad = [], []
     for name in names:
-        for how in HOWS:
+        for how in CORRUPTIONS:
             tmp = Path(tempfile.mkdtemp())
             db = tmp / "db"
             shutil.copytree(db0, db)
-            rows = [dict(r) for r in rows0]
-            for r in rows:
-                if r["name"] == name:
-                    changed = corrupt(np.asarray(r["values"], float), list(r["shape"]), how)
-                    if changed is not None:
-                        r["values"], r["shape"] = changed[0].tolist(), changed[1]
-            path = db / version / "model_arrays.parquet"
-            pq.write_table(pa.Table.from_pylist(rows, schema=table.schema), path)
-            if refresh:
-                manifest = json.loads((db / version / "manifest.json").read_text())
-                manifest["checksums"]["model_arrays"] = file_sha256(path)
-                (db / version / "manifest.json").write_text(json.dumps(manifest))
+            edit_arrays(db, array_corrupted(name, how), checksum=refresh)
             for extra in ([], ["--emotion", "happy"]):
                 err = io.StringIO()
                 with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -146,7 +113,7 @@ def fuzz(db0: Path, wav: str, refresh: bool) -> None:
     for b in bad:
         print(b)
     print(collections.Counter((h, r) for _, h, r in runs))
-    for n in sorted({n for n, h, r in runs if r == 0 and h in ("zero", "huge", "neg")}):
+    for n in sorted({n for n, h, r in runs if r == 0 and h in ("zeroed", "huge", "negated")}):
         print("accepted:", n, sorted({h for m, h, r in runs if m == n and r == 0}))
     print("runs:", len(runs), "bad:", len(bad))
 

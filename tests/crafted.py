@@ -53,7 +53,7 @@ def _animes(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "animes"), change)
 
 
-def _arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
+def edit_arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
     """Change the model arrays; with ``checksum``, as a deliberate editor would, the
     manifest's checksum of them too (so that what is checked is the arrays)."""
     path = _live(root) / "model_arrays.parquet"
@@ -160,21 +160,21 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "animes_random": _bytes(lambda r: _first_part(_live(r) / "animes"),
                             lambda b: np.random.default_rng(0).bytes(len(b))),
     "animes_empty": lambda r: [p.unlink() for p in (_live(r) / "animes").rglob("*.parquet")],
-    "arrays_shape_mismatch": lambda r: _arrays(r, _array_edit("pca_components", shape=[999])),
-    "arrays_shape_negative": lambda r: _arrays(r, _array_edit("channel_mean", shape=[-1])),
-    "arrays_shape_deep": lambda r: _arrays(r, _array_edit("ica_mean", shape=[1] * 40)),
-    "arrays_missing_pca": lambda r: _arrays(r, _drop_array("pca_components")),
-    "arrays_missing_params": lambda r: _arrays(r, _drop_array("decomposer_params")),
-    "arrays_nan_mixing": lambda r: _arrays(r, lambda rows: _array_edit(
+    "arrays_shape_mismatch": lambda r: edit_arrays(r, _array_edit("pca_components", shape=[999])),
+    "arrays_shape_negative": lambda r: edit_arrays(r, _array_edit("channel_mean", shape=[-1])),
+    "arrays_shape_deep": lambda r: edit_arrays(r, _array_edit("ica_mean", shape=[1] * 40)),
+    "arrays_missing_pca": lambda r: edit_arrays(r, _drop_array("pca_components")),
+    "arrays_missing_params": lambda r: edit_arrays(r, _drop_array("decomposer_params")),
+    "arrays_nan_mixing": lambda r: edit_arrays(r, lambda rows: _array_edit(
         "ica_mixing", values=[float("nan")] * len(rows["ica_mixing"]["values"]))(rows)),
-    "arrays_wrong_size_mixing": lambda r: _arrays(r, lambda rows: _array_edit(
+    "arrays_wrong_size_mixing": lambda r: edit_arrays(r, lambda rows: _array_edit(
         "ica_mixing", values=[1.0], shape=[1])(rows)),
-    "arrays_zero_cutoffs": lambda r: _arrays(r, lambda rows: _array_edit(
+    "arrays_zero_cutoffs": lambda r: edit_arrays(r, lambda rows: _array_edit(
         "ic_cutoff_hz", values=[0.0] * len(rows["ic_cutoff_hz"]["values"]))(rows)),
-    "arrays_head_reference_shape": lambda r: _arrays(r, _array_edit(
+    "arrays_head_reference_shape": lambda r: edit_arrays(r, _array_edit(
         "head_reference", values=[1.0, 2.0], shape=[2])),
     # ica_mean zeroed is valid (the scores are centred): only the checksum tells.
-    "arrays_checksum_stale": lambda r: _arrays(r, lambda rows: _array_edit(
+    "arrays_checksum_stale": lambda r: edit_arrays(r, lambda rows: _array_edit(
         "ica_mean", values=[0.0] * len(rows["ica_mean"]["values"]))(rows), checksum=False),
     "arrays_checksum_wrong": lambda r: _manifest(r, lambda m: {**m, "checksums": "x"}),
     "arrays_random": _bytes(lambda r: _live(r) / "model_arrays.parquet",
@@ -193,23 +193,36 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
 }
 
 
-def _corrupted(how: str):
-    """A change of one array's values that keeps them finite (``cut``: its last column)."""
+#: The ways :func:`corrupted` damages an array: ``negated`` (-|v| - 1), ``zeroed``, ``nan``
+#: (its first value), ``huge`` (times 1e30), ``cut`` (its last column).
+CORRUPTIONS = ("negated", "zeroed", "nan", "huge", "cut")
+
+
+def corrupted(how: str):
+    """A change of one array's row (:data:`CORRUPTIONS`); an empty array, or one without a
+    second column to keep when cut, is left as it is."""
     def change(row: dict) -> dict:
         v = np.asarray(row["values"], dtype=np.float64)
+        shape = list(row["shape"])
+        if v.size == 0 or (how == "cut" and (not shape or shape[-1] < 2)):
+            return row
         if how == "cut":
-            shape = list(row["shape"])
+            v = v.reshape(shape)[..., :-1]
             shape[-1] -= 1
-            v = v.reshape(row["shape"])[..., :-1]
             return {**row, "shape": shape, "values": v.ravel().tolist()}
-        v = {"negated": -np.abs(v) - 1, "zeroed": np.zeros_like(v), "huge": v * 1e30}[how]
+        if how == "nan":
+            v = v.copy()
+            v[0] = np.nan
+        else:
+            v = {"negated": -np.abs(v) - 1, "zeroed": np.zeros_like(v), "huge": v * 1e30}[how]
         return {**row, "values": v.tolist()}
     return change
 
 
-def _array_corrupted(name: str, how: str):
+def array_corrupted(name: str, how: str):
+    """A change of the model arrays (:func:`edit_arrays`): array ``name`` :func:`corrupted`."""
     def change(rows: dict) -> dict:
-        rows[name] = _corrupted(how)(rows[name])
+        rows[name] = corrupted(how)(rows[name])
         return rows
     return change
 
@@ -237,7 +250,7 @@ ARRAY_CORRUPTIONS: dict[str, tuple[str, ...]] = {
 }
 #: name -> mutation, as :data:`DATABASE_MUTATIONS`, one per :data:`ARRAY_CORRUPTIONS`.
 ARRAY_MUTATIONS: dict[str, Callable[[Path], None]] = {
-    f"{how}:{name}": (lambda r, name=name, how=how: _arrays(r, _array_corrupted(name, how)))
+    f"{how}:{name}": (lambda r, name=name, how=how: edit_arrays(r, array_corrupted(name, how)))
     for name, hows in ARRAY_CORRUPTIONS.items() for how in hows
 }
 
