@@ -53,7 +53,7 @@ METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-p
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
 #: ``kbest<K>[-ctx]-raw``: the K animes averaged as recorded, never relative to their
 #: recordings' mean poses (``PostOptions(recentre=False)``; the k-best rows recentre as
-#: ``synth`` does by default: with more than one speaker in the database).
+#: ``synth`` does by default: with more than one speaker or session in the database).
 RAW_SUFFIX = "-raw"
 #: ``kbest<K>[-ctx]-rc``: always recentred (``PostOptions(recentre=True)``), whatever the
 #: number of speakers.

@@ -143,7 +143,7 @@ def synthesize(
         exact phone labels (the synthetic corpus) the paper's synthesis is better
         (docs/results.md). ``joins`` is then empty. ``options.recentre`` says whether each
         anime is averaged relative to its recording's mean pose (None: when the database
-        names more than one speaker, :func:`recentres`).
+        holds more than one speaker or session, :func:`recentres`).
     phones_engine : str, optional
         The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
         default, PocketSphinx alignment of a transcript, hama recognition without one).
