@@ -274,7 +274,9 @@ def grid(tmp: Path, workers: int, db: Path | None,
             audio = clip.audio.astype(np.float32) / 32767.0
             phones, _ = segment(audio, clip.sample_rate, engine=engine)
             phones = tuple(phones)
-            agreement.append(phone_agreement(list(clip.phones), list(phones)))
+            opening = measures.mouth_opening(clip.motion, clip.schema.names, clip.schema.kind)
+            agreement.append(phone_agreement(list(clip.phones), list(phones), opening,
+                                             clip.fps))
             yield dataclasses.replace(clip, phones=phones, segmentation="recognized")
 
     out = {"aligned": score_fold(fold, "grid", test)}

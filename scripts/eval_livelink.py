@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from grid_phone_engines import vowels_follow  # scripts/ is sys.path[0]
 
 from animegraph.apps import evaluate
 from animegraph.synthesis import Model
@@ -47,7 +48,6 @@ from ingest.readers import discover, estimate_lag, load, shift_motion
 from ingest.readers.livelink import frame_steps, mouth_activity
 from ingest.readers.sync import audio_envelope
 from ingest.speech.engines import ENGINES
-from ingest.speech.phones import VOWELS
 
 CAPTURE = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "livelink"
            / "neurosync_testset.csv")
@@ -94,20 +94,6 @@ def round_trip(capture: Path, folder: Path) -> dict:
             "max_timecode_diff_frames": round(float(np.abs(again.frames - take.frames).max()), 4)}
 
 
-def vowels_and_jaw(clip) -> float:
-    """Pearson r of jawOpen with a vowel indicator of the clip's recognised phones (1 in a
-    vowel, else 0; Gaussian-smoothed, sigma 50 ms): how much the phones' names and times
-    say about the jaw before any synthesis."""
-    from scipy.ndimage import gaussian_filter1d
-
-    jaw = clip.motion[:, list(clip.schema.names).index("jawOpen")]
-    t = np.arange(len(jaw)) / clip.fps
-    vowel = np.zeros(len(jaw))
-    for p in clip.phones:
-        vowel[(t >= p.start) & (t < p.end)] = p.phone in VOWELS
-    return float(np.corrcoef(gaussian_filter1d(vowel, 0.05 * clip.fps), jaw)[0, 1])
-
-
 def heldout(capture: Path, fraction: float, folder: Path, engine: str | None = None,
             folds: int = 1) -> dict:
     """The held-out synthesis: with ``folds`` 1, the database from the first ``fraction`` of
@@ -116,7 +102,8 @@ def heldout(capture: Path, fraction: float, folder: Path, engine: str | None = N
     frames either side of a cut are the only ones a neighbour shares)."""
     t0 = time.perf_counter()
     (clip,), reference = prepare_sources(discover([capture]), IngestConfig(phones_engine=engine))
-    vowels_r = vowels_and_jaw(clip)
+    vowels_r = vowels_follow(clip.phones, clip.motion[:, list(clip.schema.names).index(
+        "jawOpen")], clip.fps)
     if folds == 1:
         cut = round(fraction * clip.duration, 2)
         blocks = [(0.0, cut), (cut, clip.duration)]

@@ -16,6 +16,9 @@ over the aligned span:
   moves where the speaker is silent), split into ``edge_sil_as_speech`` (the silence
   before the first and after the last aligned phone) and ``pause_sil_as_speech`` (pauses
   between phones); ``speech_as_sil``: the reverse;
+- ``vowels_mouth_r`` / ``ref_vowels_mouth_r``: how well a vowel indicator of the phones
+  (recognised / aligned) follows the clip's mouth opening (:func:`vowels_follow`): what
+  the phones' names and times say about the mouth before any synthesis;
 - ``per``: phone error rate (``SIL`` left out); ``phones`` / ``ref_phones``: phones a clip;
   ``median_dur_s`` / ``ref_median_dur_s``: median phone duration; ``ref_silence_s`` /
   ``ref_seconds``: seconds of ``SIL`` in the aligned phones / of the clip.
@@ -36,13 +39,16 @@ from pathlib import Path
 import numpy as np
 
 from animegraph.apps.evaluate import GRID_HOLDOUT, grid_split
+from animegraph.motion.measures import mouth_opening
 from db.store import Database
 from ingest.speech.engines import ENGINES
-from ingest.speech.phones import SILENCE, VISEME_OF
+from ingest.speech.phones import SILENCE, VISEME_OF, VOWELS
 from ingest.speech.segment import phone_error_rate, segment
 from ingest.tables import prepared_from_database
 
 STEP_S = 0.01
+#: Gaussian smoothing (s) of the vowel indicator of :func:`vowels_follow`.
+VOWEL_SIGMA_S = 0.05
 
 
 def frame_labels(segments, t: np.ndarray) -> np.ndarray:
@@ -52,8 +58,20 @@ def frame_labels(segments, t: np.ndarray) -> np.ndarray:
     return np.array([segments[j].phone for j in k])
 
 
-def agreement(reference, hypothesis) -> dict[str, float]:
-    """The measures of the module docstring for one clip."""
+def vowels_follow(segments, opening: np.ndarray, fps: float) -> float:
+    """Pearson r of a mouth opening, shape (n_frames,) at ``fps``, with a vowel indicator
+    of ``segments`` (1 in a vowel, else 0; Gaussian-smoothed, sigma
+    :data:`VOWEL_SIGMA_S`)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    labels = frame_labels(segments, np.arange(len(opening)) / fps)
+    vowel = np.isin(labels, VOWELS).astype(np.float64)
+    return float(np.corrcoef(gaussian_filter1d(vowel, VOWEL_SIGMA_S * fps), opening)[0, 1])
+
+
+def agreement(reference, hypothesis, opening: np.ndarray, fps: float) -> dict[str, float]:
+    """The measures of the module docstring for one clip (``opening``: its mouth
+    opening, shape (n_frames,) at ``fps``)."""
     t = np.arange(reference[0].start, reference[-1].end, STEP_S) + STEP_S / 2
     a, b = frame_labels(reference, t), frame_labels(hypothesis, t)
     silent = a == SILENCE
@@ -74,6 +92,8 @@ def agreement(reference, hypothesis) -> dict[str, float]:
             "pause_sil_as_speech": (float(np.mean(b[pause] != SILENCE)) if pause.any()
                                     else np.nan),
             "speech_as_sil": float(np.mean(b[speech] == SILENCE)),
+            "vowels_mouth_r": vowels_follow(hypothesis, opening, fps),
+            "ref_vowels_mouth_r": vowels_follow(reference, opening, fps),
             "per": phone_error_rate(reference, hypothesis),
             "phones": float(len(durs)), "ref_phones": float(len(ref_durs)),
             "median_dur_s": float(np.median(durs)) if durs else np.nan,
@@ -97,9 +117,10 @@ def main() -> int:
     rows: dict[str, list[dict]] = {e: [] for e in args.engines}
     for clip in test:
         audio = clip.audio.astype(np.float32) / 32767.0
+        opening = mouth_opening(clip.motion, clip.schema.names, clip.schema.kind)
         for engine in args.engines:
             hyp = list(segment(audio, clip.sample_rate, engine=engine)[0])
-            rows[engine].append(agreement(list(clip.phones), hyp))
+            rows[engine].append(agreement(list(clip.phones), hyp, opening, clip.fps))
     print(f"# {len(test)} held-out GRID clips (every {GRID_HOLDOUT}th in clip-id order); "
           "means over clips")
     keys = list(next(iter(rows.values()))[0])
