@@ -56,7 +56,7 @@ DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", 
 #: ``synth`` does by default: with more than one speaker or session in the database).
 RAW_SUFFIX = "-raw"
 #: ``kbest<K>[-ctx]-rc``: always recentred (``PostOptions(recentre=True)``), whatever the
-#: number of speakers.
+#: number of speakers or sessions.
 RECENTRE_SUFFIX = "-rc"
 RECENTRE_SUFFIXES = {RAW_SUFFIX: False, RECENTRE_SUFFIX: True}
 #: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
