@@ -80,6 +80,8 @@ class IngestConfig:
     # --audio-cost posteriorgram): about 0.08 CPU-s per second of speech when hama has not
     # recognised the phones already. Off by default: the posteriorgram cost did not measure
     # better than the paper's (docs/results.md, issue 13); on when the database has them.
+    # Clips whose phones hama recognised keep theirs in any case (prepare_clip): it costs
+    # nothing, and ppg-ridge's fit then need not hear them again.
     posteriorgrams: bool = False
     limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
 

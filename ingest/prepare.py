@@ -20,6 +20,7 @@ from db.errors import DataError, ParameterError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.formats.phones_csv import Segment
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
+from ingest.speech.engines import check_engine
 from ingest.speech.features import RastaPlpConfig, rasta_plp
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.segment import segment
@@ -58,6 +59,10 @@ class PreparedClip:
     posteriors : np.ndarray, shape (n_posterior_frames, 39), float16, or None
         Phone posteriorgram of the whole clip, 50 frames per second
         (:mod:`ingest.speech.posteriorgram`); None when hama is not installed.
+    posterior_blank : np.ndarray, shape (n_posterior_frames,), float16, or None
+        hama's probability of the CTC blank in each of those frames (the posteriorgram
+        leaves it out): with ``posteriors``, what ppg-ridge hears of the clip, kept so
+        that its fit does not run hama over the database's speech again.
     """
 
     clip_id: str
@@ -81,6 +86,7 @@ class PreparedClip:
     extra: dict = field(default_factory=dict)
     emotion_features: object | str | None = None  # SpeechFeatures (ingest.emotion.classifier)
     posteriors: np.ndarray | None = None
+    posterior_blank: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -116,6 +122,7 @@ def prepare_clip(
         Phone engine for clips without labels (:data:`ingest.speech.segment.ENGINES`).
     posteriorgrams : bool, optional
         Compute the clip's phone posteriorgram (when hama is installed; beyond the paper).
+        Kept anyway when hama recognised the clip's phones (it has heard the clip).
 
     Raises
     ------
@@ -146,7 +153,11 @@ def prepare_clip(
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)
-    posteriors = clip_posteriorgram(audio, raw.sample_rate) if posteriorgrams else None
+    # hama has already heard a clip whose phones it recognised: keeping its outputs is
+    # free, and spares ppg-ridge's fit (the audio-only guide) hearing it again.
+    heard = method == "recognized" and check_engine(phones_engine) in ("auto", "hama")
+    posteriors, blank = (clip_posteriors(audio, raw.sample_rate) if posteriorgrams or heard
+                         else (None, None))
     pcm = np.round(np.clip(audio, -1, 1) * 32767).astype(np.int16)
     emotion = raw.emotion or UNKNOWN_EMOTION
     features = None
@@ -162,17 +173,21 @@ def prepare_clip(
         segmentation=method, prosody=prosody.astype(np.float32),
         emotion=emotion, speaker=raw.speaker, sentence_id=raw.sentence_id, text=raw.text,
         extra=extra, emotion_features=features, posteriors=posteriors,
+        posterior_blank=blank,
     )
 
 
-def clip_posteriorgram(audio: np.ndarray, sample_rate: int) -> np.ndarray | None:
-    """The clip's phone posteriorgram as stored (float16), or None without hama."""
+def clip_posteriors(audio: np.ndarray, sample_rate: int
+                    ) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
+    """The clip's phone posteriorgram, shape (n, 39), and its CTC blank, shape (n,), as
+    stored (float16); (None, None) without hama."""
     from ingest.speech import ctc, posteriorgram
 
     if not ctc.available():
-        return None
-    return posteriorgram.compute(audio, sample_rate).astype(np.float16)
-
+        return None, None
+    probs = ctc.posteriors(audio, sample_rate)
+    return (posteriorgram.fold(probs).astype(np.float16),
+            posteriorgram.blank(probs).astype(np.float16))
 
 
 def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> PreparedClip:
@@ -191,10 +206,11 @@ def slice_clip(clip: PreparedClip, start: float, end: float, *, suffix: str) -> 
                    for p in clip.phones if p.end > start and p.start < end)
     hop = RastaPlpConfig().hop_s  # frame period of the prosody curve (ingest uses the default)
     p0, p1 = int(round(start / hop)), int(round(end / hop)) + 1
-    post = clip.posteriors
-    if post is not None:
-        post = post[int(round(start / POSTERIOR_HOP_S)):int(round(end / POSTERIOR_HOP_S)) + 1]
+    q0, q1 = int(round(start / POSTERIOR_HOP_S)), int(round(end / POSTERIOR_HOP_S)) + 1
+    post = None if clip.posteriors is None else clip.posteriors[q0:q1]
+    blank = None if clip.posterior_blank is None else clip.posterior_blank[q0:q1]
     return replace(clip, clip_id=clip.clip_id + suffix, motion=clip.motion[f0:f1],
                    missing=clip.missing[f0:f1], audio=clip.audio[s0:s1],
                    phones=tuple(p for p in phones if p.end > p.start),
-                   prosody=clip.prosody[p0:p1], emotion_features=None, posteriors=post)
+                   prosody=clip.prosody[p0:p1], emotion_features=None, posteriors=post,
+                   posterior_blank=blank)

@@ -35,7 +35,7 @@ CLIPS_SCHEMA = pa.schema([
     ("phone_starts", _F64), ("phone_ends", _F64), ("prosody_frames", pa.int32()),
     ("prosody", _F32), ("lip_audio_lag_s", pa.float64()), ("source", pa.string()),
     ("checksum", pa.string()), ("extra", pa.string()),
-    ("posterior_frames", pa.int32()), ("posteriors", _F16),
+    ("posterior_frames", pa.int32()), ("posteriors", _F16), ("posterior_blank", _F16),
 ])
 
 
@@ -175,6 +175,8 @@ def _clip_row(clip: PreparedClip, n_animes: int) -> dict:
         "posterior_frames": None if clip.posteriors is None else int(len(clip.posteriors)),
         "posteriors": None if clip.posteriors is None else clip.posteriors.astype(
             np.float16).ravel(),
+        "posterior_blank": (None if clip.posteriors is None or clip.posterior_blank is None
+                            else clip.posterior_blank.astype(np.float16)),
     }
 
 
@@ -271,9 +273,18 @@ def prepared_from_database(db) -> list[PreparedClip]:
                 row["prosody_frames"], -1),
             emotion=row["emotion"], speaker=row["speaker"], sentence_id=row["sentence_id"],
             text=row["text"], extra=json.loads(row["extra"]),
-            posteriors=_posteriors(row),
+            posteriors=_posteriors(row), posterior_blank=_posterior_blank(row),
         ))
     return out
+
+
+def _posterior_blank(row: dict) -> np.ndarray | None:
+    """A clips row's CTC blank (float16), or None (not stored, a database built before
+    it was, or not one value per posteriorgram frame)."""
+    values, n = row.get("posterior_blank"), row.get("posterior_frames")
+    if values is None or not n or len(values) != n:
+        return None
+    return np.asarray(values, dtype=np.float16)
 
 
 def _posteriors(row: dict) -> np.ndarray | None:

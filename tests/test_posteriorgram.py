@@ -219,4 +219,45 @@ def test_prepare_clip_stores_the_posteriorgram_unless_told_not_to(tiny_corpus):
     with_post = prepare_clip(raw)
     assert with_post.posteriors.dtype == np.float16
     assert abs(len(with_post.posteriors) - with_post.duration / 0.02) <= 1
-    assert prepare_clip(raw, posteriorgrams=False).posteriors is None
+    blank = with_post.posterior_blank  # the CTC blank, which the posteriorgram leaves out
+    assert blank.shape == (len(with_post.posteriors),) and 0 <= blank.min() <= blank.max() <= 1
+    labelled = prepare_clip(raw, posteriorgrams=False)
+    assert labelled.posteriors is None and labelled.posterior_blank is None
+    # Phones recognised by hama: it has heard the clip, so its outputs are kept anyway.
+    recognised = prepare_clip(dataclasses.replace(raw, phones=(), text=None, words=None),
+                              posteriorgrams=False)
+    assert recognised.segmentation == "recognized"
+    np.testing.assert_array_equal(recognised.posteriors, with_post.posteriors)
+    np.testing.assert_array_equal(recognised.posterior_blank, blank)
+
+
+@needs_hama
+def test_ppg_ridge_fits_on_the_stored_posteriors_without_hearing_the_speech_again(
+        tiny_db, monkeypatch):
+    from animegraph.baselines.data import training_set
+    from animegraph.baselines.ppg_forward import stored_posteriors
+    from animegraph.baselines.ppg_ridge import PpgRidge
+    from ingest.speech import ctc
+
+    data = training_set(Database.open(tiny_db[0]))
+    assert all(stored_posteriors(c) is not None for c in data.clips)
+    heard = []
+    real = ctc.posteriors
+    monkeypatch.setattr(ctc, "posteriors", lambda *a, **k: heard.append(1) or real(*a, **k))
+    stored = PpgRidge().fit(data)
+    assert heard == []
+    # Without the blank (a database from before it was stored) hama hears every clip; the
+    # fit agrees up to the stored values' float16 rounding.
+    again = PpgRidge().fit(dataclasses.replace(data, clips=tuple(
+        dataclasses.replace(c, posterior_blank=None) for c in data.clips)))
+    assert len(heard) == len(data.clips)
+    assert again.alpha_ == stored.alpha_
+    scale = np.abs(again.coef_).max()
+    np.testing.assert_allclose(stored.coef_, again.coef_, atol=2e-2 * scale)
+    # Stored values that do not fit the audio are not used (someone else's database).
+    clip = data.clips[0]
+    for bad in (dict(posterior_blank=clip.posterior_blank[:-5]),
+                dict(posteriors=clip.posteriors[:, :-1]),
+                dict(posteriors=np.full_like(clip.posteriors, np.nan)),
+                dict(posterior_blank=np.full_like(clip.posterior_blank, 7))):
+        assert stored_posteriors(dataclasses.replace(clip, **bad)) is None

@@ -144,7 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "instead of shifting it by the estimated lip-audio lag")
     ing.add_argument("--posteriorgrams", action="store_true",
                      help="also store each clip's phone posteriorgram (hama), for synth "
-                     "--audio-cost posteriorgram (beyond the paper; kept once stored)")
+                     "--audio-cost posteriorgram (beyond the paper; kept once stored; "
+                     "always kept for clips whose phones hama recognised)")
     _phones_engine_option(ing, "a transcript")
     ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
                      help="fastest plausible marker motion in mm/s (default 5000); a faster "

@@ -40,6 +40,11 @@ class TrainingClip:
         Motion in the database's channels at ``fps``.
     phones : tuple of Segment
         ARPAbet phone segments tiling the audio.
+    posteriors, posterior_blank : np.ndarray or None
+        hama's posteriorgram, shape (n, 39), and CTC blank, shape (n,), of the audio as
+        ingest stored them (:class:`ingest.prepare.PreparedClip`); None when not stored.
+        Another person's data: :func:`animegraph.baselines.ppg_forward.stored_posteriors`
+        checks them before use.
     """
 
     clip_id: str
@@ -49,6 +54,8 @@ class TrainingClip:
     fps: float
     emotion: str
     phones: tuple[Segment, ...]
+    posteriors: np.ndarray | None = None
+    posterior_blank: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -130,7 +137,9 @@ def training_set(source) -> TrainingSet:
                  else audio.astype(np.float32))
         out.append(TrainingClip(clip_id=c.clip_id, audio=audio, sample_rate=int(c.sample_rate),
                                 motion=np.asarray(c.motion, dtype=np.float64), fps=fps,
-                                emotion=c.emotion, phones=tuple(c.phones)))
+                                emotion=c.emotion, phones=tuple(c.phones),
+                                posteriors=getattr(c, "posteriors", None),
+                                posterior_blank=getattr(c, "posterior_blank", None)))
     return TrainingSet(clips=tuple(out), names=tuple(schema.names),
                        groups=tuple(schema.groups), kind=schema.kind, fps=fps)
 

@@ -15,8 +15,9 @@ from animegraph.baselines.data import rms_envelope
 from animegraph.baselines.predicting import Stored
 from db.errors import ParameterError
 from ingest.speech import ctc
-from ingest.speech.phones import PHONES, SILENCE
-from ingest.speech.posteriorgram import HOP_S, fold
+from ingest.speech.phones import PHONES
+from ingest.speech.posteriorgram import HOP_S, PHONE_COLUMNS, fold
+from ingest.speech.posteriorgram import blank as blank_of
 
 #: Context each side of a frame (s) and the step between context frames (s).
 CONTEXT_S = 0.2
@@ -62,8 +63,32 @@ def _at(values: np.ndarray, hop_s: float, times: np.ndarray) -> np.ndarray:
     return values[lo] * (1.0 - frac) + values[hi] * frac
 
 
+def stored_posteriors(clip) -> tuple[np.ndarray, np.ndarray] | None:
+    """A training clip's stored posteriorgram and CTC blank (:class:`~animegraph.baselines
+    .data.TrainingClip`), if they fit its audio; else None (hama hears it again).
+
+    They come with a database, someone else's data: they are used only when there is one
+    blank a frame, 39 posteriorgram columns, as many frames as the audio gives (within 2)
+    and every value a finite probability.
+    """
+    post, blank = getattr(clip, "posteriors", None), getattr(clip, "posterior_blank", None)
+    if post is None or blank is None:
+        return None
+    post = np.asarray(post, dtype=np.float32)
+    blank = np.asarray(blank, dtype=np.float32)
+    expected = len(clip.audio) / clip.sample_rate / HOP_S
+    if (post.ndim != 2 or post.shape[1] != len(PHONE_COLUMNS) or blank.shape != (len(post),)
+            or abs(len(post) - expected) > 2 or not len(post)):
+        return None
+    if not (np.isfinite(post).all() and np.isfinite(blank).all()
+            and 0 <= min(post.min(), blank.min()) and max(post.max(), blank.max()) <= 1):
+        return None
+    return post, blank
+
+
 def ppg_features(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
-                 context_s: float = CONTEXT_S, step_s: float = CONTEXT_STEP_S) -> np.ndarray:
+                 context_s: float = CONTEXT_S, step_s: float = CONTEXT_STEP_S,
+                 stored: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The regression's input at ``times`` (s).
 
     Parameters
@@ -73,6 +98,9 @@ def ppg_features(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
     times : np.ndarray, shape (n,)
     context_s, step_s : float
         Context each side and step (s).
+    stored : (np.ndarray, np.ndarray), optional
+        The audio's posteriorgram, shape (q, 39), and CTC blank, shape (q,), as ingest
+        stored them (:func:`stored_posteriors`): used instead of running hama again.
 
     Returns
     -------
@@ -80,8 +108,10 @@ def ppg_features(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
         Per context offset (earliest first): the 39 posteriorgram columns, the blank's
         probability and the log loudness relative to the clip's loud frames.
     """
-    probs = ctc.posteriors(audio, sample_rate)
-    frames = np.column_stack([fold(probs), probs[:, PHONES.index(SILENCE)]])
+    if stored is None:
+        probs = ctc.posteriors(audio, sample_rate)
+        stored = fold(probs), blank_of(probs)
+    frames = np.column_stack(stored)
     n_frames = len(frames)
     level = rms_envelope(audio, sample_rate, (np.arange(n_frames) + 0.5) * HOP_S,
                          window=RMS_WINDOW_S, smooth=0.0)
@@ -100,10 +130,11 @@ class PpgForward:
     context_s = CONTEXT_S
     step_s = CONTEXT_STEP_S
 
-    def features(self, audio: np.ndarray, sample_rate: int, times: np.ndarray) -> np.ndarray:
+    def features(self, audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
+                 stored: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """:func:`ppg_features` with this model's context."""
         return ppg_features(audio, sample_rate, times, context_s=self.context_s,
-                            step_s=self.step_s)
+                            step_s=self.step_s, stored=stored)
 
     def _predict(self, audio, sample_rate, times, emotion):
         x = self.features(audio, sample_rate, times)

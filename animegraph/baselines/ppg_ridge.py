@@ -44,7 +44,13 @@ import numpy as np
 
 from animegraph.baselines.base import BaselineModel, check_enough, sample_times
 from animegraph.baselines.data import TrainingSet
-from animegraph.baselines.ppg_forward import CONTEXT_S, CONTEXT_STEP_S, PpgForward, n_offsets
+from animegraph.baselines.ppg_forward import (
+    CONTEXT_S,
+    CONTEXT_STEP_S,
+    PpgForward,
+    n_offsets,
+    stored_posteriors,
+)
 from ingest.speech import ctc
 
 #: Ridge penalties tried by generalised cross-validation (standardised data).
@@ -84,11 +90,13 @@ class PpgRidge(PpgForward, BaselineModel):
         # capture's extra frames repeat what their neighbours say, at 2.4 x the memory.
         rate = min(float(data.fps), float(ctc.FRAME_RATE))
         x, y = [], []
-        # hama hears every clip (about 0.1 s a second of speech): a bar on a terminal.
+        # hama hears every clip whose posteriors ingest did not store (about 0.1 s a
+        # second of speech): a bar on a terminal.
         clips = tqdm(data.clips, unit="clip", desc="ppg-ridge: phone posteriors",
                      leave=False, disable=None, file=sys.stderr, dynamic_ncols=True)
         for clip, times, motion in sample_times(clips, rate):
-            x.append(self.features(clip.audio, clip.sample_rate, times))
+            x.append(self.features(clip.audio, clip.sample_rate, times,
+                                   stored=stored_posteriors(clip)))
             y.append(motion)
         x, y = np.concatenate(x), np.concatenate(y)
         check_enough(len(x), x.shape[1] + 1, "the ppg-ridge mapping")

@@ -33,7 +33,7 @@ import numpy as np
 from ingest.speech.ctc import FRAME_RATE
 from ingest.speech.phones import PHONES, SILENCE
 
-__all__ = ["HOP_S", "PHONE_COLUMNS", "SMOOTHING", "compute", "fold"]
+__all__ = ["HOP_S", "PHONE_COLUMNS", "SMOOTHING", "blank", "compute", "fold"]
 
 #: Frame period of a posteriorgram (s): the hama model's 20 ms.
 HOP_S = 1.0 / FRAME_RATE
@@ -66,6 +66,16 @@ def fold(probs: np.ndarray) -> np.ndarray:
     width = phones.shape[1]
     phones = np.where(total > 0, phones / np.where(total > 0, total, 1.0), 1.0 / width)
     return ((1.0 - SMOOTHING) * phones + SMOOTHING / width).astype(np.float32)
+
+
+def blank(probs: np.ndarray) -> np.ndarray:
+    """The CTC blank's probability in each frame of ``probs`` (the ``SIL`` column of
+    :func:`ingest.speech.ctc.posteriors`, which :func:`fold` leaves out): shape
+    (n_frames,), float32."""
+    probs = np.asarray(probs)
+    if probs.ndim != 2 or probs.shape[1] != len(PHONES):
+        raise ValueError(f"posteriors must be (n_frames, {len(PHONES)}), got {probs.shape}")
+    return probs[:, PHONES.index(SILENCE)].astype(np.float32)
 
 
 def compute(audio: np.ndarray, sample_rate: int) -> np.ndarray:
