@@ -308,8 +308,9 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         clips = existing.table("clips", columns=["corpus", "clip_id", "checksum"]).to_pylist()
         known = {(c["corpus"], c["clip_id"]): c["checksum"] for c in clips}
         fps = existing.manifest["fps"]
-        if "posteriors" in existing.columns("clips") and not config.posteriorgrams:
+        if "posteriors" in existing.columns("animes") and not config.posteriorgrams:
             # A database that stores posteriorgrams keeps them for the clips added to it.
+            # (The animes table has them only then; the clips table always has the column.)
             config = replace(config, posteriorgrams=True)
         if config.fps is not None and config.fps != fps:
             raise ParameterError(f"--fps {config.fps} differs from the database's {fps} fps")

@@ -125,6 +125,10 @@ def test_adding_clips_refits_the_model_over_everything(tiny_corpus, tmp_path):
     assert report.count("unchanged") == 4 and report.count("added") == len(clips) - 4
     assert Database.open(db).manifest["n_clips"] == len(clips)
     assert current_version(db) == "v000002"
+    # Labelled clips, no --posteriorgrams: the clips added later get none either (the
+    # clips table always has the column; only a database storing them keeps them on).
+    frames = Database.open(db).table("clips", columns=["posterior_frames"])
+    assert frames.column("posterior_frames").null_count == len(clips)
 
 
 def test_errors(tmp_path):
