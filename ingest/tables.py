@@ -225,12 +225,27 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
 
 
 def prepared_from_database(db) -> list[PreparedClip]:
-    """The clips of a database as :class:`PreparedClip` (to refit the model with more).
+    """The clips of a database as :class:`PreparedClip` (to refit the model with more, or
+    to fit a baseline on it).
 
     Parameters
     ----------
     db : db.store.Database
+
+    Raises
+    ------
+    DataError
+        One line naming the database, when a clip's row does not hold up (a list whose
+        length does not fit its frame count, a missing column): a database is someone
+        else's data.
     """
+    try:
+        return _read_prepared(db)
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
+
+
+def _read_prepared(db) -> list[PreparedClip]:
     from ingest.clip import ChannelSchema
     from ingest.formats.phones_csv import Segment
 

@@ -53,6 +53,10 @@ def _animes(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "animes"), change)
 
 
+def _clips(root: Path, change) -> None:
+    _rewrite(_first_part(_live(root) / "clips"), change)
+
+
 def edit_arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
     """Change the model arrays; with ``checksum``, as a deliberate editor would, the
     manifest's checksum of them too (so that what is checked is the arrays)."""
@@ -154,6 +158,12 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "prosody_nan": lambda r: _animes(r, _replace_column("prosody",
                                                         lambda t: _nan_list(t, "prosody"))),
     "phoneme_unknown": lambda r: _animes(r, _set("phoneme", 0, "XYZ")),
+    # A clip's lists that do not fit their frame counts (read when a baseline is fitted
+    # on the database, or when clips are added to it).
+    "clip_prosody_short": lambda r: _clips(r, _replace_column(
+        "prosody", lambda t: _short_list(t, "prosody"))),
+    "clip_posteriors_short": lambda r: _clips(r, _replace_column(
+        "posteriors", lambda t: _short_list(t, "posteriors"))),
     "animes_column_missing": lambda r: _animes(r, lambda t: t.drop_columns(["next_node"])),
     "animes_truncated": _bytes(lambda r: _first_part(_live(r) / "animes"),
                                lambda b: b[: len(b) // 2]),

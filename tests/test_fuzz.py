@@ -21,6 +21,7 @@ _READERS = ("open", "model", "info", "sql")
 
 def _read_all(path) -> None:
     from animegraph.apps.info import database_info
+    from animegraph.baselines.data import training_set
     from animegraph.synthesis.model import Model
     from db.sql import query
     from db.store import Database
@@ -31,6 +32,9 @@ def _read_all(path) -> None:
     model = Model.load(path)
     graph = model.graph
     assert ((graph.next_node >= -1) & (graph.next_node < graph.n_nodes)).all()
+    # Every clip whole, as a baseline's first fit (the audio-only guide) and adding clips
+    # read them.
+    training_set(db)
 
 
 @pytest.mark.parametrize("mutation", sorted(DATABASE_MUTATIONS))
