@@ -68,6 +68,35 @@ def test_posteriors(spoken):
     assert np.sum(np.argmax(post, axis=1) != PHONES.index(SILENCE)) >= 10
 
 
+def test_threads_each_take_a_session_and_get_what_one_thread_gets(spoken):
+    """Calls on several threads run on sessions of their own (hama's engine is
+    single-threaded), never more than the model allows, with the serial results."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    audio = [(u.audio, u.sample_rate) for u in spoken] * 3
+    ctc.forget()
+    serial = [ctc.posteriors(a, r) for a, r in audio[:2]]
+    model = ctc._model()
+    with ThreadPoolExecutor(4) as pool:
+        ctc.forget()
+        threaded = list(pool.map(lambda ar: ctc.posteriors(*ar), audio))
+    for k, post in enumerate(threaded):
+        np.testing.assert_array_equal(post, serial[k % 2])
+    assert 1 <= model.made <= model.limit
+    # every session made is idle again, and a call that finds none idle waits for one
+    assert model.idle.qsize() == model.made
+    held = [model.idle.get() for _ in range(model.made)]
+    limit, model.limit = model.limit, model.made
+    with ThreadPoolExecutor(1) as pool:
+        waiting = pool.submit(lambda: ctc._log_probs(np.zeros(1600, dtype=np.float32)))
+        assert not waiting.done()
+        model.idle.put(held.pop())
+        assert waiting.result(timeout=60).shape[0] > 0
+    for session in held:
+        model.idle.put(session)
+    model.limit = limit
+
+
 def test_recognize_is_roughly_right(spoken):
     for u in spoken:
         segments = ctc.recognize(u.audio, u.sample_rate)

@@ -38,6 +38,7 @@ no notion of emotion (``emotion`` is ignored) and needs ``hama`` (a core depende
 from __future__ import annotations
 
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from typing import ClassVar
 
 import numpy as np
@@ -51,6 +52,7 @@ from animegraph.baselines.ppg_forward import (
     n_offsets,
     stored_posteriors,
 )
+from db.system import usable_cpus
 from ingest.speech import ctc
 
 #: Ridge penalties tried by generalised cross-validation (standardised data).
@@ -89,16 +91,22 @@ class PpgRidge(PpgForward, BaselineModel):
         # No more motion frames than the posteriorgram has (50 a second): a 120 fps
         # capture's extra frames repeat what their neighbours say, at 2.4 x the memory.
         rate = min(float(data.fps), float(ctc.FRAME_RATE))
-        x, y = [], []
+        samples = list(sample_times(data.clips, rate))
+
+        def features(sample) -> np.ndarray:
+            clip, times, _ = sample
+            return self.features(clip.audio, clip.sample_rate, times,
+                                 stored=stored_posteriors(clip))
+
         # hama hears every clip whose posteriors ingest did not store (about 0.1 s a
-        # second of speech): a bar on a terminal.
-        clips = tqdm(data.clips, unit="clip", desc="ppg-ridge: phone posteriors",
-                     leave=False, disable=None, file=sys.stderr, dynamic_ncols=True)
-        for clip, times, motion in sample_times(clips, rate):
-            x.append(self.features(clip.audio, clip.sample_rate, times,
-                                   stored=stored_posteriors(clip)))
-            y.append(motion)
-        x, y = np.concatenate(x), np.concatenate(y)
+        # second of speech, on one core a call): the clips on one thread per core, in
+        # order, with a bar on a terminal.
+        with ThreadPoolExecutor(usable_cpus(), thread_name_prefix="ppg-ridge") as pool:
+            x = list(tqdm(pool.map(features, samples), total=len(samples), unit="clip",
+                          desc="ppg-ridge: phone posteriors", leave=False, disable=None,
+                          file=sys.stderr, dynamic_ncols=True))
+        x, y = np.concatenate(x), np.concatenate([motion for _, _, motion in samples])
+        del samples
         check_enough(len(x), x.shape[1] + 1, "the ppg-ridge mapping")
         # Standardised both ways, so that the penalty treats every feature alike and the
         # cross-validation weighs every channel alike; then mapped back to raw units.
@@ -106,7 +114,11 @@ class PpgRidge(PpgForward, BaselineModel):
         x_sd[x_sd == 0] = 1.0
         y_mean, y_sd = y.mean(axis=0), y.std(axis=0)
         y_sd[y_sd == 0] = 1.0
-        ridge = RidgeCV(alphas=ALPHAS).fit((x - x_mean) / x_sd, (y - y_mean) / y_sd)
+        # The same leave-one-out criterion whichever decomposition: one SVD of the data
+        # takes 30 % less time than sklearn's default eigen path here (many frames, a few
+        # hundred features).
+        ridge = RidgeCV(alphas=ALPHAS, gcv_mode="svd").fit((x - x_mean) / x_sd,
+                                                           (y - y_mean) / y_sd)
         weights = ridge.coef_.T / x_sd[:, None] * y_sd[None, :]  # (n_features, n_channels)
         self.coef_ = np.vstack([y_mean - x_mean @ weights, weights])
         self.alpha_ = float(ridge.alpha_)

@@ -9,7 +9,6 @@ after the first call) and a large layer's queries run on several threads.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -18,6 +17,7 @@ import numpy as np
 
 from animegraph.search.kdtree import LEAF, build_tree, query
 from animegraph.search.problem import Problem, row_dist
+from db.system import usable_cpus
 
 log = logging.getLogger(__name__)
 
@@ -29,14 +29,6 @@ _REBUILD = 0.7
 _PARALLEL_MIN = 2048
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
-
-
-def _threads() -> int:
-    """Threads for the queries of a layer: the CPUs this process may use, at most 8."""
-    try:
-        return max(1, min(8, len(os.sched_getaffinity(0))))
-    except AttributeError:  # not on Linux
-        return max(1, min(8, os.cpu_count() or 1))
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
@@ -389,7 +381,7 @@ def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
 def _run_queries(cn, lo1, hi1, n_query, args) -> int:
     """The queries of one layer, split over threads when there are many (numba releases
     the GIL)."""
-    threads = _threads()
+    threads = usable_cpus(8)  # the CPUs this process may use, at most 8
     if threads == 1 or n_query < _PARALLEL_MIN:
         return _query_layer(cn, lo1, hi1, *args)
     cuts = np.linspace(lo1, hi1, threads + 1).astype(np.int64)

@@ -48,14 +48,18 @@ import hashlib
 import logging
 import math
 import os
+import queue
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from db.errors import DataError
+from db.system import usable_cpus
 from ingest.formats.phones_csv import Segment
 from ingest.speech.g2p import pronounce, transcript_words
 from ingest.speech.phones import PHONES, SILENCE
@@ -139,9 +143,37 @@ _SIL = _INDEX[SILENCE]
 
 @dataclass
 class _Model:
-    session: object
+    """The model's symbol map and its inference sessions.
+
+    One session runs one call at a time on one core (hama's engine is single-threaded and
+    releases the GIL), so callers on several threads (a baseline hearing every clip of a
+    database) each take a session of their own: up to ``limit``, made when first needed.
+    """
+
     merge: np.ndarray  # (n_symbols, n_phones) 0/1: symbol -> PHONES column
-    lock: threading.Lock
+    new_session: Callable[[], object]
+    limit: int
+    idle: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
+    made: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    @contextmanager
+    def session(self) -> Iterator[object]:
+        """A session for this thread's call, back to the idle ones after it."""
+        try:
+            session = self.idle.get_nowait()
+        except queue.Empty:
+            with self.lock:
+                make = self.made < self.limit
+                if make:
+                    session = self.new_session()
+                    self.made += 1
+            if not make:
+                session = self.idle.get()  # all in use: wait for one
+        try:
+            yield session
+        finally:
+            self.idle.put(session)
 
 
 _MODEL: _Model | None = None
@@ -177,16 +209,21 @@ def _model() -> _Model:
             raise DataError(f"the hama phone engine is not installed ({exc}); "
                             "pip install hama, or use --phones-engine pocketsphinx") from exc
         start = time.perf_counter()
-        try:
-            asr = ASRModel()
-        except (RuntimeError, OSError, ValueError) as exc:
-            raise DataError(f"cannot load the hama phone model: {exc}") from exc
+
+        def load() -> ASRModel:
+            try:
+                return ASRModel()
+            except (RuntimeError, OSError, ValueError) as exc:
+                raise DataError(f"cannot load the hama phone model: {exc}") from exc
+
+        asr = load()
         symbols = asr.decoder_tokens
         merge = np.zeros((len(symbols), len(PHONES)), dtype=np.float32)
         for k, symbol in enumerate(symbols):
             merge[k, _INDEX[IPA_TO_ARPABET.get(symbol, SILENCE)]] = 1.0
         logger.debug("hama model loaded in %.2f s", time.perf_counter() - start)
-        _MODEL = _Model(asr.session, merge, threading.Lock())
+        _MODEL = _Model(merge, lambda: load().session, usable_cpus(), made=1)
+        _MODEL.idle.put(asr.session)
         return _MODEL
 
 
@@ -200,9 +237,9 @@ def _log_probs(samples: np.ndarray) -> np.ndarray:
     for a in range(0, max(len(samples), 1), size):
         lo, hi = max(0, a - context), min(len(samples), a + size + context)
         wav = np.ascontiguousarray(samples[lo:hi], dtype=np.float32)
-        with model.lock:
+        with model.session() as session:
             try:
-                log_probs, lengths = model.session.run(
+                log_probs, lengths = session.run(
                     ["log_probs", "out_lengths"],
                     {"waveform": wav[None], "waveform_lengths": np.array([len(wav)])})
             except RuntimeError as exc:
