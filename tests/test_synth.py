@@ -230,7 +230,8 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
     audio, sr = read_wav(stem.with_suffix(".wav"))
     labels = read_phones_csv(f"{stem}.phones.csv")
     plain = synthesize(model, audio, sr, labels=labels)
-    one = synthesize(model, audio, sr, labels=labels, k_best=1)
+    one = synthesize(model, audio, sr, labels=labels, k_best=1,
+                     options=PostOptions(blend=False))
     unblended = synthesize(model, audio, sr, labels=labels, options=PostOptions(blend=False))
     np.testing.assert_allclose(one.motion, unblended.motion)
     assert one.joins == []
@@ -253,6 +254,67 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
         assert row["pick_weight"] == weights[0]
     with pytest.raises(ParameterError, match="k must be"):
         synthesize(model, audio, sr, labels=labels, k_best=0)
+
+
+def _played_through(graph, nodes):
+    """Input phones on the recorded frames of ``nodes``, one after another."""
+    from animegraph.synthesis import Phone
+    from ingest.speech.phones import PHONES
+
+    phones, t = [], 0.0
+    for a in nodes:
+        n = len(graph.motion(a)) / graph.fps
+        phones.append(Phone(PHONES[graph.node_phone[a]], t, t + n, graph.prosody(a)))
+        t += n
+    return phones
+
+
+def test_k_best_cross_fades_phones_through_their_recorded_transitions(model):
+    from dataclasses import replace
+
+    from animegraph.synthesis import Phone, blend_k_best
+
+    graph = model.graph
+    opts = PostOptions(time_warp=False, smooth=False)
+
+    def both(ranked, phones):
+        return (blend_k_best(graph, ranked, phones, options=opts),
+                blend_k_best(graph, ranked, phones, options=replace(opts, blend=False)))
+
+    # Five animes of one recording played through: each phone's recorded neighbour is the
+    # next phone's own anime, so cross-fading changes nothing.
+    run = [int(np.flatnonzero(graph.prev_node < 0)[0])]
+    for _ in range(4):
+        run.append(int(graph.next_node[run[-1]]))
+    assert min(run) >= 0
+    phones = _played_through(graph, run)
+    faded, cut = both([np.array([a]) for a in run], phones)
+    np.testing.assert_allclose(faded, cut, atol=1e-9)
+    # The third phone's anime taken from elsewhere, from after the second phone's phoneme:
+    # its recorded predecessor is mixed into the second phone's second half, and the
+    # third phone's first half gets the second phone's recorded successor.
+    same = graph.by_phone[graph.node_phone[run[2]]]
+    prev = graph.prev_node[same]
+    other = same[(prev >= 0) & (graph.node_phone[np.maximum(prev, 0)] == graph.node_phone[run[1]])
+                 & (graph.node_clip[same] != graph.node_clip[run[2]])]
+    if len(other) == 0:
+        pytest.skip("no anime of the third phone recorded after the second phone elsewhere")
+    ranked = [np.array([a]) for a in run]
+    ranked[2] = other[:1]
+    faded, cut = both(ranked, phones)
+    edges = np.cumsum([0] + [len(graph.motion(a)) for a in run])
+    centres = (edges[:-1] + edges[1:] - 1) / 2
+    changed = np.flatnonzero(np.abs(faded - cut).max(axis=1) > 1e-9)
+    # from the second phone's centre on (its second half: the predecessor mixed in) to at
+    # most the fourth's (the new anime's own successor may show the fourth phone)
+    assert len(changed) and centres[1] < changed.min() < edges[2]
+    assert changed.max() < centres[3]
+    # ... only where the recording shows the input's phones: relabelled, the second phone
+    # is shown by no recorded neighbour, and its frames stay its own mean.
+    label = next(p for p in ("ZH", "OY", "UH", "TH") if p not in {x.phone for x in phones})
+    phones[1] = Phone(label, phones[1].start, phones[1].end, phones[1].prosody)
+    faded, cut = both(ranked, phones)
+    np.testing.assert_allclose(faded[:edges[2]], cut[:edges[2]], atol=1e-9)
 
 
 def test_recording_means_are_each_clips_mean_motion(model):
@@ -294,11 +356,11 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     assert model.sessions[0][1] == "synth01"
     assert not recentres(model) and recentres(model, PostOptions(recentre=True))
     raw = synthesize(model, audio, sr, labels=labels, k_best=4,
-                     options=PostOptions(smooth=False, recentre=False))
+                     options=PostOptions(smooth=False, blend=False, recentre=False))
     rc = synthesize(model, audio, sr, labels=labels, k_best=4,
-                    options=PostOptions(smooth=False, recentre=True))
+                    options=PostOptions(smooth=False, blend=False, recentre=True))
     default = synthesize(model, audio, sr, labels=labels, k_best=4,
-                         options=PostOptions(smooth=False))
+                         options=PostOptions(smooth=False, blend=False))
     np.testing.assert_array_equal(default.ics, raw.ics)
     # The record says how the animes were averaged (labels: ranked by context first).
     assert (rc.recentred, default.recentred) == (True, False)
@@ -306,7 +368,7 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     assert explain_record(rc)["k_best_ranking"] == "context"
     picked = [[(a["node"], a["weight"]) for a in animes] for animes in rc.blended]
     assert picked == [[(a["node"], a["weight"]) for a in animes] for animes in raw.blended]
-    # Unsmoothed, each phone's frames move by one pose: minus the weighted mean of its
+    # Unsmoothed and cut at the phones' boundaries, each phone's frames move by one pose: minus the weighted mean of its
     # animes' recording means, plus the utterance's offset (their mean over its frames).
     means = recording_means(model.graph)
     _, ranges = output_frames(rc.phones, model.graph.fps)

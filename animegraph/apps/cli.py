@@ -227,7 +227,10 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--explain-json", type=Path, default=None,
                      help="write the explanation as JSON here")
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
-    syn.add_argument("--no-blend", action="store_true", help="skip blending at jumps")
+    syn.add_argument("--no-blend", action="store_true",
+                     help="skip blending at jumps (with --k-best: cut each phone's mean at "
+                     "its boundaries instead of cross-fading it into its neighbours' "
+                     "through the recorded transitions)")
     syn.add_argument("--helper", choices=HELPER_CHOICES, default=None,
                      help="the paper's search, with a helper pair's motion blended in at a "
                      "jump as recorded ('paper', §4.3, the default), moved onto the animes' "
@@ -843,7 +846,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
-          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes)"
+          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes, "
+             + ("cut at its boundaries" if args.no_blend else
+                "cross-faded into its neighbours through the recorded transitions") + ")"
              if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:

@@ -47,7 +47,8 @@ METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-p
            "kbest20-guided", "kbest20-guided-blend", "kbest20-blend", "kbest20-ctx",
            "kbest20-ctx-blend", "kbest20-raw", "kbest20-ctx-raw", "kbest20-raw-blend",
            "kbest20-ctx-raw-blend", "kbest20-rc", "kbest20-ctx-rc", "kbest20-rc-blend",
-           "kbest20-ctx-rc-blend")
+           "kbest20-ctx-rc-blend", "kbest20-cut", "kbest20-ctx-cut", "kbest20-cut-blend",
+           "kbest20-rc-cut-blend")
 #: The methods scored unless others are asked for (those of the paper's audio cost;
 #: ``kbest20-ctx`` is ``synth``'s default with known phones).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
@@ -59,6 +60,10 @@ RAW_SUFFIX = "-raw"
 #: number of speakers or sessions.
 RECENTRE_SUFFIX = "-rc"
 RECENTRE_SUFFIXES = {RAW_SUFFIX: False, RECENTRE_SUFFIX: True}
+#: ``kbest<K>[-ctx][-rc|-raw]-cut``: each phone's mean cut at its boundaries, not
+#: cross-faded into its neighbours' through the recorded transitions
+#: (``PostOptions(blend=False)``).
+CUT_SUFFIX = "-cut"
 #: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
 #: (``animegraph.search.k_best(..., context=True)``; beyond the paper).
 CONTEXT_SUFFIX = "-ctx"
@@ -150,6 +155,8 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
     search input of :func:`heldout_query`, and its number of jump matches."""
     nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
+        blend = not method.endswith(CUT_SUFFIX)
+        method = method.removesuffix(CUT_SUFFIX)
         recentre = None  # synth's default
         for suffix, on in RECENTRE_SUFFIXES.items():
             if method.endswith(suffix):
@@ -157,7 +164,8 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
         context = method.endswith(CONTEXT_SUFFIX)
         k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,
-                             context=context, options=PostOptions(recentre=recentre))[0], jumps
+                             context=context,
+                             options=PostOptions(recentre=recentre, blend=blend))[0], jumps
     options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
                else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps

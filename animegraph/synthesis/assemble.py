@@ -16,7 +16,8 @@ Three steps, each optional so their effect can be measured:
   :func:`ingest.lowpass.smooth`, beside the learning of the cutoffs).
 
 Beyond the paper, :func:`blend_k_best` averages the k best-matching animes of each phone
-instead of joining one anime per phone (opt-in: ``synthesize(..., k_best=K)``).
+instead of joining one anime per phone (opt-in: ``synthesize(..., k_best=K)``), and
+cross-fades each phone's mean into its neighbours' through the recorded transitions.
 
 Motion is handled in independent-component space, shape (n_frames, n_ics), at the
 database's frame rate.
@@ -31,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from animegraph.search.dtw import dtw, warp_indices
-from animegraph.search.graph import AnimeGraph
+from animegraph.search.graph import PHONE_INDEX, AnimeGraph
 from db.errors import ParameterError
 from ingest.lowpass import smooth
 
@@ -61,7 +62,7 @@ class PostOptions:
     averages (beyond the paper)."""
 
     time_warp: bool = True  # DTW on prosody; False: stretch each anime uniformly
-    blend: bool = True  # blend at jump matches
+    blend: bool = True  # blend at jump matches (k-best: at every phone join)
     smooth: bool = True  # low-pass with the learned cutoffs
     #: How a helper pair's motion enters the blend at a jump: "paper" as recorded (§4.3);
     #: "anchored" displaced onto the two animes' poses at the blend's ends (:func:`anchor`);
@@ -347,9 +348,18 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     ``r ** -RANK_DECAY`` (:data:`RANK_DECAY`); the result is then smoothed with the
     learned cutoffs. One anime per phone is a single noisy sample of how the phone
     can look; the mean of the few whose audio matches best is a better estimate (on
-    real data with recognized phones, docs/results.md). Averaging replaces the blending
-    at jump matches (``options.blend`` is not used): averaged neighbours are no longer
-    single recordings to join.
+    real data with recognized phones, docs/results.md).
+
+    Averaged neighbours are no longer single recordings to join as §4.3 does at a jump
+    match. With ``options.blend`` (the default) each join is cross-faded instead through
+    the transitions the animes were recorded with: each phone's mean is carried into
+    the halves of its neighbours by the animes recorded next to its own
+    (:func:`_recorded_neighbours`: those that show the input's neighbouring phone, as the
+    helper pairs of §4.3 show the jump's phoneme transition), and the two estimates of a
+    frame between two phones' centres are mixed with weights that move linearly from one
+    centre to the other (overlap-add with triangular windows, which sum to one). Where no
+    anime shows the transition, the phone's own mean stands. Without ``blend`` the
+    phones' means are cut at their boundaries.
 
     With ``options.recentre`` true each anime enters the mean as its motion
     relative to its recording's mean pose (:func:`recording_means`), and the utterance's
@@ -375,7 +385,7 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     cutoffs : np.ndarray, shape (n_ics,), optional
         Needed for smoothing.
     options : PostOptions, optional
-        ``time_warp`` and ``smooth`` apply.
+        ``time_warp``, ``blend``, ``smooth`` and ``recentre`` apply.
 
     Returns
     -------
@@ -384,21 +394,115 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     """
     opts = options or PostOptions()
     n, ranges = output_frames(phones, graph.fps)
-    motion = np.zeros((n, graph.motion_values.shape[1]))
+    n_ics = graph.motion_values.shape[1]
+    motion = np.zeros((n, n_ics))
     means = recording_means(graph) if opts.recentre else None
-    offset, used = np.zeros(motion.shape[1]), 0.0
-    for nodes, phone, (s, b) in zip(ranked, phones, ranges, strict=True):
+    offset, used = np.zeros(n_ics), 0.0
+    before, after = [], []  # per phone: its animes' recorded neighbours, (mean, weight)
+    for i, (nodes, phone, (s, b)) in enumerate(zip(ranked, phones, ranges, strict=True)):
+        nodes = np.asarray(nodes, dtype=np.int64)
+        w = rank_weights(len(nodes))
+        own = (means[graph.node_clip[nodes]] if means is not None
+               else np.zeros((len(nodes), n_ics)))  # (k, n_ics)
         pieces = np.array([warp_anime(graph, int(a), phone, b - s, time_warp=opts.time_warp)
                            for a in nodes])
-        w = rank_weights(len(nodes))
+        motion[s:b] = np.tensordot(w, pieces - own[:, None, :], axes=1)
         if means is not None and b > s:
-            own = means[graph.node_clip[np.asarray(nodes, dtype=np.int64)]]  # (k, n_ics)
-            pieces = pieces - own[:, None, :]
             offset += (b - s) * (w @ own)
             used += b - s
-        motion[s:b] = np.tensordot(w, pieces, axes=1)
+        if opts.blend:
+            before.append(_recorded_neighbours(
+                graph, nodes, w, own, phones[i - 1], ranges[i - 1][1] - ranges[i - 1][0],
+                before=True) if i > 0 else (None, 0.0))
+            after.append(_recorded_neighbours(
+                graph, nodes, w, own, phones[i + 1], ranges[i + 1][1] - ranges[i + 1][0],
+                before=False) if i + 1 < len(phones) else (None, 0.0))
+    if opts.blend:
+        motion = _cross_fade(motion, ranges, before, after)
     if means is not None and used > 0:
         motion += offset / used
     if opts.smooth and cutoffs is not None:
         motion = smooth(motion, cutoffs, graph.fps)
     return motion
+
+
+def _recorded_neighbours(graph: AnimeGraph, nodes: np.ndarray, w: np.ndarray,
+                         own: np.ndarray, phone: Phone, n_out: int, *,
+                         before: bool) -> tuple[np.ndarray | None, float]:
+    """What the animes ``nodes`` of one input phone show of its neighbour ``phone``.
+
+    The animes recorded just before ``nodes`` (``before``) or just after them, of those
+    that show ``phone``'s phoneme: each stretched onto the neighbour's ``n_out`` frames,
+    relative to its recording's pose as the phone's own mean is, and averaged with the
+    weights ``w`` renormalised over them.
+
+    Parameters
+    ----------
+    nodes : np.ndarray of int, shape (k,)
+    w : np.ndarray, shape (k,)
+        Their weights (summing to 1).
+    own : np.ndarray, shape (k, n_ics)
+        The pose each enters the mean relative to (zeros: as recorded).
+    phone : Phone
+        The neighbouring input phone.
+    n_out : int
+        Its number of frames.
+    before : bool
+        The neighbour is the phone before (else after).
+
+    Returns
+    -------
+    mean : np.ndarray, shape (n_out, n_ics), or None
+        None when the neighbour has no frames or no anime shows it.
+    share : float
+        The share of ``w`` the animes shown carry (0 with None).
+    """
+    nb = (graph.prev_node if before else graph.next_node)[nodes]
+    shows = (nb >= 0) & (graph.node_phone[np.maximum(nb, 0)]
+                         == PHONE_INDEX.get(phone.phone, -1))
+    if n_out == 0 or not shows.any():
+        return None, 0.0
+    pieces = np.array([_stretch(graph.motion(int(a)).astype(np.float64), n_out)
+                       for a in nb[shows]]) - own[shows][:, None, :]
+    share = float(w[shows].sum())
+    return np.tensordot(w[shows] / share, pieces, axes=1), share
+
+
+def _stretch(motion: np.ndarray, n_out: int) -> np.ndarray:
+    """``motion`` (m, n_ics) stretched uniformly onto ``n_out`` frames."""
+    if len(motion) == 1:
+        return np.repeat(motion, n_out, axis=0)
+    return _interp_rows(motion, (np.arange(n_out) + 0.5) / n_out * (len(motion) - 1))
+
+
+def _cross_fade(motion: np.ndarray, ranges: Sequence[tuple[int, int]],
+                before: Sequence[tuple[np.ndarray | None, float]],
+                after: Sequence[tuple[np.ndarray | None, float]]) -> np.ndarray:
+    """Each phone's frames mixed with its neighbours' recorded continuations.
+
+    ``motion`` (n_frames, n_ics) holds each phone's own mean in its ``ranges``;
+    ``before[i]`` / ``after[i]`` are phone i's animes' recorded neighbours over phone
+    i - 1's / i + 1's frames, with the share of weight they carry
+    (:func:`_recorded_neighbours`). Between the centres of phones i and i + 1, the
+    weight of phone i + 1's estimate rises linearly from 0 to 1 (times the share its
+    estimate carries there, the rest staying with the phone's own mean).
+    """
+    out = motion.copy()
+    centres = [(s + b - 1) / 2.0 for s, b in ranges]
+    for j, (s, b) in enumerate(ranges):
+        if b <= s:
+            continue
+        t = np.arange(s, b, dtype=np.float64)
+        own = motion[s:b]
+        for k, neighbour in ((j - 1, after[j - 1] if j > 0 else (None, 0.0)),
+                             (j + 1, before[j + 1] if j + 1 < len(ranges) else (None, 0.0))):
+            estimate, share = neighbour
+            if estimate is None:
+                continue
+            side = (t < centres[j]) if k < j else (t >= centres[j])  # the half facing k
+            # The triangular window of phone k: 1 at its centre, 0 at this phone's.
+            reach = max(abs(centres[j] - centres[k]), 1e-9)
+            raw = np.clip(1.0 - np.abs(t[side] - centres[k]) / reach, 0.0, 1.0)[:, None]
+            out[s:b][side] = (((1.0 - raw) * own[side] + share * raw * estimate[side])
+                              / ((1.0 - raw) + share * raw))
+    return out
