@@ -366,6 +366,8 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     assert (rc.recentred, default.recentred) == (True, False)
     assert explain_record(rc)["recentred"] and not explain_record(default)["recentred"]
     assert explain_record(rc)["k_best_ranking"] == "context"
+    assert explain_record(rc)["k_best_joins"] == "cut" and not rc.cross_faded
+    assert synthesize(model, audio, sr, labels=labels, k_best=4).cross_faded
     picked = [[(a["node"], a["weight"]) for a in animes] for animes in rc.blended]
     assert picked == [[(a["node"], a["weight"]) for a in animes] for animes in raw.blended]
     # Unsmoothed and cut at the phones' boundaries, each phone's frames move by one pose: minus the weighted mean of its
@@ -387,7 +389,10 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     assert main([*args, "--k-best", "4", "--recentre"]) == 0
     assert "recording's mean pose (as asked)" in capsys.readouterr().err
     assert main([*args, "--k-best", "4"]) == 0
-    assert "mean pose" not in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "mean pose" not in err and "cross-faded into its neighbours" in err
+    assert main([*args, "--k-best", "4", "--no-blend"]) == 0
+    assert "cut at its boundaries" in capsys.readouterr().err
 
 
 def test_k_best_ranks_by_phonetic_context_when_asked(model, held_out):

@@ -847,8 +847,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
           + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes, "
-             + ("cut at its boundaries" if args.no_blend else
-                "cross-faded into its neighbours through the recorded transitions") + ")"
+             + ("cross-faded into its neighbours through the recorded transitions"
+                if out.cross_faded else "cut at its boundaries") + ")"
              if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:

@@ -101,21 +101,24 @@ def warp_anime(graph: AnimeGraph, node: int, phone: Phone, n_out: int, *,
     np.ndarray, shape (n_out, n_ics)
     """
     motion = graph.motion(node).astype(np.float64)
-    if n_out == 0:
-        return np.zeros((0, motion.shape[1]))
-    if len(motion) == 1:
-        return np.repeat(motion, n_out, axis=0)
+    anime_prosody = graph.prosody(node)
+    if not (time_warp and n_out and len(motion) > 1 and len(phone.prosody) > 1
+            and len(anime_prosody) > 1):
+        return _stretch(motion, n_out)
     # Position of each output frame in the input phone, as a fraction of its prosody frames.
     u = (np.arange(n_out) + 0.5) / n_out
-    anime_prosody = graph.prosody(node)
-    if time_warp and len(phone.prosody) > 1 and len(anime_prosody) > 1:
-        src = warp_positions(phone.prosody, anime_prosody)
-        v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
-        frac = v / (len(anime_prosody) - 1)
-    else:
-        frac = u
-    pos = np.clip(frac, 0.0, 1.0) * (len(motion) - 1)
-    return _interp_rows(motion, pos)
+    src = warp_positions(phone.prosody, anime_prosody)
+    v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
+    frac = v / (len(anime_prosody) - 1)
+    return _interp_rows(motion, np.clip(frac, 0.0, 1.0) * (len(motion) - 1))
+
+
+def _stretch(motion: np.ndarray, n_out: int) -> np.ndarray:
+    """``motion`` (m, n_ics) stretched uniformly onto ``n_out`` frames, each output frame
+    showing the motion at its centre's relative position."""
+    if n_out == 0 or len(motion) == 1:
+        return np.repeat(motion[:1], n_out, axis=0)
+    return _interp_rows(motion, (np.arange(n_out) + 0.5) / n_out * (len(motion) - 1))
 
 
 def warp_positions(c_input: np.ndarray, c_anime: np.ndarray) -> np.ndarray:
@@ -466,13 +469,6 @@ def _recorded_neighbours(graph: AnimeGraph, nodes: np.ndarray, w: np.ndarray,
                        for a in nb[shows]]) - own[shows][:, None, :]
     share = float(w[shows].sum())
     return np.tensordot(w[shows] / share, pieces, axes=1), share
-
-
-def _stretch(motion: np.ndarray, n_out: int) -> np.ndarray:
-    """``motion`` (m, n_ics) stretched uniformly onto ``n_out`` frames."""
-    if len(motion) == 1:
-        return np.repeat(motion, n_out, axis=0)
-    return _interp_rows(motion, (np.arange(n_out) + 0.5) / n_out * (len(motion) - 1))
 
 
 def _cross_fade(motion: np.ndarray, ranges: Sequence[tuple[int, int]],

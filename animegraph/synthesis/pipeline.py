@@ -83,6 +83,10 @@ class Synthesis:
     recentred : bool
         With ``k_best``: each anime entered the mean relative to its recording's mean pose
         (:func:`recentres`).
+    cross_faded : bool
+        With ``k_best``: each phone's mean was cross-faded into its neighbours' through
+        the recorded transitions (``PostOptions.blend``;
+        :func:`animegraph.synthesis.blend_k_best`), not cut at its boundaries.
     """
 
     motion: np.ndarray
@@ -100,6 +104,7 @@ class Synthesis:
     warnings: tuple[str, ...] = ()
     context_ranked: bool = False
     recentred: bool = False
+    cross_faded: bool = False
 
 
 def synthesize(
@@ -254,7 +259,8 @@ def synthesize(
                      segmentation=method_used, result=result, joins=joins, explain=explain,
                      timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
                      warnings=tuple(warnings), context_ranked=bool(k_best and context),
-                     recentred=k_best is not None and recentres(model, options))
+                     recentred=k_best is not None and recentres(model, options),
+                     cross_faded=k_best is not None and (options or PostOptions()).blend)
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
