@@ -370,8 +370,9 @@ def test_k_best_recentres_each_anime_on_its_recording(model, held_out, capsys):
     assert synthesize(model, audio, sr, labels=labels, k_best=4).cross_faded
     picked = [[(a["node"], a["weight"]) for a in animes] for animes in rc.blended]
     assert picked == [[(a["node"], a["weight"]) for a in animes] for animes in raw.blended]
-    # Unsmoothed and cut at the phones' boundaries, each phone's frames move by one pose: minus the weighted mean of its
-    # animes' recording means, plus the utterance's offset (their mean over its frames).
+    # Unsmoothed and cut at the phones' boundaries, each phone's frames move by one pose:
+    # minus the weighted mean of its animes' recording means, plus the utterance's offset
+    # (their mean over its frames).
     means = recording_means(model.graph)
     _, ranges = output_frames(rc.phones, model.graph.fps)
     shift = np.zeros_like(rc.ics)
