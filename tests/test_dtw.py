@@ -14,6 +14,7 @@ from animegraph.search.dtw import (
     audio_costs_many,
     dtw,
     warp_indices,
+    warp_indices_many,
     warp_onto,
 )
 from db.errors import ParameterError
@@ -254,6 +255,24 @@ def test_audio_costs_many_equal_one_call_per_input(rng, monkeypatch, parallel):
         audio_costs_many(inputs, values, offsets, lists[:2])
     with pytest.raises(ParameterError, match=r"c_inputs\[1\]"):
         audio_costs_many([inputs[0], np.full((3, 9), np.nan)], values, offsets, lists[:2])
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_warp_indices_many_equal_one_dtw_per_pair(rng, monkeypatch, parallel):
+    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1 if parallel else 10**9)
+    curves, values, offsets = _graph_like(rng, 200)
+    inputs = [rng.standard_normal((k, 9)) for k in (12, 1, 30, 5)]
+    lists = [rng.permutation(200)[:k] for k in (150, 0, 7, 200)]
+    many = warp_indices_many(inputs, values, offsets, lists)
+    assert [m.shape for m in many] == [(150, 12), (0, 1), (7, 30), (200, 5)]
+    for x, nodes, warps in zip(inputs, lists, many, strict=True):
+        for a, row in zip(nodes, warps, strict=True):  # bit for bit
+            np.testing.assert_array_equal(row, warp_indices(len(x), dtw(x, curves[a]).path))
+    assert warp_indices_many([], values, offsets, []) == []
+    with pytest.raises(ParameterError, match="one node list per input"):
+        warp_indices_many(inputs, values, offsets, lists[:2])
+    with pytest.raises(ParameterError, match="nodes must be in"):
+        warp_indices_many(inputs[:1], values, offsets, [np.array([200])])
 
 
 def test_audio_costs_float64_values_and_band(rng):

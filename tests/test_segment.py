@@ -92,6 +92,26 @@ def test_align_recovers_phones_and_timing(spoken):
     assert np.median(all_errors) < 0.030  # measured: about 4 ms
 
 
+def test_one_phone_words_are_placed_by_the_word_pass_alone(spoken):
+    # align_phones skips PocketSphinx's second (phone) pass: with words of one phone it
+    # gives back the word pass's boundaries. Checked here against running it.
+    from ingest.speech import segment as seg
+
+    engine = seg._engine("align")
+    for utterance in spoken:
+        phones = [p.phone for p in utterance.phones if p.phone != SILENCE]
+        prepared = seg._prepare(*seg._check_audio(utterance.audio, utterance.sample_rate))
+        words = " ".join(seg._phone_word(p) for p in phones)
+        with engine.lock:
+            seg._add_words(engine, [(seg._phone_word(p), p) for p in sorted(set(phones))
+                                    if seg._phone_word(p) not in engine.added])
+            one = seg._align_phones(engine.decoder, words, prepared.pcm, one_phone_words=True)
+            two = seg._align_phones(engine.decoder, words, prepared.pcm)
+        placed = [(seg._as_phone(p), f) for p, f in one]
+        assert [p for p, _ in placed if p != SILENCE] == phones
+        assert placed == [(seg._as_phone(p), f) for p, f in two]
+
+
 def test_align_out_of_vocabulary_word(caplog):
     text = "The blorptastic wizard counted 42 frogs."
     utterance = speak(text)

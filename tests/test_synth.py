@@ -10,6 +10,7 @@ import pytest
 
 from animegraph.apps.cli import main
 from animegraph.synthesis import Model, PostOptions, explain_record, synthesize, warp_positions
+from animegraph.synthesis.assemble import Phone, warp_anime, warp_animes
 from db.errors import DataError, ParameterError
 from ingest.corpus import face
 from ingest.corpus.synthetic import ClipSpec, CorpusConfig, synthesize_clip, write_clip
@@ -223,6 +224,33 @@ def test_warp_positions_pin_the_ends():
     assert src[0] == 0.0 and src[-1] == 7.0
     assert np.all(np.diff(src) >= 0)
     assert warp_positions(c_input[:1], c_anime).tolist() == [0.0]
+
+
+def test_animes_warped_at_once_play_each_anime_on_the_phone_timing(model):
+    # Against §4.3 written out for one anime at a time: the output frame's place in the
+    # input phone, through the pinned DTW warp, to a place in the anime's motion.
+    graph = model.graph
+    rng = np.random.default_rng(3)
+    nodes = rng.choice(graph.n_nodes, size=12, replace=False)
+    phone = Phone("AA", 0.0, 0.2, graph.prosody(int(nodes[0]))[::-1].astype(np.float64))
+    for n_out in (1, 7, 40):
+        got = warp_animes(graph, nodes, phone, n_out)
+        assert got.shape == (12, n_out, graph.motion_values.shape[1])
+        for a, piece in zip(nodes, got, strict=True):
+            motion = graph.motion(int(a)).astype(np.float64)
+            prosody = graph.prosody(int(a))
+            u = (np.arange(n_out) + 0.5) / n_out
+            if len(motion) > 1 and len(prosody) > 1:
+                src = warp_positions(phone.prosody, prosody)
+                v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
+                u = np.clip(v / (len(prosody) - 1), 0.0, 1.0)
+            pos = u * (len(motion) - 1)
+            lo = np.floor(pos).astype(int)
+            hi = np.minimum(lo + 1, len(motion) - 1)
+            t = (pos - lo)[:, None]
+            np.testing.assert_array_equal(piece, (1 - t) * motion[lo] + t * motion[hi])
+        np.testing.assert_array_equal(warp_anime(graph, int(nodes[1]), phone, n_out), got[1])
+    assert warp_animes(graph, nodes, phone, 0).shape == (12, 0, graph.motion_values.shape[1])
 
 
 def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):

@@ -50,7 +50,7 @@ import numpy as np
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
-           "warp_indices", "warp_onto"]
+           "warp_indices", "warp_indices_many", "warp_onto"]
 
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
 #: Local distances of Eq. 5's audio cost: the paper's Euclidean norm between RASTA-PLP
@@ -257,10 +257,39 @@ def _audio_cost_one(xt, y, band, metric, acc, c, total):
 
 
 @_jit()
-def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, lo, hi,
-                 out):
-    """Eq. 5 for the pairs [lo, hi): input ``inputs[t]`` (columns ``x_off[k]:x_off[k+1]``
-    of ``xs``, shape (d, total input frames)) against node ``nodes[t]``.
+def _warp_one(xt, y, band, acc, c, out):
+    """The mean frame j of ``y`` matched to each frame i of x on the optimal path of
+    Euclidean DTW, into ``out[:n]`` (:func:`warp_indices` of :func:`dtw`'s path);
+    ``acc`` (>= m, n) and ``c`` (n,) are workspace."""
+    n = xt.shape[1]
+    m = y.shape[0]
+    _accumulate(xt, y, band, 0, acc, c)
+    total = 0.0
+    count = 0
+    i = n - 1
+    j = m - 1
+    while True:
+        total += j
+        count += 1
+        if i == 0 and j == 0:
+            break
+        pi, pj = _step_back(acc, i, j)
+        if pi != i:
+            out[i] = total / count
+            total = 0.0
+            count = 0
+        i = pi
+        j = pj
+    out[0] = total / count
+
+
+@_jit()
+def _pairs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, lo, hi,
+                 out, warps):
+    """Pairs [lo, hi): input ``inputs[t]`` (columns ``x_off[k]:x_off[k+1]`` of ``xs``,
+    shape (d, total input frames)) against node ``nodes[t]``. With ``metric`` >= 0,
+    Eq. 5 into ``out[t]``; with -1, the warp (:func:`_warp_one`) into ``warps[t]``'s
+    first n_k entries.
 
     Pairs of one input are expected together: its workspace is made once per run of them.
     """
@@ -278,21 +307,25 @@ def _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metri
             c = np.empty(xt.shape[1])
             current = k
         a = nodes[t]
-        out[t] = _audio_cost_one(xt, values[offsets[a]:offsets[a + 1]], band, metric, acc, c,
-                                 total)
+        y = values[offsets[a]:offsets[a + 1]]
+        if metric < 0:
+            _warp_one(xt, y, band, acc, c, warps[t])
+        else:
+            out[t] = _audio_cost_one(xt, y, band, metric, acc, c, total)
 
 
 @_jit(parallel=True)
-def _costs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, n_chunks,
-                    out):
+def _pairs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, n_chunks,
+                    out, warps):
     # Chunks of pairs, not pairs, in parallel: one workspace per chunk, and one parallel
     # region for a whole utterance (a region per phone cost more in thread wake-ups than
     # the work on a loaded 2-core machine). (numba.get_num_threads() is not called in
     # here: it would make the function uncachable.)
     n_pairs = nodes.shape[0]
     for chunk in numba.prange(n_chunks):
-        _costs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric,
-                     chunk * n_pairs // n_chunks, (chunk + 1) * n_pairs // n_chunks, out)
+        _pairs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric,
+                     chunk * n_pairs // n_chunks, (chunk + 1) * n_pairs // n_chunks, out,
+                     warps)
 
 
 @_jit()
@@ -471,9 +504,9 @@ def audio_cost(c_input: np.ndarray, c_anime: np.ndarray, *, band: int | None = N
     _same_width("c_anime", y, "c_input", x)
     out = np.empty(1)
     zero = np.zeros(1, dtype=np.int64)
-    _costs_range(np.ascontiguousarray(x.T), np.array([0, len(x)], dtype=np.int64), y,
+    _pairs_range(np.ascontiguousarray(x.T), np.array([0, len(x)], dtype=np.int64), y,
                  np.array([0, len(y)], dtype=np.int64), zero, zero, len(y), _band(band),
-                 _audio_metric(metric), 0, 1, out)
+                 _audio_metric(metric), 0, 1, out, np.empty((0, 0)))
     return float(out[0])
 
 
@@ -553,17 +586,54 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
         values; different numbers of features; bad ``band``; different numbers of inputs
         and node lists.
     """
+    sizes, out, _ = _run_pairs(c_inputs, values, offsets, nodes, band, _audio_metric(metric))
+    return _split(out, sizes)
+
+
+def warp_indices_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets: np.ndarray,
+                      nodes: Sequence[np.ndarray], *, band: int | None = None
+                      ) -> list[np.ndarray]:
+    """§4.3's time-warps of every input phone's candidate nodes at once.
+
+    :func:`warp_indices` of :func:`dtw`'s path for each (input curve, node curve) pair, in
+    one compiled loop over an utterance's pairs as :func:`audio_costs_many` scores them
+    (k-best averages several animes per phone, each warped onto it).
+
+    Parameters
+    ----------
+    c_inputs : sequence of np.ndarray, each shape (n_i, d)
+        The input phones' prosody curves.
+    values, offsets, band
+        As :func:`audio_costs_many`.
+    nodes : sequence of np.ndarray of int, each shape (k_i,)
+        ``nodes[i]``: the nodes to warp onto input ``i`` (may be empty).
+
+    Returns
+    -------
+    list of np.ndarray of float64, shapes (k_i, n_i)
+        Row t of ``out[i]`` equals ``warp_indices(n_i, dtw(c_inputs[i], curve of
+        nodes[i][t]).path)``, exactly.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`audio_costs_many`.
+    """
+    sizes, _, warps = _run_pairs(c_inputs, values, offsets, nodes, band, -1)
+    return [w[:, :len(c)] for w, c in zip(_split(warps, sizes), c_inputs, strict=True)]
+
+
+def _run_pairs(c_inputs, values, offsets, nodes, band, code):
+    """Checked arguments of the pair functions through the kernels: ``sizes`` (k_i per
+    input), Eq. 5's costs (``code`` >= 0) or warps (``code`` -1, one row per pair)."""
     if len(c_inputs) != len(nodes):
         raise ParameterError(f"need one node list per input curve, got {len(nodes)} lists "
                              f"for {len(c_inputs)} curves")
     values = _values(values)
     band = _band(band)
-    code = _audio_metric(metric)
     offsets = _int_vector("offsets", offsets)
     if len(offsets) < 2:
         raise ParameterError(f"offsets must have n_nodes + 1 >= 2 entries, got {len(offsets)}")
-    if len(c_inputs) == 0:
-        return []
     xs, lists = [], []
     for i, (c_input, node_list) in enumerate(zip(c_inputs, nodes, strict=True)):
         x = _curve("c_input" if len(c_inputs) == 1 else f"c_inputs[{i}]", c_input, np.float64)
@@ -572,7 +642,9 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
         lists.append(_int_vector("nodes", node_list))
     sizes = np.array([len(n) for n in lists], dtype=np.int64)
     flat = np.concatenate(lists) if lists else np.empty(0, dtype=np.int64)
-    out = np.empty(len(flat))
+    out = np.empty(len(flat) if code >= 0 else 0)
+    warps = np.zeros((len(flat), max((len(x) for x in xs), default=0)) if code < 0
+                     else (0, 0))
     if len(flat):
         _check_nodes(values, offsets, flat)
         x_off = np.concatenate([[0], np.cumsum([len(x) for x in xs])]).astype(np.int64)
@@ -581,12 +653,17 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
         max_len = int(np.diff(offsets)[flat].max())
         if len(flat) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
             n_chunks = min(len(flat), 8 * numba.get_num_threads())
-            _costs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
-                            n_chunks, out)
+            _pairs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
+                            n_chunks, out, warps)
         else:
-            _costs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
-                         0, len(flat), out)
-    return np.split(out, np.cumsum(sizes)[:-1])
+            _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
+                         0, len(flat), out, warps)
+    return sizes, out, warps
+
+
+def _split(a: np.ndarray, sizes: np.ndarray) -> list[np.ndarray]:
+    """``a``'s rows in consecutive pieces of ``sizes`` rows (none for no sizes)."""
+    return np.split(a, np.cumsum(sizes)[:-1]) if len(sizes) else []
 
 
 def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> None:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from animegraph.search.dtw import dtw, warp_indices
+from animegraph.search.dtw import dtw, warp_indices, warp_indices_many
 from animegraph.search.graph import PHONE_INDEX, AnimeGraph
 from db.errors import ParameterError
 from ingest.lowpass import smooth
@@ -100,17 +100,61 @@ def warp_anime(graph: AnimeGraph, node: int, phone: Phone, n_out: int, *,
     -------
     np.ndarray, shape (n_out, n_ics)
     """
-    motion = graph.motion(node).astype(np.float64)
-    anime_prosody = graph.prosody(node)
-    if not (time_warp and n_out and len(motion) > 1 and len(phone.prosody) > 1
-            and len(anime_prosody) > 1):
-        return _stretch(motion, n_out)
-    # Position of each output frame in the input phone, as a fraction of its prosody frames.
-    u = (np.arange(n_out) + 0.5) / n_out
-    src = warp_positions(phone.prosody, anime_prosody)
-    v = np.interp(u * (len(phone.prosody) - 1), np.arange(len(src)), src)
-    frac = v / (len(anime_prosody) - 1)
-    return _interp_rows(motion, np.clip(frac, 0.0, 1.0) * (len(motion) - 1))
+    return warp_animes(graph, np.array([node]), phone, n_out, time_warp=time_warp)[0]
+
+
+def warp_animes(graph: AnimeGraph, nodes: np.ndarray, phone: Phone, n_out: int, *,
+                time_warp: bool = True, positions: np.ndarray | None = None) -> np.ndarray:
+    """The motions of ``nodes`` each warped onto ``n_out`` frames of ``phone`` (§4.3).
+
+    Each anime is played with the input phone's timing: the DTW alignment of the two
+    prosody curves (:func:`warp_positions`) says which anime frame each input frame
+    shows. An anime or a phone of a single prosody frame (or ``time_warp`` False) is
+    stretched uniformly instead.
+
+    Parameters
+    ----------
+    graph : AnimeGraph
+    nodes : np.ndarray of int, shape (k,)
+    phone : Phone
+    n_out : int
+    time_warp : bool, optional
+    positions : np.ndarray, shape (k, len(phone.prosody)), optional
+        The rows of :func:`animegraph.search.dtw.warp_indices_many` for ``nodes`` (rows
+        of animes that are stretched are not read); computed when not given.
+
+    Returns
+    -------
+    np.ndarray, shape (k, n_out, n_ics)
+    """
+    nodes = np.asarray(nodes, dtype=np.int64)
+    first = graph.motion_offsets[nodes]
+    frames = graph.motion_offsets[nodes + 1] - first
+    prosody = graph.prosody_offsets[nodes + 1] - graph.prosody_offsets[nodes]
+    u = (np.arange(n_out) + 0.5) / n_out if n_out else np.zeros(0)
+    frac = np.tile(u, (len(nodes), 1))  # (k, n_out): where in each anime, 0 to 1
+    n_in = len(phone.prosody)
+    warped = np.flatnonzero((frames > 1) & (prosody > 1)) if (time_warp and n_out
+                                                               and n_in > 1) else []
+    if len(warped):
+        if positions is None:
+            positions = np.zeros((len(nodes), n_in))
+            positions[warped] = warp_indices_many(
+                [phone.prosody], graph.prosody_values, graph.prosody_offsets,
+                [nodes[warped]])[0]
+        at = u * (n_in - 1)  # each output frame's place among the input's prosody frames
+        for r in warped:
+            src = positions[r].copy()  # the ends pinned, see warp_positions
+            src[0], src[-1] = 0.0, prosody[r] - 1.0
+            v = np.interp(at, np.arange(n_in), src)
+            frac[r] = np.clip(v / (prosody[r] - 1), 0.0, 1.0)
+    pos = frac * (frames - 1)[:, None]
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, (frames - 1)[:, None])
+    t = (pos - lo)[:, :, None]
+    values = graph.motion_values
+    return ((1 - t) * values[first[:, None] + lo].astype(np.float64)
+            + t * values[first[:, None] + hi].astype(np.float64))
 
 
 def _stretch(motion: np.ndarray, n_out: int) -> np.ndarray:
@@ -402,13 +446,14 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     means = recording_means(graph) if opts.recentre else None
     offset, used = np.zeros(n_ics), 0.0
     before, after = [], []  # per phone: its animes' recorded neighbours, (mean, weight)
+    positions = _warp_rows(graph, ranked, phones) if opts.time_warp else [None] * len(phones)
     for i, (nodes, phone, (s, b)) in enumerate(zip(ranked, phones, ranges, strict=True)):
         nodes = np.asarray(nodes, dtype=np.int64)
         w = rank_weights(len(nodes))
         own = (means[graph.node_clip[nodes]] if means is not None
                else np.zeros((len(nodes), n_ics)))  # (k, n_ics)
-        pieces = np.array([warp_anime(graph, int(a), phone, b - s, time_warp=opts.time_warp)
-                           for a in nodes])
+        pieces = warp_animes(graph, nodes, phone, b - s, time_warp=opts.time_warp,
+                             positions=positions[i])
         motion[s:b] = np.tensordot(w, pieces - own[:, None, :], axes=1)
         if means is not None and b > s:
             offset += (b - s) * (w @ own)
@@ -427,6 +472,24 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     if opts.smooth and cutoffs is not None:
         motion = smooth(motion, cutoffs, graph.fps)
     return motion
+
+
+def _warp_rows(graph: AnimeGraph, ranked: Sequence[np.ndarray],
+               phones: Sequence[Phone]) -> list[np.ndarray | None]:
+    """:func:`warp_animes`'s ``positions`` for every phone's ``ranked`` nodes, in one
+    compiled pass over the utterance (rows of animes that are stretched are zero)."""
+    out: list[np.ndarray | None] = [None] * len(phones)
+    lengths = np.diff(graph.prosody_offsets)
+    use = [i for i, p in enumerate(phones) if len(p.prosody) > 1]
+    rows = [np.asarray(ranked[i], dtype=np.int64) for i in use]
+    keep = [lengths[r] > 1 for r in rows]
+    kept = [r[k] for r, k in zip(rows, keep, strict=True)]
+    warps = warp_indices_many([phones[i].prosody for i in use], graph.prosody_values,
+                              graph.prosody_offsets, kept)
+    for i, r, k, w in zip(use, rows, keep, warps, strict=True):
+        out[i] = np.zeros((len(r), len(phones[i].prosody)))
+        out[i][k] = w
+    return out
 
 
 def _recorded_neighbours(graph: AnimeGraph, nodes: np.ndarray, w: np.ndarray,
