@@ -153,9 +153,11 @@ def prepare_clip(
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)
-    # hama has already heard a clip whose phones it recognised: keeping its outputs is
-    # free, and spares ppg-ridge's fit (the audio-only guide) hearing it again.
-    heard = method == "recognized" and check_engine(phones_engine) in ("auto", "hama")
+    # hama has already heard a clip whose phones it recognised, or whose transcript it
+    # aligned or checked (ingest.speech.engines): keeping its outputs is free, and spares
+    # ppg-ridge's fit (the audio-only guide) hearing it again.
+    heard = (method in ("recognized", "aligned")
+             and check_engine(phones_engine) in ("auto", "hama"))
     posteriors, blank = (clip_posteriors(audio, raw.sample_rate) if posteriorgrams or heard
                          else (None, None))
     pcm = np.round(np.clip(audio, -1, 1) * 32767).astype(np.int16)

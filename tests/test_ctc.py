@@ -133,6 +133,27 @@ def test_wrong_transcript_is_a_data_error(spoken):
         ctc.align(u.audio, u.sample_rate, SENTENCES[1])
 
 
+def test_the_default_aligner_rejects_a_transcript_of_another_utterance(spoken, caplog):
+    # PocketSphinx aligns: it finds a path through any transcript, so hama checks first.
+    u = spoken[0]
+    ctc.check_transcript(u.audio, u.sample_rate, u.text)  # the right one passes
+    assert segment(u.audio, u.sample_rate, text=u.text)[1] == "aligned"
+    with pytest.raises(DataError, match="does not match"):
+        ctc.check_transcript(u.audio, u.sample_rate, SENTENCES[1])
+    with pytest.raises(DataError, match="does not match"):
+        aligner("auto")(u.audio, u.sample_rate, SENTENCES[1])
+    with caplog.at_level(logging.WARNING, logger="ingest.speech.segment"):
+        segments, method = segment(u.audio, u.sample_rate, text=SENTENCES[1])
+    assert method == "recognized" and "fell back" in caplog.text
+    assert segments == recognizer("auto")(u.audio, u.sample_rate)
+    # A shorter transcript PocketSphinx alone forces onto the speech without complaint
+    fox = speak("The quick brown fox jumps over the lazy dog near the river bank.", Voice())
+    wrong = "Bin blue at F two now please."
+    assert segment(fox.audio, fox.sample_rate, text=wrong, engine="pocketsphinx")[1] == \
+        "aligned"
+    assert segment(fox.audio, fox.sample_rate, text=wrong)[1] == "recognized"
+
+
 def test_too_long_transcript_is_a_data_error(spoken):
     u = spoken[0]
     short = u.audio[: int(0.3 * u.sample_rate)]

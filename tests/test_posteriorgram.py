@@ -229,6 +229,17 @@ def test_prepare_clip_stores_the_posteriorgram_unless_told_not_to(tiny_corpus):
     assert recognised.segmentation == "recognized"
     np.testing.assert_array_equal(recognised.posteriors, with_post.posteriors)
     np.testing.assert_array_equal(recognised.posterior_blank, blank)
+    # A transcript: hama checks it before PocketSphinx aligns it, so it has heard the clip.
+    aligned = prepare_clip(dataclasses.replace(raw, phones=(), words=None),
+                           posteriorgrams=False)
+    assert aligned.segmentation == "aligned"
+    np.testing.assert_array_equal(aligned.posteriors, with_post.posteriors)
+    # A transcript of another utterance is not forced onto the speech: recognised instead.
+    other = prepare_clip(dataclasses.replace(raw, phones=(), words=None,
+                                             text="Open the window and look at the sea."),
+                         posteriorgrams=False)
+    assert other.segmentation == "recognized"
+    assert [p.phone for p in other.phones] == [p.phone for p in recognised.phones]
 
 
 @needs_hama

@@ -147,9 +147,16 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     err = capsys.readouterr().err
     assert "audio only (phones recognised by the pocketsphinx phone engine): the paper's" in err
     assert main([*base, "--text", "nothing like what is said in it at all", "-o",
-                 str(tmp_path / "d.npz"), "--phones-engine", "hama"]) == 0
+                 str(tmp_path / "d.npz")]) == 0
+    err = capsys.readouterr().err  # checked before anything is aligned: speech alone
+    assert "does not match the audio" in err and "synthesizing from the speech alone" in err
+    assert "path: audio only (phones named by hama" in err and "phonetic context" not in err
+    with np.load(tmp_path / "b.npz") as alone, np.load(tmp_path / "d.npz") as dropped:
+        np.testing.assert_array_equal(alone["motion"], dropped["motion"])
+    assert main([*base, "--text", "nothing like what is said in it at all", "-o",
+                 str(tmp_path / "e.npz"), "--phones-engine", "hama"]) == 0
     err = capsys.readouterr().err
-    assert "fell back to phone recognition" in err and "phonetic context" not in err
+    assert "does not match the audio" in err and "path: audio only (phones recognised" in err
 
 
 @pytest.mark.parametrize("extra, needle", [

@@ -757,15 +757,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "animes; the paper's search (--exact, --window, --search) takes one "
                          "anime a phone")
     audio_cost = args.audio_cost or "plp"
-    if audio_cost != "plp":
-        path += f"; audio cost {audio_cost} (beyond the paper)"
-    if args.candidates == "likely":
-        path += "; candidates from the likely phones (beyond the paper)"
-    guide_name, guide_blend, guide_rank = _synth_guide(args)
-    from animegraph.synthesis.path import guide_line
-
-    path += guide_line(guide_name, guide_blend, guide_rank, known_phones=args.labels is not
-                       None or args.text is not None, asked=args.guide is not None)
+    path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
     t0 = time.perf_counter()
     model = Model.load(args.db)
     _check_livelink_channels(args, model.names)
@@ -776,6 +768,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
+    t_check = time.perf_counter()
+    if args.text is not None and not _transcript_fits(args, audio, sample_rate):
+        args.text = None  # speech alone: its default path and guide, as said
+        k_best, path = _synth_path(args)
+        path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
+    t0 += time.perf_counter() - t_check  # hearing the speech is not loading the database
     if sidecar is not None:
         print(f"animegraph: using the phone labels beside the speech, {sidecar} "
               "(--labels or --text to use others)", file=sys.stderr)
@@ -1000,6 +998,39 @@ def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
     searched = (args.exact or args.window is not None or args.search is not None
                 or args.helper is not None)
     return given, args.labels is not None or args.text is not None, searched
+
+
+def _synth_plan(args: argparse.Namespace, path: str) -> tuple[str, str | None, float, bool]:
+    """The path line completed with the audio cost, candidates and guide, and the guide
+    (:func:`_synth_guide`)."""
+    from animegraph.synthesis.path import guide_line
+
+    if (args.audio_cost or "plp") != "plp":
+        path += f"; audio cost {args.audio_cost} (beyond the paper)"
+    if args.candidates == "likely":
+        path += "; candidates from the likely phones (beyond the paper)"
+    guide_name, guide_blend, guide_rank = _synth_guide(args)
+    path += guide_line(guide_name, guide_blend, guide_rank, known_phones=args.labels is not
+                       None or args.text is not None, asked=args.guide is not None)
+    return path, guide_name, guide_blend, guide_rank
+
+
+def _transcript_fits(args: argparse.Namespace, audio, sample_rate: int) -> bool:
+    """Whether ``--text`` is what the speech says, as far as the phone engine checks
+    (:func:`ingest.speech.engines.check_transcript`); if not, says so on stderr."""
+    import numpy as np
+
+    from db.errors import DataError
+    from ingest.speech.engines import check_transcript
+
+    mono = audio if np.ndim(audio) == 1 else np.mean(audio, axis=1)
+    try:
+        check_transcript(mono, sample_rate, args.text, args.phones_engine)
+    except DataError as exc:
+        print(f"animegraph: warning: {exc}: synthesizing from the speech alone",
+              file=sys.stderr)
+        return False
+    return True
 
 
 def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:

@@ -75,8 +75,10 @@ __all__ = [
     "PAUSE_DB",
     "align",
     "available",
+    "check_transcript",
     "posteriors",
     "recognize",
+    "transcript_loss",
 ]
 
 #: Sampling rate of the model's input (Hz).
@@ -555,6 +557,57 @@ def transcript_phones(text: str) -> list[str]:
     return phones
 
 
+def check_transcript(audio: np.ndarray, sample_rate: int, text: str) -> None:
+    """Raise :class:`~db.errors.DataError` unless ``text`` is what ``audio`` says.
+
+    The test of :func:`align` (:data:`MAX_ALIGN_LOSS` on :func:`transcript_loss`), for a
+    transcript another engine aligns: a forced aligner finds a path through almost any
+    transcript, so without it a transcript of another utterance would be timed as if
+    spoken.
+
+    Raises
+    ------
+    ParameterError
+        Bad audio, sample rate or an empty transcript.
+    DataError
+        As :func:`align`; or hama cannot be loaded.
+    """
+    transcript_loss(audio, sample_rate, text, check=True)
+
+
+def transcript_loss(audio: np.ndarray, sample_rate: int, text: str, *,
+                    check: bool = False) -> float:
+    """How much worse ``text``'s CTC alignment fits the audio than free recognition does:
+    the mean drop of the log posterior along the best path, in nats per 20 ms frame
+    (0 for audio shorter than a phone; ``check``: raise as :func:`check_transcript`)."""
+    from ingest.speech.segment import MIN_DURATION, _check_audio, _check_text
+
+    text = _check_text(text)
+    samples, sample_rate = _check_audio(audio, sample_rate)
+    if len(samples) / sample_rate < MIN_DURATION:
+        return 0.0
+    return _fit_transcript(_resample(samples, sample_rate), text, check=check)[4]
+
+
+def _fit_transcript(samples16: np.ndarray, text: str, *, check: bool = True
+                    ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray, float]:
+    """The transcript's phones, their indices, CTC Viterbi start frames, the log
+    posteriors they were aligned on, and the loss; DataError if the transcript has no
+    phone or (``check``) does not fit."""
+    phones = transcript_phones(text)
+    if not phones:
+        raise DataError(f"the transcript {text[:60]!r} has no pronounceable word")
+    _, log_probs = _phone_log_probs(samples16)
+    labels = np.asarray([_INDEX[p] for p in phones], dtype=np.int64)
+    starts, score = ctc_viterbi(log_probs, labels, _SIL)
+    free = float(np.sum(np.max(log_probs, axis=1)))
+    loss = (free - score) / max(len(log_probs), 1)
+    if check and loss > MAX_ALIGN_LOSS:
+        raise DataError(f"the transcript {text[:60]!r} does not match the audio "
+                        f"(alignment {loss:.2f} nats/frame below recognition)")
+    return phones, labels, starts, log_probs, loss
+
+
 def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
           ) -> list[Segment]:
     """Forced alignment of a transcript by CTC Viterbi over :func:`posteriors`.
@@ -591,17 +644,7 @@ def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
     duration = len(samples) / sample_rate
     if duration < MIN_DURATION:
         return _silence(duration)
-    phones = transcript_phones(text)
-    if not phones:
-        raise DataError(f"the transcript {text[:60]!r} has no pronounceable word")
     samples16 = _resample(samples, sample_rate)
-    _, log_probs = _phone_log_probs(samples16)
-    labels = np.asarray([_INDEX[p] for p in phones], dtype=np.int64)
-    starts, score = ctc_viterbi(log_probs, labels, _SIL)
-    free = float(np.sum(np.max(log_probs, axis=1)))
-    loss = (free - score) / max(len(log_probs), 1)
-    if loss > MAX_ALIGN_LOSS:
-        raise DataError(f"the transcript {text[:60]!r} does not match the audio "
-                        f"(alignment {loss:.2f} nats/frame below recognition)")
+    phones, labels, starts, log_probs, _ = _fit_transcript(samples16, text)
     last = _last_frames(starts, log_probs, labels)
     return _timed(phones, starts, last, samples16, len(log_probs), duration, refine)

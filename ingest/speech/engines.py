@@ -12,6 +12,8 @@
   hama's 20 ms, and its silence model: hama gave a phone to 22 % of GRID's edge silence,
   PocketSphinx to 9 %). Recognise-then-align is the usual two-pass use of a recogniser
   whose timing is coarse; where PocketSphinx finds no path, hama's own timing stands.
+  PocketSphinx's aligner finds a path through any transcript, so hama first checks that
+  the transcript is what the audio says (:func:`ingest.speech.ctc.check_transcript`).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from ingest.speech.phones import SILENCE
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_ENGINE", "ENGINES", "aligner", "check_engine", "recognizer"]
+__all__ = ["DEFAULT_ENGINE", "ENGINES", "aligner", "check_engine", "check_transcript",
+           "recognizer"]
 
 ENGINES: tuple[str, ...] = ("auto", "hama", "pocketsphinx")
 #: The engine used when none is named.
@@ -43,10 +46,13 @@ def check_engine(engine: object) -> str:
 
 def aligner(engine: str | None = None) -> Callable:
     """``align(audio, sample_rate, text)`` of ``engine`` (raises DataError on no fit)."""
-    if check_engine(engine) == "hama":
+    engine = check_engine(engine)
+    if engine == "hama":
         from ingest.speech.ctc import align
-    else:
+    elif engine == "pocketsphinx":
         from ingest.speech.segment import align
+    else:
+        align = align_auto
     return align
 
 
@@ -60,6 +66,34 @@ def recognizer(engine: str | None = None) -> Callable:
     else:
         recognize = recognize_auto
     return recognize
+
+
+def check_transcript(audio, sample_rate, text: str, engine: str | None = None) -> None:
+    """Raise :class:`~db.errors.DataError` if ``engine``'s alignment would reject ``text``
+    as not what the audio says (:func:`ingest.speech.ctc.check_transcript`: ``"auto"`` and
+    ``"hama"``, when hama's native library loads; ``"pocketsphinx"`` checks nothing)."""
+    from ingest.speech import ctc
+
+    if check_engine(engine) == "pocketsphinx":
+        return
+    if ctc.available():
+        ctc.check_transcript(audio, sample_rate, text)
+    else:  # a platform hama's wheel does not cover
+        logger.debug("hama is unavailable: the transcript is aligned unchecked")
+
+
+def align_auto(audio, sample_rate, text: str, *, refine: bool = True) -> list:
+    """PocketSphinx's forced alignment of ``text`` (the ``"auto"`` alignment), once hama
+    has found that it is what the audio says.
+
+    Parameters, result and errors as :func:`ingest.speech.segment.align`; also
+    :class:`~db.errors.DataError` when the transcript does not match the audio
+    (:func:`check_transcript`).
+    """
+    from ingest.speech.segment import align
+
+    check_transcript(audio, sample_rate, text, "auto")
+    return align(audio, sample_rate, text, refine=refine)
 
 
 def recognize_auto(audio, sample_rate, *, refine: bool = True) -> list:
