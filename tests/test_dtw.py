@@ -240,39 +240,39 @@ def test_audio_costs_equal_a_loop_of_audio_cost(rng, monkeypatch, parallel):
         np.testing.assert_array_equal(costs, expected)  # bit for bit
 
 
+def _one_cost(x, curve):
+    return audio_cost(x, curve)
+
+
+def _one_warp(x, curve):
+    return warp_indices(len(x), dtw(x, curve).path)
+
+
 @pytest.mark.parametrize("parallel", [False, True])
-def test_audio_costs_many_equal_one_call_per_input(rng, monkeypatch, parallel):
+@pytest.mark.parametrize("many_of, one, shape", [
+    (audio_costs_many, _one_cost, lambda k, n: (k,)),
+    (warp_indices_many, _one_warp, lambda k, n: (k, n)),
+])
+def test_pairs_of_an_utterance_equal_one_call_per_pair(rng, monkeypatch, parallel, many_of,
+                                                       one, shape):
+    # Eq. 5's costs and §4.3's warps of every (input phone, candidate) pair in one call.
     monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1 if parallel else 10**9)
     curves, values, offsets = _graph_like(rng, 200)
     inputs = [rng.standard_normal((k, 9)) for k in (12, 1, 30, 5)]
     lists = [rng.permutation(200)[:k] for k in (150, 0, 7, 200)]
-    many = audio_costs_many(inputs, values, offsets, lists)
-    assert [m.shape for m in many] == [(150,), (0,), (7,), (200,)]
-    for x, nodes, costs in zip(inputs, lists, many, strict=True):
-        np.testing.assert_array_equal(costs, [audio_cost(x, curves[a]) for a in nodes])
-    assert audio_costs_many([], values, offsets, []) == []
+    many = many_of(inputs, values, offsets, lists)
+    assert [m.shape for m in many] == [shape(len(n), len(x)) for x, n in zip(inputs, lists,
+                                                                           strict=True)]
+    for x, nodes, got in zip(inputs, lists, many, strict=True):
+        for a, value in zip(nodes, got, strict=True):  # bit for bit
+            np.testing.assert_array_equal(value, one(x, curves[a]))
+    assert many_of([], values, offsets, []) == []
     with pytest.raises(ParameterError, match="one node list per input"):
-        audio_costs_many(inputs, values, offsets, lists[:2])
+        many_of(inputs, values, offsets, lists[:2])
     with pytest.raises(ParameterError, match=r"c_inputs\[1\]"):
-        audio_costs_many([inputs[0], np.full((3, 9), np.nan)], values, offsets, lists[:2])
-
-
-@pytest.mark.parametrize("parallel", [False, True])
-def test_warp_indices_many_equal_one_dtw_per_pair(rng, monkeypatch, parallel):
-    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1 if parallel else 10**9)
-    curves, values, offsets = _graph_like(rng, 200)
-    inputs = [rng.standard_normal((k, 9)) for k in (12, 1, 30, 5)]
-    lists = [rng.permutation(200)[:k] for k in (150, 0, 7, 200)]
-    many = warp_indices_many(inputs, values, offsets, lists)
-    assert [m.shape for m in many] == [(150, 12), (0, 1), (7, 30), (200, 5)]
-    for x, nodes, warps in zip(inputs, lists, many, strict=True):
-        for a, row in zip(nodes, warps, strict=True):  # bit for bit
-            np.testing.assert_array_equal(row, warp_indices(len(x), dtw(x, curves[a]).path))
-    assert warp_indices_many([], values, offsets, []) == []
-    with pytest.raises(ParameterError, match="one node list per input"):
-        warp_indices_many(inputs, values, offsets, lists[:2])
+        many_of([inputs[0], np.full((3, 9), np.nan)], values, offsets, lists[:2])
     with pytest.raises(ParameterError, match="nodes must be in"):
-        warp_indices_many(inputs[:1], values, offsets, [np.array([200])])
+        many_of(inputs[:1], values, offsets, [np.array([200])])
 
 
 def test_audio_costs_float64_values_and_band(rng):
