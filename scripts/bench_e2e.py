@@ -12,7 +12,9 @@ phones recognised (default), force-aligned to the text, or taken from eSpeak's e
 Prints each run's phase timings and real-time factor (synthesis time / audio duration), and
 the process's CPU time (less sensitive to the machine's load than the wall time). With
 ``--guide`` the database's stored guide (fitted and stored first if absent, reported
-apart) guides the animes' choice, as ``synth --guide``.
+apart) guides the animes' choice, as ``synth --guide``. Last, hama's model call alone on
+the same audio: the single-threaded floor under the ``segment`` phase when phones are
+recognised or a transcript is checked.
 DB defaults to the default database (built on first use, as by ``animegraph demo``).
 """
 
@@ -98,6 +100,13 @@ def main() -> int:
         print(f"run {k + 1}: {total:.2f} s, real-time factor {total / seconds:.3f}, CPU "
               f"{cpu:.2f} s ({cpu / seconds:.3f} x real time) "
               f"({phases}; {len(out.phones)} phones, {out.result.n_jumps} jumps)")
+    if hasattr(ctc, "forget") and args.segmentation != "labels":
+        # The floor under "segment": hama's one call, single-threaded, on the same audio.
+        ctc.forget()
+        t = time.perf_counter()
+        ctc.posteriors(utt.audio, utt.sample_rate)
+        alone = time.perf_counter() - t
+        print(f"hama's call alone: {alone:.2f} s ({alone / seconds:.3f} x real time)")
     return 0
 
 
