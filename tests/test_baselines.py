@@ -21,7 +21,7 @@ from animegraph.baselines.data import audio_features, training_set
 from animegraph.baselines.hier_pca import HierPca, _pca, _speech_to_d
 from animegraph.baselines.mu_mlp import MuMlp
 from animegraph.baselines.ppg_forward import N_PER_OFFSET
-from animegraph.baselines.ppg_ridge import ALPHAS, PpgRidge
+from animegraph.baselines.ppg_ridge import ALPHAS, PpgRidge, ridge_loo
 from animegraph.baselines.stored import FORWARD, load_forward
 from animegraph.motion import measures
 from db.errors import DataError, ParameterError
@@ -181,6 +181,24 @@ def test_ppg_ridge_features_are_gain_free_and_in_context(split):
 
 
 @pytest.mark.shared
+@pytest.mark.parametrize("n, p, t, noise", [(400, 30, 5, 1.0), (1500, 80, 12, 0.1),
+                                             (1500, 80, 12, 30.0)])
+def test_ridge_loo_chooses_and_solves_as_ridge_cv(n, p, t, noise):
+    from sklearn.linear_model import RidgeCV
+
+    rng = np.random.default_rng(n + p)
+    x = rng.standard_normal((n, p))
+    x[:, -1] = x[:, 0] - x[:, 1]  # collinear, and a constant (after centring) column
+    x[:, 3] = 1.0
+    y = x @ (rng.standard_normal((p, t)) * (rng.random((p, 1)) < 0.3))
+    y += noise * rng.standard_normal((n, t))
+    x, y = x - x.mean(axis=0), y - y.mean(axis=0)
+    alpha, weights = ridge_loo(x, y, ALPHAS)
+    ridge = RidgeCV(alphas=ALPHAS, gcv_mode="svd").fit(x, y)
+    assert alpha == ridge.alpha_
+    np.testing.assert_allclose(weights, ridge.coef_.T, rtol=0, atol=1e-9 * np.abs(weights).max())
+
+
 def test_ppg_ridge_on_real_speech():
     """Fitted on a minute of each of two FACEGOOD clips (Mandarin, ARKit-style curves, read
     as recorded), it follows 30 s of a third clip's jaw opening (the full evaluation:
