@@ -176,6 +176,7 @@ def test_ctc_viterbi_finds_the_known_path():
     starts, score = ctc.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0)
     assert starts.tolist() == [0, 3, 6]
     assert score == pytest.approx(7 * np.log(0.9))
+    assert ctc.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0, path=False) == (None, score)
     # a repeated label needs a blank between its two copies
     starts, _ = ctc.ctc_viterbi(log_probs, np.array([1, 1]), blank=0)
     assert starts[1] > starts[0] + 1

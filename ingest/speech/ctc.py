@@ -336,7 +336,8 @@ def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------------------------------------
 
 
-def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int) -> tuple[np.ndarray, float]:
+def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int, *,
+                path: bool = True) -> tuple[np.ndarray | None, float]:
     """The best CTC path of a label sequence through frame log posteriors.
 
     States are ``blank, l1, blank, l2, ..., lL, blank`` (``2L + 1``); a path starts in the
@@ -351,11 +352,14 @@ def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int) -> tuple[
         Class indices of the sequence (none equal to ``blank``), at least one.
     blank : int
         Class index of the blank.
+    path : bool, optional
+        Trace the path back (False: only its score, without the (n_frames, 2 n_labels
+        + 1) table of back-pointers: a byte per cell, 3 GB for 30 min of speech).
 
     Returns
     -------
-    starts : numpy.ndarray, shape (n_labels,), int
-        First frame of each label on the best path.
+    starts : numpy.ndarray, shape (n_labels,), int, or None
+        First frame of each label on the best path (None without ``path``).
     score : float
         Log probability of that path.
 
@@ -376,30 +380,32 @@ def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int) -> tuple[
     can_skip[3::2] = labels[1:] != labels[:-1]
     score = np.full(n_states, -np.inf)
     score[:2] = log_probs[0, states[:2]]
-    back = np.zeros((n_frames, n_states), dtype=np.int8)
+    back = np.zeros((n_frames if path else 0, n_states), dtype=np.int8)
     for t in range(1, n_frames):
         stay = score
         step = np.concatenate(([-np.inf], score[:-1]))
         skip = np.where(can_skip, np.concatenate(([-np.inf, -np.inf], score[:-2])), -np.inf)
         best = np.maximum(stay, np.maximum(step, skip))
-        move = np.where(best == stay, 0, np.where(best == step, 1, 2)).astype(np.int8)
-        back[t] = move
+        if path:
+            back[t] = np.where(best == stay, 0, np.where(best == step, 1, 2))
         score = best + log_probs[t, states]
     end = n_states - 1 if n_states == 1 or score[-1] >= score[-2] else n_states - 2
     total = float(score[end])
     if not math.isfinite(total):
         raise DataError("no CTC path through the transcript")
-    path = np.empty(n_frames, dtype=np.int64)
+    if not path:
+        return None, total
+    visited = np.empty(n_frames, dtype=np.int64)  # the state at each frame
     s = end
     for t in range(n_frames - 1, -1, -1):
-        path[t] = s
+        visited[t] = s
         s -= int(back[t, s])
     starts = np.empty(n_labels, dtype=np.int64)
-    label_frames = path % 2 == 1
+    label_frames = visited % 2 == 1
     first = np.full(n_states, -1, dtype=np.int64)
     frames = np.flatnonzero(label_frames)
     for t in frames[::-1]:
-        first[path[t]] = t
+        first[visited[t]] = t
     starts[:] = first[1::2]
     return starts, total
 
@@ -586,20 +592,21 @@ def transcript_loss(audio: np.ndarray, sample_rate: int, text: str, *,
     samples, sample_rate = _check_audio(audio, sample_rate)
     if len(samples) / sample_rate < MIN_DURATION:
         return 0.0
-    return _fit_transcript(_resample(samples, sample_rate), text, check=check)[4]
+    return _fit_transcript(_resample(samples, sample_rate), text, check=check, path=False)[4]
 
 
-def _fit_transcript(samples16: np.ndarray, text: str, *, check: bool = True
-                    ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray, float]:
-    """The transcript's phones, their indices, CTC Viterbi start frames, the log
-    posteriors they were aligned on, and the loss; DataError if the transcript has no
-    phone or (``check``) does not fit."""
+def _fit_transcript(samples16: np.ndarray, text: str, *, check: bool = True,
+                    path: bool = True
+                    ) -> tuple[list[str], np.ndarray, np.ndarray | None, np.ndarray, float]:
+    """The transcript's phones, their indices, CTC Viterbi start frames (None without
+    ``path``), the log posteriors they were aligned on, and the loss; DataError if the
+    transcript has no phone or (``check``) does not fit."""
     phones = transcript_phones(text)
     if not phones:
         raise DataError(f"the transcript {text[:60]!r} has no pronounceable word")
     _, log_probs = _phone_log_probs(samples16)
     labels = np.asarray([_INDEX[p] for p in phones], dtype=np.int64)
-    starts, score = ctc_viterbi(log_probs, labels, _SIL)
+    starts, score = ctc_viterbi(log_probs, labels, _SIL, path=path)
     free = float(np.sum(np.max(log_probs, axis=1)))
     loss = (free - score) / max(len(log_probs), 1)
     if check and loss > MAX_ALIGN_LOSS:
