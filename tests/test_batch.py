@@ -313,3 +313,42 @@ def test_run_line_renders_an_mp4_preview(tiny_db, tmp_path):
     n_frames, seconds = imageio_ffmpeg.count_frames_and_secs(str(preview))
     assert n_frames > 10 and abs(seconds - row["duration_s"]) < 0.5
     assert not list(folder.glob(".*.tmp*"))
+
+
+def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db, tiny_corpus,
+                                                                      tmp_path):
+    """As ``synth`` does: the speech alone, guided by the stored speech-alone guide (here
+    mu-mlp; ppg-ridge is not fitted, and the row says so); the same motion as synthesizing
+    the recording without a transcript."""
+    from animegraph.baselines import make_estimator
+    from animegraph.baselines.base import save_model
+    from animegraph.baselines.stored import load_forward
+    from animegraph.synthesis import Model, synthesize
+    from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    save_model(make_estimator("mu-mlp", n_mfcc=6, context=1, subset_hidden=(3, 4),
+                              expression_hidden=4, frame_rate=60.0).fit(
+        prepared_from_database(Database.open(db))), db)
+    wav = sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "r"
+    line = ScriptLine(id="r", text="Nothing like what is said in it at all.", line_no=2,
+                      audio=wav)
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="none", key=line_key(line, identity, "none")))
+    assert row["status"] == "done", row
+    assert row["warnings"].startswith("transcript alignment failed: "), row["warnings"]
+    assert "without the speech-alone guide ppg-ridge (not fitted: animegraph fit --method " \
+           "ppg-ridge" in row["warnings"]
+    assert row["path"].startswith("audio only (the transcript does not fit the recording)")
+    assert "mu-mlp's predicted motion" in row["path"]
+    assert json.loads((folder / "explain.json").read_text())["guide"] == "mu-mlp"
+    audio, sr = read_wav(wav)
+    alone = synthesize(Model.load(db), audio, sr, k_best=AUDIO_ONLY_K_BEST,
+                       guide=load_forward(db, "mu-mlp"))
+    written = read_c3d(folder / "motion.c3d").points
+    np.testing.assert_allclose(written.reshape(len(written), -1), alone.motion, atol=1e-3)

@@ -1,6 +1,8 @@
 """Trajectory-guided selection (animegraph.synthesis.guide): a baseline's predicted motion
 as the target of the animes' choice, and as a blend."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -130,6 +132,17 @@ def test_heldout_guided_rows(tiny_db, model, mlp):
         evaluate.score_heldout(model, clip, methods=("kbest20-guided",))
 
 
+def copy_unfitted(db, to):
+    """A copy of the shared database ``db`` without the baselines an earlier test (a
+    ``synth`` of speech alone) may have fitted and stored in it."""
+    import shutil
+
+    from animegraph.baselines.stored import MODELS_DIR
+
+    shutil.copytree(db, to, ignore=lambda folder, names: [MODELS_DIR] if folder == str(db)
+                    else [])
+
+
 def evaluate_segment(phone):
     from ingest.formats.phones_csv import Segment
 
@@ -149,7 +162,7 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
 
     assert SYNTH_GUIDES == GUIDES
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     save_model(mlp, db)  # small, so that the test does not fit the paper's size
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
@@ -204,7 +217,7 @@ def test_cli_synth_mean_of_two_guides(tiny_db, tiny_corpus, mlp, tmp_path, capsy
     from animegraph.baselines.base import load_model, save_model
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     save_model(mlp, db)
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
@@ -242,7 +255,7 @@ def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corp
     from animegraph.apps.cli import main
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
     base = ["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx"]
@@ -270,7 +283,6 @@ def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, m
     """The NumPy-only restore of a stored mu-mlp gives the estimator's prediction, in a
     process that never imports scikit-learn."""
     import json
-    import shutil
     import subprocess
     import sys
 
@@ -278,7 +290,7 @@ def test_stored_mu_mlp_predicts_as_the_estimator_without_scikit_learn(tiny_db, m
     from animegraph.baselines.stored import load_forward
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     assert load_forward(db, "mu-mlp") is None and load_forward(db, "av-hmm") is None
     save_model(mlp, db)
     audio, rate, _ = speech
@@ -315,7 +327,7 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
     from animegraph.baselines.base import save_model
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     save_model(mlp, db)
     save_model(make_estimator("ppg-ridge").fit(db), db)
     wav = tmp_path / "speech.wav"
@@ -352,7 +364,7 @@ def test_corrupt_stored_mu_mlp_is_one_line(tiny_db, tiny_corpus, mlp, tmp_path, 
     from db.store import arrays_from_table, arrays_to_table
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    copy_unfitted(tiny_db[0], db)
     save_model(mlp, db)
     path = model_path(db, "mu-mlp")
     table = pq.read_table(path)
@@ -378,3 +390,38 @@ def test_corrupt_stored_mu_mlp_is_one_line(tiny_db, tiny_corpus, mlp, tmp_path, 
         assert "mu-mlp" in err[-1], err[-1]
         assert ("is implausible" if corrupt != "nan" else "values not finite") in err[-1]
         assert not any("Traceback" in e for e in err) and not out.exists()
+
+
+def test_a_transcript_that_does_not_fit_is_synthesized_as_speech_alone(model, mlp, speech,
+                                                                       tiny_corpus):
+    """``recognized_guide`` is the speech-alone path's guide for a transcript that turns out
+    not to fit: the motion is that of no transcript with the guide, the record says which
+    guide and the warning says why; a transcript that fits never loads it."""
+    from animegraph.synthesis import explain_record
+
+    audio, rate, _ = speech
+    asked = []
+
+    def load():
+        asked.append(1)
+        return mlp
+
+    wrong = synthesize(model, audio, rate, text="nothing like what is said in it at all",
+                       k_best=5, recognized_guide=load)
+    alone = synthesize(model, audio, rate, k_best=5, guide=mlp)
+    assert wrong.segmentation == alone.segmentation == "recognized" and asked == [1]
+    np.testing.assert_array_equal(wrong.motion, alone.motion)
+    assert wrong.guided == alone.guided == ("mu-mlp",)
+    assert explain_record(wrong)["guide"] == "mu-mlp"
+    assert wrong.warnings[0].startswith("transcript alignment failed: ")
+    assert "fell back to phone recognition" in wrong.warnings[0]
+    assert not any("alignment" in w for w in alone.warnings)
+    # The guide given wins; without one to fall back on, the animes alone.
+    unguided = synthesize(model, audio, rate, text="nothing like what is said in it at all",
+                          k_best=5)
+    assert unguided.guided == () and explain_record(unguided)["guide"] is None
+    assert not np.array_equal(unguided.motion, wrong.motion)
+    wav = sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0]
+    said = json.loads(wav.with_suffix(".json").read_text())["text"]
+    fits = synthesize(model, audio, rate, text=said, k_best=5, recognized_guide=load)
+    assert fits.segmentation == "aligned" and fits.guided == () and asked == [1]

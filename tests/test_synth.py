@@ -112,7 +112,8 @@ def test_cli_synth_writes_c3d_and_explains(tiny_db, held_out, tmp_path, capsys):
         assert exact["motion"].shape == tol["motion"].shape == k3["motion"].shape
 
 
-def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, capsys):
+def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, capsys,
+                                                 monkeypatch):
     """Labels or a transcript, and audio only: k-best 20 (one function decides for labels,
     shared with batch), said on stderr and in --explain; --exact brings the paper's
     search back."""
@@ -139,7 +140,7 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
         assert kbest["motion"].shape == exact["motion"].shape
         assert not np.allclose(kbest["motion"], exact["motion"])
     assert main([*base, "-o", str(tmp_path / "b.npz")]) == 0
-    err = capsys.readouterr().err
+    err = b_err = capsys.readouterr().err
     assert "path: audio only (phones named by hama, placed by PocketSphinx)" in err
     assert "mean of its 20 best animes" in err and "(recognized)" in err
     assert main([*base, "--exact", "--phones-engine", "pocketsphinx",
@@ -157,6 +158,21 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
                  str(tmp_path / "e.npz"), "--phones-engine", "hama"]) == 0
     err = capsys.readouterr().err
     assert "does not match the audio" in err and "path: audio only (phones recognised" in err
+    # A transcript that passes the check but cannot be aligned after all: the speech
+    # alone, with its guide, all the same.
+    import animegraph.apps.cli as cli
+
+    monkeypatch.setattr(cli, "_transcript_fits", lambda *args: True)
+    assert main([*base, "--text", "nothing like what is said in it at all", "-o",
+                 str(tmp_path / "f.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: transcript alignment failed: " in err
+    assert "path: audio only (phones named by hama" in err and "phonetic context" not in err
+    assert "(transcript alignment failed: synthesized from the speech alone)" in err
+    # (the tiny database is too small for mu-mlp: its path line says so, as for b.npz)
+    assert ("but without its mu-mlp guide" in err) == ("without its mu-mlp" in b_err)
+    with np.load(tmp_path / "b.npz") as alone, np.load(tmp_path / "f.npz") as late:
+        np.testing.assert_array_equal(alone["motion"], late["motion"])
 
 
 @pytest.mark.parametrize("extra, needle", [

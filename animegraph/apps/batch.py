@@ -443,6 +443,7 @@ def finished(folder: Path, key: str) -> dict | None:
 
 _MODELS: dict = {}
 _LOADS: Counter = Counter()
+_GUIDES: dict = {}
 _MODEL_LOCK = threading.Lock()
 
 
@@ -470,6 +471,34 @@ def worker_model(db: str, version: str):
             _MODELS[key] = model
             _LOADS[key] += 1
         return model
+
+
+def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str]]:
+    """The guide ``name`` (``a+b``: the mean of its parts) as stored with ``db``, loaded
+    once per process and kept: (the guide, a tuple of its parts, or None; the parts not
+    to be had, each with why). A worker does not fit a guide: that writes the database,
+    and the batch only reads it."""
+    from animegraph.baselines.stored import load_forward
+
+    key = (str(Path(db).resolve()), version, name)
+    with _MODEL_LOCK:
+        if key not in _GUIDES:
+            got, lacking = [], []
+            for part in name.split("+"):
+                try:
+                    model = load_forward(db, part)
+                except AnimeGraphError as exc:  # unreadable: the line goes on without it
+                    model, why = None, str(exc)
+                else:
+                    why = f"not fitted: animegraph fit --method {part} --db {db}"
+                if model is None:
+                    lacking.append(f"{part} ({why})")
+                else:
+                    got.append(model)
+            guide = None if not got else got[0] if len(got) == 1 else tuple(got)
+            _GUIDES.clear()  # one database at a time per process
+            _GUIDES[key] = (guide, lacking)
+        return _GUIDES[key]
 
 
 def run_line(task: LineTask) -> dict:
@@ -509,6 +538,7 @@ def run_line(task: LineTask) -> dict:
 
 def _make_line(task: LineTask, model, folder: Path) -> dict:
     from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
+    from animegraph.synthesis.path import audio_only_guide
     from ingest.formats.livelink import is_arkit
     from ingest.formats.phones_csv import write_phones_csv
     from ingest.formats.wav import read_wav, write_wav
@@ -521,13 +551,29 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     else:
         audio, sample_rate, labels = _speak(line, warnings)
         text, speech = None, "espeak"
+    lacking: list[str] = []
+
+    def speech_alone_guide():
+        """A recording whose transcript does not fit it is synthesized as speech alone
+        is by ``synth``: with the audio-only path's guide."""
+        name = audio_only_guide(known_phones=False, searched=line.exact or
+                                line.window is not None)
+        if name is None:
+            return None
+        guide, missing = worker_guide(task.db, task.db_version, name)
+        lacking.extend(missing)
+        return guide
+
     synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
                        emotion=line.emotion.argument, method=line.method, window=line.window,
-                       k_best=line.synthesis_path()[0])
+                       k_best=line.synthesis_path()[0], recognized_guide=speech_alone_guide)
+    warnings.extend(synth.warnings)  # a transcript not aligned and why; the speech's quality
     warnings.extend(synth.notes)  # e.g. emotion components that could not be mapped
+    path = line.synthesis_path()[1]
     if line.audio is not None and synth.segmentation != "aligned":
-        warnings.append(f"the transcript could not be aligned; phones were "
-                        f"{synth.segmentation}")
+        path = speech_alone_path(line, synth.guided)
+    if lacking:
+        warnings.append(f"without the speech-alone guide {', '.join(lacking)}")
     missing = backoffs(synth)
     if missing:
         warnings.append(f"phones missing from the database, backed off: {', '.join(missing)}")
@@ -547,12 +593,25 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         _render(folder, motion_name, synth.phones)
         outputs.append("preview.mp4")
     return {
-        "speech": speech, "path": line.synthesis_path()[1],
+        "speech": speech, "path": path,
         "duration_s": round(len(audio) / sample_rate, 3),
         "emotion": used, "motion_emotions": _motion_emotions(synth.explain),
         "jumps": synth.result.n_jumps, "cost": round(float(synth.result.cost), 4),
         "warnings": "; ".join(warnings), "error": "", "_outputs": outputs,
     }
+
+
+def speech_alone_path(line: ScriptLine, guided: tuple[str, ...]) -> str:
+    """The report's path for a recording whose transcript did not fit it: ``synth``'s
+    for the speech alone."""
+    from animegraph.synthesis.guide import GUIDE_BLEND
+    from animegraph.synthesis.path import guide_line, synthesis_path
+
+    searched = line.exact or line.window is not None
+    _, path = synthesis_path("audio only (the transcript does not fit the recording)",
+                             known_phones=False, searched=searched)
+    name = "+".join(guided) or None
+    return path + guide_line(name, GUIDE_BLEND, False, known_phones=False, asked=False)
 
 
 def _speak(line: ScriptLine, warnings: list[str]):

@@ -719,6 +719,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         write_explain,
         write_motion,
     )
+    from animegraph.synthesis.guide import guide_names
     from ingest.formats.media import read_audio
     from ingest.readers.common import read_labels
 
@@ -785,13 +786,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     t_guide = time.perf_counter()
     guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
-    if guide_name is not None:
-        got = {g.method for g in (guide if isinstance(guide, tuple) else (guide,))
-               if g is not None}
-        missing = [part for part in guide_name.split("+") if part not in got]
-        if missing:
-            path += (f"; but without its {' and '.join(missing)} guide, which could not be "
-                     "fitted")
+    path += _guide_shortfall(guide_name, guide_names(guide))
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -813,15 +808,20 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
                      guide_blend=guide_blend, guide_rank=guide_rank,
-                     context=args.context_ranking)
+                     context=args.context_ranking, recognized_guide=_recognized_guide(args))
     from animegraph.synthesis.path import CONTEXT_PHRASE
 
+    if args.text is not None and out.segmentation == "recognized":
+        # The check passed, the alignment failed: what ran is the speech-alone path.
+        text, args.text = args.text, None
+        path, alone, _, _ = _synth_plan(args, _synth_path(args)[1])
+        args.text = text
+        path += _guide_shortfall(alone, out.guided)
+        path += " (transcript alignment failed: synthesized from the speech alone)"
     if out.context_ranked and CONTEXT_PHRASE not in path:
         path += f"; k-best{CONTEXT_PHRASE}"
     elif not out.context_ranked:  # e.g. a transcript that failed to align: recognised
         path = path.replace(CONTEXT_PHRASE, "")
-    if args.text is not None and out.segmentation == "recognized":
-        path += " (transcript alignment failed: fell back to phone recognition)"
     if out.recentred:
         why = "as asked" if args.recentre else f"{len(model.sessions)} speakers or sessions"
         path += f"; each anime relative to its recording's mean pose ({why})"
@@ -981,6 +981,28 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
               f"best animes alone", file=sys.stderr)
         record_unfit(db, name, str(exc))
         return None
+
+
+def _guide_shortfall(name: str | None, got: tuple[str, ...]) -> str:
+    """What the path line adds when parts of the guide ``name`` could not be had."""
+    missing = [part for part in (name or "").split("+") if part and part not in got]
+    if not missing:
+        return ""
+    return f"; but without its {' and '.join(missing)} guide, which could not be fitted"
+
+
+def _recognized_guide(args: argparse.Namespace):
+    """With ``--text`` and no guide: what loads the speech-alone path's guide, for
+    ``synthesize`` to call if the transcript cannot be aligned after all (the check
+    before it passed, PocketSphinx found no path); else None."""
+    from animegraph.synthesis.path import audio_only_guide
+
+    if args.text is None or args.guide is not None:
+        return None
+    name = audio_only_guide(known_phones=False, searched=_synth_given(args)[2])
+    if name is None:
+        return None
+    return lambda: _load_guide(args.db, name, asked=False)
 
 
 def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:

@@ -75,6 +75,7 @@ def explain_record(synth: Synthesis) -> dict:
         record["k_best_ranking"] = "context" if synth.context_ranked else "audio cost"
         record["recentred"] = synth.recentred
         record["k_best_joins"] = "cross-faded" if synth.cross_faded else "cut"
+    record["guide"] = "+".join(synth.guided) or None
     return record
 
 

@@ -169,6 +169,16 @@ def guided_costs(audio: list[np.ndarray], target: list[np.ndarray],
     return out
 
 
+def guide_names(predictor) -> tuple[str, ...]:
+    """The baselines a guide is made of (``("mu-mlp", "ppg-ridge")`` for their mean); ()
+    for None."""
+    if predictor is None:
+        return ()
+    if isinstance(predictor, list | tuple):
+        return tuple(name for p in predictor for name in guide_names(p))
+    return (str(predictor.method),)
+
+
 def check_guide_use(share: float, rank: bool) -> None:
     """ParameterError unless the guide does something: a share in [0, 1], not 0 without
     ranking."""

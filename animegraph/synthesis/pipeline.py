@@ -44,6 +44,7 @@ from animegraph.synthesis.guide import (
     GUIDE_BLEND,
     blend_guide,
     check_guide_use,
+    guide_names,
     guide_trajectory,
     guided_costs,
     target_costs,
@@ -75,8 +76,9 @@ class Synthesis:
         With ``k_best``: per phone the animes its motion averages (node, clip_id,
         position, weight), the search's pick first; empty otherwise.
     warnings : tuple of str
-        What may be wrong with the input speech (:mod:`ingest.speech.quality`): clipping,
-        telephone band, little speech the phone engine knows.
+        What may be wrong with the input: a transcript that could not be aligned (the
+        phones were recognised), and the speech (:mod:`ingest.speech.quality`):
+        clipping, telephone band, little speech the phone engine knows.
     context_ranked : bool
         With ``k_best``: the animes were ranked by phonetic context first
         (:func:`animegraph.search.k_best` with ``context``).
@@ -87,6 +89,9 @@ class Synthesis:
         With ``k_best``: each phone's mean was cross-faded into its neighbours' through
         the recorded transitions (``PostOptions.blend``;
         :func:`animegraph.synthesis.blend_k_best`), not cut at its boundaries.
+    guided : tuple of str
+        The baselines whose predicted motion guided this one (``guide``, or
+        ``recognized_guide`` after a transcript that did not fit); empty without.
     """
 
     motion: np.ndarray
@@ -105,6 +110,7 @@ class Synthesis:
     context_ranked: bool = False
     recentred: bool = False
     cross_faded: bool = False
+    guided: tuple[str, ...] = ()
 
 
 def synthesize(
@@ -115,7 +121,7 @@ def synthesize(
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
     guide=None, guide_blend: float = GUIDE_BLEND, guide_rank: bool = False,
-    context: bool | None = None,
+    context: bool | None = None, recognized_guide=None,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -177,6 +183,12 @@ def synthesize(
         (:func:`animegraph.search.k_best`). None (default): as
         :data:`animegraph.synthesis.path.KNOWN_PHONES_CONTEXT` says when the phones are
         known (labels, or a transcript aligned), off when they are recognised.
+    recognized_guide : guide, or a callable returning one (or None), optional
+        With ``text`` and no ``guide``: the guide used when the transcript does not fit
+        the speech and the phones are recognised instead, so that a wrong transcript
+        gives what the speech alone would (``synth`` and ``batch`` pass the audio-only
+        path's guide, :data:`animegraph.synthesis.path.AUDIO_ONLY_GUIDE`). A callable is
+        called only then (a first use may fit the guide).
 
     Returns
     -------
@@ -206,10 +218,17 @@ def synthesize(
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
                              sample_rate)
     emotion = choice.search
+    fallback: list[str] = []  # why a transcript was not aligned: the first warning
     phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
                                        prosody_config=prosody_config, engine=phones_engine,
-                                       posteriorgram=posteriorgram)
-    warnings = input_warnings(audio, sample_rate, method_used == "recognized" or posteriorgram)
+                                       posteriorgram=posteriorgram, on_fallback=fallback.append)
+    warnings = fallback + input_warnings(audio, sample_rate,
+                                         method_used == "recognized" or posteriorgram)
+    if (guide is None and text is not None and method_used == "recognized"
+            and recognized_guide is not None):
+        guide = recognized_guide() if callable(recognized_guide) else recognized_guide
+        if guide is not None:
+            check_guide_use(guide_blend, guide_rank)
     timings["segment_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -260,7 +279,8 @@ def synthesize(
                      timings=timings, emotion=choice, notes=tuple(notes), blended=blended,
                      warnings=tuple(warnings), context_ranked=bool(k_best and context),
                      recentred=k_best is not None and recentres(model, options),
-                     cross_faded=k_best is not None and (options or PostOptions()).blend)
+                     cross_faded=k_best is not None and (options or PostOptions()).blend,
+                     guided=guide_names(guide))
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
@@ -301,20 +321,23 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
                  labels: list[Segment] | None = None,
                  prosody_config: RastaPlpConfig | None = None,
                  engine: str | None = None, posteriorgram: bool = False,
-                 posteriors: np.ndarray | None = None) -> tuple[tuple[Phone, ...], str]:
+                 posteriors: np.ndarray | None = None,
+                 on_fallback=None) -> tuple[tuple[Phone, ...], str]:
     """The search nodes of an utterance: its phones with their prosody curves.
 
     With ``posteriorgram`` each phone also gets its part of the utterance's phone
     posteriorgram (:mod:`ingest.speech.posteriorgram`; ``posteriors``, shape
     (n_frames, 39), if already computed). Returns the phones and how they were found
-    (``labels``, ``aligned``, ``recognized``).
+    (``labels``, ``aligned``, ``recognized``); a failed alignment of ``text`` is said to
+    ``on_fallback`` (:func:`ingest.speech.segment.segment`).
     """
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
         raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
     if not np.any(np.abs(audio) > 1e-4):
         raise DataError("the audio is silent: there is no speech to animate")
-    segments, method = segment(audio, sample_rate, text=text, labels=labels, engine=engine)
+    segments, method = segment(audio, sample_rate, text=text, labels=labels, engine=engine,
+                               on_fallback=on_fallback)
     if all(s.phone == "SIL" for s in segments):
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()

@@ -84,7 +84,7 @@ import math
 import os
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -802,6 +802,7 @@ def segment(
     text: str | None = None,
     labels: Sequence[Segment] | None = None,
     engine: str | None = None,
+    on_fallback: Callable[[str], object] | None = None,
 ) -> tuple[list[Segment], str]:
     """Phone segments of speech by the best means at hand.
 
@@ -810,8 +811,9 @@ def segment(
     engine ``engine`` (:mod:`ingest.speech.engines`: PocketSphinx's :func:`align` and
     :func:`recognize`, the CTC model of :mod:`ingest.speech.ctc`, or each task by the
     engine that measured better at it). If the alignment
-    fails (:class:`~db.errors.DataError`) a warning is logged ("transcript alignment
-    failed: ...; fell back to phone recognition") and recognition is used instead.
+    fails (:class:`~db.errors.DataError`) recognition is used instead, and a line saying
+    so ("transcript alignment failed: ...; fell back to phone recognition") is logged as
+    a warning, or given to ``on_fallback``.
 
     Parameters
     ----------
@@ -825,6 +827,8 @@ def segment(
         Known phone labels (seconds).
     engine : str, optional
         One of :data:`ingest.speech.engines.ENGINES`; default ``"auto"``.
+    on_fallback : callable, optional
+        Receives the line on a failed alignment instead of the log.
 
     Returns
     -------
@@ -850,8 +854,11 @@ def segment(
         try:
             return do_align(samples, sample_rate, text), "aligned"
         except DataError as exc:
-            logger.warning("transcript alignment failed: %s; fell back to phone recognition",
-                           exc)
+            line = f"transcript alignment failed: {exc}; fell back to phone recognition"
+            if on_fallback is None:
+                logger.warning("%s", line)
+            else:
+                on_fallback(line)
     return do_recognize(samples, sample_rate), "recognized"
 
 
