@@ -556,8 +556,7 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     def speech_alone_guide():
         """A recording whose transcript does not fit it is synthesized as speech alone
         is by ``synth``: with the audio-only path's guide."""
-        name = audio_only_guide(known_phones=False, searched=line.exact or
-                                line.window is not None)
+        name = audio_only_guide(known_phones=False, searched=line.searched)
         if name is None:
             return None
         guide, missing = worker_guide(task.db, task.db_version, name)
@@ -607,9 +606,8 @@ def speech_alone_path(line: ScriptLine, guided: tuple[str, ...]) -> str:
     from animegraph.synthesis.guide import GUIDE_BLEND
     from animegraph.synthesis.path import guide_line, synthesis_path
 
-    searched = line.exact or line.window is not None
     _, path = synthesis_path("audio only (the transcript does not fit the recording)",
-                             known_phones=False, searched=searched)
+                             known_phones=False, searched=line.searched)
     name = "+".join(guided) or None
     return path + guide_line(name, GUIDE_BLEND, False, known_phones=False, asked=False)
 

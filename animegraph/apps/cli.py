@@ -813,10 +813,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
     if args.text is not None and out.segmentation == "recognized":
         # The check passed, the alignment failed: what ran is the speech-alone path.
-        text, args.text = args.text, None
-        path, alone, _, _ = _synth_plan(args, _synth_path(args)[1])
-        args.text = text
-        path += _guide_shortfall(alone, out.guided)
+        alone = argparse.Namespace(**{**vars(args), "text": None})
+        path, name, _, _ = _synth_plan(alone, _synth_path(alone)[1])
+        path += _guide_shortfall(name, out.guided)
         path += " (transcript alignment failed: synthesized from the speech alone)"
     if out.context_ranked and CONTEXT_PHRASE not in path:
         path += f"; k-best{CONTEXT_PHRASE}"

@@ -137,7 +137,12 @@ class ScriptLine:
         from animegraph.synthesis.path import known_phones_path
 
         given = "transcript given" if self.audio is not None else "eSpeak NG phones"
-        return known_phones_path(given, searched=self.exact or self.window is not None)
+        return known_phones_path(given, searched=self.searched)
+
+    @property
+    def searched(self) -> bool:
+        """The paper's search asked for (``exact`` or ``window``): one anime a phone."""
+        return self.exact or self.window is not None
 
 
 def read_script(path: str | Path) -> list[ScriptLine]:
