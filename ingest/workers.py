@@ -12,6 +12,10 @@
   instead waits for every queued job on the way out, and CPython's result thread can
   die with ``InvalidStateError: CANCELLED`` on a cancelled future, after which that
   wait never ends (the hang seen in issue 17).
+* Each worker's native thread pools (BLAS, OpenMP, numba) get the cores divided among
+  the workers. Left at their default, every worker's BLAS starts a thread per core and
+  the threads of all workers spin for the same cores: ingesting GRID's 800 clips on 2
+  cores took 90 s to read the clips instead of 40 (``docs/results.md``, session 15).
 """
 
 from __future__ import annotations
@@ -25,11 +29,33 @@ import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 
+from db.system import usable_cpus
+
 #: Seconds a terminated worker gets to exit before it is killed.
 TERMINATE_GRACE_S = 3.0
 #: Seconds between two looks at the parent's pid (where prctl is not available).
 PARENT_POLL_S = 0.5
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+#: Variables read by native thread pools when they load (those loaded later in a worker).
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                    "BLIS_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def threads_per_worker(workers: int) -> int:
+    """Native threads each of ``workers`` processes gets: the usable cores shared out."""
+    return max(1, usable_cpus(cap=4096) // max(1, workers))
+
+
+def limit_threads(threads: int) -> None:
+    """Limit this process' native thread pools to ``threads``, loaded or not yet loaded."""
+    for name in THREAD_VARIABLES:
+        os.environ[name] = str(threads)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=threads)  # the pools already loaded (numpy's BLAS above all)
+    numba = sys.modules.get("numba")
+    if numba is not None:  # loaded already: it read its variable before this
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
 
 
 def die_with_parent(parent: int | None = None) -> None:
@@ -66,10 +92,13 @@ def _watch_parent(parent: int) -> None:
     os._exit(1)
 
 
-def worker_initializer(parent: int) -> None:
-    """Initializer of every worker process: ignore Ctrl-C, end with the parent."""
+def worker_initializer(parent: int, threads: int | None = None) -> None:
+    """Initializer of every worker process: ignore Ctrl-C, end with the parent, and
+    (with ``threads``) limit the native thread pools to that many threads."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(parent)
+    if threads is not None:
+        limit_threads(threads)
 
 
 def end_workers(processes: Iterable[multiprocessing.Process]) -> None:
@@ -117,7 +146,8 @@ def map_in_processes(
     """
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                               initializer=worker_initializer, initargs=(os.getpid(),))
+                               initializer=worker_initializer,
+                               initargs=(os.getpid(), threads_per_worker(workers)))
     try:
         results = pool.map(func, jobs, chunksize=chunksize)
         done = list(progress(results) if progress else results)

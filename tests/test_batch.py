@@ -352,3 +352,25 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
                        guide=load_forward(db, "mu-mlp"))
     written = read_c3d(folder / "motion.c3d").points
     np.testing.assert_allclose(written.reshape(len(written), -1), alone.motion, atol=1e-3)
+
+    # Finished, until the guide it lacked is fitted: then the line is made again.
+    from animegraph.apps.batch import guide_state
+
+    def stored(parts):
+        return guide_state(db, parts)
+
+    assert finished(folder, line_key(line, identity, "none"), stored) is not None
+    save_model(make_estimator("ppg-ridge").fit(prepared_from_database(Database.open(db))), db)
+    assert finished(folder, line_key(line, identity, "none"), stored) is None
+    # A line whose transcript fits records no guide: fitting one does not remake it.
+    fits = ScriptLine(id="f", text=json.loads(wav.with_suffix(".json").read_text())["text"],
+                      line_no=3, audio=wav)
+    row = run_line(LineTask(line=fits, db=str(db), db_version=version,
+                            folder=str(tmp_path / "out" / "f"), render="none",
+                            key=line_key(fits, identity, "none")))
+    assert row["status"] == "done" and row["warnings"] == "", row
+    assert "guides" not in json.loads((tmp_path / "out" / "f" / DONE).read_text())
+    # Guide names from the output folder are only those of stored guides.
+    marker = json.loads((folder / DONE).read_text())
+    (folder / DONE).write_text(json.dumps({**marker, "guides": {"../../x": None}}))
+    assert finished(folder, line_key(line, identity, "none"), stored) is None

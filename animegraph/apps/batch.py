@@ -19,9 +19,11 @@ at ``scheduler``. Each worker process loads the Anime Graph once (:func:`worker_
 
 A line whose ``done.json`` holds the same key (a hash of its inputs, the recording's
 bytes, the database version and the options that change its outputs) is skipped on a
-re-run unless ``force``. Every file is written to a temporary name and renamed; the old
-``done.json`` is removed before a line is redone, so an interrupted batch never leaves a
-line that looks finished but is not. A failing line records its reason in
+re-run unless ``force``; a recording that went as speech alone (its transcript did not
+fit) is remade also when the stored guide it had (or lacked) has changed since. Every
+file is written to a temporary name and renamed; the old ``done.json`` is removed before
+a line is redone, so an interrupted batch never leaves a line that looks finished but is
+not. A failing line records its reason in
 ``OUT/report.csv`` and the others go on. One batch at a time writes into an output
 folder (an OS lock, :func:`db.lock.writer_lock`); a second one fails with one line.
 """
@@ -193,6 +195,12 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
                 progress, say) -> BatchResult:
     rows: dict[str, dict] = {}
     tasks: list[LineTask] = []
+    stored: dict[str, str | None] = {}
+
+    def guides(parts: list[str]) -> dict:
+        stored.update(guide_state(db, [p for p in parts if p not in stored]))
+        return {p: stored[p] for p in parts}
+
     for line in lines:
         folder = out / line.id
         try:
@@ -200,7 +208,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         except LineError as exc:
             rows[line.id] = _row(line, status="failed", error=str(exc))
             continue
-        saved = None if options.force else finished(folder, key)
+        saved = None if options.force else finished(folder, key, guides)
         if saved is not None:
             rows[line.id] = {**saved, "status": "skipped"}
             continue
@@ -421,9 +429,15 @@ def _file_digest(path: Path) -> str:
     return digest.hexdigest()
 
 
-def finished(folder: Path, key: str) -> dict | None:
+def finished(folder: Path, key: str,
+             guides: Callable[[list[str]], dict] | None = None) -> dict | None:
     """The saved report row of a line finished with this ``key`` (every output still
-    there), else None."""
+    there), else None.
+
+    ``guides(parts)`` gives the stored state of guide parts now (:func:`guide_state`):
+    a line that went as speech alone is finished only if the guide it had (or lacked)
+    is still what is stored, so fitting the guide after a batch remakes its lines.
+    """
     try:
         marker = json.loads((folder / DONE).read_text())
     except (OSError, ValueError):
@@ -433,6 +447,14 @@ def finished(folder: Path, key: str) -> dict | None:
     outputs = marker.get("outputs", [])
     if not all((folder / name).is_file() for name in outputs):
         return None
+    used = marker.get("guides")
+    if guides is not None and used is not None:
+        from animegraph.baselines.stored import FORWARD
+
+        # The names come from a file in the output folder: only stored guides' names.
+        if not isinstance(used, dict) or not set(used) <= set(FORWARD) or \
+                used != guides(sorted(used)):
+            return None
     row = marker.get("row")
     return row if isinstance(row, dict) else None
 
@@ -473,16 +495,31 @@ def worker_model(db: str, version: str):
         return model
 
 
-def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str]]:
+def guide_state(db: str | Path, parts: Iterable[str]) -> dict[str, str | None]:
+    """What is stored of each guide part with ``db``'s live version: part -> the SHA-256
+    of its model file, or None if there is none."""
+    from animegraph.baselines.stored import model_path
+
+    state = {}
+    for part in parts:
+        try:
+            state[part] = _file_digest(model_path(db, part))
+        except LineError:
+            state[part] = None
+    return state
+
+
+def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str], dict]:
     """The guide ``name`` (``a+b``: the mean of its parts) as stored with ``db``, loaded
     once per process and kept: (the guide, a tuple of its parts, or None; the parts not
-    to be had, each with why). A worker does not fit a guide: that writes the database,
-    and the batch only reads it."""
+    to be had, each with why; :func:`guide_state` of the parts as they were read). A
+    worker does not fit a guide: that writes the database, and the batch only reads it."""
     from animegraph.baselines.stored import load_forward
 
     key = (str(Path(db).resolve()), version, name)
     with _MODEL_LOCK:
         if key not in _GUIDES:
+            state = guide_state(db, name.split("+"))  # before reading: never newer
             got, lacking = [], []
             for part in name.split("+"):
                 try:
@@ -497,7 +534,7 @@ def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str]]:
                     got.append(model)
             guide = None if not got else got[0] if len(got) == 1 else tuple(got)
             _GUIDES.clear()  # one database at a time per process
-            _GUIDES[key] = (guide, lacking)
+            _GUIDES[key] = (guide, lacking, state)
         return _GUIDES[key]
 
 
@@ -526,11 +563,14 @@ def run_line(task: LineTask) -> dict:
     row["seconds"] = round(time.perf_counter() - t0, 3)
     row["cpu_seconds"] = round(time.process_time() - cpu0, 3)
     if row["status"] == "done":
-        outputs = row.pop("_outputs")
+        outputs, guides = row.pop("_outputs"), row.pop("_guides")
         marker = {"format": FORMAT, "key": task.key, "outputs": outputs, "row": row}
+        if guides:
+            marker["guides"] = guides
         with atomic_write(folder / DONE) as handle:
             handle.write(json.dumps(marker, indent=1).encode())
     row.pop("_outputs", None)
+    row.pop("_guides", None)
     row["_pid"] = os.getpid()
     row["_loads"] = _LOADS[(str(Path(task.db).resolve()), task.db_version)]
     return row
@@ -552,6 +592,7 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         audio, sample_rate, labels = _speak(line, warnings)
         text, speech = None, "espeak"
     lacking: list[str] = []
+    guides: dict[str, str | None] = {}
 
     def speech_alone_guide():
         """A recording whose transcript does not fit it is synthesized as speech alone
@@ -559,8 +600,9 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         name = audio_only_guide(known_phones=False, searched=line.searched)
         if name is None:
             return None
-        guide, missing = worker_guide(task.db, task.db_version, name)
+        guide, missing, state = worker_guide(task.db, task.db_version, name)
         lacking.extend(missing)
+        guides.update(state)
         return guide
 
     synth = synthesize(model, audio, sample_rate, text=text, labels=labels,
@@ -597,6 +639,7 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
         "emotion": used, "motion_emotions": _motion_emotions(synth.explain),
         "jumps": synth.result.n_jumps, "cost": round(float(synth.result.cost), 4),
         "warnings": "; ".join(warnings), "error": "", "_outputs": outputs,
+        "_guides": guides,
     }
 
 

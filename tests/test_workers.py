@@ -1,0 +1,27 @@
+"""Worker processes share the cores out: each one's native thread pools are limited."""
+
+from __future__ import annotations
+
+import os
+
+from ingest.workers import map_in_processes, threads_per_worker
+
+
+def _thread_pools(_job) -> tuple[list[int], str | None]:
+    import numpy  # noqa: F401  (loads the BLAS if the worker has not yet)
+    from threadpoolctl import threadpool_info
+
+    blas = [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+    return blas, os.environ.get("OMP_NUM_THREADS")
+
+
+def test_each_worker_gets_its_share_of_the_cores():
+    from threadpoolctl import threadpool_info
+
+    own = [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+    share = threads_per_worker(2)
+    for blas, omp in map_in_processes(_thread_pools, [0, 1, 2, 3], workers=2):
+        assert blas, "numpy's BLAS was not found in the worker"
+        # Never more than the share; the BLAS may be built for fewer threads than that.
+        assert all(n == min(share, max(own)) for n in blas), (blas, share, own)
+        assert omp == str(share)
