@@ -194,6 +194,7 @@ def _work(args):
                             head_reference=reference if _has_head(raw.schema) else None,
                             phones_engine=engine, posteriorgrams=posteriorgrams)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
+        note = "; ".join(n for n in (note, clip.extra.get("transcript_fallback")) if n)
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
                             note=note)

@@ -147,9 +147,12 @@ def prepare_clip(
         if n_even:
             extra["words_spread_evenly"] = n_even
     else:
+        fallback: list[str] = []
         phones, method = segment(audio, raw.sample_rate, text=raw.text or None,
                                  labels=list(raw.phones) if raw.phones else None,
-                                 engine=phones_engine)
+                                 engine=phones_engine, on_fallback=fallback.append)
+        if fallback:  # kept (in the clips table too) and said in the clip's report row
+            extra["transcript_fallback"] = fallback[0]
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)

@@ -109,6 +109,35 @@ def test_a_bad_clip_is_rejected_and_the_others_go_in(tiny_corpus, tmp_path):
     assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added")
 
 
+def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_path, capsys):
+    """A clip whose transcript is another utterance's goes in with its phones recognised,
+    and the report and the clips table say so; its neighbours are aligned as before."""
+    src = tmp_path / tiny_corpus.name
+    shutil.copytree(tiny_corpus, src)
+    clips = sorted((src / "clips").glob("*.json"))[:3]
+    for clip in clips[:2]:
+        clip.with_suffix(".phones.csv").unlink()  # no labels: the transcript is aligned
+    meta = json.loads(clips[0].read_text())
+    meta["text"] = "Nothing like what is said in it at all."
+    clips[0].write_text(json.dumps(meta))
+    for extra in sorted((src / "clips").iterdir()):
+        if extra.name.split(".")[0] not in {c.stem for c in clips}:
+            extra.unlink()
+    db = tmp_path / "db"
+    assert main(["ingest", str(src), "--db", str(db), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"added {clips[0].with_suffix('.c3d')}: transcript alignment failed: " in out, out
+    assert "fell back to phone recognition" in out
+    assert str(clips[1].with_suffix(".c3d")) not in out  # its own transcript: aligned
+    rows = {r["clip_id"]: r for r in Database.open(db).table(
+        "clips", columns=["clip_id", "segmentation", "extra"]).to_pylist()}
+    wrong, right = rows[clips[0].stem], rows[clips[1].stem]
+    assert wrong["segmentation"] == "recognized" and right["segmentation"] == "aligned"
+    assert json.loads(wrong["extra"])["transcript_fallback"].startswith(
+        "transcript alignment failed: ")
+    assert "transcript_fallback" not in json.loads(right["extra"])
+
+
 def test_adding_clips_refits_the_model_over_everything(tiny_corpus, tmp_path):
     first = tmp_path / "part" / tiny_corpus.name  # same corpus name: the same clips
     (first / "clips").mkdir(parents=True)
