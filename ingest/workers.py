@@ -50,12 +50,13 @@ def limit_threads(threads: int) -> None:
     """Limit this process' native thread pools to ``threads``, loaded or not yet loaded."""
     for name in THREAD_VARIABLES:
         os.environ[name] = str(threads)
+    numba = sys.modules.get("numba")
+    if numba is not None:  # loaded already: it read its variable before this
+        # First: this starts numba's threading layer, which sizes the OpenMP pool.
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=threads)  # the pools already loaded (numpy's BLAS above all)
-    numba = sys.modules.get("numba")
-    if numba is not None:  # loaded already: it read its variable before this
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
 
 
 def die_with_parent(parent: int | None = None) -> None:

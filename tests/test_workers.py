@@ -25,3 +25,20 @@ def test_each_worker_gets_its_share_of_the_cores():
         # Never more than the share; the BLAS may be built for fewer threads than that.
         assert all(n == min(share, max(own)) for n in blas), (blas, share, own)
         assert omp == str(share)
+
+
+def test_pools_loaded_before_the_limit_are_limited_too():
+    """numba and the BLAS already loaded (a worker's main module may import them) obey
+    the limit; run apart, so that this test process keeps its own threads."""
+    import subprocess
+    import sys
+
+    code = ("import numba, numpy\n"
+            "from threadpoolctl import threadpool_info\n"
+            "from ingest.workers import limit_threads\n"
+            "limit_threads(1)\n"
+            "print(numba.get_num_threads(), "
+            "max(p['num_threads'] for p in threadpool_info()))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["1", "1"], out
