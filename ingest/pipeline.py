@@ -194,13 +194,24 @@ def _work(args):
                             head_reference=reference if _has_head(raw.schema) else None,
                             phones_engine=engine, posteriorgrams=posteriorgrams)
         status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
-        note = "; ".join(n for n in (note, clip.extra.get("transcript_fallback")) if n)
+        note = _note(note, clip)
         report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
                             segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
                             note=note)
         return report, clip
     except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
         return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
+
+
+def _note(checked: str, clip: PreparedClip) -> str:
+    """The clip's line in the report: the plausibility check's note, then what the
+    reader and the phone alignment had to make do with."""
+    notes = [checked]
+    gaps = clip.extra.get("frames_without_face", 0)
+    if gaps:
+        notes.append(f"no face in {gaps} frames (filled as gaps)")
+    notes.append(clip.extra.get("transcript_fallback", ""))
+    return "; ".join(n for n in notes if n)
 
 
 def _checksum(source: ClipSource) -> str | None:

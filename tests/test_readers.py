@@ -479,6 +479,13 @@ def test_landmark_clip_failures(tmp_path):
     assert clip.motion.shape == (50, 468 * 3 + 7) and clip.schema.kind == "landmarks"
     assert clip.schema.names[-7:] == POSE_CHANNELS and clip.schema.groups[-1] == "pose"
     assert clip.extra["procrustes_rms_mm"] < 1e-3
+    assert clip.extra["frames_without_face"] == 0
+    gaps = raw.copy()
+    gaps[[3, 4, 20]] = np.nan  # frames the tracker found no face in
+    np.save(folder / "landmarks.npy", gaps)
+    clip = load(source)
+    assert clip.extra["frames_without_face"] == 3
+    np.save(folder / "landmarks.npy", raw)
     (folder / "meta.json").write_text(json.dumps({"width": 256}))
     with pytest.raises(DataError, match="meta.json: no 'fps'"):
         load(source)

@@ -346,9 +346,6 @@ def landmark_clip(
     face = np.isfinite(raw[:, :N_FACE]).all(axis=(1, 2))
     if not face.any():
         raise DataError(f"{lm_path}: no face in any frame (all NaN)")
-    if not face.all():
-        logger.warning("%s: no face in %d of %d frames (left NaN)", lm_path,
-                       int((~face).sum()), len(face))
 
     norm = normalise_landmarks(raw, float(width), float(height))
     n = len(raw)
@@ -365,6 +362,8 @@ def landmark_clip(
     extra = {
         **extra,
         "layout": source.layout,
+        # filled as gaps; said on the clip's line of the ingest report
+        "frames_without_face": int((~face).sum()),
         "lip_audio_lag_s": round(lag, 4),
         "lag_confidence": round(confidence, 4),
         # pooled per speaker at ingest (ingest.lag): whether any lag is applied is decided there

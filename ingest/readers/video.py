@@ -381,8 +381,7 @@ def load_video(source: ClipSource) -> RawClip:
     fields = metadata_fields(meta, meta_path) if meta_path else dict.fromkeys(
         ("text", "emotion", "speaker", "sentence_id"))
     text, phones, words = transcript_and_labels(source, len(audio) / sample_rate)
-    extra = {"tracker": TRACKER_TAG, "video": video.name,
-             "frames_without_face": int((tracking.n_faces == 0).sum())}
+    extra = {"tracker": TRACKER_TAG, "video": video.name}
     return landmark_clip(
         source, tracking.landmarks, fps=tracking.fps, width=float(tracking.width),
         height=float(tracking.height), audio=audio, sample_rate=sample_rate,
