@@ -79,6 +79,25 @@ def test_a_table_built_clip_by_clip_is_written_in_few_row_groups(tmp_path, monke
     np.testing.assert_array_equal(back.column("ch7").to_numpy(), frames.column("ch7").to_numpy())
 
 
+def test_floats_are_written_without_a_dictionary(tmp_path):
+    """Motion values hardly repeat: a dictionary would be tried and given up page by page
+    (slower and larger); names and ids keep theirs. The values read back unchanged."""
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    (frames,) = db.table_path("frames").rglob("*.parquet")
+    meta = pq.ParquetFile(frames).metadata.row_group(0)
+    encodings = {meta.column(i).path_in_schema: meta.column(i).encodings
+                 for i in range(meta.num_columns)}
+    assert not any("DICTIONARY" in e for e in encodings["jaw"]), encodings
+    assert any("DICTIONARY" in e for e in encodings["clip_id"]), encodings
+    assert db.table("frames").column("jaw").to_pylist() == pytest.approx([0.1, 0.2, 0.3])
+    (arrays,) = db.version_dir.glob("model_arrays.parquet")
+    meta = pq.ParquetFile(arrays).metadata.row_group(0)
+    values = [meta.column(i) for i in range(meta.num_columns)
+              if meta.column(i).path_in_schema.startswith("values")]
+    assert values and not any("DICTIONARY" in e for c in values for e in c.encodings)
+
+
 def test_model_arrays_round_trip_exactly():
     rng = np.random.default_rng(0)
     arrays = {"a": rng.normal(size=(4, 5)), "b": rng.normal(size=7), "c": np.zeros((0, 3))}

@@ -126,7 +126,7 @@ def save_model(model: BaselineModel, db_root) -> Path:
     import pyarrow.parquet as pq
 
     from db.atomic import atomic_write
-    from db.store import arrays_to_table, current_version
+    from db.store import arrays_to_table, current_version, dictionary_columns
 
     root = Path(db_root)
     path = model_path(root, model.method)
@@ -135,7 +135,7 @@ def save_model(model: BaselineModel, db_root) -> Path:
     meta = {**model.describe(), "db_version": current_version(root)}
     table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
     with atomic_write(path) as handle:
-        pq.write_table(table, handle)
+        pq.write_table(table, handle, use_dictionary=dictionary_columns(table))
     for stale in (root / MODELS_DIR).iterdir():
         if stale.is_dir() and not (root / stale.name).is_dir():
             shutil.rmtree(stale, ignore_errors=True)
