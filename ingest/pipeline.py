@@ -514,7 +514,8 @@ def build_database(
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
     del motion
-    sources = [model.sources_from_pcs(p) for p in pcs_of_clips(model, [c.motion for c in clips])]
+    pcs = pcs_of_clips(model, [c.motion for c in clips])
+    sources = [model.sources_from_pcs(p) for p in pcs]
     cutoffs = cutoff_frequencies(sources, fps, energy=config.energy)
     extra_arrays = {} if reference is None else {"head_reference": reference}
     say("ingest: learning the emotion model (components, mappings, classifier) ...")
@@ -527,7 +528,7 @@ def build_database(
     emotion_arrays, emotion_entry, emotion_columns = emotion.to_database()
     say("ingest: building the anime nodes and writing the database ...")
     tables = build_tables(clips, model, cutoffs, arrays={**extra_arrays, **emotion_arrays},
-                          component_columns=emotion_columns)
+                          component_columns=emotion_columns, pcs=pcs)
     emotions: dict[str, int] = {}
     for c in clips:
         emotions[c.emotion] = emotions.get(c.emotion, 0) + 1

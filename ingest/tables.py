@@ -57,15 +57,21 @@ def build_tables(
     prosody_config: RastaPlpConfig | None = None,
     arrays: dict[str, np.ndarray] | None = None,
     component_columns: dict[str, list] | None = None,
+    pcs: Sequence[np.ndarray] | None = None,
 ) -> dict[str, pa.Table]:
     """Every table of the database for ``clips`` (sorted by corpus and clip id).
 
     ``arrays`` are stored with the model's (e.g. the head reference); ``component_columns``
     (one value per independent component) are added to the ``components`` table (e.g. the
-    speech/emotion split, :mod:`ingest.emotion`).
+    speech/emotion split, :mod:`ingest.emotion`). ``pcs``: each clip's principal-component
+    scores (n_frames_k, n_pcs), in the order of ``clips``, if already computed
+    (:func:`ingest.decompose.pcs_of_clips`).
     """
     cfg = prosody_config or RastaPlpConfig()
-    clips = sorted(clips, key=lambda c: c.key)
+    if pcs is None:
+        pcs = pcs_of_clips(model, [c.motion for c in clips])
+    order = sorted(range(len(clips)), key=lambda i: clips[i].key)
+    clips, pcs = [clips[i] for i in order], [pcs[i] for i in order]
     schema = clips[0].schema
     clip_rows, anime_cols = [], _columns()
     audio_rows = []
@@ -73,9 +79,9 @@ def build_tables(
     sources_all = []
     # Posteriorgrams (beyond the paper) are stored only when every clip has one.
     with_posteriors = all(c.posteriors is not None and len(c.posteriors) for c in clips)
-    for clip, pcs in zip(clips, pcs_of_clips(model, [c.motion for c in clips]), strict=True):
-        sources = model.sources_from_pcs(pcs).astype(np.float32)
-        sources_all.append(sources)
+    for clip, scores in zip(clips, pcs, strict=True):
+        ics = model.sources_from_pcs(scores).astype(np.float32)
+        sources_all.append(ics)
         n_phones = len(clip.phones)
         for pos, seg in enumerate(clip.phones):
             first, stop = anime_frames(seg.start, seg.end, clip.fps, len(clip.motion))
@@ -99,9 +105,9 @@ def build_tables(
                 post = slice_frames(clip.posteriors, seg.start, seg.end, hop_s=POSTERIOR_HOP_S)
                 a["posterior_frames"].append(len(post))
                 a["posteriors"].append(post.astype(np.float16).ravel())
-            a["motion"].append(sources[first:stop].ravel())
-            a["first_pcs"].append(pcs[first].astype(np.float32))
-            a["last_pcs"].append(pcs[stop - 1].astype(np.float32))
+            a["motion"].append(ics[first:stop].ravel())
+            a["first_pcs"].append(scores[first].astype(np.float32))
+            a["last_pcs"].append(scores[stop - 1].astype(np.float32))
             a["prev_node"].append(node - 1 if pos > 0 else None)
             a["next_node"].append(node + 1 if pos < n_phones - 1 else None)
             node += 1
