@@ -383,7 +383,8 @@ def prepare_sources(
 ) -> tuple[list[PreparedClip], np.ndarray | None]:
     """Prepare clips without a database: (the usable clips at one frame rate, head reference).
 
-    Rejected clips are logged and left out.
+    Rejected clips are logged and left out; a clip's note (what it made do with, as on
+    its line in ingest's report) is logged too.
     """
     config = config or IngestConfig()
     _check_tracker(found)
@@ -391,9 +392,11 @@ def prepare_sources(
     results = _run(list(found), {}, config.fps, config, workers, None, reference)
     clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
                         pooled=config.pool_lag)
-    for r, _ in results:
+    for r, _ in results:  # what ingest's report would say of each clip
         if r.status == "rejected":
             logger.warning("rejected %s: %s", r.source, r.reason)
+        elif r.note:
+            logger.warning("%s: %s", r.source, r.note)
     if not clips:
         raise ParameterError("no usable clips")
     fps = config.fps or max(c.fps for c in clips)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import shutil
 
 import numpy as np
@@ -16,7 +17,8 @@ from db.sql import query
 from db.store import Database, current_version
 from ingest.decompose import MotionDecomposer
 from ingest.formats.phones_csv import read_phones_csv
-from ingest.pipeline import ingest
+from ingest.pipeline import ingest, prepare_sources
+from ingest.readers import discover
 
 
 def test_every_clip_goes_in(tiny_db, tiny_corpus):
@@ -109,7 +111,8 @@ def test_a_bad_clip_is_rejected_and_the_others_go_in(tiny_corpus, tmp_path):
     assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added")
 
 
-def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_path, capsys):
+def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_path, capsys,
+                                                              caplog):
     """A clip whose transcript is another utterance's goes in with its phones recognised,
     and the report and the clips table say so; its neighbours are aligned as before."""
     src = tmp_path / tiny_corpus.name
@@ -136,6 +139,13 @@ def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_p
     assert json.loads(wrong["extra"])["transcript_fallback"].startswith(
         "transcript alignment failed: ")
     assert "transcript_fallback" not in json.loads(right["extra"])
+    caplog.clear()  # the evaluations prepare clips without a report: the log says it
+    with caplog.at_level(logging.WARNING, logger="ingest.pipeline"):
+        prepare_sources(discover([src]))
+    said = [r.getMessage() for r in caplog.records if r.name == "ingest.pipeline"]
+    assert any(m.startswith(f"{clips[0].with_suffix('.c3d')}: transcript alignment failed")
+               for m in said), said
+    assert not any(str(clips[1].with_suffix(".c3d")) in m for m in said)
 
 
 def test_a_clips_report_line_says_what_it_made_do_with():
