@@ -5,12 +5,17 @@ Usage::
     python scripts/eval_transcript_check.py [--clips 100] [--shared ../shared/data]
 
 For every eighth GRID s1 clip (up to ``--clips``; real English speech) and for eSpeak NG
-speech of the synthetic corpus' sentences, prints the distribution of
-:func:`ingest.speech.ctc.transcript_loss` (nats per frame below free recognition) with
-(a) the clip's own transcript, (b) an unrelated sentence, (c) another clip's transcript
-(for GRID: a sentence of the same grammar and length), and how many of each the check
-(:data:`ingest.speech.ctc.MAX_ALIGN_LOSS`) rejects. The default phone engine runs this
-check before PocketSphinx aligns a transcript (:func:`ingest.speech.engines.align_auto`).
+speech of the synthetic corpus' sentences, prints the distributions of
+:func:`ingest.speech.ctc.transcript_loss` (nats per frame below free recognition) and
+:func:`ingest.speech.ctc.phone_share` (phones named per phone heard) with (a) the clip's
+own transcript, also with white noise at 10 and 0 dB SNR, (b) an unrelated sentence, (c)
+another clip's transcript (for GRID: a sentence of the same grammar and length), (d) the
+transcript's first three words, (e) its last word alone, and how many of each
+:func:`ingest.speech.ctc.check_transcript` rejects (loss above
+:data:`~ingest.speech.ctc.MAX_ALIGN_LOSS`, or share below
+:data:`~ingest.speech.ctc.MIN_PHONE_SHARE`). The default phone engine runs this check
+before PocketSphinx aligns a transcript (:func:`ingest.speech.engines.align_auto`), and
+ingest before it aligns inside a word alignment's words.
 """
 
 from __future__ import annotations
@@ -35,11 +40,44 @@ ESPEAK = ("Please move the boxes off the porch.",
           "I never said she stole my money, he said quietly.")
 
 
-def _loss(audio: np.ndarray, rate: int, text: str) -> float:
+def _case(audio: np.ndarray, rate: int, text: str) -> tuple[float, float, bool]:
+    """(loss, share, rejected) of ``text`` as the transcript of ``audio``."""
     try:
-        return ctc.transcript_loss(audio, rate, text)
+        loss = ctc.transcript_loss(audio, rate, text)
     except DataError:  # more phones than the audio has frames: no alignment at all
-        return float("inf")
+        return float("inf"), ctc.phone_share(audio, rate, text), True
+    try:
+        ctc.check_transcript(audio, rate, text)
+    except DataError:
+        return loss, ctc.phone_share(audio, rate, text), True
+    return loss, ctc.phone_share(audio, rate, text), False
+
+
+def _noisy(audio: np.ndarray, snr_db: float, seed: int) -> np.ndarray:
+    noise = np.random.default_rng(seed).normal(size=len(audio))
+    noise *= np.sqrt(np.mean(audio ** 2) / np.mean(noise ** 2)) * 10 ** (-snr_db / 20)
+    return np.clip(audio + noise, -1, 1).astype(np.float32)
+
+
+def _cases(audio: list[np.ndarray], rate: int, texts: list[str], name: str) -> dict:
+    """The rows of one data set: (audio, text) pairs per case."""
+    def words(t: str, part: slice) -> str:
+        return " ".join(t.split()[part])
+
+    n = len(texts)
+    return {
+        f"{name}, own transcript": [(a, t) for a, t in zip(audio, texts, strict=True)],
+        f"{name}, own, noise 10 dB SNR": [(_noisy(a, 10, k), t) for k, (a, t) in
+                                           enumerate(zip(audio, texts, strict=True))],
+        f"{name}, own, noise 0 dB SNR": [(_noisy(a, 0, k), t) for k, (a, t) in
+                                          enumerate(zip(audio, texts, strict=True))],
+        f"{name}, unrelated sentence": [(a, UNRELATED) for a in audio],
+        f"{name}, the next one's": [(a, texts[(k + 1) % n]) for k, a in enumerate(audio)],
+        f"{name}, its first three words": [(a, words(t, slice(3))) for a, t in
+                                           zip(audio, texts, strict=True)],
+        f"{name}, its last word": [(a, words(t, slice(-1, None))) for a, t in
+                                   zip(audio, texts, strict=True)],
+    }
 
 
 def _mp4_audio(path: Path) -> np.ndarray:
@@ -51,12 +89,13 @@ def _mp4_audio(path: Path) -> np.ndarray:
     return np.frombuffer(out, "<i2").astype(np.float32) / 32768.0
 
 
-def _row(name: str, values: list[float]) -> str:
-    v = np.asarray(values)
-    finite = v[np.isfinite(v)]
-    rejected = int(np.sum(v > ctc.MAX_ALIGN_LOSS))
-    return (f"{name:<34} {len(v):>5} {np.min(v):>7.2f} {np.median(v):>7.2f} "
-            f"{np.max(finite) if finite.size else np.inf:>7.2f} {rejected:>5}/{len(v)}")
+def _row(name: str, results: list[tuple[float, float, bool]]) -> str:
+    loss, share, rejected = (np.asarray(v) for v in zip(*results, strict=True))
+    finite = loss[np.isfinite(loss)]
+    return (f"{name:<36} {len(loss):>5} {np.min(loss):>6.2f} {np.median(loss):>6.2f} "
+            f"{np.max(finite) if finite.size else np.inf:>6.2f} {np.min(share):>6.2f} "
+            f"{np.median(share):>6.2f} {np.max(share):>6.2f} "
+            f"{int(rejected.sum()):>5}/{len(loss)}")
 
 
 def main() -> int:
@@ -66,30 +105,23 @@ def main() -> int:
     args = parser.parse_args()
     from ingest.speech.espeak import speak
 
-    rows = {}
     spoken = [speak(text) for text in ESPEAK]
-    rows["eSpeak, own transcript"] = [_loss(u.audio, u.sample_rate, u.text) for u in spoken]
-    rows["eSpeak, unrelated sentence"] = [_loss(u.audio, u.sample_rate, UNRELATED)
-                                          for u in spoken]
-    rows["eSpeak, the next sentence's"] = [
-        _loss(u.audio, u.sample_rate, spoken[(k + 1) % len(spoken)].text)
-        for k, u in enumerate(spoken)]
+    cases = _cases([u.audio for u in spoken], spoken[0].sample_rate,
+                   [u.text for u in spoken], "eSpeak")
     folder = args.shared / "grid" / "s1"
     if folder.is_dir():
         videos = sorted(folder.glob("*.mp4"))[::8][: args.clips]
         texts = [v.with_suffix(".txt").read_text().strip() for v in videos]
-        audio = [_mp4_audio(v) for v in videos]
-        rows["GRID, own transcript"] = [_loss(a, 16000, t) for a, t in zip(audio, texts,
-                                                                          strict=True)]
-        rows["GRID, unrelated sentence"] = [_loss(a, 16000, UNRELATED) for a in audio]
-        rows["GRID, the next clip's (same grammar)"] = [
-            _loss(a, 16000, texts[(k + 1) % len(texts)]) for k, a in enumerate(audio)]
+        cases |= _cases([_mp4_audio(v) for v in videos], 16000, texts, "GRID")
     else:
         print(f"skipping GRID: {folder} not found", file=sys.stderr)
-    print(f"{'transcript':<34} {'clips':>5} {'min':>7} {'median':>7} {'max':>7} rejected"
-          f"  (loss in nats/frame; rejected above {ctc.MAX_ALIGN_LOSS})")
-    for name, values in rows.items():
-        print(_row(name, values))
+    print(f"{'transcript':<36} {'clips':>5} {'loss: min':>6} {'median':>6} {'max':>6} "
+          f"{'share: min':>6} {'median':>6} {'max':>6} rejected   (loss in nats/frame, "
+          f"rejected above {ctc.MAX_ALIGN_LOSS}; share: phones named per phone heard, "
+          f"rejected below {ctc.MIN_PHONE_SHARE})")
+    for name, pairs in cases.items():
+        rate = 16000 if name.startswith("GRID") else spoken[0].sample_rate
+        print(_row(name, [_case(a, rate, t) for a, t in pairs]), flush=True)
     return 0
 
 

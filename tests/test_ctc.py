@@ -7,6 +7,7 @@ import logging
 
 import numpy as np
 import pytest
+from conftest import require_shared
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -131,6 +132,21 @@ def test_wrong_transcript_is_a_data_error(spoken):
     u = spoken[0]
     with pytest.raises(DataError, match="does not match"):
         ctc.align(u.audio, u.sample_rate, SENTENCES[1])
+
+
+def test_a_transcript_that_leaves_words_out_does_not_match():
+    """CTC's blank absorbs untranscribed speech cheaply: a one-word transcript of a GRID
+    sentence fits within MAX_ALIGN_LOSS, and only the share of phones it names shows
+    that it is not what the audio says."""
+    from ingest.formats.media import read_audio
+
+    audio, rate = read_audio(require_shared("grid", "s1", "bbaf2n.mp4"))
+    ctc.check_transcript(audio, rate, "bin blue at f two now")  # what is said
+    for partial in ("now", "zebra"):
+        assert ctc.transcript_loss(audio, rate, partial) < ctc.MAX_ALIGN_LOSS
+        with pytest.raises(DataError, match="words missing"):
+            ctc.check_transcript(audio, rate, partial)
+    assert segment(audio, rate, text="now", on_fallback=lambda line: None)[1] == "recognized"
 
 
 def test_the_default_aligner_rejects_a_transcript_of_another_utterance(spoken, caplog):

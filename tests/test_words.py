@@ -17,6 +17,7 @@ from ingest.formats.words import (
     word_tier,
 )
 from ingest.readers import discover, load
+from ingest.speech import ctc
 from ingest.speech.espeak import Voice, speak
 from ingest.speech.g2p import pronounce
 from ingest.speech.phones import SILENCE
@@ -191,3 +192,34 @@ def test_words_of_another_utterance_are_rejected(tmp_path):
     (folder / "transcript.txt").write_text("bin")
     with pytest.raises(DataError, match="after the audio"):
         load(discover([folder])[0])
+
+
+@pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
+def test_a_word_alignment_is_checked_against_the_speech(tmp_path):
+    """Words beside a clip are what it says only if the transcript check agrees: an
+    alignment of another utterance, or one leaving most words out, falls back to
+    recognition and says so, as a transcript that does not fit does."""
+    from ingest.formats.wav import write_wav
+    from ingest.prepare import prepare_clip
+
+    words = ["open", "window", "bottle", "kitchen", "garden"]
+    utterance = speak(" ".join(words), Voice(word_gap=30))
+    folder = _landmark_folder(tmp_path / "corpus", seconds=utterance.duration)
+    write_wav(folder / "audio_16k.wav", utterance.audio, utterance.sample_rate)
+    align = folder.parent / "clip.align"
+
+    def write_align(segments):
+        align.write_text("".join(f"{round(w.start * 25000)} {round(w.end * 25000)} "
+                                 f"{w.word or 'sil'}\n" for w in segments))
+        return prepare_clip(load(discover([folder])[0]))
+
+    given = _word_intervals(utterance, words)
+    right = write_align(given)
+    assert right.segmentation == "aligned-words" and "transcript_fallback" not in right.extra
+    for wrong in (  # another utterance's words at these times; the last word alone
+            [WordSegment(w, g.start, g.end) for w, g in zip(
+                ["please", "move", "these", "boxes", "today"], given, strict=True)],
+            given[-1:]):
+        clip = write_align(wrong)
+        assert clip.segmentation == "recognized", wrong
+        assert clip.extra["transcript_fallback"].startswith("word alignment failed: ")
