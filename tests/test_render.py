@@ -62,12 +62,29 @@ def _no_leftovers(folder):
     return [p.name for p in folder.iterdir() if p.name.startswith(".")]
 
 
+def _actor_video(path, seconds=1.0, *, sound=True, faststart=False, keep=1.0):
+    """A red 160 x 120 "video of the actor" at 25 fps (with a tone), its first ``keep`` of bytes.
+
+    Cut short, a plain MP4 loses its index (written last: nothing decodes); a faststart one
+    keeps it (the header still declares ``seconds``) and decodes up to the cut.
+    """
+    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-f", "lavfi", "-i",
+           f"color=c=red:s=160x120:r=25:d={seconds}"]
+    if sound:
+        cmd += ["-f", "lavfi", "-i", f"sine=frequency=300:sample_rate=16000:duration={seconds}",
+                "-c:a", "aac"]
+    if keep < 1:  # noise makes every frame about as big, so a cut falls mid-video
+        cmd += ["-vf", "noise=alls=30:allf=t"]
+    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    subprocess.run([*cmd, *(["-movflags", "+faststart"] if faststart else []), str(path)],
+                   check=True)
+    data = path.read_bytes()
+    path.write_bytes(data[:int(len(data) * keep)])
+    return path
+
+
 def test_mp4_beside_the_actor_video(take, capsys):
-    actor = take / "actor.mp4"  # a 1 s "video of the actor", 160 x 120, red, with a tone
-    subprocess.run([ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-f", "lavfi", "-i",
-                    "color=c=red:s=160x120:r=25:d=1", "-f", "lavfi", "-i",
-                    "sine=frequency=300:sample_rate=16000:duration=1", "-c:v", "libx264",
-                    "-c:a", "aac", "-pix_fmt", "yuv420p", str(actor)], check=True)
+    actor = _actor_video(take / "actor.mp4")
     out = take / "both.mp4"
     assert main(["render", str(take / "take.c3d"), "--audio", str(actor), "--beside",
                  str(actor), "-o", str(out), "--quiet", "--size", "240x270"]) == 0
@@ -81,6 +98,45 @@ def test_mp4_beside_the_actor_video(take, capsys):
     assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
                  str(take / "face.gif"), "--quiet"]) == 2
     assert "--beside needs an .mp4" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["index lost", "no video track"])
+def test_failed_beside_keeps_the_previous_output(take, tmp_path, capsys, what):
+    # An actor video with no picture to show is refused before anything is rendered, in
+    # one line naming it, and the output from an earlier run is left as it was.
+    bad = (_actor_video(tmp_path / "actor.mp4", keep=0.5) if what == "index lost"
+           else take / "take.wav")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "r.mp4").write_bytes(b"an earlier render")
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--audio",
+                                   str(take / "take.wav"), "--beside", str(bad), "-o",
+                                   str(out / "r.mp4"), "--size", "240x270"]), 1)
+    assert bad.name in line and ("no video track" in line) == (what == "no video track"), line
+    assert (out / "r.mp4").read_bytes() == b"an earlier render"
+    assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
+
+
+def test_beside_failing_after_the_render_keeps_the_previous_output(take, tmp_path, capsys,
+                                                                    monkeypatch):
+    # The face is rendered into a temporary file: -o is replaced only once the pair is made.
+    from animegraph.face import render
+    from db.errors import DataError
+
+    def fail(*args, **kwargs):
+        raise DataError("ffmpeg could not put actor.mp4 beside r.mp4: disk full")
+
+    monkeypatch.setattr(render, "place_beside", fail)
+    actor = _actor_video(tmp_path / "actor.mp4")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "r.mp4").write_bytes(b"an earlier render")
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--beside", str(actor),
+                                   "-o", str(out / "r.mp4"), "--size", "240x270",
+                                   "--quiet"]), 1)
+    assert "disk full" in line
+    assert (out / "r.mp4").read_bytes() == b"an earlier render"
+    assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
 
 
 def test_mp4_with_audio(take, capsys):
