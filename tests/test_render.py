@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import logging
+import re
 import subprocess
 
 import numpy as np
@@ -49,6 +51,14 @@ def _streams(path):
     out = subprocess.run([ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
                          text=True)
     return [line.strip() for line in out.stderr.splitlines() if "Stream #" in line]
+
+
+def _duration(path):
+    """Seconds, from the container."""
+    info = subprocess.run([ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
+                          text=True).stderr
+    hours, minutes, seconds = re.search(r"Duration: (\d+):(\d+):([\d.]+)", info).groups()
+    return 3600 * int(hours) + 60 * int(minutes) + float(seconds)
 
 
 def _decode(path, width, height):
@@ -137,6 +147,33 @@ def test_beside_failing_after_the_render_keeps_the_previous_output(take, tmp_pat
     assert "disk full" in line
     assert (out / "r.mp4").read_bytes() == b"an earlier render"
     assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
+
+
+@pytest.mark.parametrize(("seconds", "keep"), [(0.5, 1.0), (1.0, 0.5)],
+                         ids=["short", "cut in half"])
+def test_shorter_video_beside_ends_the_result_with_a_warning(take, tmp_path, caplog,
+                                                             seconds, keep):
+    # A video shorter than the motion (or declaring 1 s but cut short) ends the result
+    # where its pictures end, instead of freezing its last picture, and says so.
+    actor = _actor_video(tmp_path / "actor.mp4", seconds, sound=False, faststart=True,
+                         keep=keep)
+    out = tmp_path / "both.mp4"
+    with caplog.at_level(logging.WARNING, logger="animegraph.face.render"):
+        assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o", str(out),
+                     "--quiet", "--size", "240x270"]) == 0
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "actor.mp4" in warnings[0], warnings
+    assert "1.00 s" in warnings[0]  # the motion's length, and the video's:
+    shown = float(re.search(r"actor\.mp4 \D*([\d.]+) s", warnings[0]).group(1))
+    assert shown < 0.8 and abs(_duration(out) - shown) < 0.1, (shown, _duration(out))
+
+
+def test_mp4_beside_an_equal_video_has_no_warning(take, tmp_path, caplog):
+    actor = _actor_video(tmp_path / "actor.mp4")
+    with caplog.at_level(logging.WARNING, logger="animegraph.face.render"):
+        assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
+                     str(tmp_path / "both.mp4"), "--quiet", "--size", "240x270"]) == 0
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]
 
 
 def test_mp4_with_audio(take, capsys):

@@ -233,7 +233,8 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     """Put ``video`` (the actor) left of the rendered MP4 ``path``, at its height; atomic.
 
     The sound is the rendered file's if it has any, else the video's; the result ends
-    with the shorter of the two.
+    with the shorter of the two (where the last decodable picture of a video cut short
+    is, whatever its header says).
 
     Parameters
     ----------
@@ -270,9 +271,12 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     sound = "1:a" if meta.get("audio_codec") else "0:a?"
     _check_folder(out)
     tmp = _temporary(out, ".mp4")
+    # hstack's shortest=1: by default it would repeat the shorter input's last picture up
+    # to the longer's end (a frozen actor), and -shortest alone only trims the sound.
     cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-i", str(video),
            "-i", str(path), "-filter_complex",
-           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];[a][b]hstack=inputs=2[v]",
+           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];"
+           "[a][b]hstack=inputs=2:shortest=1[v]",
            "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",
            "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-c:a", "aac",
            "-movflags", "+faststart", str(tmp)]
@@ -391,7 +395,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         ``phone``, ``start``, ``end``: captions, or labels on a curve plot.
     beside : Path, optional
         The actor's video, put left of the face (MP4 only, :func:`place_beside`); checked
-        before anything is rendered.
+        before anything is rendered. The result ends with the shorter of the two; a
+        warning is logged when that is the video.
 
     Raises
     ------
@@ -414,9 +419,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     if beside is not None and kind != ".mp4":
         raise ParameterError(f"--beside needs an .mp4 output, got {out.name!r}")
     if beside is not None:
-        from ingest.formats.media import video_length
-
-        video_length(beside)  # no decodable picture: its one line now, before any rendering
+        _check_beside(Path(beside), motion.duration, video_fps)
     arkit = deformer is None and is_arkit(motion.names)
     if deformer is None and not arkit:
         if kind in (".glb", ""):
@@ -447,6 +450,17 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
             return write_arkit_glb(animation, arkit_weights(motion, animation.fps), out)
         return write_glb(animation, out)
     return write_obj_frames(animation, out, force=force)
+
+
+def _check_beside(video: Path, duration: float, fps: float) -> None:
+    """Refuse a video with no decodable picture; warn if it is shorter than the motion."""
+    from ingest.formats.media import video_length
+
+    length = video_length(video)
+    # Within a frame of the motion is the same length (a container rounds its duration).
+    if length < duration - 1.0 / fps:
+        logger.warning("%s holds %.2f s of video, the motion %.2f s: the result ends at "
+                       "%.2f s", video.name, length, duration, length)
 
 
 def _video(frames: Iterable[np.ndarray], out: Path, fps: float, *, audio: Path | None,
