@@ -176,6 +176,53 @@ def test_mp4_beside_an_equal_video_has_no_warning(take, tmp_path, caplog):
     assert not [r for r in caplog.records if r.levelno == logging.WARNING]
 
 
+def _write_bad_audio(folder, what):
+    import soundfile
+
+    path = folder / f"{what.replace(' ', '_')}.wav"
+    if what == "non-finite":
+        x = np.zeros(16000, np.float32)
+        x[4000:4100] = np.nan
+        soundfile.write(path, x, 16000, subtype="FLOAT")
+    elif what == "corrupt":
+        path.write_bytes(b"RIFF\x24\x00\x00\x00WAVEfmt junk" + bytes(64))
+    else:  # a video without a sound track
+        path = _actor_video(folder / "silent.mp4", sound=False)
+    return path
+
+
+@pytest.mark.parametrize(("what", "says"), [("non-finite", "non-finite samples"),
+                                            ("corrupt", "corrupt"),
+                                            ("no sound", "no audio track")])
+def test_bad_audio_is_the_readers_one_line_before_rendering(take, tmp_path, capsys, what,
+                                                            says):
+    # Not --quiet: the progress bar must not even start; the error is the reader's line.
+    audio = _write_bad_audio(tmp_path, what)
+    out = tmp_path / "out"
+    out.mkdir()
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--audio", str(audio),
+                                   "-o", str(out / "r.mp4"), "--size", "240x270"]), 1)
+    assert says in line and audio.name in line and "ffmpeg" not in line, line
+    assert list(out.iterdir()) == []
+
+
+def test_progress_bar_is_closed_before_an_error(take, tmp_path, capsys, monkeypatch):
+    # ffmpeg failing mid-render (a full disk, say): the bar ends its line before the error.
+    from animegraph.face import render
+
+    fake = tmp_path / "ffmpeg"
+    fake.write_text("#!/bin/sh\necho 'No space left on device' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setattr(render, "ffmpeg_exe", lambda: str(fake))
+    assert main(["render", str(take / "take.c3d"), "-o", str(tmp_path / "r.mp4"),
+                 "--size", "240x270"]) == 1
+    err = capsys.readouterr().err
+    assert "rendering" in err  # the bar was shown
+    last = err.rstrip("\n").split("\n")[-1]
+    assert last == "animegraph: error: ffmpeg could not write r.mp4: No space left on device", err
+    assert not _no_leftovers(tmp_path)
+
+
 def test_mp4_with_audio(take, capsys):
     out = take / "face.mp4"
     assert main(["render", str(take / "take.c3d"), "--audio", str(take / "take.wav"),

@@ -215,6 +215,10 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
             proc.kill()
             proc.wait()
         tmp.unlink(missing_ok=True)
+        # Closing the frames now closes a progress bar wrapped round them; left to the
+        # garbage collector it would end its line after the error, on the error's line.
+        if hasattr(frames, "close"):
+            frames.close()
         raise
     return path
 
@@ -387,7 +391,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     deformer : Deformer, optional
         Mesh and marker map for point motion; None renders the channels as curves.
     audio : Path, optional
-        Speech muxed into an MP4.
+        Speech muxed into an MP4: a WAV or a video's sound track, read first by
+        :func:`ingest.formats.media.read_audio`, whose errors are the ones raised.
     fps : float, optional
         Frame rate of the video (default 30; 20 for a GIF) or of the glTF / OBJ frames
         (default the motion's).
@@ -404,7 +409,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         If ``out``'s extension is not one of :data:`FORMATS`, or ``beside`` is given for
         another output than an MP4.
     DataError
-        If ``beside`` cannot be read, or writing fails; ``out`` is then left as it was.
+        If ``audio`` or ``beside`` cannot be read, or writing fails; ``out`` is then left
+        as it was.
     """
     out = Path(out)
     kind = out.suffix.lower()
@@ -418,6 +424,12 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     video_fps = fps or (20.0 if kind == ".gif" else 30.0)
     if beside is not None and kind != ".mp4":
         raise ParameterError(f"--beside needs an .mp4 output, got {out.name!r}")
+    if audio is not None and kind == ".mp4":
+        from ingest.formats.media import read_audio
+
+        # Read by the reader synth uses: its one line (no audio track, non-finite or
+        # corrupt samples) now, not ffmpeg's internals halfway through the frames.
+        read_audio(audio)
     if beside is not None:
         _check_beside(Path(beside), motion.duration, video_fps)
     arkit = deformer is None and is_arkit(motion.names)
