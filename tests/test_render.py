@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import logging
+import re
 import subprocess
 
 import numpy as np
@@ -51,6 +53,14 @@ def _streams(path):
     return [line.strip() for line in out.stderr.splitlines() if "Stream #" in line]
 
 
+def _duration(path):
+    """Seconds, from the container."""
+    info = subprocess.run([ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
+                          text=True).stderr
+    hours, minutes, seconds = re.search(r"Duration: (\d+):(\d+):([\d.]+)", info).groups()
+    return 3600 * int(hours) + 60 * int(minutes) + float(seconds)
+
+
 def _decode(path, width, height):
     raw = subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-i", str(path), "-f",
                           "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True,
@@ -62,12 +72,29 @@ def _no_leftovers(folder):
     return [p.name for p in folder.iterdir() if p.name.startswith(".")]
 
 
+def _actor_video(path, seconds=1.0, *, sound=True, faststart=False, keep=1.0):
+    """A red 160 x 120 "video of the actor" at 25 fps (with a tone), its first ``keep`` of bytes.
+
+    Cut short, a plain MP4 loses its index (written last: nothing decodes); a faststart one
+    keeps it (the header still declares ``seconds``) and decodes up to the cut.
+    """
+    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-f", "lavfi", "-i",
+           f"color=c=red:s=160x120:r=25:d={seconds}"]
+    if sound:
+        cmd += ["-f", "lavfi", "-i", f"sine=frequency=300:sample_rate=16000:duration={seconds}",
+                "-c:a", "aac"]
+    if keep < 1:  # noise makes every frame about as big, so a cut falls mid-video
+        cmd += ["-vf", "noise=alls=30:allf=t"]
+    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    subprocess.run([*cmd, *(["-movflags", "+faststart"] if faststart else []), str(path)],
+                   check=True)
+    data = path.read_bytes()
+    path.write_bytes(data[:int(len(data) * keep)])
+    return path
+
+
 def test_mp4_beside_the_actor_video(take, capsys):
-    actor = take / "actor.mp4"  # a 1 s "video of the actor", 160 x 120, red, with a tone
-    subprocess.run([ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-f", "lavfi", "-i",
-                    "color=c=red:s=160x120:r=25:d=1", "-f", "lavfi", "-i",
-                    "sine=frequency=300:sample_rate=16000:duration=1", "-c:v", "libx264",
-                    "-c:a", "aac", "-pix_fmt", "yuv420p", str(actor)], check=True)
+    actor = _actor_video(take / "actor.mp4")
     out = take / "both.mp4"
     assert main(["render", str(take / "take.c3d"), "--audio", str(actor), "--beside",
                  str(actor), "-o", str(out), "--quiet", "--size", "240x270"]) == 0
@@ -81,6 +108,119 @@ def test_mp4_beside_the_actor_video(take, capsys):
     assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
                  str(take / "face.gif"), "--quiet"]) == 2
     assert "--beside needs an .mp4" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["index lost", "no video track"])
+def test_failed_beside_keeps_the_previous_output(take, tmp_path, capsys, what):
+    # An actor video with no picture to show is refused before anything is rendered, in
+    # one line naming it, and the output from an earlier run is left as it was.
+    bad = (_actor_video(tmp_path / "actor.mp4", keep=0.5) if what == "index lost"
+           else take / "take.wav")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "r.mp4").write_bytes(b"an earlier render")
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--audio",
+                                   str(take / "take.wav"), "--beside", str(bad), "-o",
+                                   str(out / "r.mp4"), "--size", "240x270"]), 1)
+    assert bad.name in line and ("no video track" in line) == (what == "no video track"), line
+    assert (out / "r.mp4").read_bytes() == b"an earlier render"
+    assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
+
+
+def test_beside_failing_after_the_render_keeps_the_previous_output(take, tmp_path, capsys,
+                                                                    monkeypatch):
+    # The face is rendered into a temporary file: -o is replaced only once the pair is made.
+    from animegraph.face import render
+    from db.errors import DataError
+
+    def fail(*args, **kwargs):
+        raise DataError("ffmpeg could not put actor.mp4 beside r.mp4: disk full")
+
+    monkeypatch.setattr(render, "place_beside", fail)
+    actor = _actor_video(tmp_path / "actor.mp4")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "r.mp4").write_bytes(b"an earlier render")
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--beside", str(actor),
+                                   "-o", str(out / "r.mp4"), "--size", "240x270",
+                                   "--quiet"]), 1)
+    assert "disk full" in line
+    assert (out / "r.mp4").read_bytes() == b"an earlier render"
+    assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
+
+
+@pytest.mark.parametrize(("seconds", "keep"), [(0.5, 1.0), (1.0, 0.5)],
+                         ids=["short", "cut in half"])
+def test_shorter_video_beside_ends_the_result_with_a_warning(take, tmp_path, caplog,
+                                                             seconds, keep):
+    # A video shorter than the motion (or declaring 1 s but cut short) ends the result
+    # where its pictures end, instead of freezing its last picture, and says so.
+    actor = _actor_video(tmp_path / "actor.mp4", seconds, sound=False, faststart=True,
+                         keep=keep)
+    out = tmp_path / "both.mp4"
+    with caplog.at_level(logging.WARNING, logger="animegraph.face.render"):
+        assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o", str(out),
+                     "--quiet", "--size", "240x270"]) == 0
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "actor.mp4" in warnings[0], warnings
+    assert "1.00 s" in warnings[0]  # the motion's length, and the video's:
+    shown = float(re.search(r"actor\.mp4 \D*([\d.]+) s", warnings[0]).group(1))
+    assert shown < 0.8 and abs(_duration(out) - shown) < 0.1, (shown, _duration(out))
+
+
+def test_mp4_beside_an_equal_video_has_no_warning(take, tmp_path, caplog):
+    actor = _actor_video(tmp_path / "actor.mp4")
+    with caplog.at_level(logging.WARNING, logger="animegraph.face.render"):
+        assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
+                     str(tmp_path / "both.mp4"), "--quiet", "--size", "240x270"]) == 0
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]
+
+
+def _write_bad_audio(folder, what):
+    import soundfile
+
+    path = folder / f"{what.replace(' ', '_')}.wav"
+    if what == "non-finite":
+        x = np.zeros(16000, np.float32)
+        x[4000:4100] = np.nan
+        soundfile.write(path, x, 16000, subtype="FLOAT")
+    elif what == "corrupt":
+        path.write_bytes(b"RIFF\x24\x00\x00\x00WAVEfmt junk" + bytes(64))
+    else:  # a video without a sound track
+        path = _actor_video(folder / "silent.mp4", sound=False)
+    return path
+
+
+@pytest.mark.parametrize(("what", "says"), [("non-finite", "non-finite samples"),
+                                            ("corrupt", "corrupt"),
+                                            ("no sound", "no audio track")])
+def test_bad_audio_is_the_readers_one_line_before_rendering(take, tmp_path, capsys, what,
+                                                            says):
+    # Not --quiet: the progress bar must not even start; the error is the reader's line.
+    audio = _write_bad_audio(tmp_path, what)
+    out = tmp_path / "out"
+    out.mkdir()
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--audio", str(audio),
+                                   "-o", str(out / "r.mp4"), "--size", "240x270"]), 1)
+    assert says in line and audio.name in line and "ffmpeg" not in line, line
+    assert list(out.iterdir()) == []
+
+
+def test_progress_bar_is_closed_before_an_error(take, tmp_path, capsys, monkeypatch):
+    # ffmpeg failing mid-render (a full disk, say): the bar ends its line before the error.
+    from animegraph.face import render
+
+    fake = tmp_path / "ffmpeg"
+    fake.write_text("#!/bin/sh\necho 'No space left on device' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setattr(render, "ffmpeg_exe", lambda: str(fake))
+    assert main(["render", str(take / "take.c3d"), "-o", str(tmp_path / "r.mp4"),
+                 "--size", "240x270"]) == 1
+    err = capsys.readouterr().err
+    assert "rendering" in err  # the bar was shown
+    last = err.rstrip("\n").split("\n")[-1]
+    assert last == "animegraph: error: ffmpeg could not write r.mp4: No space left on device", err
+    assert not _no_leftovers(tmp_path)
 
 
 def test_mp4_with_audio(take, capsys):

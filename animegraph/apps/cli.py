@@ -520,7 +520,7 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
 def _cmd_render(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.face.render import deformer_for, place_beside, render_motion
+    from animegraph.face.render import deformer_for, render_motion
     from animegraph.motion.files import read_motion
     from ingest.formats.livelink import is_arkit
 
@@ -543,9 +543,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
                         fps=args.fps, phones=phones, size=size, force=args.force,
                         progress=lambda total: _progress(total, args.quiet, "frame",
-                                                              "rendering"))
-    if args.beside is not None:
-        place_beside(out, args.beside)
+                                                              "rendering"),
+                        beside=args.beside)
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
     if deformer is None and is_arkit(motion.names):

@@ -11,7 +11,9 @@ curve motion (no rig here) is drawn as curves over time with the phones and a mo
 cursor.
 
 Every output appears complete or not at all: files are written beside the target under
-a temporary name and renamed; OBJ frames go to a hidden folder renamed into place.
+a temporary name and renamed; OBJ frames go to a hidden folder renamed into place; a face
+put beside the actor's video is rendered into a hidden folder first, and only the pair
+replaces the target.
 """
 
 from __future__ import annotations
@@ -171,15 +173,14 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
     kind = path.suffix.lower()
     if kind not in (".mp4", ".gif"):
         raise ParameterError(f"video output must end in .mp4 or .gif, got {path.name!r}")
-    if not path.parent.is_dir():
-        raise DataError(f"cannot write {path}: folder {path.parent} does not exist")
+    _check_folder(path)
     frames = iter(frames)
     try:
         first = next(frames)
     except StopIteration:
         raise DataError("nothing to render: the motion has no frames") from None
     height, width = first.shape[:2]
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{kind}"
+    tmp = _temporary(path, kind)
     cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-f", "rawvideo",
            "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", f"{fps:.6g}", "-i", "-"]
     if kind == ".mp4":
@@ -214,28 +215,55 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
             proc.kill()
             proc.wait()
         tmp.unlink(missing_ok=True)
+        # Closing the frames now closes a progress bar wrapped round them; left to the
+        # garbage collector it would end its line after the error, on the error's line.
+        if hasattr(frames, "close"):
+            frames.close()
         raise
     return path
 
 
-def place_beside(path: Path, video: Path) -> Path:
+def _temporary(path: Path, suffix: str = "") -> Path:
+    """A hidden, unique name beside ``path``: in its folder, so renaming onto it is atomic."""
+    return path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{suffix}"
+
+
+def _check_folder(path: Path) -> None:
+    if not path.parent.is_dir():
+        raise DataError(f"cannot write {path}: folder {path.parent} does not exist")
+
+
+def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     """Put ``video`` (the actor) left of the rendered MP4 ``path``, at its height; atomic.
 
     The sound is the rendered file's if it has any, else the video's; the result ends
-    with the shorter of the two.
+    with the shorter of the two (where the last decodable picture of a video cut short
+    is, whatever its header says).
+
+    Parameters
+    ----------
+    path : Path
+        The rendered face (``.mp4``).
+    video : Path
+        The actor's video.
+    out : Path, optional
+        Where the pair goes (default: over ``path``); written as a hidden temporary file
+        beside it, then renamed.
 
     Raises
     ------
     ParameterError
-        If ``path`` is not an ``.mp4``.
+        If ``path`` or ``out`` is not an ``.mp4``.
     DataError
         If ``video`` is missing or ffmpeg cannot read or write either (its last line).
     """
     import imageio_ffmpeg
 
     path, video = Path(path), Path(video)
-    if path.suffix.lower() != ".mp4":
-        raise ParameterError(f"--beside needs an .mp4 output, got {path.name!r}")
+    out = path if out is None else Path(out)
+    for name in (path, out):
+        if name.suffix.lower() != ".mp4":
+            raise ParameterError(f"--beside needs an .mp4 output, got {name.name!r}")
     if not video.is_file():
         raise DataError(f"video not found: {video}")
     reader = imageio_ffmpeg.read_frames(str(path))
@@ -245,10 +273,14 @@ def place_beside(path: Path, video: Path) -> Path:
         reader.close()
     height = int(meta["size"][1])
     sound = "1:a" if meta.get("audio_codec") else "0:a?"
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp.mp4"
+    _check_folder(out)
+    tmp = _temporary(out, ".mp4")
+    # hstack's shortest=1: by default it would repeat the shorter input's last picture up
+    # to the longer's end (a frozen actor), and -shortest alone only trims the sound.
     cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-i", str(video),
            "-i", str(path), "-filter_complex",
-           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];[a][b]hstack=inputs=2[v]",
+           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];"
+           "[a][b]hstack=inputs=2:shortest=1[v]",
            "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",
            "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-c:a", "aac",
            "-movflags", "+faststart", str(tmp)]
@@ -256,10 +288,10 @@ def place_beside(path: Path, video: Path) -> Path:
     if result.returncode != 0 or not tmp.exists():
         tmp.unlink(missing_ok=True)
         lines = [x for x in result.stderr.decode(errors="replace").splitlines() if x.strip()]
-        raise DataError(f"ffmpeg could not put {video.name} beside {path.name}: "
+        raise DataError(f"ffmpeg could not put {video.name} beside {out.name}: "
                         f"{lines[-1] if lines else f'exit status {result.returncode}'}")
-    os.replace(tmp, path)
-    return path
+    os.replace(tmp, out)
+    return out
 
 
 def write_obj_frames(animation: FaceAnimation, folder: Path, *, force: bool = False) -> Path:
@@ -350,7 +382,8 @@ def curve_image(motion: Motion, phones: Sequence[dict], *, size=(960, 540),
 def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None,
                   audio: Path | None = None, fps: float | None = None,
                   phones: Sequence[dict] = (), size=(480, 540), force: bool = False,
-                  progress: Callable[[int], Callable] | None = None) -> Path:
+                  progress: Callable[[int], Callable] | None = None,
+                  beside: Path | None = None) -> Path:
     """Render ``motion`` to ``out`` by its extension (see :data:`FORMATS`).
 
     Parameters
@@ -358,12 +391,26 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     deformer : Deformer, optional
         Mesh and marker map for point motion; None renders the channels as curves.
     audio : Path, optional
-        Speech muxed into an MP4.
+        Speech muxed into an MP4: a WAV or a video's sound track, read first by
+        :func:`ingest.formats.media.read_audio`, whose errors are the ones raised.
     fps : float, optional
         Frame rate of the video (default 30; 20 for a GIF) or of the glTF / OBJ frames
         (default the motion's).
     phones : sequence of dict
         ``phone``, ``start``, ``end``: captions, or labels on a curve plot.
+    beside : Path, optional
+        The actor's video, put left of the face (MP4 only, :func:`place_beside`); checked
+        before anything is rendered. The result ends with the shorter of the two; a
+        warning is logged when that is the video.
+
+    Raises
+    ------
+    ParameterError
+        If ``out``'s extension is not one of :data:`FORMATS`, or ``beside`` is given for
+        another output than an MP4.
+    DataError
+        If ``audio`` or ``beside`` cannot be read, or writing fails; ``out`` is then left
+        as it was.
     """
     out = Path(out)
     kind = out.suffix.lower()
@@ -375,6 +422,16 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     if kind != "" and out.is_dir():
         raise DataError(f"{out} is a folder")
     video_fps = fps or (20.0 if kind == ".gif" else 30.0)
+    if beside is not None and kind != ".mp4":
+        raise ParameterError(f"--beside needs an .mp4 output, got {out.name!r}")
+    if audio is not None and kind == ".mp4":
+        from ingest.formats.media import read_audio
+
+        # Read by the reader synth uses: its one line (no audio track, non-finite or
+        # corrupt samples) now, not ffmpeg's internals halfway through the frames.
+        read_audio(audio)
+    if beside is not None:
+        _check_beside(Path(beside), motion.duration, video_fps)
     arkit = deformer is None and is_arkit(motion.names)
     if deformer is None and not arkit:
         if kind in (".glb", ""):
@@ -385,7 +442,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
             return out
         frames = curve_frames(motion, phones, fps=video_fps,
                               size=(960, 540) if kind == ".mp4" else (640, 360))
-        return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
+        return _video(frames, out, video_fps, audio=audio if kind == ".mp4" else None,
+                      beside=beside)
     if kind in (".mp4", ".gif", ".png"):
         animation = _animation(motion, deformer, video_fps)
         if kind == ".png":
@@ -394,7 +452,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         frames = face_frames(animation, size=gif_size, phones=phones)
         if progress is not None:
             frames = progress(animation.n_frames)(frames)
-        return encode(frames, out, video_fps, audio=audio if kind == ".mp4" else None)
+        return _video(frames, out, video_fps, audio=audio if kind == ".mp4" else None,
+                      beside=beside)
     animation = _animation(motion, deformer, fps)
     if kind == ".glb":
         from animegraph.face.gltf import write_arkit_glb, write_glb
@@ -403,6 +462,35 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
             return write_arkit_glb(animation, arkit_weights(motion, animation.fps), out)
         return write_glb(animation, out)
     return write_obj_frames(animation, out, force=force)
+
+
+def _check_beside(video: Path, duration: float, fps: float) -> None:
+    """Refuse a video with no decodable picture; warn if it is shorter than the motion."""
+    from ingest.formats.media import video_length
+
+    length = video_length(video)
+    # Within a frame of the motion is the same length (a container rounds its duration).
+    if length < duration - 1.0 / fps:
+        logger.warning("%s holds %.2f s of video, the motion %.2f s: the result ends at "
+                       "%.2f s", video.name, length, duration, length)
+
+
+def _video(frames: Iterable[np.ndarray], out: Path, fps: float, *, audio: Path | None,
+           beside: Path | None) -> Path:
+    """:func:`encode` to ``out``; with ``beside``, the face into a hidden folder beside
+    ``out`` and then the pair onto ``out`` (:func:`place_beside`), so a failure at either
+    step leaves ``out`` as it was."""
+    if beside is None:
+        return encode(frames, out, fps, audio=audio)
+    _check_folder(out)
+    staging = _temporary(out)
+    staging.mkdir()
+    try:
+        # The face keeps out's name inside the folder, so ffmpeg's errors name the output.
+        face = encode(frames, staging / out.name, fps, audio=audio)
+        return place_beside(face, beside, out=out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _animation(motion: Motion, deformer: Deformer | None, fps: float | None) -> FaceAnimation:

@@ -5,7 +5,8 @@ beside ``<take>.csv``); :func:`read_audio` reads it as mono float32, so an iPhon
 ingests as it comes off the phone. The ffmpeg binary is the one ``imageio-ffmpeg`` ships
 (a dependency, used for rendering too). The same reads the speech of a video clip
 (:mod:`ingest.readers.video`) and a video given to ``synth``. WAV files go through
-:func:`ingest.formats.wav.read_wav` as everywhere else.
+:func:`ingest.formats.wav.read_wav` as everywhere else. :func:`video_length` says how much
+of a video's picture ffmpeg can decode (``render --beside`` checks the actor's video with it).
 """
 
 from __future__ import annotations
@@ -57,14 +58,64 @@ def read_audio(path: str | os.PathLike[str],
            "-acodec", "pcm_f32le", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:
-        lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
-        # ffmpeg 7 follows "Stream map '' matches no streams." with more lines
-        if not proc.stdout and (not lines or any("matches no streams" in ln for ln in lines)):
-            raise DataError(f"{path}: no audio track")
-        raise DataError(f"cannot read the sound track of {path}: "
-                        f"{lines[-1] if lines else proc.returncode}")
+        raise _read_error(path, "audio", proc, nothing_read=not proc.stdout)
     audio = np.frombuffer(proc.stdout, dtype="<f4").astype(np.float32)
     return np.clip(audio, -1.0, 1.0), rate
+
+
+def video_length(path: str | os.PathLike[str]) -> float:
+    """Seconds of picture that ffmpeg decodes from a file's first video track.
+
+    Every frame is decoded (to no output), so a file cut short gives the length it
+    holds, not the one its header declares.
+
+    Parameters
+    ----------
+    path : path
+        A video (any container ffmpeg reads).
+
+    Returns
+    -------
+    float
+        From the first decoded frame to the end of the last one.
+
+    Raises
+    ------
+    DataError
+        One line naming the file if it is missing, has no video track, or ffmpeg decodes
+        no frame of it (ffmpeg's last line).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"video not found: {path}")
+    import imageio_ffmpeg
+
+    # -progress writes key=value lines (the last frame= and out_time_us= are the totals);
+    # ffmpeg's human-readable statistics line is not meant to be parsed.
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-nostats",
+           "-i", str(path), "-map", "0:v:0", "-f", "null", "-progress", "pipe:1", "-"]
+    proc = subprocess.run(cmd, capture_output=True, check=False)
+    totals = dict(line.partition("=")[::2]
+                  for line in proc.stdout.decode(errors="replace").splitlines())
+    frames = totals.get("frame", "").strip()
+    if proc.returncode != 0 or not frames.isdigit() or int(frames) == 0:
+        raise _read_error(path, "video", proc, nothing_read=True)
+    try:
+        return int(totals["out_time_us"]) / 1e6
+    except (KeyError, ValueError):
+        raise DataError(f"cannot read the video track of {path}: ffmpeg gave no "
+                        "duration") from None
+
+
+def _read_error(path: Path, track: str, proc: subprocess.CompletedProcess,
+                nothing_read: bool) -> DataError:
+    """The one line for a failed ffmpeg read of ``path``'s ``track`` (audio or video)."""
+    lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
+    # ffmpeg 7 follows "Stream map '' matches no streams." with more lines
+    if nothing_read and (not lines or any("matches no streams" in ln for ln in lines)):
+        return DataError(f"{path}: no {track} track")
+    return DataError(f"cannot read the {track} track of {path}: "
+                     f"{lines[-1] if lines else proc.returncode}")
 
 
 def _sample_rate(path: Path) -> int:
