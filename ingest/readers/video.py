@@ -344,12 +344,13 @@ def video_audio(path: Path, sample_rate: int = AUDIO_RATE, checksum: str | None 
 
 def check_tracking(tracking: Tracking, where: Path) -> None:
     """Reject a video whose face was seldom found, or that shows two faces, or whose frame
-    count does not fit its duration (a variable frame rate)."""
+    count does not fit its duration (a variable frame rate, or a file cut short)."""
     n = len(tracking.landmarks)
     expected = tracking.duration * tracking.fps
     if expected > 0 and abs(n - expected) > max(2.0, FRAME_COUNT_TOLERANCE * expected):
         raise DataError(f"{where}: {n} frames decoded but {tracking.duration:.2f} s at "
-                        f"{tracking.fps:g} fps make {expected:.0f} (variable frame rate?)")
+                        f"{tracking.fps:g} fps make {expected:.0f} (a variable frame rate, or "
+                        f"the file is cut short)")
     found = int((tracking.n_faces > 0).sum())
     if found < MIN_TRACKED_FRACTION * n:
         raise DataError(f"{where}: a face in only {found} of {n} frames "
