@@ -336,6 +336,7 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         report.clips.append(clip_report)
         if clip is not None:
             new.append(clip)
+    new = _drop_copies(new, known, report)
 
     if new:
         kept = []
@@ -411,6 +412,28 @@ def _run(found, known, fps, config, workers, progress, reference):
         return list(progress(len(jobs))(results) if progress else results)
     return map_in_processes(_work, jobs, workers=workers, chunksize=4,
                             progress=progress(len(jobs)) if progress else None)
+
+
+def _drop_copies(new: list[PreparedClip], known: dict[tuple[str, str], str],
+                 report: IngestReport) -> list[PreparedClip]:
+    """``new`` without the clips whose files are byte for byte another clip's, in the
+    database or earlier in ``new`` (a copied folder ingested again): each is rejected on
+    its report row. A recording in twice would be two of k-best's candidates, and its
+    animes two votes, for one take."""
+    replaced = {c.key for c in new}
+    owner = {checksum: key for key, checksum in known.items() if key not in replaced}
+    rows = {(r.source, r.clip_id): k for k, r in enumerate(report.clips)}
+    kept = []
+    for clip in new:
+        first = owner.setdefault(clip.checksum, clip.key) if clip.checksum else clip.key
+        if first == clip.key:
+            kept.append(clip)
+            continue
+        k = rows[(clip.source, clip.clip_id)]
+        report.clips[k] = ClipReport(clip.source, clip.clip_id, "rejected",
+                                     reason=f"the same recording as {'/'.join(first)} "
+                                            "(identical files)")
+    return kept
 
 
 def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:

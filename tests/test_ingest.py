@@ -111,6 +111,30 @@ def test_a_bad_clip_is_rejected_and_the_others_go_in(tiny_corpus, tmp_path):
     assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added")
 
 
+def test_a_copied_folder_is_not_ingested_twice(tiny_corpus, tmp_path):
+    """The same files under another folder name are another corpus's clip ids, but the
+    same recordings: rejected with the clip they copy, in one ingest or a later one."""
+    src = tmp_path / "a" / tiny_corpus.name
+    shutil.copytree(tiny_corpus, src)
+    for extra in sorted((src / "clips").iterdir()):
+        if not extra.name.startswith(("s0001_", "s0002_")):
+            extra.unlink()
+    copy = tmp_path / "copy"
+    shutil.copytree(src, copy)
+    report = ingest([src, copy], tmp_path / "db")
+    added = [c for c in report.clips if c.status == "added"]
+    copies = [c for c in report.clips if c.status == "rejected"]
+    assert added and sorted(c.clip_id for c in copies) == sorted(c.clip_id for c in added)
+    for row in copies:  # the first found of the two goes in
+        other = "copy" if str(src) in row.source else tiny_corpus.name
+        assert row.reason == f"the same recording as {other}/{row.clip_id} (identical files)"
+    assert Database.open(tmp_path / "db").manifest["n_clips"] == len(added)
+    for folder in (src, copy):  # later: whichever is in the database stands
+        with pytest.raises(ParameterError, match="every clip was rejected"):
+            ingest([folder.rename(tmp_path / "again")], tmp_path / "db")
+        (tmp_path / "again").rename(folder)
+
+
 def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_path, capsys,
                                                               caplog):
     """A clip whose transcript is another utterance's goes in with its phones recognised,
