@@ -91,3 +91,24 @@ def test_synth_says_what_is_wrong_and_still_animates(tiny_db, speech, tmp_path, 
     assert "warning: the audio is clipped" in captured.out  # --explain says it too
     assert "Traceback" not in captured.err
 
+
+@pytest.mark.parametrize("kind", ["silence", pytest.param("music", marks=needs_hama)])
+def test_no_speech_with_a_transcript_is_one_error(tiny_db, tmp_path, capsys, kind):
+    """A transcript cannot match audio that holds no speech: the error says so alone,
+    without a warning first that the transcript does not match."""
+    sr = 16000
+    t = np.arange(3 * sr) / sr
+    if kind == "silence":
+        audio = np.zeros(3 * sr, np.float32)
+    else:  # chords, as the prober's music.wav: no phone in them
+        chords = sum(np.sin(2 * np.pi * f * h * t) / h
+                     for f in (261.6, 329.6, 392.0) for h in (1, 2, 3))
+        audio = (0.2 * chords / np.abs(chords).max()).astype(np.float32)
+    wav = tmp_path / f"{kind}.wav"
+    write_wav(wav, audio, sr)
+    code = main(["synth", str(wav), "--db", str(tiny_db[0]), "--text",
+                 "bin blue at f two now", "--guide", "none", "-o", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    said = [ln for ln in err.splitlines() if "warning" in ln or "error" in ln]
+    assert code == 1 and len(said) == 1, err
+    assert ("the audio is silent" if kind == "silence" else "no speech found") in said[0]
