@@ -10,7 +10,7 @@ from animegraph.apps.cli import main
 from ingest.formats.wav import write_wav
 from ingest.speech import ctc
 from ingest.speech.espeak import speak
-from ingest.speech.quality import assess, warnings_for
+from ingest.speech.quality import NARROW_BAND_ENERGY, assess, warnings_for
 
 needs_hama = pytest.mark.skipif(not ctc.available(), reason="the hama phone engine is not "
                                 "installed (pip install hama)")
@@ -47,6 +47,26 @@ def test_telephone_band(speech):
     assert "nothing above 4 kHz" in _warned(back, sr)
 
 
+def test_short_speech_is_not_called_narrow_band(speech):
+    """A fifth of a second of speech is a syllable or less: a vowel has next to nothing
+    above 4 kHz, telephone band or not, so the band is not judged on it."""
+    audio, sr = speech
+    n = int(0.2 * sr)
+    pieces = [audio[i:i + n] for i in range(0, len(audio) - n, n // 4)]
+
+    def high_share(x):  # an oracle of the measure: share of the power above 4 kHz
+        power = np.abs(np.fft.rfft(x.astype(np.float64))) ** 2
+        return power[np.fft.rfftfreq(len(x), 1 / sr) > 4000].sum() / power.sum()
+
+    vowel = min((p for p in pieces if np.abs(p).max() > 0.1), key=high_share)
+    assert high_share(vowel) < NARROW_BAND_ENERGY  # what the whole-band test would call narrow
+    assert _warned(vowel, sr) == ""
+    assert assess(vowel, sr).high_band_energy is None
+    # a second of sound is judged: the telephone band brought back to 16 kHz still is
+    back = resample_poly(resample_poly(audio, 1, 2), 2, 1).astype(np.float32)
+    assert "nothing above 4 kHz" in _warned(back[: int(1.5 * sr)], sr)
+
+
 @needs_hama
 def test_speech_the_engine_knows_and_noise_it_does_not(speech, rng):
     audio, sr = speech
@@ -70,3 +90,25 @@ def test_synth_says_what_is_wrong_and_still_animates(tiny_db, speech, tmp_path, 
     assert "animegraph: warning: the audio is clipped" in captured.err
     assert "warning: the audio is clipped" in captured.out  # --explain says it too
     assert "Traceback" not in captured.err
+
+
+@pytest.mark.parametrize("kind", ["silence", pytest.param("music", marks=needs_hama)])
+def test_no_speech_with_a_transcript_is_one_error(tiny_db, tmp_path, capsys, kind):
+    """A transcript cannot match audio that holds no speech: the error says so alone,
+    without a warning first that the transcript does not match."""
+    sr = 16000
+    t = np.arange(3 * sr) / sr
+    if kind == "silence":
+        audio = np.zeros(3 * sr, np.float32)
+    else:  # chords, as the prober's music.wav: no phone in them
+        chords = sum(np.sin(2 * np.pi * f * h * t) / h
+                     for f in (261.6, 329.6, 392.0) for h in (1, 2, 3))
+        audio = (0.2 * chords / np.abs(chords).max()).astype(np.float32)
+    wav = tmp_path / f"{kind}.wav"
+    write_wav(wav, audio, sr)
+    code = main(["synth", str(wav), "--db", str(tiny_db[0]), "--text",
+                 "bin blue at f two now", "--guide", "none", "-o", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    said = [ln for ln in err.splitlines() if "warning" in ln or "error" in ln]
+    assert code == 1 and len(said) == 1, err
+    assert ("the audio is silent" if kind == "silence" else "no speech found") in said[0]

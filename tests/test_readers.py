@@ -310,6 +310,24 @@ def test_truncated_wav(clip_folder):
         load(_one([clip_folder.parent]))
 
 
+def test_wav_at_96k_is_ingested_at_48k(clip_folder):
+    """A studio recorder's 96 kHz: read at 48 kHz (the fastest the prosody features take),
+    so the clip goes in instead of being rejected for its rate."""
+    import soundfile
+    from scipy.signal import resample_poly
+
+    from ingest.prepare import prepare_clip
+
+    wav = clip_folder.with_suffix(".wav")
+    audio, rate = read_wav(wav)
+    soundfile.write(str(wav), resample_poly(audio, 96000, rate), 96000, subtype="PCM_24")
+    raw = load(_one([clip_folder.parent]))
+    assert raw.sample_rate == 48000
+    assert abs(len(raw.audio) / 48000 - len(audio) / rate) < 1e-3
+    clip = prepare_clip(raw, posteriorgrams=False)
+    assert len(clip.phones) > 0
+
+
 def test_audio_motion_length_mismatch(clip_folder):
     wav = clip_folder.with_suffix(".wav")
     audio, rate = read_wav(wav)

@@ -714,6 +714,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         Model,
         PostOptions,
         backoffs,
+        check_not_silent,
         synthesize,
         write_explain,
         write_motion,
@@ -768,8 +769,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "happy=0.7,neutral=0.3")
     check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
+    # Silence is the error, not a transcript that does not fit it: checked first.
+    check_not_silent(audio)
     t_check = time.perf_counter()
-    if args.text is not None and not _transcript_fits(args, audio, sample_rate):
+    mismatch = (_transcript_mismatch(args, audio, sample_rate) if args.text is not None
+                else None)
+    if mismatch is not None:
         args.text = None  # speech alone: its default path and guide, as said
         k_best, path = _synth_path(args)
         path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
@@ -810,6 +815,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      context=args.context_ranking, recognized_guide=_recognized_guide(args))
     from animegraph.synthesis.path import CONTEXT_PHRASE
 
+    if mismatch is not None:
+        # Said only now that phones were found: on music or noise the one line is
+        # synthesize's "no speech found", not a transcript nothing could have matched.
+        print(f"animegraph: warning: {mismatch}: synthesizing from the speech alone",
+              file=sys.stderr)
     if args.text is not None and out.segmentation == "recognized":
         # The check passed, the alignment failed: what ran is the speech-alone path.
         alone = argparse.Namespace(**{**vars(args), "text": None})
@@ -1035,9 +1045,9 @@ def _synth_plan(args: argparse.Namespace, path: str) -> tuple[str, str | None, f
     return path, guide_name, guide_blend, guide_rank
 
 
-def _transcript_fits(args: argparse.Namespace, audio, sample_rate: int) -> bool:
-    """Whether ``--text`` is what the speech says, as far as the phone engine checks
-    (:func:`ingest.speech.engines.check_transcript`); if not, says so on stderr."""
+def _transcript_mismatch(args: argparse.Namespace, audio, sample_rate: int) -> str | None:
+    """Why ``--text`` is not what the speech says, as far as the phone engine checks
+    (:func:`ingest.speech.engines.check_transcript`); None if it is."""
     import numpy as np
 
     from db.errors import DataError
@@ -1047,10 +1057,8 @@ def _transcript_fits(args: argparse.Namespace, audio, sample_rate: int) -> bool:
     try:
         check_transcript(mono, sample_rate, args.text, args.phones_engine)
     except DataError as exc:
-        print(f"animegraph: warning: {exc}: synthesizing from the speech alone",
-              file=sys.stderr)
-        return False
-    return True
+        return str(exc)
+    return None
 
 
 def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:

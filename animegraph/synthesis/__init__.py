@@ -26,6 +26,7 @@ from animegraph.synthesis.model import Model, to_world
 from animegraph.synthesis.output import read_database_motion, write_motion
 from animegraph.synthesis.pipeline import (
     Synthesis,
+    check_not_silent,
     map_emotion,
     query_phones,
     recentres,
@@ -37,7 +38,7 @@ from animegraph.synthesis.pipeline import (
 
 __all__ = [
     "HELPER_MODES", "Model", "Phone", "PostOptions", "Synthesis", "backoffs", "blend_k_best",
-    "explain_record", "map_emotion", "query_phones", "rank_weights", "read_database_motion",
-    "recentres", "render_k_best", "render_nodes", "score_candidates", "synthesize", "to_world",
-    "warp_positions", "write_explain", "write_motion",
+    "check_not_silent", "explain_record", "map_emotion", "query_phones", "rank_weights",
+    "read_database_motion", "recentres", "render_k_best", "render_nodes", "score_candidates",
+    "synthesize", "to_world", "warp_positions", "write_explain", "write_motion",
 ]

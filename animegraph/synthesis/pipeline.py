@@ -317,6 +317,14 @@ def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
     return mapped, notes
 
 
+def check_not_silent(audio: np.ndarray) -> None:
+    """Raise :class:`~db.errors.DataError` if ``audio`` (shape (n_samples,) or
+    (n_samples, n_channels), float in [-1, 1]) never rises above -80 dBFS: nothing to
+    animate, whatever a transcript says (``synth`` asks before checking one)."""
+    if not np.any(np.abs(audio) > 1e-4):
+        raise DataError("the audio is silent: there is no speech to animate")
+
+
 def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None,
                  labels: list[Segment] | None = None,
                  prosody_config: RastaPlpConfig | None = None,
@@ -334,8 +342,7 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
         raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
-    if not np.any(np.abs(audio) > 1e-4):
-        raise DataError("the audio is silent: there is no speech to animate")
+    check_not_silent(audio)
     segments, method = segment(audio, sample_rate, text=text, labels=labels, engine=engine,
                                on_fallback=on_fallback)
     if all(s.phone == "SIL" for s in segments):

@@ -11,20 +11,34 @@ of a video's picture ffmpeg can decode (``render --beside`` checks the actor's v
 
 from __future__ import annotations
 
+import io
+import logging
 import os
+import re
 import subprocess
 from pathlib import Path
 
 import numpy as np
+import soundfile
 
 from db.errors import DataError
-from ingest.formats.wav import read_wav
+from ingest.formats.wav import read_wav, speech_samples
+
+logger = logging.getLogger(__name__)
 
 #: Video containers (lower case, with the dot): their sound track is speech, and ingest
 #: tracks the face in their pictures (:mod:`ingest.readers.video`).
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mpg", ".mpeg", ".mkv", ".webm")
 #: Everything read through ffmpeg: videos and audio-only MPEG-4 (``.m4a``).
 MEDIA_SUFFIXES = VIDEO_SUFFIXES + (".m4a",)
+#: A line ffmpeg logs at level error or fatal (``-loglevel level+...`` tags each line).
+_ERROR_LEVEL = re.compile(r"\[(error|fatal|panic)\] ")
+#: The container's declared duration, as ffmpeg describes the input.
+_DURATION = re.compile(r"^\[info\]\s+Duration: (\d+):(\d\d):(\d\d(?:\.\d+)?)")
+#: Seconds a complete sound track may fall short of the declared duration: codec priming
+#: and padding (AAC's 1024 samples, Opus's 312) and the rounding of the duration to 10 ms
+#: move its end by tens of milliseconds; a file cut short loses far more.
+TRUNCATION_SLACK = 0.2
 
 
 def read_audio(path: str | os.PathLike[str],
@@ -37,13 +51,21 @@ def read_audio(path: str | os.PathLike[str],
         A WAV (read by :func:`ingest.formats.wav.read_wav`) or a file of
         :data:`MEDIA_SUFFIXES` (its first sound track, decoded by ffmpeg).
     sample_rate : int, optional
-        Decode a sound track at this rate (default: its own). WAV files keep theirs.
+        Decode a sound track at this rate (default: its own, limited as a WAV's). WAV
+        files keep theirs.
+
+    Returns
+    -------
+    audio : np.ndarray, float32, shape (n_samples,)
+        The channels mixed as a WAV's are, the rate limited as a WAV's is
+        (:func:`ingest.formats.wav.speech_samples`).
+    sample_rate : int
 
     Raises
     ------
     DataError
-        One line naming the file if it is missing, has no sound track, or ffmpeg cannot
-        read it.
+        One line naming the file if it is missing, has no sound track, ffmpeg cannot
+        read it, or it is truncated (:func:`_check_complete`).
     """
     path = Path(path)
     if path.suffix.lower() not in MEDIA_SUFFIXES:
@@ -52,15 +74,34 @@ def read_audio(path: str | os.PathLike[str],
         raise DataError(f"audio file not found: {path}")
     import imageio_ffmpeg
 
-    rate = int(sample_rate) if sample_rate else _sample_rate(path)
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-i", str(path),
-           "-vn", "-map", "0:a:0", "-ac", "1", "-ar", str(rate), "-f", "f32le",
-           "-acodec", "pcm_f32le", "-"]
+    # A WAV on the pipe rather than raw samples: its header gives the rate and the channel
+    # count, so the channels are mixed here, by the WAV's rule, not by ffmpeg's downmix
+    # (which sums stereo at -3 dB each and cancels opposite phases). The log, each line
+    # tagged with its level, gives the declared duration and any decoding error.
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-nostats",
+           "-loglevel", "level+info", "-i", str(path), "-vn", "-map", "0:a:0",
+           *(("-ar", str(int(sample_rate))) if sample_rate else ()),
+           "-f", "wav", "-acodec", "pcm_f32le", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
-    if proc.returncode != 0 or not proc.stdout:
-        raise _read_error(path, "audio", proc, nothing_read=not proc.stdout)
-    audio = np.frombuffer(proc.stdout, dtype="<f4").astype(np.float32)
-    return np.clip(audio, -1.0, 1.0), rate
+    log = proc.stderr.decode(errors="replace").splitlines()
+    errors = [_message(ln) for ln in log if _ERROR_LEVEL.search(ln)]
+    if proc.returncode != 0:
+        raise _read_error(path, "audio", errors, proc.returncode)
+    try:
+        audio, rate = soundfile.read(io.BytesIO(proc.stdout), dtype="float32", always_2d=True)
+    except (soundfile.SoundFileError, RuntimeError, ValueError) as exc:
+        raise DataError(f"cannot read the audio track of {path}: {exc}") from exc
+    if len(audio):  # no samples at all is speech_samples' error
+        _check_complete(path, len(audio) / rate, log, errors)
+    # Lossy codecs overshoot full scale near loud peaks (GRID's AAC by up to 40 %): not a
+    # fault of the file to warn about; clipped quietly (synth warns of flat tops).
+    np.clip(audio, -1.0, 1.0, out=audio)
+    return speech_samples(audio, int(rate), path)
+
+
+def _message(line: str) -> str:
+    """An ffmpeg log line without its ``[component @ 0x...]`` and ``[level]`` tags."""
+    return re.sub(r"^(\[[^\]]*\]\s*)+", "", line).strip()
 
 
 def video_length(path: str | os.PathLike[str]) -> float:
@@ -99,7 +140,8 @@ def video_length(path: str | os.PathLike[str]) -> float:
                   for line in proc.stdout.decode(errors="replace").splitlines())
     frames = totals.get("frame", "").strip()
     if proc.returncode != 0 or not frames.isdigit() or int(frames) == 0:
-        raise _read_error(path, "video", proc, nothing_read=True)
+        lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
+        raise _read_error(path, "video", lines, proc.returncode)
     try:
         return int(totals["out_time_us"]) / 1e6
     except (KeyError, ValueError):
@@ -107,27 +149,40 @@ def video_length(path: str | os.PathLike[str]) -> float:
                         "duration") from None
 
 
-def _read_error(path: Path, track: str, proc: subprocess.CompletedProcess,
-                nothing_read: bool) -> DataError:
-    """The one line for a failed ffmpeg read of ``path``'s ``track`` (audio or video)."""
-    lines = [ln for ln in proc.stderr.decode(errors="replace").splitlines() if ln.strip()]
-    # ffmpeg 7 follows "Stream map '' matches no streams." with more lines
-    if nothing_read and (not lines or any("matches no streams" in ln for ln in lines)):
+def _read_error(path: Path, track: str, errors: list[str], returncode: int) -> DataError:
+    """The one line for a failed ffmpeg read of ``path``'s ``track`` (``"audio"`` or
+    ``"video"``), from ffmpeg's error lines."""
+    # "Stream map '' matches no streams." need not be the last line (ffmpeg 7 adds more)
+    if any("matches no streams" in ln for ln in errors):
         return DataError(f"{path}: no {track} track")
     return DataError(f"cannot read the {track} track of {path}: "
-                     f"{lines[-1] if lines else proc.returncode}")
+                     f"{errors[-1] if errors else returncode}")
 
 
-def _sample_rate(path: Path) -> int:
-    """The first sound track's sample rate, from ffmpeg's description of the file."""
-    import re
+def _check_complete(path: Path, decoded_s: float, log: list[str], errors: list[str]) -> None:
+    """Refuse a sound track cut short: ffmpeg reads what is there, says so at level error
+    ("partial file", "File ended prematurely"), and exits 0.
 
-    import imageio_ffmpeg
+    The sound is truncated when ffmpeg reported an error and decoded more than
+    :data:`TRUNCATION_SLACK` s less than the container declares. Without an error the
+    shortfall is a sound track that ends before the pictures (``-shortest`` leaves a
+    second of them), which is no fault: it is only logged. A read error with no
+    shortfall, a damaged packet inside the file, is ffmpeg's to conceal.
 
-    proc = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-i",
-                           str(path)], capture_output=True, check=False)
-    info = proc.stderr.decode(errors="replace")
-    match = re.search(r"Stream #\S+.*?Audio: .*?(\d+) Hz", info)
-    if not match:
-        raise DataError(f"{path}: no audio track")
-    return int(match.group(1))
+    Raises
+    ------
+    DataError
+        One line naming the file, like a truncated WAV's.
+    """
+    match = next((m for m in map(_DURATION.match, log) if m), None)
+    if match is None:  # a stream with no declared duration ("N/A"): nothing to compare
+        return
+    hours, minutes, seconds = match.groups()
+    declared = 3600 * int(hours) + 60 * int(minutes) + float(seconds)
+    if decoded_s >= declared - TRUNCATION_SLACK:
+        return
+    if errors:
+        raise DataError(f"truncated audio file {path}: {decoded_s:.2f} s of sound decoded, "
+                        f"the file declares {declared:.2f} s ({errors[0]})")
+    logger.info("%s: the sound track ends at %.2f s, %.2f s before the file's declared "
+                "duration", path, decoded_s, declared - decoded_s)

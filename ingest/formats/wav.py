@@ -1,13 +1,16 @@
 """WAV audio, through ``soundfile`` (libsndfile).
 
 Audio crosses this boundary as float32 samples in [-1, 1]: shape ``(n_samples,)``
-for mono, ``(n_samples, n_channels)`` otherwise. Any sample rate and any PCM or
-float subtype libsndfile reads is accepted; files are written as 16-bit PCM.
+for mono, ``(n_samples, n_channels)`` otherwise. Any PCM or float subtype libsndfile
+reads is accepted; files are written as 16-bit PCM. Speech is read at a rate in
+:data:`SPEECH_RATE_RANGE`: faster files are resampled down to its top, slower ones refused
+(:func:`speech_samples`, shared with the sound tracks of :mod:`ingest.formats.media`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
 from pathlib import Path
@@ -24,6 +27,15 @@ logger = logging.getLogger(__name__)
 _SHORT_DATA = re.compile(r"^data\s*:\s*(\d+)\s*\(should be (\d+)\)", re.MULTILINE)
 #: Declared sizes streaming writers use when the length is unknown (not truncation).
 _SIZE_PLACEHOLDERS = (0, 0xFFFFFFFF, 0x7FFFFFFF)
+#: Sample rates speech is read at (Hz): those the prosody features are tested at
+#: (:mod:`ingest.speech.features`). Above 48 kHz there is nothing for speech (its
+#: spectrum ends far below 24 kHz), so faster recordings are resampled down to 48 kHz;
+#: below 8 kHz even the telephone band (to 3.4 kHz) is cut, so slower ones are refused.
+SPEECH_RATE_RANGE: tuple[int, int] = (8000, 48000)
+#: Share of the channels' mean energy below which their average has cancelled them:
+#: channels carrying the same speech keep all of it, unrelated ones 1 / n_channels
+#: (half for stereo), an opposite-phase pair (right = -left) almost none.
+CANCELLED_MIX = 0.1
 
 
 def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.ndarray, int]:
@@ -41,13 +53,13 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
     audio : np.ndarray, float32
         Shape (n_samples,) if ``mono``, else (n_samples, n_channels).
     sample_rate : int
-        Samples per second.
+        Samples per second, in :data:`SPEECH_RATE_RANGE` (see :func:`speech_samples`).
 
     Raises
     ------
     DataError
-        If the file is missing, empty (no samples), truncated, corrupt, or holds
-        non-finite samples.
+        If the file is missing, empty (no samples), truncated, corrupt, holds
+        non-finite samples, or is sampled below 8 kHz.
     """
     path = Path(path)
     if not path.is_file():
@@ -66,18 +78,101 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
                 f"truncated audio file {path}: data chunk declares {declared} bytes, "
                 f"holds {actual}"
             )
+    audio, sample_rate = speech_samples(audio, int(sample_rate), path, mono=mono)
+    logger.debug("read %s: %s at %d Hz (%s)", path, audio.shape, sample_rate, info.subtype)
+    return audio, sample_rate
+
+
+def speech_samples(audio: np.ndarray, sample_rate: int, where: str | os.PathLike[str], *,
+                   mono: bool = True) -> tuple[np.ndarray, int]:
+    """Decoded speech made ready for the speech code: checked, clipped, resampled, mixed.
+
+    The one place these rules live, for WAV files (:func:`read_wav`) and the sound tracks
+    of videos (:func:`ingest.formats.media.read_audio`) alike.
+
+    Parameters
+    ----------
+    audio : np.ndarray, float32, shape (n_samples, n_channels)
+        Samples as decoded, nominally in [-1, 1].
+    sample_rate : int
+        Their rate in Hz.
+    where : str or os.PathLike
+        The file they came from, named in errors and warnings.
+    mono : bool, optional
+        Mix the channels into one (default; :func:`to_mono`).
+
+    Returns
+    -------
+    audio : np.ndarray, float32
+        Shape (n_out,) if ``mono``, else (n_out, n_channels); ``n_out`` is
+        ``n_samples`` unless resampled. Samples outside [-1, 1] are clipped (with a
+        warning).
+    sample_rate : int
+        ``sample_rate``, or the top of :data:`SPEECH_RATE_RANGE` if it was faster.
+
+    Raises
+    ------
+    DataError
+        If there are no samples, a sample is not finite, or ``sample_rate`` is below
+        :data:`SPEECH_RATE_RANGE`.
+    """
     if audio.shape[0] == 0:
-        raise DataError(f"audio file has no samples: {path}")
+        raise DataError(f"audio file has no samples: {where}")
     if not np.isfinite(audio).all():
-        raise DataError(f"audio file has non-finite samples: {path}")
+        raise DataError(f"audio file has non-finite samples: {where}")
+    low, high = SPEECH_RATE_RANGE
+    if sample_rate < low:
+        raise DataError(f"{where}: sampled at {sample_rate} Hz; speech needs at least "
+                        f"{low} Hz")
     peak = float(np.abs(audio).max())
     if peak > 1.0:
-        logger.warning("%s: samples up to %.3f outside [-1, 1]; clipping", path, peak)
-        np.clip(audio, -1.0, 1.0, out=audio)
+        logger.warning("%s: samples up to %.3f outside [-1, 1]; clipping", where, peak)
+        audio = np.clip(audio, -1.0, 1.0)
+    if sample_rate > high:
+        g = math.gcd(high, sample_rate)
+        from scipy.signal import resample_poly  # deferred: a second of a one-shot synth
+
+        logger.info("%s: resampling from %d Hz to %d Hz", where, sample_rate, high)
+        audio = resample_poly(audio, high // g, sample_rate // g, axis=0)
+        # the anti-aliasing filter can ring past full scale next to a loud transient
+        audio = np.clip(audio, -1.0, 1.0)
+        sample_rate = high
     if mono:
-        audio = audio.mean(axis=1, dtype=np.float32) if audio.shape[1] > 1 else audio[:, 0]
-    logger.debug("read %s: %s at %d Hz (%s)", path, audio.shape, sample_rate, info.subtype)
+        audio = to_mono(audio, where)
     return np.ascontiguousarray(audio, dtype=np.float32), int(sample_rate)
+
+
+def to_mono(audio: np.ndarray, where: str | os.PathLike[str]) -> np.ndarray:
+    """The channels of ``audio`` mixed into one: their mean, unless that cancels them.
+
+    Channels in opposite phase (right = -left, a miswired microphone or a swapped
+    polarity) average to silence, which would be taken for "no speech". When the mean
+    keeps less than :data:`CANCELLED_MIX` of the channels' mean energy, the loudest
+    channel alone is used instead, and a warning says so.
+
+    Parameters
+    ----------
+    audio : np.ndarray, shape (n_samples, n_channels)
+    where : str or os.PathLike
+        The file they came from, named in the warning.
+
+    Returns
+    -------
+    np.ndarray, float32, shape (n_samples,)
+    """
+    if audio.shape[1] == 1:
+        return audio[:, 0]
+    mix = audio.mean(axis=1, dtype=np.float32)
+    energy = np.einsum("ij,ij->j", audio, audio, dtype=np.float64)  # per channel
+    mixed = float(np.einsum("i,i->", mix, mix, dtype=np.float64))
+    kept = mixed / float(energy.mean()) if energy.any() else 1.0
+    if kept >= CANCELLED_MIX:
+        return mix
+    loudest = int(np.argmax(energy))
+    logger.warning("%s: its %d channels cancel when averaged (opposite phase?): the mix "
+                   "keeps %.1f %% of their energy; using channel %d alone", where,
+                   audio.shape[1], 100 * kept, loudest + 1)
+    return audio[:, loudest]
 
 
 def write_wav(path: str | os.PathLike[str], audio: np.ndarray, sample_rate: int) -> None:

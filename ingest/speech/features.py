@@ -71,6 +71,7 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.filters import lfilter
+from ingest.formats.wav import SPEECH_RATE_RANGE
 
 logger = logging.getLogger(__name__)
 
@@ -94,7 +95,8 @@ RASTA_NUMERATOR.setflags(write=False)
 RASTA_DENOMINATOR: np.ndarray = np.array([1.0, -0.94])
 RASTA_DENOMINATOR.setflags(write=False)
 
-SAMPLE_RATE_RANGE: tuple[int, int] = (8000, 48000)  # Hz, the rates the features are tested at
+#: Hz, the rates the features are tested at; speech is read at these (ingest.formats.wav).
+SAMPLE_RATE_RANGE: tuple[int, int] = SPEECH_RATE_RANGE
 _INT16_SCALE = 32768.0  # powspec.m: "values coming out of rasta treat samples as integers"
 _LOUDNESS_EXPONENT = 0.33  # postaud.m: cube-root intensity-loudness compression (not 1/3)
 _N_MELS = 40  # mel bands of mfcc(): filled at 8 kHz with a 256-point FFT, standard for ASR
