@@ -102,8 +102,11 @@ def test_mp4_beside_the_actor_video(take, capsys):
     streams = _streams(out)
     assert any("Video: h264" in s and "600x270" in s for s in streams), streams
     assert any("Audio: aac" in s for s in streams)
-    frame = _decode(out, 600, 270)[5].astype(int)
+    frames = _decode(out, 600, 270)
+    frame = frames[5].astype(int)
     assert frame[100:170, 20:340, 0].mean() > 180 > frame[100:170, 20:340, 1].mean() + 100
+    # one frame rate, the face's 30 fps: the 25 fps actor is not interleaved with it
+    assert abs(len(frames) - 30 * _duration(out)) <= 1.5, (len(frames), _duration(out))
     assert not _no_leftovers(take)
     assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
                  str(take / "face.gif"), "--quiet"]) == 2

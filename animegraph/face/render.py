@@ -276,11 +276,13 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     _check_folder(out)
     tmp = _temporary(out, ".mp4")
     # hstack's shortest=1: by default it would repeat the shorter input's last picture up
-    # to the longer's end (a frozen actor), and -shortest alone only trims the sound.
+    # to the longer's end (a frozen actor), and -shortest alone only trims the sound. The
+    # actor is brought to the face's frame rate: hstack emits a frame whenever either
+    # input has one, so 25 fps beside 30 would make a variable rate of about 52.
     cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-i", str(video),
            "-i", str(path), "-filter_complex",
-           f"[0:v]scale=-2:{height},setsar=1[a];[1:v]setsar=1[b];"
-           "[a][b]hstack=inputs=2:shortest=1[v]",
+           f"[0:v]scale=-2:{height},setsar=1,fps={float(meta['fps']):.6g}[a];"
+           "[1:v]setsar=1[b];[a][b]hstack=inputs=2:shortest=1[v]",
            "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",
            "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-c:a", "aac",
            "-movflags", "+faststart", str(tmp)]
