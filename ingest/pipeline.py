@@ -57,6 +57,7 @@ from ingest.motion import fill_gaps, head_points
 from ingest.plausible import Limits, check_clip
 from ingest.prepare import PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
+from ingest.speech.ctc import kept_on_disk
 from ingest.tables import build_tables, prepared_from_database
 from ingest.workers import map_in_processes
 
@@ -178,7 +179,13 @@ class IngestReport:
 
 
 def _work(args):
-    """Worker: read one clip and prepare it unless the database already has it."""
+    """Worker: read one clip and prepare it unless the database already has it (the phone
+    model's outputs kept in the cache, as tracking is: :func:`ingest.speech.ctc.kept_on_disk`)."""
+    with kept_on_disk():
+        return _prepare_source(args)
+
+
+def _prepare_source(args):
     source, known, fps, reference, engine, limits, posteriorgrams = args
     try:
         # Every reader's checksum is that of the clip's files in role order: an unchanged

@@ -69,6 +69,41 @@ def test_posteriors(spoken):
     assert np.sum(np.argmax(post, axis=1) != PHONES.index(SILENCE)) >= 10
 
 
+def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch):
+    """Within kept_on_disk the posteriors are written to the cache and read back, with
+    identical results and no model run; a damaged file is ignored and replaced; outside
+    it nothing is written."""
+    monkeypatch.setenv("ANIMEGRAPH_CACHE", str(tmp_path))
+    u = spoken[0]
+    ctc.forget()
+    fresh = ctc.recognize(u.audio, u.sample_rate), ctc.posteriors(u.audio, u.sample_rate)
+    assert not (tmp_path / "phones").exists()  # synthesis keeps nothing
+    ctc.forget()
+    with ctc.kept_on_disk():
+        ctc.posteriors(u.audio, u.sample_rate)
+    (kept,) = (tmp_path / "phones").iterdir()
+    ctc.forget()
+
+    def no_model(samples):
+        raise AssertionError("the model ran")
+
+    with monkeypatch.context() as m, ctc.kept_on_disk():
+        m.setattr(ctc, "_log_probs", no_model)
+        again = ctc.recognize(u.audio, u.sample_rate), ctc.posteriors(u.audio, u.sample_rate)
+    assert again[0] == fresh[0]
+    np.testing.assert_array_equal(again[1], fresh[1])
+    for damage in (b"not numpy", None):
+        if damage is None:  # a well-formed file of the wrong shape
+            np.save(kept, np.ones((3, 2)), allow_pickle=False)
+        else:
+            kept.write_bytes(damage)
+        ctc.forget()
+        with ctc.kept_on_disk():
+            np.testing.assert_array_equal(ctc.posteriors(u.audio, u.sample_rate), fresh[1])
+        assert np.load(kept, allow_pickle=False).shape == (len(fresh[1]), len(PHONES))
+    ctc.forget()
+
+
 def test_threads_each_take_a_session_and_get_what_one_thread_gets(spoken):
     """Calls on several threads run on sessions of their own (hama's engine is
     single-threaded), never more than the model allows, with the serial results."""

@@ -49,6 +49,7 @@ range.
 
 from __future__ import annotations
 
+import contextvars
 import hashlib
 import logging
 import math
@@ -60,6 +61,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -324,6 +326,63 @@ def forget() -> None:
         _RECENT.clear()
 
 
+#: Set (:func:`kept_on_disk`) while ingest prepares clips: the model's outputs are then
+#: also kept in the user's cache, as a video's tracking is, so that a re-ingest does not
+#: run the model again (GRID's 800 clips: about 200 CPU-s).
+_ON_DISK: contextvars.ContextVar[bool] = contextvars.ContextVar("hama_on_disk", default=False)
+
+
+@contextmanager
+def kept_on_disk() -> Iterator[None]:
+    """Within this block, keep the model's outputs in ``<cache>/phones/`` by a digest of
+    their 16 kHz input (and reuse them): ingest's clip preparation, not one-off synthesis."""
+    token = _ON_DISK.set(True)
+    try:
+        yield
+    finally:
+        _ON_DISK.reset(token)
+
+
+def _disk_path(key: bytes) -> Path:
+    from importlib.metadata import version
+
+    from ingest.cache import cache_dir
+
+    return cache_dir() / "phones" / f"{key.hex()}-hama{version('hama')}.npy"
+
+
+def _from_disk(path: Path, n_samples: int) -> np.ndarray | None:
+    """Posteriors kept by :func:`_to_disk`, if they are what the model would give for
+    ``n_samples`` of audio (a damaged or foreign file is ignored and replaced)."""
+    try:
+        probs = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        logger.warning("%s: unreadable (%s); running the phone model again", path, exc)
+        return None
+    most = n_samples // (SAMPLE_RATE // FRAME_RATE) + 2
+    if (probs.dtype != np.float64 or probs.ndim != 2 or probs.shape[1] != len(PHONES)
+            or not 0 < len(probs) <= most or not np.isfinite(probs).all()
+            or np.any(probs < 0) or np.abs(probs.sum(axis=1) - 1).max() > 1e-3):
+        logger.warning("%s: not this audio's phone posteriors; running the model again", path)
+        return None
+    return probs
+
+
+def _to_disk(path: Path, probs: np.ndarray) -> None:
+    import io
+
+    from db.atomic import atomic_write
+
+    buffer = io.BytesIO()
+    np.save(buffer, probs, allow_pickle=False)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path) as handle:
+            handle.write(buffer.getvalue())
+    except OSError as exc:  # a cache that cannot be written costs time, not the result
+        logger.warning("%s: cannot keep the phone posteriors (%s)", path, exc)
+
+
 def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
     key = hashlib.blake2b(np.ascontiguousarray(samples16).tobytes(), digest_size=16).digest()
@@ -331,9 +390,14 @@ def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if key in _RECENT:
             _RECENT.move_to_end(key)
             return _RECENT[key]
-    log_probs = _log_probs(samples16)
-    probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
-    probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+    path = _disk_path(key) if _ON_DISK.get() else None
+    probs = _from_disk(path, len(samples16)) if path is not None and path.is_file() else None
+    if probs is None:
+        log_probs = _log_probs(samples16)
+        probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
+        probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+        if path is not None:
+            _to_disk(path, probs)  # float64: what is read back gives the same results
     out = probs.astype(np.float32), np.log(np.maximum(probs, 1e-30))
     for a in out:
         a.flags.writeable = False
