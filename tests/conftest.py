@@ -44,12 +44,16 @@ def tiny_db(tiny_corpus, tmp_path_factory):
     return path, report
 
 
-@pytest.fixture(autouse=True)
-def _isolated_cache(tmp_path_factory, monkeypatch):
-    """Keep every test's cache (the demo's default corpus) out of the user's home."""
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_cache(tmp_path_factory):
+    """Keep every test's cache (the demo's default corpus, the phone posteriors ingest
+    keeps) out of the user's home: session-wide, so that session fixtures such as
+    ``tiny_db``, set up before any test's own fixtures, use it too."""
     from animegraph.apps.cache import CACHE_ENV
 
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "cache"))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "cache"))
+        yield
 
 
 def require_shared(*parts: str) -> Path:
