@@ -1047,15 +1047,13 @@ def _synth_plan(args: argparse.Namespace, path: str) -> tuple[str, str | None, f
 
 def _transcript_mismatch(args: argparse.Namespace, audio, sample_rate: int) -> str | None:
     """Why ``--text`` is not what the speech says, as far as the phone engine checks
-    (:func:`ingest.speech.engines.check_transcript`); None if it is."""
-    import numpy as np
-
+    (:func:`ingest.speech.engines.check_transcript`); None if it is. ``audio`` is mono,
+    as :func:`ingest.formats.media.read_audio` gives it."""
     from db.errors import DataError
     from ingest.speech.engines import check_transcript
 
-    mono = audio if np.ndim(audio) == 1 else np.mean(audio, axis=1)
     try:
-        check_transcript(mono, sample_rate, args.text, args.phones_engine)
+        check_transcript(audio, sample_rate, args.text, args.phones_engine)
     except DataError as exc:
         return str(exc)
     return None

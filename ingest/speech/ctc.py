@@ -50,6 +50,7 @@ range.
 from __future__ import annotations
 
 import contextvars
+import functools
 import hashlib
 import logging
 import math
@@ -344,11 +345,16 @@ def kept_on_disk() -> Iterator[None]:
 
 
 def _disk_path(key: bytes) -> Path:
-    from importlib.metadata import version
-
     from ingest.cache import cache_dir
 
-    return cache_dir() / "phones" / f"{key.hex()}-hama{version('hama')}.npy"
+    return cache_dir() / "phones" / f"{key.hex()}-hama{_hama_version()}.npy"
+
+
+@functools.cache  # read once a process, not once a clip
+def _hama_version() -> str:
+    from importlib.metadata import version
+
+    return version("hama")
 
 
 def _from_disk(path: Path, n_samples: int) -> np.ndarray | None:
