@@ -92,10 +92,10 @@ def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch):
         again = ctc.recognize(u.audio, u.sample_rate), ctc.posteriors(u.audio, u.sample_rate)
     assert again[0] == fresh[0]
     np.testing.assert_array_equal(again[1], fresh[1])
-    for damage in (b"not numpy", None):
+    for damage in (b"not numpy", None, b"x" * (len(fresh[1]) * len(PHONES) * 8 + 8192)):
         if damage is None:  # a well-formed file of the wrong shape
             np.save(kept, np.ones((3, 2)), allow_pickle=False)
-        else:
+        else:  # garbage, or more bytes than this audio's posteriors can take
             kept.write_bytes(damage)
         ctc.forget()
         with ctc.kept_on_disk():

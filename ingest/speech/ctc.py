@@ -360,12 +360,15 @@ def _hama_version() -> str:
 def _from_disk(path: Path, n_samples: int) -> np.ndarray | None:
     """Posteriors kept by :func:`_to_disk`, if they are what the model would give for
     ``n_samples`` of audio (a damaged or foreign file is ignored and replaced)."""
+    most = n_samples // (SAMPLE_RATE // FRAME_RATE) + 2
     try:
+        # never more than this audio's posteriors (and npy's header) is read into memory
+        if path.stat().st_size > most * len(PHONES) * 8 + 4096:
+            raise ValueError(f"{path.stat().st_size} bytes, more than this audio's")
         probs = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as exc:
         logger.warning("%s: unreadable (%s); running the phone model again", path, exc)
         return None
-    most = n_samples // (SAMPLE_RATE // FRAME_RATE) + 2
     if (probs.dtype != np.float64 or probs.ndim != 2 or probs.shape[1] != len(PHONES)
             or not 0 < len(probs) <= most or not np.isfinite(probs).all()
             or np.any(probs < 0) or np.abs(probs.sum(axis=1) - 1).max() > 1e-3):
