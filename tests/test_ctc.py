@@ -69,7 +69,7 @@ def test_posteriors(spoken):
     assert np.sum(np.argmax(post, axis=1) != PHONES.index(SILENCE)) >= 10
 
 
-def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch):
+def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch, caplog):
     """Within kept_on_disk the posteriors are written to the cache and read back, with
     identical results and no model run; a damaged file is ignored and replaced; outside
     it nothing is written."""
@@ -98,9 +98,12 @@ def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch):
         else:  # garbage, or more bytes than this audio's posteriors can take
             kept.write_bytes(damage)
         ctc.forget()
-        with ctc.kept_on_disk():
+        caplog.clear()
+        with ctc.kept_on_disk(), caplog.at_level(logging.WARNING, logger="ingest.speech.ctc"):
             np.testing.assert_array_equal(ctc.posteriors(u.audio, u.sample_rate), fresh[1])
         assert np.load(kept, allow_pickle=False).shape == (len(fresh[1]), len(PHONES))
+        if damage is not None and len(damage) > 100:  # refused unread, by its size
+            assert "bytes, more than this audio's" in caplog.text
     ctc.forget()
 
 
