@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from db.arrow import numbers, repeat_string
@@ -142,6 +143,7 @@ def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
     for name in PARTITIONED:
         if "emotion" not in tables[name].column_names:
             raise ValueError(f"table {name} needs an emotion column to be partitioned by")
+        _check_partition_names(tables[name].column("emotion"))
     previous = current_version(root) if is_database(root) else None
     if based_on is not ANY_VERSION and previous != based_on:
         raise DataError(f"database {root} changed while this write was prepared (it is now "
@@ -171,6 +173,19 @@ def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
         handle.write(name.encode())
     _prune(root, keep={name, previous} - {None})
     return root / name
+
+
+def _check_partition_names(emotions: pa.ChunkedArray) -> None:
+    """DataError if two emotion labels differ only in case: they name partition folders,
+    which a case-insensitive file system (macOS, Windows) would make one, the second
+    label's part files overwriting the first's."""
+    seen: dict[str, str] = {}
+    for name in pc.unique(emotions).to_pylist():
+        key = str(name).casefold()
+        if key in seen:
+            raise DataError(f"emotion labels {seen[key]!r} and {name!r} differ only in case: "
+                            "a database keeps one of them (ingest lowercases emotion labels)")
+        seen[key] = str(name)
 
 
 def rows_per_group(table: pa.Table) -> int:

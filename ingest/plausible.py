@@ -12,7 +12,8 @@ to the whole database). So each clip is checked on its own, as it is read:
   nothing starting ``__``; the emotion, which names a partition folder of the store,
   also not a value the store reads back as missing (:data:`RESERVED_EMOTIONS`:
   ``__HIVE_DEFAULT_PARTITION__``, ``NULL`` ...) and only letters, digits, ``_``, ``-``,
-  ``.``, ``+`` and spaces;
+  ``.``, ``+`` and spaces, and lowercased (``Happy`` and ``happy`` are one emotion: two
+  folders differing only in case are one on macOS and Windows);
   the transcript at most :data:`MAX_TEXT_CHARS`, no NUL;
 - **phones**: at most :data:`MAX_SHORT_PHONE_SHARE` of them shorter than one analysis
   frame (:data:`MIN_PHONE_S`, the 10 ms hop of the prosody features, §4.1), none
@@ -331,11 +332,16 @@ def _check_moves(motion: np.ndarray, points, clip: RawClip) -> None:
 def check_clip(clip: RawClip, limits: Limits | None = None) -> tuple[RawClip, str]:
     """Every check of this module on one clip: (the clip, a note for the report).
 
+    The clip comes back with its emotion lowercased and implausible samples made gaps
+    and filled (the note says how many).
+
     Raises
     ------
     DataError
         The clip is rejected; the message says why.
     """
     check_clip_labels(clip)
+    if clip.emotion is not None and clip.emotion != clip.emotion.lower():
+        clip = replace(clip, emotion=clip.emotion.lower())
     check_phones(clip)
     return check_motion(clip, limits or Limits())

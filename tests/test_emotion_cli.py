@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from animegraph.apps.cli import main
-from animegraph.emotion.control import parse_emotion
+from animegraph.emotion.control import check_names, parse_emotion
 from animegraph.emotion.evaluate import EmotionData, cross_validate
 from animegraph.synthesis import Model, read_database_motion, synthesize
 from db.errors import DataError, ParameterError
@@ -61,6 +61,30 @@ def test_parse_emotion():
     for bad in ("", "happy=x", "happy=-1,sad=1", "happy=0", "happy,sad", "auto=1", "1x"):
         with pytest.raises(ParameterError):
             parse_emotion(bad)
+
+
+def test_emotion_names_match_whatever_their_case():
+    """Requests match the database's spelling (one written before ingest lowercased
+    labels may hold ``Happy``); a mix adds up names that differ only in case."""
+    assert check_names("HAPPY", None, ["happy", "sad"]) == "happy"
+    assert check_names("happy", None, ["Happy", "sad"]) == "Happy"
+    assert check_names({"Sad": 0.5, "sad": 0.25, "happy": 0.25}, None, ["happy", "sad"]) \
+        == {"sad": 0.75, "happy": 0.25}
+    assert check_names("auto", None, []) == "auto"
+    with pytest.raises(ParameterError, match="unknown emotion 'bored'"):
+        check_names("bored", None, ["happy"])
+
+
+def test_synth_and_query_take_an_emotion_in_any_case(tiny_db, tiny_corpus, tmp_path, capsys):
+    stem = _clip(tiny_corpus, "happy")
+    out = tmp_path / "o.npz"
+    assert main(["synth", str(stem.with_suffix(".wav")), "--db", str(tiny_db[0]), "--labels",
+                 f"{stem}.phones.csv", "-o", str(out), "--emotion", "Happy"]) == 0
+    assert out.exists()
+    assert main(["query", "--db", str(tiny_db[0]), "--emotion", "SAD", "--format",
+                 "csv"]) == 0
+    rows = capsys.readouterr().out.strip().splitlines()
+    assert len(rows) > 1 and all(',"sad",' in row for row in rows[1:])
 
 
 def test_classify_prints_probabilities(tiny_db, tiny_corpus, capsys):

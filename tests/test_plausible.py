@@ -54,6 +54,13 @@ def test_good_labels_pass():
     check_label("US senator (not named), from a public speech", "speaker")
 
 
+def test_emotion_labels_are_lowercased(rng):
+    """``Happy`` and ``happy`` are one emotion (and one partition folder on macOS)."""
+    clip, _ = check_clip(_clip(_walk(rng), emotion="Happy"))
+    assert clip.emotion == "happy"
+    assert check_clip(_clip(_walk(rng)))[0].emotion is None
+
+
 def test_absurd_phones_are_rejected(rng):
     motion = _walk(rng)
     tiny = tuple(Segment("AA", i * 4e-6, (i + 1) * 4e-6) for i in range(1000))

@@ -116,6 +116,19 @@ def test_new_version_replaces_old_and_keeps_one_behind(tmp_path):
     assert Database.open(root).table("clips").column("clip_id").to_pylist()[0] == "c0"
 
 
+def test_emotions_differing_only_in_case_are_refused(tmp_path):
+    """They would name one partition folder on macOS and Windows, one overwriting the
+    other's part files: the write is refused and the database left as it was."""
+    root = tmp_path / "db"
+    write_version(root, _tables(tag="a"), {"fps": 30.0})
+    before = sorted(os.listdir(root))
+    tables = _tables(tag="b")
+    tables["clips"] = pa.table({"clip_id": ["b0", "b1"], "emotion": ["happy", "Happy"]})
+    with pytest.raises(DataError, match="'happy' and 'Happy' differ only in case"):
+        write_version(root, tables, {"fps": 30.0})
+    assert sorted(os.listdir(root)) == before
+
+
 def test_failed_write_leaves_the_database_as_it_was(tmp_path, monkeypatch):
     import db.store as store
 

@@ -767,7 +767,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
             args.emotion_mix:
         raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
                          "happy=0.7,neutral=0.3")
-    check_names(emotion, model.emotion_model, model.graph.emotions)
+    emotion = check_names(emotion, model.emotion_model, model.graph.emotions)
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     # Silence is the error, not a transcript that does not fit it: checked first.
     check_not_silent(audio)
@@ -1107,8 +1107,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"{args.method}")
     db = Database.open(args.db)
     _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
-    check_names(emotion, None, db.table("clips", columns=["emotion"]).column("emotion")
-                .to_pylist())
+    emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
+                          .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     t0 = time.perf_counter()
     model = fitted_model(args.db, args.method, refit=args.refit)
@@ -1183,7 +1183,8 @@ def _cmd_classify(args: argparse.Namespace) -> int:
 def _cmd_map_emotion(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.emotion.control import classify_speech, map_motion, parse_emotion
+    from animegraph.emotion.control import (check_names, classify_speech, map_motion,
+                                            parse_emotion)
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import Model, read_database_motion
     from ingest.formats.media import read_audio
@@ -1208,6 +1209,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
                         "learn it")
     for name in [target] if isinstance(target, str) else list(target):
         emotions.mapping(name, name)  # a single-emotion database, an unknown name: say so
+    target, source = check_names(target, emotions, ()), check_names(source, emotions, ())
     if source != "auto":
         for name in [target] if isinstance(target, str) else list(target):
             emotions.mapping(source, name)  # too few parallel sentences: say so now

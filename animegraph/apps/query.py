@@ -18,7 +18,7 @@ import io
 import re
 import secrets
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
+from animegraph.emotion.control import AUTO, check_names
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
@@ -129,12 +130,11 @@ def run_query(db: Database, spec: QuerySpec) -> pa.Table:
     ParameterError
         Also for an emotion the database does not have (naming the ones it has).
     """
-    if spec.emotion is not None:
-        known = sorted(set(db.table("clips", columns=["emotion"]).column("emotion")
-                           .to_pylist()))
-        if spec.emotion not in known:
-            raise ParameterError(f"emotion {spec.emotion!r} is not in the database (it has "
-                                 f"{', '.join(known)})")
+    if spec.emotion is not None:  # in the database's spelling, whatever its case
+        if spec.emotion.lower() == AUTO:
+            raise ParameterError("query: --emotion takes an emotion's name, not auto")
+        known = db.table("clips", columns=["emotion"]).column("emotion").to_pylist()
+        spec = replace(spec, emotion=check_names(spec.emotion, None, known))
     return run_sql(db, build_sql(spec))
 
 

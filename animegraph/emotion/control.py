@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from db.errors import DataError, ParameterError
-from ingest.emotion.model import EmotionModel
+from ingest.emotion.model import EmotionModel, find_emotion
 from ingest.lowpass import smooth
 from ingest.motion import unstabilize_points
 
@@ -131,15 +131,31 @@ class EmotionChoice:
         return self.target
 
 
-def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str]) -> None:
-    """Raise ParameterError if a parsed request names an emotion the database lacks."""
+def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str]):
+    """A parsed request in the database's spelling of its emotions.
+
+    Names match whatever their case (:func:`ingest.emotion.model.find_emotion`).
+
+    Returns
+    -------
+    None, str or dict of str to float
+        ``spec`` with each name as the database writes it.
+
+    Raises
+    ------
+    ParameterError
+        A name the database lacks.
+    """
     if spec is None or spec == AUTO:
-        return
+        return spec
     known = set(graph_emotions) | set(model.emotions if model is not None else ())
-    for name in [spec] if isinstance(spec, str) else list(spec):
-        if name not in known:
-            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
-                                 f"has {', '.join(sorted(known)) or 'no labelled emotions'})")
+    if isinstance(spec, str):
+        return find_emotion(spec, known)
+    mix: dict[str, float] = {}
+    for name, weight in spec.items():
+        name = find_emotion(name, known)
+        mix[name] = mix.get(name, 0.0) + weight
+    return mix
 
 
 def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[str],
@@ -154,8 +170,7 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
     DataError
         ``"auto"`` without a classifier or with unusable audio.
     """
-    spec = parse_emotion(spec)
-    check_names(spec, model, graph_emotions)
+    spec = check_names(parse_emotion(spec), model, graph_emotions)
     if spec is None:
         return EmotionChoice(None, None)
     probabilities = None
@@ -167,7 +182,7 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
             raise ParameterError("emotion 'auto' needs the speech to classify")
         probabilities = classify_speech(model, audio, sample_rate)
         spec = next(iter(probabilities))
-    check_names(spec, model, graph_emotions)
+    spec = check_names(spec, model, graph_emotions)
     names = [spec] if isinstance(spec, str) else list(spec)
     heaviest = spec if isinstance(spec, str) else max(spec, key=spec.get)
     search = heaviest

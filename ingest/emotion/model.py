@@ -22,7 +22,7 @@ ingest: the errors come when a user asks for what is missing (:meth:`EmotionMode
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from itertools import permutations
 from typing import TYPE_CHECKING
@@ -133,6 +133,26 @@ def correspondences(data: ParallelData, src: str, dst: str, sentences: Sequence[
     return np.concatenate(xs), np.concatenate(ys)
 
 
+def find_emotion(name: str, known: Collection[str]) -> str:
+    """``name`` as ``known`` spells it, whatever its case.
+
+    Ingest lowercases emotion labels (they name partition folders, one on a
+    case-insensitive file system); a database written before it did may hold ``Happy``.
+
+    Raises
+    ------
+    ParameterError
+        No emotion of ``known`` is ``name`` (or two are, differing only in case).
+    """
+    if name in known:
+        return name
+    same = [k for k in known if k.casefold() == name.casefold()]
+    if len(same) == 1:
+        return same[0]
+    raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it has "
+                         f"{', '.join(sorted(known)) or 'no labelled emotions'})")
+
+
 @dataclass(frozen=True, eq=False)
 class EmotionModel:
     """Everything a database knows about emotion.
@@ -172,11 +192,8 @@ class EmotionModel:
 
     # ------------------------------------------------------------------ use
     def check_emotion(self, name: str) -> str:
-        """``name`` if the database has this emotion, else a ParameterError naming them."""
-        if name not in self.emotions:
-            raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it "
-                                 f"has {', '.join(self.emotions) or 'no labelled emotions'})")
-        return name
+        """``name`` as the database spells it (:func:`find_emotion`)."""
+        return find_emotion(name, self.emotions)
 
     def mapping(self, src: str, dst: str) -> RbfMapping | None:
         """F_src,dst (None when src == dst: the identity).
@@ -192,8 +209,7 @@ class EmotionModel:
             raise DataError(f"the database has a single emotion "
                             f"({', '.join(self.emotions) or 'none labelled'}): there is "
                             "nothing to map between")
-        self.check_emotion(src)
-        self.check_emotion(dst)
+        src, dst = self.check_emotion(src), self.check_emotion(dst)
         if src == dst:
             return None
         if (src, dst) not in self.mappings:
