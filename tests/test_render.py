@@ -6,6 +6,7 @@ import json
 import logging
 import re
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,6 +112,11 @@ def test_mp4_beside_the_actor_video(take, capsys):
     assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
                  str(take / "face.gif"), "--quiet"]) == 2
     assert "--beside needs an .mp4" in capsys.readouterr().err
+    for suffix in (".gif", ".png", ".glb"):  # nothing to carry the sound: said, not dropped
+        assert main(["render", str(take / "take.c3d"), "--audio", str(take / "take.wav"),
+                     "-o", str(take / f"face{suffix}"), "--quiet"]) == 2
+        assert "--audio needs an .mp4" in capsys.readouterr().err
+        assert not (take / f"face{suffix}").exists()
 
 
 @pytest.mark.parametrize("what", ["index lost", "no video track"])
@@ -148,6 +154,29 @@ def test_beside_failing_after_the_render_keeps_the_previous_output(take, tmp_pat
                                    "-o", str(out / "r.mp4"), "--size", "240x270",
                                    "--quiet"]), 1)
     assert "disk full" in line
+    assert (out / "r.mp4").read_bytes() == b"an earlier render"
+    assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
+
+
+def test_beside_interrupted_leaves_nothing_behind(take, tmp_path, capsys, monkeypatch):
+    # A Ctrl-C while ffmpeg writes the pair: no half-written file beside -o, -o unchanged.
+    from animegraph.face import render
+
+    real = subprocess.run
+
+    def interrupted(cmd, **kwargs):
+        if "hstack" not in " ".join(cmd):
+            return real(cmd, **kwargs)
+        Path(cmd[-1]).write_bytes(b"half a pair")  # ffmpeg had begun its output
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(render.subprocess, "run", interrupted)
+    actor = _actor_video(tmp_path / "actor.mp4")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "r.mp4").write_bytes(b"an earlier render")
+    assert main(["render", str(take / "take.c3d"), "--beside", str(actor), "-o",
+                 str(out / "r.mp4"), "--size", "240x270", "--quiet"]) == 130
     assert (out / "r.mp4").read_bytes() == b"an earlier render"
     assert sorted(p.name for p in out.iterdir()) == ["r.mp4"]
 

@@ -531,8 +531,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise UsageError(f"animegraph render: --audio {args.audio} does not exist")
     if args.beside is not None and not args.beside.is_file():
         raise UsageError(f"animegraph render: --beside {args.beside} does not exist")
-    if args.beside is not None and args.output.suffix.lower() != ".mp4":
-        raise UsageError("animegraph render: --beside needs an .mp4 output")
+    for option, given in (("--beside", args.beside), ("--audio", args.audio)):
+        if given is not None and args.output.suffix.lower() != ".mp4":
+            raise UsageError(f"animegraph render: {option} needs an .mp4 output (a GIF, PNG, "
+                             "glTF or OBJ frames carry neither sound nor a second picture)")
     phones = _phone_track(args)
     t0 = time.perf_counter()
     motion = read_motion(args.motion)
@@ -1248,10 +1250,18 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+class _LogFormatter(logging.Formatter):
+    """``animegraph: warning: ...``: the style of the lines the commands print."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:  # noqa: N802 (logging's name)
+        return f"animegraph: {record.levelname.lower()}: {record.getMessage()}"
+
+
 def _configure_logging(verbosity: int) -> None:
     level = logging.WARNING if verbosity == 0 else logging.INFO if verbosity == 1 else logging.DEBUG
-    logging.basicConfig(level=level, format="animegraph: %(levelname)s: %(message)s",
-                        stream=sys.stderr)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_LogFormatter())
+    logging.basicConfig(level=level, handlers=[handler])
 
 
 def _on_interrupt(signum, frame) -> None:

@@ -286,13 +286,17 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
            "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",
            "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-c:a", "aac",
            "-movflags", "+faststart", str(tmp)]
-    result = subprocess.run(cmd, capture_output=True, check=False)
-    if result.returncode != 0 or not tmp.exists():
+    try:
+        result = subprocess.run(cmd, capture_output=True, check=False)
+        if result.returncode != 0 or not tmp.exists():
+            lines = [x for x in result.stderr.decode(errors="replace").splitlines()
+                     if x.strip()]
+            raise DataError(f"ffmpeg could not put {video.name} beside {out.name}: "
+                            f"{lines[-1] if lines else f'exit status {result.returncode}'}")
+        os.replace(tmp, out)
+    except BaseException:  # a Ctrl-C too: nothing half-written is left beside ``out``
         tmp.unlink(missing_ok=True)
-        lines = [x for x in result.stderr.decode(errors="replace").splitlines() if x.strip()]
-        raise DataError(f"ffmpeg could not put {video.name} beside {out.name}: "
-                        f"{lines[-1] if lines else f'exit status {result.returncode}'}")
-    os.replace(tmp, out)
+        raise
     return out
 
 
@@ -408,8 +412,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     Raises
     ------
     ParameterError
-        If ``out``'s extension is not one of :data:`FORMATS`, or ``beside`` is given for
-        another output than an MP4.
+        If ``out``'s extension is not one of :data:`FORMATS`, or ``audio`` or ``beside``
+        is given for another output than an MP4.
     DataError
         If ``audio`` or ``beside`` cannot be read, or writing fails; ``out`` is then left
         as it was.
@@ -424,9 +428,10 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     if kind != "" and out.is_dir():
         raise DataError(f"{out} is a folder")
     video_fps = fps or (20.0 if kind == ".gif" else 30.0)
-    if beside is not None and kind != ".mp4":
-        raise ParameterError(f"--beside needs an .mp4 output, got {out.name!r}")
-    if audio is not None and kind == ".mp4":
+    for option, given in (("--beside", beside), ("--audio", audio)):
+        if given is not None and kind != ".mp4":
+            raise ParameterError(f"{option} needs an .mp4 output, got {out.name!r}")
+    if audio is not None:
         from ingest.formats.media import read_audio
 
         # Read by the reader synth uses: its one line (no audio track, non-finite or
@@ -444,8 +449,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
             return out
         frames = curve_frames(motion, phones, fps=video_fps,
                               size=(960, 540) if kind == ".mp4" else (640, 360))
-        return _video(frames, out, video_fps, audio=audio if kind == ".mp4" else None,
-                      beside=beside)
+        return _video(frames, out, video_fps, audio=audio, beside=beside)
     if kind in (".mp4", ".gif", ".png"):
         animation = _animation(motion, deformer, video_fps)
         if kind == ".png":
@@ -454,8 +458,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         frames = face_frames(animation, size=gif_size, phones=phones)
         if progress is not None:
             frames = progress(animation.n_frames)(frames)
-        return _video(frames, out, video_fps, audio=audio if kind == ".mp4" else None,
-                      beside=beside)
+        return _video(frames, out, video_fps, audio=audio, beside=beside)
     animation = _animation(motion, deformer, fps)
     if kind == ".glb":
         from animegraph.face.gltf import write_arkit_glb, write_glb
