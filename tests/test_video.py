@@ -18,6 +18,7 @@ from conftest import require_shared
 
 from db.errors import DataError
 from ingest.clip import checksum_files
+from ingest.formats.media import DECODING_VERSION
 from ingest.readers import discover, load
 from ingest.readers.video import (
     TRACKER_HINT,
@@ -191,8 +192,12 @@ def test_sound_track_is_cached_by_checksum(tmp_path):
     decoded = video_audio(video)
     first = video_audio(video, checksum=checksum)
     np.testing.assert_array_equal(first, decoded)
-    entry = cache_path(checksum).with_name(f"{checksum}-audio16000.npy")
+    entry = cache_path(checksum).with_name(f"{checksum}-audio16000-d{DECODING_VERSION}.npy")
     assert entry.is_file()
+    # A copy decoded by an earlier way of reading is another name: never met.
+    stale = entry.with_name(f"{checksum}-audio16000.npy")
+    np.save(stale, np.zeros(4, np.float32))
+    np.testing.assert_array_equal(video_audio(video, checksum=checksum), decoded)
     moved = video.rename(tmp_path / "elsewhere.mp4")
     np.testing.assert_array_equal(video_audio(video, checksum=checksum), decoded)
     entry.write_bytes(b"not an npy")

@@ -1185,8 +1185,7 @@ def _cmd_classify(args: argparse.Namespace) -> int:
 def _cmd_map_emotion(args: argparse.Namespace) -> int:
     import time
 
-    from animegraph.emotion.control import (check_names, classify_speech, map_motion,
-                                            parse_emotion)
+    from animegraph.emotion.control import check_names, classify_speech, map_motion, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import Model, read_database_motion
     from ingest.formats.media import read_audio

@@ -14,7 +14,7 @@ A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmp
   not yet tracked stops with that one line.
 - **cache**: the landmarks of a video are kept in ``<cache>/tracking/<sha256>-<tracker>.npz``
   (:func:`ingest.cache.cache_dir`), and its decoded sound track beside them
-  (``<sha256>-audio16000.npy``), so re-ingest neither tracks nor decodes again.
+  (``<sha256>-audio16000-d2.npy``), so re-ingest neither tracks nor decodes again.
 - **speech**: ``<clip>.wav`` beside the video if there is one, else the video's audio
   track, decoded to 16 kHz mono.
 - **checks** (each a one-line rejection): a file ffmpeg cannot decode; no audio track; a
@@ -48,7 +48,7 @@ from db.atomic import atomic_write
 from db.errors import DataError
 from ingest.cache import cache_dir
 from ingest.clip import RawClip, checksum_files
-from ingest.formats.media import read_audio
+from ingest.formats.media import DECODING_VERSION, read_audio
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
@@ -314,7 +314,8 @@ def video_audio(path: Path, sample_rate: int = AUDIO_RATE, checksum: str | None 
     (:func:`ingest.formats.media.read_audio`).
 
     With the video's ``checksum`` the decoded track is cached beside its tracking
-    (``<cache>/tracking/<sha256>-audio<rate>.npy``), so a re-ingest from the cache starts
+    (``<cache>/tracking/<sha256>-audio<rate>-d<version>.npy``, the version
+    :data:`ingest.formats.media.DECODING_VERSION`), so a re-ingest from the cache starts
     no ffmpeg; an entry that cannot be read is decoded again and replaced.
 
     Raises
@@ -324,7 +325,8 @@ def video_audio(path: Path, sample_rate: int = AUDIO_RATE, checksum: str | None 
     """
     if checksum is None:
         return read_audio(path, sample_rate)[0]
-    target = cache_dir() / "tracking" / f"{checksum}-audio{int(sample_rate)}.npy"
+    target = (cache_dir() / "tracking"
+              / f"{checksum}-audio{int(sample_rate)}-d{DECODING_VERSION}.npy")
     if target.is_file():
         try:
             audio = np.load(target, allow_pickle=False)
