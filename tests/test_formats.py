@@ -106,6 +106,30 @@ def test_c3d_long_labels_and_many_markers(tmp_path):
     assert read_c3d(tmp_path / "wide.c3d").labels == labels
 
 
+def test_c3d_with_more_markers_than_one_label_parameter_holds(tmp_path):
+    """A face tracked from video (468 landmarks) in one file: the labels past 255 go in
+    POINT:LABELS2, LABELS3 ... as C3D.org's manual has it; read back by this reader and by
+    ezc3d (the C++ reference implementation), marker for marker."""
+    import ezc3d
+
+    rng = np.random.default_rng(3)
+    labels = tuple(f"lm{i:03d}" for i in range(600))
+    points = rng.normal(0, 50, size=(4, 600, 3))
+    points[1, 300] = np.nan  # a gap past the first parameter's markers
+    write_c3d(tmp_path / "face.c3d", MarkerData(points, labels, 30))
+    back = read_c3d(tmp_path / "face.c3d")
+    assert back.labels == labels
+    np.testing.assert_allclose(back.points, points.astype(np.float32), equal_nan=True)
+    other = ezc3d.c3d(str(tmp_path / "face.c3d"))
+    params = other["parameters"]["POINT"]
+    assert params["USED"]["value"][0] == 600
+    assert [*params["LABELS"]["value"], *params["LABELS2"]["value"],
+            *params["LABELS3"]["value"]] == list(labels)
+    xyz = np.moveaxis(other["data"]["points"][:3], (0, 1, 2), (2, 1, 0))  # -> frames first
+    valid = ~np.isnan(points[:, :, 0])
+    np.testing.assert_allclose(xyz[valid], points.astype(np.float32)[valid], rtol=1e-6)
+
+
 def test_c3d_registry():
     assert MOTION_READERS[".c3d"] is read_c3d
 
@@ -142,9 +166,9 @@ def test_write_c3d_bad_arguments(tmp_path):
         write_c3d(tmp_path / "x.c3d", np.zeros((4, 2, 3)))
     with pytest.raises(ParameterError, match="units"):
         write_c3d(tmp_path / "x.c3d", MarkerData(np.zeros((2, 1, 3)), ("A",), 100, units="m"))
-    with pytest.raises(ParameterError, match="256"):
-        labels = tuple(f"M{i}" for i in range(256))
-        write_c3d(tmp_path / "x.c3d", MarkerData(np.zeros((2, 256, 3)), labels, 100))
+    with pytest.raises(ParameterError, match="32768"):
+        labels = tuple(f"M{i}" for i in range(32768))
+        write_c3d(tmp_path / "x.c3d", MarkerData(np.zeros((1, 32768, 3)), labels, 100))
     with pytest.raises(ParameterError, match="float32"):
         write_c3d(tmp_path / "x.c3d", MarkerData(np.full((2, 1, 3), 1e300), ("A",), 100))
     assert list(tmp_path.iterdir()) == []

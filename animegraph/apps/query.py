@@ -290,7 +290,7 @@ def _safe(name: str) -> str:
 
 
 def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
-    """C3D for marker databases (at most 255 points), Live Link Face CSV for ARKit
+    """C3D for marker databases, Live Link Face CSV for ARKit
     databases (timecode = the snippet's start in its recording), else channel CSV; the
     file name."""
     from animegraph.motion.files import LIVELINK_SUFFIX, point_labels, write_channel_csv

@@ -29,8 +29,13 @@ logger = logging.getLogger(__name__)
 #: Longest marker label written. The C3D spec allows longer labels but recommends at
 #: most 16 characters; 32 is the width common motion-capture software writes.
 MAX_LABEL_LENGTH = 32
-#: Most markers one ``POINT:LABELS`` parameter can name (its count is one byte).
-MAX_MARKERS = 255
+#: Most markers one ``POINT:LABELS`` parameter can name (a parameter's dimensions are
+#: one byte each). More are named on in ``POINT:LABELS2``, ``LABELS3`` ... (and their
+#: ``DESCRIPTIONS2`` ...), as C3D.org's manual and Vicon write it, so that a face tracked
+#: from video (468 landmarks) fits one file.
+LABELS_PER_PARAMETER = 255
+#: Most markers a file holds: ``POINT:USED`` is a 16-bit signed integer.
+MAX_MARKERS = 32767
 
 #: Second byte of every C3D file (the header's key).
 _C3D_MAGIC = 0x50
@@ -165,7 +170,8 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData) -> None:
     if data.units != "mm":
         raise ParameterError(f"data.units: C3D files are written in 'mm', got {data.units!r}")
     if data.n_markers > MAX_MARKERS:
-        raise ParameterError(f"data: at most {MAX_MARKERS} markers per file, got {data.n_markers}")
+        raise ParameterError(f"a C3D file holds at most {MAX_MARKERS} markers, got "
+                             f"{data.n_markers}")
     rate32 = np.float32(data.rate)
     if not np.isfinite(rate32):
         raise ParameterError(f"data.rate: does not fit a float32, got {data.rate!r}")
@@ -184,7 +190,14 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData) -> None:
 
     writer = c3d.Writer(point_rate=float(rate32), analog_rate=0.0, point_scale=-1.0,
                         point_units="mm  ")
-    writer.set_point_labels(list(data.labels))
+    for start in range(0, data.n_markers, LABELS_PER_PARAMETER):
+        part = list(data.labels[start:start + LABELS_PER_PARAMETER])
+        text, width = c3d.Writer.pack_labels(part)
+        number = "" if start == 0 else str(1 + start // LABELS_PER_PARAMETER)
+        writer.point_group.add_str(f"LABELS{number}", "Point labels.", text, width, len(part))
+        # Written here, or the writer would make one DESCRIPTIONS for every marker.
+        writer.point_group.add_str(f"DESCRIPTIONS{number}", "Point descriptions.",
+                                   " " * len(part), 1, len(part))
     writer.add_frames([(frame, no_analog) for frame in frames])
     buffer = io.BytesIO()
     with warnings.catch_warnings():
@@ -229,6 +242,19 @@ def _read_point_block(handle, reader, n_points: int, n_frames: int) -> list | np
     invalid = (data[:, :, 3].astype(np.int32) < 0) | np.isnan(data[:, :, :3]).any(axis=2)
     data[:, :, 3] = np.where(invalid, -1.0, 0.0)
     return list(data)
+
+
+def _point_labels(reader, n_points: int) -> list[str]:
+    """``POINT:LABELS``, then ``LABELS2``, ``LABELS3`` ... while ``n_points`` need more."""
+    labels: list[str] = []
+    number = 1
+    while len(labels) < n_points:
+        param = reader.get(f"POINT:LABELS{number if number > 1 else ''}")
+        if param is None:
+            break
+        labels += list(param.string_array)
+        number += 1
+    return labels
 
 
 def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
@@ -277,8 +303,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
             if raw is None:
                 raw = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=False)]
             rate = float(reader.point_rate)
-            label_param = reader.get("POINT:LABELS")
-            labels = [] if label_param is None else list(label_param.string_array)
+            labels = _point_labels(reader, n_points)
             units_param = reader.get("POINT:UNITS")
             units = "" if units_param is None else units_param.string_value
     except DataError:
