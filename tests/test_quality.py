@@ -53,6 +53,21 @@ def test_telephone_band(speech):
     assert "nothing above 4 kHz" in _warned(back, sr)
 
 
+def test_narrow_band_is_said_only_when_phones_are_heard_in_the_audio(speech):
+    """Phones given as labels (a batch line spoken by eSpeak NG, whose own speech has
+    little above 4 kHz: "Bin blue at F two now." measures -20.2 dB) need nothing from
+    the upper band: no telephone-band line then, clipping still said."""
+    from animegraph.synthesis.pipeline import input_warnings
+
+    audio, sr = speech
+    back = resample_poly(resample_poly(audio, 1, 2), 2, 1).astype(np.float32)
+    assert any("nothing above 4 kHz" in w for w in input_warnings(back, sr, False))
+    assert input_warnings(back, sr, False, phones_heard=False) == []
+    clipped = np.clip(4.0 * back / np.abs(back).max(), -1.0, 1.0)
+    assert [w[:20] for w in input_warnings(clipped, sr, False, phones_heard=False)] == [
+        "the audio is clipped"]
+
+
 def test_short_speech_is_not_called_narrow_band(speech):
     """A fifth of a second of speech is a syllable or less: a vowel has little above
     4 kHz, telephone band or not, so the band is not judged on it."""

@@ -223,7 +223,8 @@ def synthesize(
                                        prosody_config=prosody_config, engine=phones_engine,
                                        posteriorgram=posteriorgram, on_fallback=fallback.append)
     warnings = fallback + input_warnings(audio, sample_rate,
-                                         method_used == "recognized" or posteriorgram)
+                                         method_used == "recognized" or posteriorgram,
+                                         phones_heard=method_used != "labels")
     if (guide is None and text is not None and method_used == "recognized"
             and recognized_guide is not None):
         guide = recognized_guide() if callable(recognized_guide) else recognized_guide
@@ -283,17 +284,23 @@ def synthesize(
                      guided=guide_names(guide))
 
 
-def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
+def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool, *,
+                   phones_heard: bool = True) -> list[str]:
     """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`);
     with ``phone_rate`` (hama has heard the audio already) also music or an unmodelled
-    language."""
+    language. Without ``phones_heard`` (the phones were given as labels, e.g. by the
+    synthesizer that spoke a batch line) a narrow band is not said: it matters to
+    finding phones in the audio, and eSpeak NG's own speech has little above 4 kHz."""
     probs = None
     if phone_rate and ctc.available():
         try:
             probs = ctc.posteriors(np.asarray(audio, dtype=np.float32), sample_rate)
         except DataError:
             probs = None
-    return warnings_for(assess(np.asarray(audio, dtype=np.float32), sample_rate, probs))
+    quality = assess(np.asarray(audio, dtype=np.float32), sample_rate, probs)
+    if not phones_heard:
+        quality = replace(quality, high_band_db=None)
+    return warnings_for(quality)
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
