@@ -25,6 +25,15 @@ _F32 = pa.list_(pa.float32())
 _F64 = pa.list_(pa.float64())
 _F16 = pa.list_(pa.float16())
 
+#: Types of the animes table's scalar columns (explicit, so that a database whose clips
+#: name no speaker has a text column of nulls, not a column of SQL type NULL).
+ANIME_SCALARS = {
+    "node_id": pa.int64(), "clip_id": pa.string(), "corpus": pa.string(),
+    "speaker": pa.string(), "emotion": pa.string(), "position": pa.int64(),
+    "phoneme": pa.string(), "start_time": pa.float64(), "end_time": pa.float64(),
+    "start_frame": pa.int64(), "end_frame": pa.int64(), "n_frames": pa.int64(),
+    "prosody_frames": pa.int64(),
+}
 #: Column types of the clips table (explicit, so all-null columns keep their type).
 CLIPS_SCHEMA = pa.schema([
     ("clip_id", pa.string()), ("corpus", pa.string()), ("kind", pa.string()),
@@ -115,10 +124,7 @@ def build_tables(
         audio_rows.append((clip.clip_id, clip.corpus, clip.sample_rate, clip.audio.tobytes()))
 
     animes = pa.table({
-        **{k: anime_cols[k] for k in ("node_id", "clip_id", "corpus", "speaker", "emotion",
-                                     "position", "phoneme", "start_time", "end_time",
-                                     "start_frame", "end_frame", "n_frames",
-                                     "prosody_frames")},
+        **{k: pa.array(anime_cols[k], kind) for k, kind in ANIME_SCALARS.items()},
         "prosody": pa.array(anime_cols["prosody"], _F32),
         "motion": pa.array(anime_cols["motion"], _F32),
         "first_pcs": pa.array(anime_cols["first_pcs"], _F32),

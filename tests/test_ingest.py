@@ -99,6 +99,23 @@ def test_reingesting_the_same_clips_changes_nothing(tiny_db, tiny_corpus):
     assert not report.written and current_version(path) == version
 
 
+def test_clips_that_name_no_speaker_keep_a_text_column(tiny_db, tmp_path):
+    """SQL users see speaker as VARCHAR (all null), not a column of type NULL."""
+    from dataclasses import replace
+
+    from ingest.pipeline import build_database
+    from ingest.tables import prepared_from_database
+
+    clips = [replace(c, speaker=None)
+             for c in prepared_from_database(Database.open(tiny_db[0]))[:6]]
+    build_database(tmp_path / "db", clips)
+    db = Database.open(tmp_path / "db")
+    for table in ("animes", "clips"):
+        rows = query(db, f"SELECT column_name, column_type FROM (DESCRIBE {table})").to_pylist()
+        types = {r["column_name"]: r["column_type"] for r in rows}
+        assert types["speaker"] == "VARCHAR", (table, types["speaker"])
+
+
 def test_a_bad_clip_is_rejected_and_the_others_go_in(tiny_corpus, tmp_path):
     src = tmp_path / "corpus"
     shutil.copytree(tiny_corpus, src)
