@@ -418,6 +418,11 @@ def test_plot_against_truth(take, tmp_path, capsys):
                  "--explain", str(take / "take.json"), "--audio", str(take / "take.wav"),
                  "-o", str(out)]) == 0
     assert out.read_bytes()[:4] == b"\x89PNG"
+    # Without speech or phones there is no top panel: no empty box over the measures.
+    bare = tmp_path / "bare.png"
+    assert main(["plot", str(tmp_path / "syn.csv"), "-o", str(bare)]) == 0
+    height = int.from_bytes(out.read_bytes()[20:24], "big")  # PNG's IHDR height
+    assert int.from_bytes(bare.read_bytes()[20:24], "big") < height - 100
     capsys.readouterr()
     (tmp_path / "bad.json").write_text("{\"nope\": 1}")
     line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",

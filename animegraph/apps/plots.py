@@ -228,22 +228,24 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
 
     rows = measures(motion.values, motion.names, reference=truth)
     truth_rows = dict(measures(truth.values, truth.names, reference=truth)) if truth else {}
-    n_panels = 1 + len(rows)
-    heights = [1.3] + [1.0] * len(rows)
+    top_panel = audio is not None or bool(phones)  # else it would be an empty box
+    n_panels = int(top_panel) + len(rows)
+    heights = [1.3] * int(top_panel) + [1.0] * len(rows)
     fig, axes = plt.subplots(n_panels, 1, figsize=(11, 1.2 + 1.6 * n_panels), sharex=True,
                              gridspec_kw={"height_ratios": heights})
     axes = np.atleast_1d(axes)
-    top = axes[0]
-    if audio is not None:
-        samples, rate = audio
-        top.plot(np.arange(len(samples)) / rate, samples, lw=0.3, color="0.45")
-        top.set_ylabel("speech")
-    else:
-        top.set_yticks([])
-        top.set_ylabel("phones")
-    _timeline(top, phones)
+    if top_panel:
+        top, axes = axes[0], axes[1:]
+        if audio is not None:
+            samples, rate = audio
+            top.plot(np.arange(len(samples)) / rate, samples, lw=0.3, color="0.45")
+            top.set_ylabel("speech")
+        else:
+            top.set_yticks([])
+            top.set_ylabel("phones")
+        _timeline(top, phones)
     t = np.arange(motion.n_frames) / motion.fps
-    for ax, (label, values) in zip(axes[1:], rows, strict=True):
+    for ax, (label, values) in zip(axes, rows, strict=True):
         if label in truth_rows:
             tt = np.arange(truth.n_frames) / truth.fps
             ax.plot(tt, truth_rows[label], color="k", lw=1.6, label="ground truth")
@@ -252,7 +254,7 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
         for p in phones:
             if p.get("jump"):
                 ax.axvline(p["start"], color="C0", lw=0.8, ls="--", alpha=0.7)
-    for ax in axes[1:]:  # every panel says which curve is which
+    for ax in axes:  # every panel says which curve is which
         ax.legend(loc="upper right", fontsize=7, ncol=2, framealpha=0.8)
     axes[-1].set_xlabel("time (s)")
     end = max(motion.duration, truth.duration if truth else 0.0,
