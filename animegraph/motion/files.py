@@ -191,18 +191,13 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
     path = Path(path)
     motion = np.asarray(motion, dtype=np.float64)
     names = tuple(names)
+    check_output(path, names, kind, timecode=timecode)
     suffix = path.suffix.lower()
     if path.name.lower().endswith(LIVELINK_SUFFIX):
         from ingest.formats.livelink import write_livelink
 
         write_livelink(path, motion, names, fps, start=timecode or "00:00:00:00")
-    elif timecode is not None:
-        raise ParameterError(f"a timecode goes only into Live Link CSV (-o NAME"
-                             f"{LIVELINK_SUFFIX}), not {path.name!r}")
     elif suffix == ".c3d":
-        if kind not in ("markers", "landmarks"):
-            raise ParameterError(f"C3D holds 3D points; this database has {kind} "
-                                 "(write .csv or .npz)")
         from ingest.formats.c3d import MarkerData, write_c3d
 
         point_cols = point_columns(names)
@@ -216,13 +211,47 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
         with atomic_write(path) as handle:
             np.savetxt(handle, table, delimiter=",", header=header, comments="",
                        fmt=["%d", "%.5f"] + ["%.6g"] * len(names))
-    elif suffix == ".npz":
+    else:
         with atomic_write(path) as handle:
             np.savez(handle, motion=motion, fps=fps, channels=np.array(names),
                      **(extra or {}))
-    else:
-        raise ParameterError(f"output must end in .c3d, .csv or .npz, got {path.name!r}")
     return path
+
+
+def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -> None:
+    """ParameterError unless :func:`write_channels` can write motion of these channels to
+    ``path``: what it would refuse after the work, said before it.
+
+    Parameters
+    ----------
+    path : Path
+        ``.c3d`` (point databases: markers, landmarks), ``.csv``, ``.npz``, or
+        :data:`LIVELINK_SUFFIX` (ARKit databases).
+    names : sequence of str
+        The motion's channels.
+    kind : str
+        The database's kind (``markers``, ``landmarks``, ``curves``).
+    timecode : str, optional
+        Goes only into Live Link CSV.
+    """
+    from ingest.formats.livelink import is_arkit
+
+    name = Path(path).name
+    if name.lower().endswith(LIVELINK_SUFFIX):
+        if not is_arkit(names):
+            raise ParameterError(f"Live Link Face CSV ({name}) needs a database of ARKit "
+                                 "blendshapes (an iPhone capture); this one has other "
+                                 "channels (write .csv or .npz)")
+        return
+    if timecode is not None:
+        raise ParameterError(f"a timecode goes only into Live Link CSV (-o NAME"
+                             f"{LIVELINK_SUFFIX}), not {name!r}")
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".c3d", ".csv", ".npz"):
+        raise ParameterError(f"output must end in .c3d, .csv or .npz, got {name!r}")
+    if suffix == ".c3d" and (kind not in ("markers", "landmarks") or not point_labels(names)):
+        raise ParameterError(f"C3D holds 3D points; this database has {kind} "
+                             "(write .csv or .npz)")
 
 
 def point_columns(names) -> list[int]:
