@@ -2,6 +2,10 @@
 
 Every user error (a bad option, a missing file, an impossible size) ends as one line
 on stderr and a non-zero exit; tracebacks are kept for bugs.
+
+Here: :func:`main` (the entry point), the exit statuses, Ctrl-C and logging. The options
+and their help are :mod:`animegraph.apps.cli_parser`'s; what each command does, the
+modules of :mod:`animegraph.apps.commands`.
 """
 
 from __future__ import annotations
