@@ -160,9 +160,9 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     assert "does not match the audio" in err and "path: audio only (phones recognised" in err
     # A transcript that passes the check but cannot be aligned after all: the speech
     # alone, with its guide, all the same.
-    import animegraph.apps.cli as cli
+    import animegraph.apps.commands.synth as synth_command
 
-    monkeypatch.setattr(cli, "_transcript_mismatch", lambda *args: None)
+    monkeypatch.setattr(synth_command, "_transcript_mismatch", lambda *args: None)
     assert main([*base, "--text", "nothing like what is said in it at all", "-o",
                  str(tmp_path / "f.npz")]) == 0
     err = capsys.readouterr().err

@@ -1,6 +1,8 @@
 """What users run: the command line and the work it drives.
 
-* :mod:`.cli` -- ``animegraph`` and its sub-commands (the entry point);
+* :mod:`.cli` -- ``animegraph``, the entry point: it runs the sub-command that
+  :mod:`.cli_parser` (every option and its help) parses, and turns errors into one line;
+  :mod:`.commands` -- what each sub-command does (``synth``, ``render``, ``ingest`` ...);
 * :mod:`.demo` -- ``animegraph demo`` on the embedded default data; :mod:`.cache` -- where
   the default corpus and database live;
 * :mod:`.batch`, :mod:`.script` -- batch synthesis of dialogue scripts on Dask;

@@ -1,0 +1,458 @@
+"""The ``animegraph`` argument parser: every sub-command, its options and their help.
+
+Each sub-command's function (``func``) is in :mod:`animegraph.apps.commands`; a
+left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from animegraph import __version__
+from animegraph.apps.commands.common import UsageError
+from animegraph.apps.commands.corpus import _cmd_corpus_synth, _cmd_demo
+from animegraph.apps.commands.database import (
+    _cmd_fit,
+    _cmd_info,
+    _cmd_ingest,
+    _cmd_query,
+    _cmd_sql,
+)
+from animegraph.apps.commands.emotion import _cmd_classify, _cmd_map_emotion
+from animegraph.apps.commands.render import _cmd_plot, _cmd_render
+from animegraph.apps.commands.synth import _cmd_batch, _cmd_synth
+from animegraph.baselines import METHODS
+from ingest.speech.engines import ENGINES
+
+#: ``synth --helper``: animegraph.synthesis.HELPER_MODES, written out so that ``--help`` does
+#: not import the synthesis (tests/test_synth.py checks that they are the same).
+HELPER_CHOICES = ("paper", "anchored", "anchored-nonspeech")
+
+#: ``synth --audio-cost`` (:data:`animegraph.synthesis.audio.AUDIO_COSTS`, spelled out here
+#: so that the command line starts without importing synthesis).
+SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
+
+#: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
+SYNTH_GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
+
+#: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
+SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), or a "
+                  "video's sound track (.mp4, .mov, .mkv ...), any sample rate, channels "
+                  "averaged to mono")
+
+
+class _Parser(argparse.ArgumentParser):
+    # argparse prints the whole usage block and exits; one line says it better.
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def _whole_number(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def _phones_engine_option(parser, transcript: str) -> None:
+    """``--phones-engine`` of ``ingest`` and ``synth`` (``transcript``: what they call one)."""
+    parser.add_argument("--phones-engine", choices=ENGINES, default=None,
+                        help=f"phone engine when there are no labels: auto (default: "
+                        f"PocketSphinx aligns {transcript}; without one hama names the "
+                        "phones and PocketSphinx places them: each measured best at it), "
+                        "hama (CTC phone model shipped in "
+                        "its wheel) or pocketsphinx")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every sub-command."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
+    parser = _Parser(
+        prog="animegraph",
+        description="Expressive speech-driven facial animation (after Cao et al. 2005).",
+        epilog=f"Commands that read a database take --db DB; left out, ${DB_ENV} is used if "
+        f"set, else the default database that 'animegraph demo' builds: {default_db_dir()}. "
+        "Exit status: 0 done, 1 bad input or data, 2 wrong command line, 130 interrupted.",
+    )
+    parser.add_argument("--version", action="version", version=f"animegraph {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more log output (-vv for debug)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    corpus = sub.add_parser("corpus", help="corpus tools",
+                            description="Corpus tools: 'corpus synth' generates the "
+                            "synthetic expressive speech + facial motion-capture corpus.")
+    corpus_sub = corpus.add_subparsers(dest="corpus_command", metavar="ACTION",
+                                       parser_class=_Parser)
+    synth = corpus_sub.add_parser(
+        "synth", help="generate a synthetic expressive speech + facial mocap corpus",
+        description="Generate a synthetic expressive speech + facial motion-capture corpus "
+        "(eSpeak NG speech with exact phone timing, five emotions, 3D markers on the "
+        "canonical face mesh).",
+    )
+    synth.add_argument("--out", required=True, type=Path, help="folder to create")
+    synth.add_argument("--sentences", type=_whole_number, default=None,
+                       help="distinct sentences (default 40)")
+    synth.add_argument("--parallel", type=_whole_number, default=None,
+                       help="sentences spoken in all five emotions (default 10)")
+    synth.add_argument("--variations", type=_whole_number, default=3,
+                       help="takes of every (sentence, emotion) pair (default 3)")
+    synth.add_argument("--fps", type=_number, default=120.0, help="marker frame rate (120)")
+    synth.add_argument("--seed", type=_whole_number, default=0, help="random seed (0)")
+    synth.add_argument("--scale", choices=("default", "paper"), default="default",
+                       help="'paper': Cao et al.'s size, 1,326 utterances")
+    synth.add_argument("--workers", type=_whole_number, default=None,
+                       help="worker processes (default: all cores)")
+    synth.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    synth.add_argument("--quiet", action="store_true", help="no progress bar")
+    synth.set_defaults(func=_cmd_corpus_synth)
+
+    demo = sub.add_parser(
+        "demo", help="run the pipeline on the embedded default data",
+        description="Create the default corpus in the cache folder (once), then run the "
+        "pipeline on a sentence that is not in it and write the outputs and a plot.",
+    )
+    demo.add_argument("--out", type=Path, default=Path("animegraph-demo"),
+                      help="output folder (default ./animegraph-demo)")
+    demo.add_argument("--emotion", default="happy", help="emotion of the demo sentence")
+    demo.add_argument("--text", default=None, help="the sentence to say")
+    demo.add_argument("--workers", type=_whole_number, default=None,
+                      help="worker processes for the corpus (default: all cores)")
+    demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    demo.set_defaults(func=_cmd_demo)
+
+    ing = sub.add_parser(
+        "ingest", help="add mocap clips + speech to a motion database",
+        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; landmarks "
+        "tracked from video) with their speech, segment them into phonemes and store them as "
+        "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
+        "a bad clip is rejected with its reason while the others go in.",
+    )
+    ing.add_argument("sources", nargs="+", type=Path, metavar="SRC",
+                     help="clip files or folders")
+    ing.add_argument("--db", required=True, type=Path, help="database folder")
+    ing.add_argument("--workers", type=_whole_number, default=1,
+                     help="worker processes (default 1)")
+    ing.add_argument("--variance", type=_number, default=0.95,
+                     help="share of motion variance PCA keeps (paper: 0.95-0.98)")
+    ing.add_argument("--fps", type=_number, default=None,
+                     help="database frame rate (default: the highest of the clips)")
+    ing.add_argument("--no-lag-correction", action="store_true",
+                     help="keep landmark and iPhone (Live Link) motion where it is "
+                     "instead of shifting it by the estimated lip-audio lag")
+    ing.add_argument("--posteriorgrams", action="store_true",
+                     help="also store each clip's phone posteriorgram (hama), for synth "
+                     "--audio-cost posteriorgram (beyond the paper; kept once stored; "
+                     "always kept for clips whose phones hama recognised)")
+    _phones_engine_option(ing, "a transcript")
+    ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
+                     help="fastest plausible marker motion in mm/s (default 5000); a faster "
+                     "jump is a dropout, or rejects the clip if it lasts")
+    ing.add_argument("--wait", type=_number, default=None,
+                     help="seconds to wait for another ingest into the same --db to finish "
+                     "(default 600); one writer at a time")
+    ing.add_argument("--quiet", action="store_true", help="no progress bar")
+    ing.set_defaults(func=_cmd_ingest)
+
+    sql = sub.add_parser(
+        "sql", help="run a read-only SQL query on a database",
+        description="Run SQL (DuckDB) over the database's tables: clips, animes, frames, "
+        "audio, channels, model_arrays, components. Only SELECT queries run, in DuckDB's "
+        "sandbox (no file outside the database, no network, no extensions); several "
+        "statements separated by ';' each print their result.",
+    )
+    sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
+                     "GROUP BY 1\"")
+    _db_option(sql)
+    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
+    sql.add_argument("-o", "--output", type=Path, default=None,
+                     help="write here instead of standard output (required for parquet)")
+    sql.add_argument("--max-rows", type=_whole_number, default=50,
+                     help="rows shown in table format (default 50)")
+    sql.add_argument("--limit", type=_whole_number, default=None,
+                     help="rows fetched per statement; the rest is never read "
+                     "(default 100000)")
+    sql.add_argument("--timeout", type=_number, default=None,
+                     help="seconds before the query is interrupted (default 60)")
+    sql.set_defaults(func=_cmd_sql)
+
+    syn = sub.add_parser(
+        "synth", help="facial motion for speech, from a motion database",
+        description="Segment the speech into phones, search the Anime Graph for the best "
+        "matching anime sequence (Cao et al. 2005, Eq. 2: jump matches, jump cost, DTW "
+        "audio cost with weights 100, 1, 0.01), then time-warp, blend and smooth it.",
+    )
+    syn.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
+    _db_option(syn)
+    given = syn.add_mutually_exclusive_group()
+    given.add_argument("--text", default=None, help="transcript (forced alignment)")
+    given.add_argument("--labels", type=Path, default=None,
+                       help="phone labels (.phones.csv, .TextGrid or HTK .lab; default: "
+                       "AUDIO's <stem>.phones.csv, .TextGrid or .lab beside it, if any, "
+                       "else the phones are recognized)")
+    feel = syn.add_mutually_exclusive_group()
+    feel.add_argument("--emotion", default=None, metavar="E|auto",
+                      help="the face's emotion: prefer animes of E and map the others into "
+                      "it (Cao et al. §5); 'auto': the emotion classified from the speech (§6)")
+    feel.add_argument("--emotion-mix", default=None, metavar="E=W,...",
+                      help="blend mapped emotions, e.g. happy=0.7,neutral=0.3")
+    syn.add_argument("--method", choices=METHODS, default="anime-graph",
+                     help="synthesis system: anime-graph (default, Cao et al.), or a baseline "
+                     "fitted on the database on first use and stored in it: mu-mlp (Hong et "
+                     "al. 2002), hier-pca (Cosker et al.), av-hmm (Terissi et al. 2013), "
+                     "ppg-ridge (beyond the papers: phone posteriors, speaker-independent)")
+    syn.add_argument("--refit", action="store_true",
+                     help="refit a baseline even if the database has it stored")
+    mode = syn.add_mutually_exclusive_group()
+    mode.add_argument("--exact", action="store_true",
+                      help="the global optimum (default)")
+    mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
+                      help="the paper's bounded look-ahead of K phonemes (K >= 1; the "
+                      "paper uses 3-6)")
+    mode.add_argument("--search", choices=("exact", "paper", "window", "dp"), default=None,
+                      help="Anime Graph search algorithm (paper: the published priority "
+                      "queue)")
+    syn.add_argument("--tolerance", type=_number, default=None, metavar="T",
+                     help="exact search only: accept a sequence certified within (1 + T) of "
+                     "the optimum's cost, e.g. 0.01 (much faster on huge databases)")
+    syn.add_argument("-o", "--output", required=True, type=Path,
+                     help="motion file: .c3d (marker databases), .csv or .npz; "
+                     "NAME.livelink.csv writes Live Link Face CSV (ARKit databases)")
+    syn.add_argument("--timecode", default=None, metavar="HH:MM:SS:FF",
+                     help="first frame's timecode in a .livelink.csv (default 00:00:00:00)")
+    syn.add_argument("--explain", action="store_true",
+                     help="print where every phone's motion came from and its costs")
+    syn.add_argument("--explain-json", type=Path, default=None,
+                     help="write the explanation as JSON here")
+    syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
+    syn.add_argument("--no-blend", action="store_true",
+                     help="skip blending at jumps (with --k-best: cut each phone's mean at "
+                     "its boundaries instead of cross-fading it into its neighbours' "
+                     "through the recorded transitions)")
+    syn.add_argument("--helper", choices=HELPER_CHOICES, default=None,
+                     help="the paper's search, with a helper pair's motion blended in at a "
+                     "jump as recorded ('paper', §4.3, the default), moved onto the animes' "
+                     "poses at the blend's ends ('anchored'), or that but for the speech "
+                     "components ('anchored-nonspeech')")
+    syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
+    _phones_engine_option(syn, "a --text")
+    syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
+                     help="beyond the paper: average the K best-matching animes of each "
+                     "phone (20 suits real data with recognized phones)")
+    syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
+                     help="beyond the paper: k-best averages each anime relative to its "
+                     "recording's mean pose, the utterance taking the mean pose of the "
+                     "recordings drawn on (default: on when the database's clips come from "
+                     "more than one speaker or corpus folder, whose rest poses differ; off "
+                     "with one)")
+    syn.add_argument("--context-ranking", action=argparse.BooleanOptionalAction, default=None,
+                     help="beyond the paper: rank each phone's k-best animes by phonetic "
+                     "context (their recorded neighbour phones against the input's) before "
+                     "the audio cost (default: on with a transcript or labels, off without)")
+    syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
+                     help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
+                     "default), or beyond the paper posteriorgram (DTW of hama phone "
+                     "posteriors; the database must have been ingested with hama) or both")
+    syn.add_argument("--candidates", choices=("label", "likely"), default=None,
+                     help="candidate animes of a phone: label (the paper: its own phone's, "
+                     "default), or likely (beyond the paper: also those of the 3 phones its "
+                     "posteriorgram makes likeliest)")
+    syn.add_argument("--guide", choices=(*SYNTH_GUIDES, "none"), default=None,
+                     help="beyond the paper: a baseline fitted on the database (on first use, "
+                     "then stored) predicts the motion, and the output is the mean of it and "
+                     "the animes' (default with audio only: mu-mlp+ppg-ridge, the mean of the "
+                     "two; none: off)")
+    syn.add_argument("--guide-blend", type=_number, default=None, metavar="W",
+                     help="the guide's share of the output motion, in [0, 1] (default 0.5; "
+                     "0 with --guide-rank: ranking only)")
+    syn.add_argument("--guide-rank", action="store_true",
+                     help="also rank each phone's animes by their distance to the guide's "
+                     "motion beside the audio cost (trajectory-guided selection)")
+    syn.set_defaults(func=_cmd_synth)
+
+    bat = sub.add_parser(
+        "batch", help="animate every line of a dialogue script, in parallel (Dask)",
+        description="Animate a dialogue script (CSV or JSON Lines: id, text, and optional "
+        "audio, emotion, speaker, voice, window, exact). Lines without a recording are spoken "
+        "by eSpeak NG with their emotion's prosody, phone timing from the synthesizer; lines "
+        "with one are force-aligned to their text. Each line gets OUT/<id>/ (speech.wav, "
+        "motion, phones.csv, explain.json[, preview.mp4]); OUT/report.csv lists them all. "
+        "Finished lines are skipped on a re-run unless --force.",
+    )
+    bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
+    _db_option(bat)
+    bat.add_argument("--out", required=True, type=Path, help="output folder")
+    bat.add_argument("--workers", type=_whole_number, default=2,
+                     help="worker processes of the local Dask cluster (default 2; "
+                     "ignored with --scheduler)")
+    bat.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="run on an existing Dask cluster, e.g. tcp://host:8786")
+    bat.add_argument("--render", choices=("none", "mp4"), default="none",
+                     help="also render an MP4 preview of each line (default none)")
+    bat.add_argument("--force", action="store_true", help="redo lines finished before")
+    bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    bat.set_defaults(func=_cmd_batch)
+    _add_animator_commands(sub)
+    cls = sub.add_parser(
+        "classify", help="the emotion of speech, by the database's classifier",
+        description="Print the probability of each of the database's emotions for the "
+        "speech (any rate, mono or stereo), by the classifier trained on the database's "
+        "clips at ingest: prosodic and spectral features with 50 frame-averaged cepstrum "
+        "coefficients, normalised per speaker (an unknown speaker by the training "
+        "population), and a linear SVM (Cao et al. 2005 §6 uses an SVM on the signal's "
+        "mean, variance, RMS and first 500 real-cepstrum coefficients).",
+    )
+    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
+    _db_option(cls)
+    cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
+    cls.set_defaults(func=_cmd_classify)
+
+    mp = sub.add_parser(
+        "map-emotion", help="change the emotion of a facial motion",
+        description="Map the emotion components of a motion (as written by 'synth': .c3d, "
+        ".csv or .npz, in the database's channels) from one emotion to another with the "
+        "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
+    )
+    mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
+    _db_option(mp)
+    mp.add_argument("--to", required=True, metavar="E|E=W,...",
+                    help="target emotion, or a mix such as happy=0.7,neutral=0.3")
+    mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
+                    help="emotion of IN; 'auto' (default): classify --audio if given, else "
+                    "the emotion whose mean emotion components are nearest IN's")
+    mp.add_argument("--audio", type=Path, default=None,
+                    help="the speech of IN, for --from auto")
+    mp.add_argument("-o", "--output", required=True, type=Path,
+                    help="motion file to write (.c3d, .csv or .npz)")
+    mp.set_defaults(func=_cmd_map_emotion)
+    fit = sub.add_parser(
+        "fit", help="fit a baseline method on a database and store it there",
+        description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
+        "av-hmm: Terissi et al. 2013) on every clip of a database and store the "
+        "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
+        "--method' uses it (and fits it on first use if absent).",
+    )
+    _db_option(fit)
+    fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
+    fit.set_defaults(func=_cmd_fit)
+
+    info = sub.add_parser(
+        "info", help="summarise a database",
+        description="Say which database is used (--db, $ANIMEGRAPH_DB or the demo's) and "
+        "summarise it: clips, emotions, phones, motion components, emotion model and "
+        "fitted baselines.",
+    )
+    _db_option(info)
+    info.add_argument("--json", action="store_true", help="the summary as JSON")
+    info.set_defaults(func=_cmd_info)
+    return parser
+
+
+def _db_option(parser: argparse.ArgumentParser) -> None:
+    """``--db``, which may be left out: ``$ANIMEGRAPH_DB``, else the demo's database."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
+    parser.add_argument("--db", type=Path, default=None,
+                        help=f"database folder (default: ${DB_ENV} if set, else the one "
+                        f"'animegraph demo' builds, {default_db_dir()})")
+    parser.set_defaults(default_db=True)
+
+
+def _add_animator_commands(sub) -> None:
+    """``query``, ``render`` and ``plot``: the animator's commands."""
+    from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
+
+    qry = sub.add_parser(
+        "query", help="find anime nodes or clips; export them for other tools",
+        description="List the anime nodes (phoneme instances) or, with --clips, the "
+        "utterances that match, as a table. The query is SQL over the database's views "
+        "(--show-sql prints it; 'animegraph sql' runs it as it is). --export writes each hit "
+        "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
+        "(WAV), a PNG preview, and index.csv.",
+    )
+    _db_option(qry)
+    qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
+    qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
+    qry.add_argument("--text", default=None, metavar="WORDS",
+                     help="the utterance's transcript contains every one of these words")
+    qry.add_argument("--speaker", default=None, help="speaker id")
+    qry.add_argument("--min-dur", type=_number, default=None, metavar="SEC",
+                     help="at least this long (the anime, or the clip with --clips)")
+    qry.add_argument("--order-by", default=None, metavar="FIELD",
+                     help=f"animes: {', '.join(ANIME_FIELDS)} (default node_id); clips: "
+                     f"{', '.join(CLIP_FIELDS)} (default clip_id)")
+    qry.add_argument("--desc", action="store_true", help="descending order")
+    qry.add_argument("--limit", type=_whole_number, default=20, help="most hits (default 20)")
+    qry.add_argument("--clips", action="store_true", help="whole utterances, not animes")
+    qry.add_argument("--format", choices=("table", "csv", "json"), default="table")
+    qry.add_argument("--show-sql", action="store_true",
+                     help="print the SQL instead of running it")
+    qry.add_argument("--export", type=Path, default=None, metavar="DIR",
+                     help="write every hit into this new folder")
+    qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
+                     help="seconds of motion and speech kept around each anime (0.25)")
+    qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
+    qry.set_defaults(func=_cmd_query)
+
+    ren = sub.add_parser(
+        "render", help="render motion: MP4/GIF of a shaded face, glTF, OBJ frames",
+        description="Carry marker or landmark motion onto a face mesh by RBF scattered-data "
+        "interpolation with independent face regions (Cao et al. 2005, section 7) and write "
+        "an MP4 (speech muxed in with --audio), a GIF, a PNG still, a glTF 2.0 binary (.glb, "
+        "morph targets + head motion) or a folder of OBJ frames (-o without extension). "
+        "Curve motion (blendshape weights) is drawn as curves over time with the phones.",
+    )
+    ren.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
+    ren.add_argument("-o", "--output", required=True, type=Path,
+                     help=".mp4, .gif, .png, .glb, or a folder name for OBJ frames")
+    ren.add_argument("--audio", type=Path, default=None,
+                     help="speech to mux into an MP4 (a WAV, or a video: its audio track)")
+    ren.add_argument("--beside", type=Path, default=None, metavar="VIDEO",
+                     help="put this video (the actor) left of the face in the MP4")
+    ren.add_argument("--db", type=Path, default=None,
+                     help="database the motion came from (checks its channels match)")
+    ren.add_argument("--mesh", type=Path, default=None,
+                     help="another face mesh (any format trimesh reads; mm, x left, y up)")
+    ren.add_argument("--marker-map", type=Path, default=None,
+                     help="CSV label,vertex[,region][,group]: where each marker sits")
+    ren.add_argument("--rest-frame", type=_whole_number, default=None,
+                     help="frame of the motion that matches the mesh's expression (default: "
+                     "the mesh's own marker vertices for the canonical mesh, frame 0 for "
+                     "another mesh)")
+    ren.add_argument("--labels", type=Path, default=None,
+                     help="phone labels for captions (.phones.csv, .TextGrid, .lab; default "
+                     "MOTION's <stem>.phones.csv when there is one)")
+    ren.add_argument("--explain", type=Path, default=None,
+                     help="'synth --explain-json' record, for phone captions")
+    ren.add_argument("--fps", type=_number, default=None,
+                     help="frame rate (video: 30, GIF: 20; glb/OBJ: the motion's)")
+    ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
+    ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
+    ren.add_argument("--quiet", action="store_true", help="no progress bar")
+    ren.set_defaults(func=_cmd_render)
+
+    plo = sub.add_parser(
+        "plot", help="plot motion against ground truth, with phones and jump matches",
+        description="Plot facial measures (mouth opening, width, brow; or the busiest "
+        "curves) of MOTION, against --truth when given, over the speech and the phone "
+        "timeline; with --explain (from 'synth --explain-json') the jump matches are "
+        "marked and each phone is coloured by its source recording.",
+    )
+    plo.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
+    plo.add_argument("-o", "--output", required=True, type=Path, help="PNG file")
+    plo.add_argument("--truth", type=Path, default=None, help="ground-truth motion")
+    plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
+    plo.add_argument("--labels", type=Path, default=None,
+                     help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
+    plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
+    plo.add_argument("--title", default="", help="title")
+    plo.set_defaults(func=_cmd_plot)

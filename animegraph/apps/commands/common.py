@@ -1,0 +1,40 @@
+"""What the commands share: the usage error, progress bars and lines on stderr, and the
+phone labels found beside a speech or motion file."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+class UsageError(Exception):
+    """The command line itself is wrong (exit status 2)."""
+
+
+def _progress(total: int, quiet: bool, unit: str, step: str):
+    """A progress bar factory labelled with its step (every step over ~2 s has one)."""
+    from functools import partial
+
+    from tqdm import tqdm
+
+    return partial(tqdm, total=total, unit=unit, desc=step, disable=quiet, file=sys.stderr,
+                   dynamic_ncols=True)
+
+
+def _say(line: str) -> None:
+    print(f"animegraph: {line}", file=sys.stderr)
+
+
+#: Phone-label files looked for beside a speech or motion file, in this order (what
+#: 'corpus synth', 'demo', 'query --export' and 'batch' write; the formats ingest reads).
+SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
+
+
+def _sidecar_labels(path: Path) -> Path | None:
+    """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``path`` (speech for
+    ``synth``, motion for ``render`` and ``plot``), if there is one."""
+    for suffix in SIDECAR_LABELS:
+        beside = path.with_name(path.stem + suffix)
+        if beside.is_file():
+            return beside
+    return None

@@ -1,0 +1,110 @@
+"""The database commands: ``ingest`` (clips into a database), ``sql`` and ``query``
+(reading it), ``fit`` (a baseline stored in it) and ``info`` (what it holds)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from animegraph.apps.commands.common import UsageError, _progress, _say
+
+
+def _cmd_ingest(args: argparse.Namespace) -> int:
+    from ingest.pipeline import IngestConfig, ingest
+    from ingest.plausible import Limits
+
+    limits = Limits() if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
+    config = IngestConfig(variance=args.variance, fps=args.fps,
+                          correct_lag=not args.no_lag_correction,
+                          phones_engine=args.phones_engine, limits=limits,
+                          posteriorgrams=args.posteriorgrams)
+    wait = {} if args.wait is None else {"wait": args.wait}
+    report = ingest(args.sources, args.db, config, workers=args.workers,
+                    progress=lambda total: _progress(total, args.quiet, "clip",
+                                                     "ingest: reading clips"),
+                    say=None if args.quiet else _say, **wait)
+    for line in report.lines():
+        print(line)
+    return 1 if report.count("rejected") else 0
+
+
+def _cmd_sql(args: argparse.Namespace) -> int:
+    from animegraph.apps.tabular import format_table
+    from db.sql import ROW_LIMIT, TIMEOUT_S, run
+    from db.store import Database
+
+    if args.format == "parquet" and args.output is None:
+        raise UsageError("animegraph sql: --format parquet needs --output FILE")
+    limit = args.limit or ROW_LIMIT
+    results = run(Database.open(args.db), args.query, row_limit=limit,
+                  timeout=args.timeout or TIMEOUT_S)
+    if args.output is not None and len(results) > 1:
+        raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
+    for i, result in enumerate(results):
+        if i and args.format == "table":
+            sys.stdout.write("\n")
+        text = format_table(result.table, args.format, max_rows=args.max_rows,
+                            output=args.output)
+        if text is not None:
+            sys.stdout.write(text)
+        if result.truncated:
+            print(f"animegraph sql: only the first {limit} rows were read (raise --limit)",
+                  file=sys.stderr)
+    return 0
+
+
+def _cmd_query(args: argparse.Namespace) -> int:
+    from animegraph.apps.query import QuerySpec, build_sql, export_hits, run_query
+    from animegraph.apps.tabular import format_table
+    from db.store import Database
+
+    spec = QuerySpec(phoneme=args.phoneme, emotion=args.emotion, text=args.text,
+                     speaker=args.speaker, min_dur=args.min_dur, order_by=args.order_by,
+                     descending=args.desc, limit=args.limit, clips=args.clips)
+    if args.show_sql:
+        print(build_sql(spec))
+        return 0
+    if args.export is not None and args.export.exists() and not args.force:
+        from db.errors import DataError
+
+        raise DataError(f"export folder {args.export} exists (use --force to replace it)")
+    db = Database.open(args.db)
+    hits = run_query(db, spec)
+    shown = hits.drop_columns([c for c in ("corpus",) if c in hits.column_names]) \
+        if args.format == "table" else hits
+    sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
+    if args.export is not None:
+        rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
+                           progress=lambda total: _progress(total, False, "hit",
+                                                            "exporting"))
+        print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
+              file=sys.stderr)
+    return 0
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    import time
+
+    from animegraph.baselines.base import fitted_model, model_path
+
+    t0 = time.perf_counter()
+    fitted_model(args.db, args.method, refit=True)
+    print(f"fitted {args.method} on {args.db} in {time.perf_counter() - t0:.1f} s; stored "
+          f"{model_path(args.db, args.method)}")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    import json
+
+    from animegraph.apps.info import database_info, info_lines
+    from db.store import Database
+
+    info = database_info(Database.open(args.db))
+    info["chosen_by"] = args.db_source
+    if args.json:
+        print(json.dumps(info, indent=1))
+    else:
+        for line in info_lines(info):
+            print(line)
+    return 0

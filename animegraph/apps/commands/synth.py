@@ -1,0 +1,308 @@
+"""``animegraph synth``: facial motion for speech, by the Anime Graph or a fitted
+baseline; and ``animegraph batch``, every line of a dialogue script.
+
+Which path ``synth`` takes and with what guide is :mod:`.synth_plan`'s."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from animegraph.apps.commands.common import UsageError, _progress, _sidecar_labels
+from animegraph.apps.commands.synth_plan import (
+    _guide_shortfall,
+    _load_guide,
+    _recognized_guide,
+    _synth_path,
+    _synth_plan,
+)
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from animegraph.emotion.control import check_names, parse_emotion, resolve_emotion
+    from animegraph.synthesis import (
+        Model,
+        PostOptions,
+        backoffs,
+        check_not_silent,
+        synthesize,
+        write_explain,
+        write_motion,
+    )
+    from animegraph.synthesis.guide import guide_names
+    from ingest.formats.media import read_audio
+    from ingest.readers.common import read_labels
+
+    if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
+        raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
+                         f"{args.output.name!r}")
+    _check_timecode(args)
+    if args.method != "anime-graph":
+        return _synth_baseline(args)
+    method = args.search or ("window" if args.window is not None else "exact")
+    if args.window is not None and args.window < 1:
+        raise UsageError(f"animegraph synth: --window must be at least 1, got {args.window}")
+    if method == "window" and args.window is None:
+        raise UsageError("animegraph synth: --search window needs --window K")
+    if args.tolerance is not None:
+        if not 0.0 <= args.tolerance < 1.0:
+            raise UsageError(f"animegraph synth: --tolerance must be a number in [0, 1), got "
+                             f"{args.tolerance}")
+        if method != "exact":
+            raise UsageError(f"animegraph synth: --tolerance is only used by method='exact' "
+                             f"(the exact search), not {method}")
+    if args.k_best is not None and args.k_best < 1:
+        raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
+    sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
+    args.labels = sidecar or args.labels
+    k_best, path = _synth_path(args)
+    if args.context_ranking is not None and not k_best:
+        raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
+                         "averages; the paper's search (--exact, --window, --search) takes "
+                         "one anime a phone")
+    if args.helper is not None and k_best:
+        raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
+                         "phone) at its jumps; --k-best averages animes instead: give one")
+    if args.recentre is not None and not k_best:
+        raise UsageError("animegraph synth: --recentre changes how k-best averages "
+                         "animes; the paper's search (--exact, --window, --search) takes one "
+                         "anime a phone")
+    audio_cost = args.audio_cost or "plp"
+    path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
+    t0 = time.perf_counter()
+    model = Model.load(args.db)
+    _check_livelink_channels(args, model.names)
+    emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
+    if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
+            args.emotion_mix:
+        raise UsageError("animegraph synth: --emotion-mix takes name=weight pairs, e.g. "
+                         "happy=0.7,neutral=0.3")
+    emotion = check_names(emotion, model.emotion_model, model.graph.emotions)
+    audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
+    # Silence is the error, not a transcript that does not fit it: checked first.
+    check_not_silent(audio)
+    t_check = time.perf_counter()
+    mismatch = (_transcript_mismatch(args, audio, sample_rate) if args.text is not None
+                else None)
+    if mismatch is not None:
+        args.text = None  # speech alone: its default path and guide, as said
+        k_best, path = _synth_path(args)
+        path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
+    t0 += time.perf_counter() - t_check  # hearing the speech is not loading the database
+    if sidecar is not None:
+        print(f"animegraph: using the phone labels beside the speech, {sidecar} "
+              "(--labels or --text to use others)", file=sys.stderr)
+    labels = read_labels(args.labels) if args.labels else None
+    # Classify ("auto") before any progress line, so that a failure is one line.
+    choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
+                             audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
+                             sample_rate)
+    t_guide = time.perf_counter()
+    guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
+    t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
+    path += _guide_shortfall(guide_name, guide_names(guide))
+    print(f"animegraph: loaded {model.graph.n_nodes} animes in "
+          f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
+          f"of speech ...", file=sys.stderr)
+    options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
+                          smooth=not args.no_smooth, helper=args.helper or PostOptions.helper,
+                          recentre=args.recentre)
+    if choice.probabilities is not None:
+        probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
+        print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
+              file=sys.stderr)
+    from animegraph.search.kernels import compile_notice
+
+    notice = compile_notice(method)
+    if notice:
+        print(f"animegraph: {notice}", file=sys.stderr)
+    out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
+                     emotion=choice.target, method=method, window=args.window,
+                     tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
+                     phones_engine=args.phones_engine, audio_cost=audio_cost,
+                     candidates_from=args.candidates or "label", guide=guide,
+                     guide_blend=guide_blend, guide_rank=guide_rank,
+                     context=args.context_ranking, recognized_guide=_recognized_guide(args))
+    from animegraph.synthesis.path import CONTEXT_PHRASE
+
+    if mismatch is not None:
+        # Said only now that phones were found: on music or noise the one line is
+        # synthesize's "no speech found", not a transcript nothing could have matched.
+        print(f"animegraph: warning: {mismatch}: synthesizing from the speech alone",
+              file=sys.stderr)
+    if args.text is not None and out.segmentation == "recognized":
+        # The check passed, the alignment failed: what ran is the speech-alone path.
+        alone = argparse.Namespace(**{**vars(args), "text": None})
+        path, name, _, _ = _synth_plan(alone, _synth_path(alone)[1])
+        path += _guide_shortfall(name, out.guided)
+        path += " (transcript alignment failed: synthesized from the speech alone)"
+    if out.context_ranked and CONTEXT_PHRASE not in path:
+        path += f"; k-best{CONTEXT_PHRASE}"
+    elif not out.context_ranked:  # e.g. a transcript that failed to align: recognised
+        path = path.replace(CONTEXT_PHRASE, "")
+    if out.recentred:
+        why = "as asked" if args.recentre else f"{len(model.sessions)} speakers or sessions"
+        path += f"; each anime relative to its recording's mean pose ({why})"
+    print(f"animegraph: path: {path}", file=sys.stderr)
+    for warning in out.warnings:
+        print(f"animegraph: warning: {warning}", file=sys.stderr)
+    write_motion(out, model, args.output, timecode=args.timecode)
+    if isinstance(out.emotion.target, dict):
+        print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
+              f"{out.emotion.search}, emotion components blended from their mappings",
+              file=sys.stderr)
+    elif out.emotion.target is not None and out.emotion.search != out.emotion.target:
+        print(f"animegraph: the database has no {out.emotion.target} animes: preferred "
+              f"{out.emotion.search}, mapped into {out.emotion.target}", file=sys.stderr)
+    for note in out.notes:
+        print(f"animegraph: {note}", file=sys.stderr)
+    r = out.result
+    t = out.timings
+    print(f"animegraph: {len(out.phones)} phones ({out.segmentation}), {r.n_jumps} jump "
+          f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
+          f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
+          f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
+          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes, "
+             + ("cross-faded into its neighbours through the recorded transitions"
+                if out.cross_faded else "cut at its boundaries") + ")"
+             if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
+    missing = backoffs(out)
+    if missing:
+        print(f"animegraph: phones missing from the database, backed off: "
+              f"{', '.join(missing)}", file=sys.stderr)
+    if args.explain:
+        import pyarrow as pa
+
+        from animegraph.apps.tabular import format_table
+
+        print(f"path: {path}")
+        for warning in out.warnings:
+            print(f"warning: {warning}")
+        print(format_table(pa.Table.from_pylist(out.explain), "table",
+                           max_rows=len(out.explain)), end="")
+    if args.explain_json:
+        write_explain(out, args.explain_json)
+    return 0
+
+
+def _check_timecode(args: argparse.Namespace) -> None:
+    """``synth --timecode``: only with a ``.livelink.csv`` output, and a real timecode."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import parse_timecode
+
+    livelink = args.output.name.lower().endswith(LIVELINK_SUFFIX)
+    if args.timecode is None:
+        return
+    if not livelink:
+        raise UsageError(f"animegraph synth: --timecode needs -o NAME{LIVELINK_SUFFIX} "
+                         f"(Live Link Face CSV), got {args.output.name!r}")
+    try:
+        parse_timecode(args.timecode)
+    except ValueError as exc:
+        raise UsageError(f"animegraph synth: --timecode: {exc}") from None
+
+
+def _check_livelink_channels(args: argparse.Namespace, names) -> None:
+    """A ``.livelink.csv`` output needs an ARKit database: say so before synthesizing."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+    from ingest.formats.livelink import is_arkit
+
+    if args.output.name.lower().endswith(LIVELINK_SUFFIX) and not is_arkit(names):
+        raise UsageError(f"animegraph synth: -o {args.output.name}: Live Link Face CSV needs "
+                         f"a database of ARKit blendshapes (an iPhone capture); this one has "
+                         f"other channels (write .csv or .npz)")
+
+
+def _transcript_mismatch(args: argparse.Namespace, audio, sample_rate: int) -> str | None:
+    """Why ``--text`` is not what the speech says, as far as the phone engine checks
+    (:func:`ingest.speech.engines.check_transcript`); None if it is. ``audio`` is mono,
+    as :func:`ingest.formats.media.read_audio` gives it."""
+    from db.errors import DataError
+    from ingest.speech.engines import check_transcript
+
+    try:
+        check_transcript(audio, sample_rate, args.text, args.phones_engine)
+    except DataError as exc:
+        return str(exc)
+    return None
+
+
+def _synth_baseline(args: argparse.Namespace) -> int:
+    """``synth --method <baseline>``: motion from the audio alone by a fitted baseline."""
+    import time
+
+    import numpy as np
+
+    from animegraph.baselines.base import fitted_model
+    from animegraph.emotion.control import AUTO, check_names, parse_emotion
+    from animegraph.motion.files import write_channels
+    from animegraph.synthesis import to_world
+    from db.store import Database
+    from ingest.formats.media import read_audio
+
+    search_only = [flag for flag, on in (
+        ("--text", args.text is not None), ("--labels", args.labels is not None),
+        ("--exact", args.exact), ("--window", args.window is not None),
+        ("--search", args.search is not None), ("--explain", args.explain),
+        ("--emotion-mix", args.emotion_mix is not None),
+        ("--tolerance", args.tolerance is not None),
+        ("--explain-json", args.explain_json is not None),
+        ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
+        ("--helper", args.helper is not None),
+        ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
+        ("--audio-cost", args.audio_cost is not None),
+        ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
+        ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank),
+        ("--context-ranking", args.context_ranking is not None),
+        ("--recentre", args.recentre is not None)) if on]
+    if search_only:
+        raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
+                         f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "
+                         f"anime-graph, not {args.method}")
+    emotion = parse_emotion(args.emotion)
+    if emotion == AUTO or isinstance(emotion, dict):
+        raise UsageError(f"animegraph synth: --emotion {args.emotion} (classified or mixed) "
+                         f"only applies to --method anime-graph; name one emotion for "
+                         f"{args.method}")
+    db = Database.open(args.db)
+    _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
+    emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
+                          .column("emotion").to_pylist())
+    audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
+    t0 = time.perf_counter()
+    model = fitted_model(args.db, args.method, refit=args.refit)
+    t1 = time.perf_counter()
+    motion = model.predict(audio, sample_rate, emotion=emotion)
+    t2 = time.perf_counter()
+    head = db.arrays().get("head_reference")
+    write_channels(to_world(motion, model.groups_, head), model.fps_, model.channels_,
+                   model.kind_, args.output, extra={"method": np.array(args.method)},
+                   timecode=args.timecode)
+    print(f"animegraph: {args.method} model ready in {t1 - t0:.2f} s; synthesized "
+          f"{len(audio) / sample_rate:.1f} s of speech in {t2 - t1:.2f} s; wrote "
+          f"{args.output}", file=sys.stderr)
+    return 0
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from animegraph.apps.batch import BatchOptions, run_batch
+
+    if args.scheduler is None and args.workers < 1:
+        raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
+    options = BatchOptions(db=args.db, out=args.out, workers=args.workers,
+                           scheduler=args.scheduler, render=args.render, force=args.force)
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(f"animegraph: {line}", file=sys.stderr)
+
+    result = run_batch(args.script, options, say=say,
+                       progress=lambda total: _progress(total, args.quiet, "line",
+                                                      "batch: lines"))
+    for line in result.summary():
+        print(line)
+    return 0 if result.ok else 1
