@@ -378,6 +378,13 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
     take = read_livelink(out)
     assert take.names == ARKIT_CHANNELS
     assert format_timecode(take.frames[0], 60) == "01:00:00:00.000"
+    capsys.readouterr()
+    # C3D holds points, not blendshapes: said in one line before anything is synthesized.
+    assert main(["synth", str(tmp_path / "line.wav"), "--db", str(tmp_path / "db"), "-o",
+                 str(tmp_path / "line.c3d")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "C3D holds 3D points" in err[0], err
+    assert not (tmp_path / "line.c3d").exists()
     assert len(take.values) / (60 / np.median(np.diff(take.frames))) == pytest.approx(6.0,
                                                                                        abs=0.1)
     assert take.values[:, :52].min() >= 0 and take.values[:, :52].max() <= 1
@@ -400,6 +407,24 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
                  str(tmp_path / "batch"), "--workers", "1", "--quiet"]) == 0
     assert read_livelink(tmp_path / "batch" / "hello" / "motion.livelink.csv").names \
         == ARKIT_CHANNELS
+
+
+def test_output_formats_are_checked_before_the_work():
+    from animegraph.motion.files import check_output
+
+    points = ["a.x", "a.y", "a.z"]
+    for name, kind in (("m.c3d", "markers"), ("m.c3d", "landmarks"), ("m.csv", "curves"),
+                       ("m.NPZ", "curves")):
+        check_output(Path(name), points, kind)
+    check_output(Path("m.livelink.csv"), ARKIT_CHANNELS, "curves")
+    for name, names, kind, needle in (
+            ("m.c3d", ARKIT_CHANNELS, "curves", "C3D holds 3D points"),
+            ("m.livelink.csv", points, "markers", "needs a database of ARKit"),
+            ("m.txt", points, "markers", "must end in .c3d, .csv or .npz")):
+        with pytest.raises(ParameterError, match=needle):
+            check_output(Path(name), names, kind)
+    with pytest.raises(ParameterError, match="timecode goes only"):
+        check_output(Path("m.csv"), points, "markers", timecode="01:00:00:00")
 
 
 def test_synth_livelink_needs_an_arkit_database(capsys, tiny_db, tmp_path):

@@ -239,9 +239,9 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
     name = Path(path).name
     if name.lower().endswith(LIVELINK_SUFFIX):
         if not is_arkit(names):
-            raise ParameterError(f"Live Link Face CSV ({name}) needs a database of ARKit "
-                                 "blendshapes (an iPhone capture); this one has other "
-                                 "channels (write .csv or .npz)")
+            raise ParameterError("Live Link Face CSV needs a database of ARKit blendshapes "
+                                 "(an iPhone capture); this one has other channels (write "
+                                 ".csv or .npz)")
         return
     if timecode is not None:
         raise ParameterError(f"a timecode goes only into Live Link CSV (-o NAME"

@@ -1,5 +1,5 @@
-"""What the commands share: the usage error, progress bars and lines on stderr, and the
-phone labels found beside a speech or motion file."""
+"""What the commands share: the usage error, progress bars and lines on stderr, the
+phone labels found beside a speech or motion file, and the check of a motion output."""
 
 from __future__ import annotations
 
@@ -38,3 +38,15 @@ def _sidecar_labels(path: Path) -> Path | None:
         if beside.is_file():
             return beside
     return None
+
+
+def _check_output(command: str, output: Path, names, kind: str) -> None:
+    """``-o`` must hold the database's motion (C3D its points, Live Link CSV ARKit
+    blendshapes): said before the work, not after it."""
+    from animegraph.motion.files import check_output
+    from db.errors import ParameterError
+
+    try:
+        check_output(output, names, kind)
+    except ParameterError as exc:
+        raise UsageError(f"animegraph {command}: -o {output.name}: {exc}") from None

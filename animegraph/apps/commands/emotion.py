@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from animegraph.apps.commands.common import UsageError
+from animegraph.apps.commands.common import UsageError, _check_output
 
 
 def _cmd_classify(args: argparse.Namespace) -> int:
@@ -51,6 +51,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         raise UsageError("animegraph map-emotion: --from takes one emotion or auto")
     t0 = time.perf_counter()
     model = Model.load(args.db)
+    _check_output("map-emotion", args.output, model.names, model.kind)
     emotions = model.emotion_model
     if emotions is None:
         from db.errors import DataError

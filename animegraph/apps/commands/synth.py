@@ -8,7 +8,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from animegraph.apps.commands.common import UsageError, _progress, _sidecar_labels
+from animegraph.apps.commands.common import (
+    UsageError,
+    _check_output,
+    _progress,
+    _sidecar_labels,
+)
 from animegraph.apps.commands.synth_plan import (
     _guide_shortfall,
     _load_guide,
@@ -75,7 +80,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
     t0 = time.perf_counter()
     model = Model.load(args.db)
-    _check_livelink_channels(args, model.names)
+    _check_output("synth", args.output, model.names, model.kind)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
     if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
             args.emotion_mix:
@@ -206,17 +211,6 @@ def _check_timecode(args: argparse.Namespace) -> None:
         raise UsageError(f"animegraph synth: --timecode: {exc}") from None
 
 
-def _check_livelink_channels(args: argparse.Namespace, names) -> None:
-    """A ``.livelink.csv`` output needs an ARKit database: say so before synthesizing."""
-    from animegraph.motion.files import LIVELINK_SUFFIX
-    from ingest.formats.livelink import is_arkit
-
-    if args.output.name.lower().endswith(LIVELINK_SUFFIX) and not is_arkit(names):
-        raise UsageError(f"animegraph synth: -o {args.output.name}: Live Link Face CSV needs "
-                         f"a database of ARKit blendshapes (an iPhone capture); this one has "
-                         f"other channels (write .csv or .npz)")
-
-
 def _transcript_mismatch(args: argparse.Namespace, audio, sample_rate: int) -> str | None:
     """Why ``--text`` is not what the speech says, as far as the phone engine checks
     (:func:`ingest.speech.engines.check_transcript`); None if it is. ``audio`` is mono,
@@ -269,7 +263,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
-    _check_livelink_channels(args, db.table("channels").column("name").to_pylist())
+    _check_output("synth", args.output, db.table("channels").column("name").to_pylist(),
+                  db.manifest["kind"])
     emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
                           .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
