@@ -261,10 +261,12 @@ def test_cli_sql_info_and_formats(tiny_db, capsys, tmp_path):
     (["sql", "--db", "{db}", "SELECT nope FROM animes"], "query failed"),
     (["sql", "--db", "{tmp}", "SELECT 1"], "not an animegraph database"),
     (["info", "--db", "{tmp}/missing"], "does not exist"),
+    (["sql", "--db", "{db}", "SELECT 1", "--limit", "0"], "--limit must be at least 1"),
+    (["sql", "--db", "{db}", "SELECT 1", "--timeout", "-1"], "--timeout must be > 0"),
 ])
 def test_cli_errors_are_one_line(tiny_db, tmp_path, capsys, argv, needle):
     argv = [a.format(db=tiny_db[0], tmp=tmp_path) for a in argv]
-    assert main(argv) == 1
+    assert main(argv) == (2 if needle.startswith("--") else 1)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0]
 

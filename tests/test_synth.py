@@ -192,6 +192,7 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
     (["--exact", "--context-ranking"], "--context-ranking ranks the animes k-best averages"),
     (["--method", "mu-mlp", "--no-context-ranking"], "--context-ranking only applies"),
     (["--method", "mu-mlp", "--helper", "paper"], "--helper only applies"),
+    (["--method", "mu-mlp", "--phones-engine", "hama"], "--phones-engine only applies"),
 ])
 def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
     stem, _ = held_out

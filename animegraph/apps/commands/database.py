@@ -35,9 +35,13 @@ def _cmd_sql(args: argparse.Namespace) -> int:
 
     if args.format == "parquet" and args.output is None:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
-    limit = args.limit or ROW_LIMIT
+    if args.limit is not None and args.limit < 1:
+        raise UsageError(f"animegraph sql: --limit must be at least 1, got {args.limit}")
+    if args.timeout is not None and not args.timeout > 0:
+        raise UsageError(f"animegraph sql: --timeout must be > 0 seconds, got {args.timeout}")
+    limit = ROW_LIMIT if args.limit is None else args.limit
     results = run(Database.open(args.db), args.query, row_limit=limit,
-                  timeout=args.timeout or TIMEOUT_S)
+                  timeout=TIMEOUT_S if args.timeout is None else args.timeout)
     if args.output is not None and len(results) > 1:
         raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
     for i, result in enumerate(results):

@@ -13,16 +13,13 @@ def _cmd_classify(args: argparse.Namespace) -> int:
     import json
 
     from animegraph.emotion.control import classify_speech
-    from db.errors import DataError
     from db.store import Database
     from ingest.emotion.model import EmotionModel
     from ingest.formats.media import read_audio
 
     db = Database.open(args.db)
     model = EmotionModel.from_database(db)
-    audio, sample_rate = read_audio(args.audio)
-    if audio.ndim != 1:
-        raise DataError(f"{args.audio}: expected mono speech")
+    audio, sample_rate = read_audio(args.audio)  # mono, whatever the file holds
     probabilities = classify_speech(model, audio, sample_rate)
     if args.json:
         print(json.dumps(probabilities, indent=1))

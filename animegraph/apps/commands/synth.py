@@ -245,6 +245,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--emotion-mix", args.emotion_mix is not None),
         ("--tolerance", args.tolerance is not None),
         ("--explain-json", args.explain_json is not None),
+        ("--phones-engine", args.phones_engine is not None),
         ("--no-time-warp", args.no_time_warp), ("--no-blend", args.no_blend),
         ("--helper", args.helper is not None),
         ("--no-smooth", args.no_smooth), ("--k-best", args.k_best is not None),
