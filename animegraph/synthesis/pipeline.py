@@ -78,7 +78,7 @@ class Synthesis:
     warnings : tuple of str
         What may be wrong with the input: a transcript that could not be aligned (the
         phones were recognised), and the speech (:mod:`ingest.speech.quality`):
-        clipping, telephone band, little speech the phone engine knows.
+        clipping, telephone band, music, little speech the phone engine knows.
     context_ranked : bool
         With ``k_best``: the animes were ranked by phonetic context first
         (:func:`animegraph.search.k_best` with ``context``).
@@ -284,9 +284,10 @@ def synthesize(
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
-    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`);
-    with ``phone_rate`` (hama has heard the audio already) also music or an unmodelled
-    language."""
+    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`):
+    clipping, telephone band, music (from the sound alone); with ``phone_rate`` (hama has
+    heard the audio already) also little speech the phone engine knows (music, noise or an
+    unmodelled language)."""
     probs = None
     if phone_rate and ctc.available():
         try:
