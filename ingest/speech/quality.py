@@ -32,8 +32,10 @@ Each check gives one line saying what is wrong and what it costs, or nothing:
     :data:`MUSIC_PULSE`, judged on :data:`MIN_PULSE_AUDIO` s of audio or more.
 
   Measured (``scripts/eval_music.py``) on real speech and on real music from Debian's
-  game-music and sample packages. The phone rate alone could not tell them apart: music
-  with drums gave the recogniser 5 confident phones per second, GRID's speech 7.8.
+  game-music and sample packages: no real speech called music (2,387 clips and cuts,
+  noisy and reverberant ones too); 68 % of 955 music excerpts (3-10 s) named by these
+  two, 96 % by the phone rate, 97.6 % by either. The phone rate alone misses music with
+  drums and voices: 5 confident phones per second in session 16's probe, GRID's speech 7.8.
 
 Silence is an error elsewhere (:func:`animegraph.synthesis.query_phones`); a transcript
 that does not fit the audio is warned by :func:`ingest.speech.segment.segment`.
