@@ -284,10 +284,9 @@ def synthesize(
 
 
 def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool) -> list[str]:
-    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`):
-    clipping, telephone band, music (from the sound alone); with ``phone_rate`` (hama has
-    heard the audio already) also little speech the phone engine knows (music, noise or an
-    unmodelled language)."""
+    """Lines on what may be wrong with the input speech (:mod:`ingest.speech.quality`);
+    with ``phone_rate`` (hama has heard the audio already) also music or an unmodelled
+    language."""
     probs = None
     if phone_rate and ctc.available():
         try:
