@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import require_shared
 from scipy.signal import resample_poly
 
 from animegraph.apps.cli import main
 from ingest.formats.wav import write_wav
 from ingest.speech import ctc
-from ingest.speech.espeak import speak
+from ingest.speech.espeak import Voice, speak
 from ingest.speech.quality import (
     HIGH_BAND,
+    MIN_PHONE_RATE,
+    MUSIC_LOW_ENERGY,
+    MUSIC_PULSE,
     NARROW_BAND_DB,
     SPEECH_BAND,
     assess,
@@ -152,3 +156,104 @@ def test_no_speech_with_a_transcript_is_one_error(tiny_db, tmp_path, capsys, kin
     said = [ln for ln in err.splitlines() if "warning" in ln or "error" in ln]
     assert code == 1 and len(said) == 1, err
     assert ("the audio is silent" if kind == "silence" else "no speech found") in said[0]
+
+
+def _band(sr, seconds=6.0, *, drums=True, chords=True, bpm=120.0, seed=0):
+    """A music-like signal: a drum kit on eighth notes (kick, snare, hi-hat) and/or
+    sustained three-note chords with harmonics changing every 2 s."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * sr)
+    x = np.zeros(n)
+    step = 60 / bpm / 2
+    for i in range(int(seconds / step) if drums else 0):
+        at = int(i * step * sr)
+        k = np.arange(min(int(0.25 * sr), n - at)) / sr
+        if i % 4 == 0:  # kick: a falling 150 -> 50 Hz thump
+            x[at:at + k.size] += 0.9 * np.sin(2 * np.pi * (50 + 100 * np.exp(-k / 0.03)) * k) \
+                * np.exp(-k / 0.08)
+        if i % 4 == 2:  # snare: a noise burst
+            x[at:at + k.size] += 0.5 * rng.standard_normal(k.size) * np.exp(-k / 0.05)
+        x[at:at + k.size] += 0.15 * np.diff(rng.standard_normal(k.size + 1)) * np.exp(-k / 0.015)
+    t = np.arange(n) / sr
+    for j in range(int(np.ceil(seconds / 2)) if chords else 0):
+        lo, hi = j * 2 * sr, min(n, (j + 1) * 2 * sr)
+        root = (220.0, 174.6, 261.6, 196.0)[j % 4]
+        for f in (root, root * 1.26, root * 1.5):  # a major triad
+            for h in (1, 2, 3):
+                x[lo:hi] += 0.08 / h * np.sin(2 * np.pi * f * h * t[lo:hi])
+    return (0.8 * x / np.abs(x).max()).astype(np.float32)
+
+
+@pytest.mark.parametrize("kind", ["drums and chords", "drums", "chords"])
+def test_music_is_warned_from_the_sound_alone(kind):
+    """Music with a beat gave the phone engine 5 confident phones per second, above
+    MIN_PHONE_RATE: without a check of its own it was animated without a word."""
+    sr = 16000
+    band = _band(sr, drums="drums" in kind, chords="chords" in kind)
+    said = _warned(band, sr)
+    assert "sounds like music" in said and "lip-sync will be poor" in said, said
+    q = assess(band, sr)
+    if kind == "chords":  # sustained: the level never dips as speech's does
+        assert q.low_energy < MUSIC_LOW_ENERGY
+    else:  # a steady beat
+        assert q.pulse > MUSIC_PULSE
+
+
+def test_speech_is_not_called_music(speech):
+    audio, sr = speech
+    q = assess(audio, sr)
+    assert q.low_energy > MUSIC_LOW_ENERGY and q.pulse < MUSIC_PULSE
+    assert "music" not in _warned(audio, sr)
+    for voice in (Voice(name="en-us+m3"), Voice(rate=120), Voice(rate=300)):
+        utt = speak("Bob paid the big puppy a bit of apple pie. Maybe the boy bought a pipe.",
+                    voice)
+        assert "music" not in _warned(utt.audio.astype(np.float32), utt.sample_rate)
+    short = assess(_band(sr, 1.5), sr)  # too short to judge either way
+    assert short.low_energy is None and short.pulse is None
+
+
+def test_real_speech_is_not_called_music():
+    """Real speech from three corpora, calm and angry, English, German and Mandarin."""
+    from ingest.formats.media import read_audio
+
+    grid = sorted(require_shared("grid", "s1").glob("*.mp4"))[::80]
+    angry = sorted(require_shared("emodb", "wav").glob("*W*.wav"))[::6]
+    other = [require_shared("facegood", "wav", "1114_2_01.wav"),
+             *sorted(require_shared("talkingface").glob("*/audio_16k.wav"))[::3]]
+    for path in grid + angry + other:
+        audio, sr = read_audio(path, 16000) if path.suffix == ".mp4" else read_audio(path)
+        for start in range(0, max(1, audio.size - 10 * sr), 20 * sr):  # 10 s cuts
+            said = _warned(audio[start:start + 10 * sr], sr)
+            assert "music" not in said, (path.name, start, said)
+
+
+def _song(speech):
+    """The band with a voice over it, 10 dB under the band's peak: the phone engine
+    hears enough phones in it (as in real music with drums) that the phone rate says
+    nothing."""
+    audio, sr = speech
+    song = _band(sr)
+    song[sr: sr + audio.size] += 0.3 * audio / np.abs(audio).max()
+    return (0.9 * song / np.abs(song).max()).astype(np.float32), sr
+
+
+@needs_hama
+def test_music_the_phone_rate_misses(speech):
+    song, sr = _song(speech)
+    q = assess(song, sr, ctc.posteriors(song, sr))
+    assert q.phone_rate > MIN_PHONE_RATE  # the old check's silence
+    said = warnings_for(q)
+    assert len(said) == 1 and "sounds like music" in said[0]
+
+
+@needs_hama
+def test_synth_animates_music_and_says_so(tiny_db, speech, tmp_path, capsys):
+    song, sr = _song(speech)
+    wav = tmp_path / "song.wav"
+    write_wav(wav, song, sr)
+    out = tmp_path / "out.csv"
+    code = main(["synth", str(wav), "--db", str(tiny_db[0]), "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0 and out.exists(), err
+    assert "animegraph: warning: the audio sounds like music" in err
+    assert "Traceback" not in err

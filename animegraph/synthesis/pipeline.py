@@ -78,7 +78,7 @@ class Synthesis:
     warnings : tuple of str
         What may be wrong with the input: a transcript that could not be aligned (the
         phones were recognised), and the speech (:mod:`ingest.speech.quality`):
-        clipping, telephone band, little speech the phone engine knows.
+        clipping, telephone band, music, little speech the phone engine knows.
     context_ranked : bool
         With ``k_best``: the animes were ranked by phonetic context first
         (:func:`animegraph.search.k_best` with ``context``).
