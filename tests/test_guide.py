@@ -201,7 +201,8 @@ def test_cli_synth_guide(tiny_db, tiny_corpus, mlp, tmp_path, capsys):
                           (["--exact", "--guide-rank"], "--guide-rank needs a guide"),
                           (["--guide-blend", "2"], "must be in [0, 1]"),
                           (["--guide-blend", "0"], "nothing to do"),
-                          (["--method", "mu-mlp", "--guide", "mu-mlp"], "--guide only applies")):
+                          (["--method", "mu-mlp", "--guide", "mu-mlp"],
+                           "--phones-engine, --guide only apply")):
         assert main([*base, "-o", str(tmp_path / "x.npz"), *extra]) in (1, 2)
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and needle in err[0], err
@@ -382,10 +383,10 @@ def test_corrupt_stored_mu_mlp_is_one_line(tiny_db, tiny_corpus, mlp, tmp_path, 
                    path)
     wav = tmp_path / "speech.wav"
     shutil.copy(sorted((tiny_corpus / "clips").glob("*_neutral_1.wav"))[0], wav)
-    for extra in ([], ["--guide", "mu-mlp"], ["--method", "mu-mlp"]):
+    engine = ["--phones-engine", "pocketsphinx"]  # a baseline hears no phones
+    for extra in ([*engine], [*engine, "--guide", "mu-mlp"], ["--method", "mu-mlp"]):
         out = tmp_path / "out.npz"
-        assert main(["synth", str(wav), "--db", str(db), "--phones-engine", "pocketsphinx",
-                     "-o", str(out), *extra]) == 1
+        assert main(["synth", str(wav), "--db", str(db), "-o", str(out), *extra]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert "mu-mlp" in err[-1], err[-1]
         assert ("is implausible" if corrupt != "nan" else "values not finite") in err[-1]
