@@ -75,3 +75,20 @@ def test_corpus_synth_command(capsys, tmp_path):
     line = _one_line_error(capsys, main(argv), 1)
     assert "--force" in line
     assert main([*argv, "--force"]) == 0
+
+
+def test_a_bug_gives_the_caller_its_ctrl_c_handler_back(monkeypatch):
+    """main sets its own SIGINT handler; an unexpected exception (a bug, with its
+    traceback) must not leave it installed in the process that called main."""
+    import signal
+
+    import animegraph.apps.cli as cli
+
+    def bug(argv):
+        raise RuntimeError("a bug")
+
+    before = signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(cli, "_main", bug)
+    with pytest.raises(RuntimeError, match="a bug"):
+        cli.main(["info"])
+    assert signal.getsignal(signal.SIGINT) is before

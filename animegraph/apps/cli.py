@@ -92,6 +92,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # SIGINT stays ignored: the process is on its way out, and a Ctrl-C now would
         # turn the exit into a death by signal.
         return _interrupted()
+    except BaseException:  # a bug: the caller (a test, a notebook) gets its handler back
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        raise
     if previous is not None:
         signal.signal(signal.SIGINT, previous)
     return status
