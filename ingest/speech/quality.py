@@ -16,7 +16,9 @@ Each check gives one line saying what is wrong and what it costs, or nothing:
 * **no speech the phone engine knows** -- music, noise, or a language the engine does
   not model: the hama CTC model's confident phones per second of sound
   (:data:`MIN_PHONE_RATE`; its blank fills the rest). Conversational speech has
-  10-15 phones per second; the recogniser finds 9-13 on English and German here.
+  10-15 phones per second; the recogniser finds 9-13 on English and German here. Heavy
+  reverberation blurs phones too: 20 of 100 GRID clips with an RT60 of 1 s fell under
+  the rate (``scripts/eval_music.py``), so the line names it among the causes.
 * **music** -- two measures of the sound alone, after Scheirer & Slaney ("Construction
   and evaluation of a robust multifeature speech/music discriminator", ICASSP 1997: the
   "percentage of low-energy frames" and the "pulse metric"):
@@ -255,8 +257,9 @@ def warnings_for(quality: AudioQuality) -> list[str]:
                    "from 8 kHz): phones will be less reliable")
     if quality.phone_rate is not None and quality.phone_rate < MIN_PHONE_RATE:
         out.append(f"the phone engine finds little speech it knows ({quality.phone_rate:.1f} "
-                   f"phones per second of sound; speech has about 10): music, noise, or a "
-                   f"language it does not model? The lip-sync will be poor")
+                   f"phones per second of sound; speech has about 10): music, noise, a "
+                   f"reverberant room, or a language it does not model? The lip-sync will "
+                   f"be poor")
     if quality.low_energy is not None and quality.low_energy < MUSIC_LOW_ENERGY:
         out.append(f"the audio sounds like music or steady noise, not speech (its loudness "
                    f"hardly dips: {100 * quality.low_energy:.0f} % of frames are quiet, speech "
