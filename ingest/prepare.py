@@ -23,6 +23,7 @@ from ingest.motion import fill_gaps, resample_motion, stabilize_points
 from ingest.speech.engines import check_engine, check_transcript
 from ingest.speech.features import RastaPlpConfig, rasta_plp
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
+from ingest.speech.quality import is_silent
 from ingest.speech.segment import segment
 from ingest.speech.words import align_words
 
@@ -139,7 +140,7 @@ def prepare_clip(
         missing = resample_motion(missing.astype(np.float64), raw.fps, target) > 0.5
 
     audio = np.asarray(raw.audio, dtype=np.float32)
-    if not np.any(np.abs(audio) > 1e-4):
+    if is_silent(audio):
         raise DataError("the audio is silent")
     fallback: list[str] = []
     text = raw.text or None  # with a word alignment: its words (ingest.readers.common)

@@ -58,7 +58,7 @@ from ingest.speech import ctc
 from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.posteriorgram import compute as compute_posteriorgram
-from ingest.speech.quality import assess, warnings_for
+from ingest.speech.quality import assess, is_silent, warnings_for
 from ingest.speech.segment import segment
 
 
@@ -297,10 +297,8 @@ def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool, *,
             probs = ctc.posteriors(np.asarray(audio, dtype=np.float32), sample_rate)
         except DataError:
             probs = None
-    quality = assess(np.asarray(audio, dtype=np.float32), sample_rate, probs)
-    if not phones_heard:
-        quality = replace(quality, high_band_db=None)
-    return warnings_for(quality)
+    return warnings_for(assess(np.asarray(audio, dtype=np.float32), sample_rate, probs,
+                               band=phones_heard))
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
@@ -326,9 +324,10 @@ def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
 
 def check_not_silent(audio: np.ndarray) -> None:
     """Raise :class:`~db.errors.DataError` if ``audio`` (shape (n_samples,) or
-    (n_samples, n_channels), float in [-1, 1]) never rises above -80 dBFS: nothing to
+    (n_samples, n_channels), float in [-1, 1]) is silent
+    (:func:`ingest.speech.quality.is_silent`, under -80 dBFS): nothing to
     animate, whatever a transcript says (``synth`` asks before checking one)."""
-    if not np.any(np.abs(audio) > 1e-4):
+    if is_silent(audio):
         raise DataError("the audio is silent: there is no speech to animate")
 
 

@@ -51,8 +51,10 @@ import numpy as np
 
 from ingest.speech.phones import PHONES, SILENCE
 
-__all__ = ["AudioQuality", "assess", "warnings_for"]
+__all__ = ["AudioQuality", "assess", "is_silent", "warnings_for"]
 
+#: Peak under which audio is silence (-80 dBFS: below any recording's noise floor).
+SILENT_PEAK = 1e-4
 #: Shortest run of samples at the peak counted as a flat (clipped) top.
 CLIP_RUN = 3
 #: Share of samples in flat tops above which the audio is called clipped.
@@ -124,8 +126,14 @@ class AudioQuality:
     pulse: float | None = None  # onset envelope's largest correlation at PULSE_LAGS
 
 
+def is_silent(audio: np.ndarray) -> bool:
+    """True if no sample of ``audio`` (float, full scale 1, any shape) rises above
+    :data:`SILENT_PEAK`: nothing to segment or animate (ingest and ``synth`` refuse it)."""
+    return not np.any(np.abs(audio) > SILENT_PEAK)
+
+
 def assess(audio: np.ndarray, sample_rate: int,
-           posteriors: np.ndarray | None = None) -> AudioQuality:
+           posteriors: np.ndarray | None = None, *, band: bool = True) -> AudioQuality:
     """Measure ``audio`` for :func:`warnings_for`.
 
     Parameters
@@ -135,11 +143,14 @@ def assess(audio: np.ndarray, sample_rate: int,
     sample_rate : int
     posteriors : np.ndarray, shape (n_frames, len(PHONES)), optional
         From :func:`ingest.speech.ctc.posteriors`, for the phone rate.
+    band : bool, optional
+        Judge the band (default). Off when the phones come from labels: the band matters
+        to finding phones in the audio.
 
     Returns
     -------
     AudioQuality
-        ``high_band_db`` is None below 16 kHz, or with less than
+        ``high_band_db`` is None without ``band``, below 16 kHz, or with less than
         :data:`MIN_BAND_SOUND` s of sound in the first 30 s (too little to judge);
         ``phone_rate`` None without ``posteriors``; ``low_energy`` None under
         :data:`MIN_MUSIC_AUDIO` s of audio or without sound, ``pulse`` None under
@@ -157,7 +168,7 @@ def assess(audio: np.ndarray, sample_rate: int,
     high = None
     head = x[: 30 * sample_rate]
     n_frames = max(1, round(head.size / (SOUND_FRAME * sample_rate)))
-    if (sample_rate >= 16000 and head.size >= 256
+    if (band and sample_rate >= 16000 and head.size >= 256
             and _sound_seconds(head, sample_rate, n_frames) >= MIN_BAND_SOUND):
         power = np.abs(np.fft.rfft(head)) ** 2
         freqs = np.fft.rfftfreq(head.size, 1.0 / sample_rate)
