@@ -256,3 +256,30 @@ def test_a_kernel_that_moved_in_its_file_counts_as_cached(tmp_path, monkeypatch)
     (tmp_path / "problem.row_dist-501.py312.nbi").write_bytes(b"")
     (tmp_path / "problem.row_dist-501.py311.nbi").unlink()
     assert kernels.uncompiled_kernels() == ["problem.row_dist"]  # another kernel, Python
+
+
+
+def test_the_kernels_announced_are_the_ones_synthesis_compiles(tiny_db, tiny_corpus,
+                                                               monkeypatch):
+    """A kernel synthesis never calls is never cached by it, so counting it made every
+    ``synth`` announce a minute's compilation that never came."""
+    from animegraph.search import dtw, kernels
+    from animegraph.synthesis import Model, synthesize
+    from ingest.formats.phones_csv import read_phones_csv
+    from ingest.formats.wav import read_wav
+
+    names = {name for method in ("exact", "paper") for name, _ in kernels.kernel_caches(method)}
+    assert names and not kernels.NOT_IN_SYNTHESIS & names
+
+    def untouched(*args):
+        raise AssertionError("synthesis called a kernel said not to be its own")
+
+    monkeypatch.setattr(dtw, "_dtw_path", untouched)
+    clip = sorted((tiny_corpus / "clips").glob("*_happy_1.wav"))[0]
+    audio, rate = read_wav(clip)
+    labels = read_phones_csv(clip.with_name(clip.stem + ".phones.csv"))
+    model = Model.load(tiny_db[0])
+    for k_best in (None, 20):  # the paper's one anime a phone, and k-best
+        assert synthesize(model, audio, rate, labels=labels, k_best=k_best).motion.size
+    with pytest.raises(AssertionError, match="said not to be its own"):
+        dtw.dtw(audio[:40, None], audio[:30, None])  # the check above can fail
