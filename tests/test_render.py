@@ -467,3 +467,19 @@ def test_real_landmark_track_renders(tmp_path):
     _, vertices, _ = read_glb_frames(tmp_path / "lm.glb")
     # Every vertex is a landmark: the mesh follows the track (mouth opening included).
     assert np.abs(vertices - points).max() < 0.02
+
+
+def test_mesh_without_marker_map_is_said_before_the_motion_is_read(tmp_path, capsys,
+                                                                    monkeypatch):
+    import animegraph.motion.files as files
+
+    def unread(*args, **kwargs):
+        raise AssertionError("the motion was read before the command line was checked")
+
+    monkeypatch.setattr(files, "read_motion", unread)
+    mesh = tmp_path / "face.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    line = _one_line(capsys, main(["render", str(tmp_path / "motion.c3d"), "--mesh", str(mesh),
+                                   "-o", str(tmp_path / "face.mp4")]), 2)
+    assert "--mesh needs --marker-map" in line
+    assert not (tmp_path / "face.mp4").exists()

@@ -20,6 +20,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
     size = _size(args.size)
     if args.fps is not None and not args.fps > 0:
         raise UsageError(f"animegraph render: --fps must be > 0, got {args.fps}")
+    if args.mesh is not None and args.marker_map is None:
+        raise UsageError("animegraph render: --mesh needs --marker-map (which marker sits on "
+                         "which vertex)")
     if args.audio is not None and not args.audio.is_file():
         raise UsageError(f"animegraph render: --audio {args.audio} does not exist")
     if args.beside is not None and not args.beside.is_file():
@@ -73,9 +76,6 @@ def _rest(motion, args: argparse.Namespace):
     """Rest-frame marker positions for the deformer, or None for the mesh's own."""
     from animegraph.face.mesh import default_marker_map, load_mesh, motion_points, read_marker_map
 
-    if args.mesh is not None and args.marker_map is None:
-        raise UsageError("animegraph render: --mesh needs --marker-map (which marker sits on "
-                         "which vertex)")
     index = args.rest_frame
     if index is None and args.mesh is None:
         return None
