@@ -142,7 +142,7 @@ class IngestReport:
             if e:
                 clf = e["classifier"]
                 ids = " ".join(map(str, e["emotion_components"])) or "none"
-                out.append(f"emotion: components {ids} carry emotion, "
+                out.append(f"emotion: emotion components {ids}, "
                            f"{len(e['mappings'])} emotion mappings, "
                            + (f"classifier over {len(clf['classes'])} emotions" if clf
                               else "no classifier"))
@@ -165,7 +165,7 @@ class IngestReport:
             detail = (f", r {first.lag_confidence:.2f}, margin {first.lag_margin:.2f}"
                       if len(rows) == 1 or lags[0] == lags[-1] else "")
             out.append(f"lip-audio lag {found} ({basis}{detail}): "
-                       + ("applied to" if applied else "not applied to") + f" {len(rows)} clips")
+                       + ("applied to " if applied else "not applied to ") + _clips(len(rows)))
         return out
 
     def to_csv(self) -> str:
@@ -542,7 +542,7 @@ def build_database(
         raise ParameterError("no clips to build a database from")
     fps = fps or clips[0].fps
     say = say or (lambda _line: None)
-    say(f"ingest: decomposing the motion of {len(clips)} clips (PCA, then FastICA) ...")
+    say(f"ingest: decomposing the motion of {_clips(len(clips))} (PCA, then FastICA) ...")
     motion = np.concatenate([c.motion for c in clips]).astype(np.float64)
     model = MotionDecomposer(variance=config.variance, random_state=config.random_state)
     model.fit(motion)
@@ -589,6 +589,10 @@ def _save_report(db_path: Path, report: IngestReport) -> None:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     with atomic_write(folder / f"ingest-{stamp}-{os.getpid()}.csv") as handle:
         handle.write(report.to_csv().encode())
+
+
+def _clips(n: int) -> str:
+    return f"{n} clip" if n == 1 else f"{n} clips"
 
 
 def _version() -> str:

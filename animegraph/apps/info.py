@@ -88,8 +88,8 @@ def info_lines(info: dict) -> list[str]:
         lines.append(line)
     emotion = info.get("emotion")
     if emotion:
-        lines.append(f"emotion:    components {_ids(emotion['emotion_components'])} carry "
-                     f"emotion, {_ids(emotion['speech_components'])} speech (Cao et al. "
+        lines.append(f"emotion:    emotion components {_ids(emotion['emotion_components'])}, "
+                     f"speech components {_ids(emotion['speech_components'])} (Cao et al. "
                      "§5.1.3: emotion = differs between emotions after DTW alignment; "
                      "speech = its Eq. 9 reconstruction captures mouth motion)")
         lines.append(f"mappings:   {len(emotion['mappings'])} (F_ij, §5.2)"
