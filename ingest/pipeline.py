@@ -218,6 +218,7 @@ def _note(checked: str, clip: PreparedClip) -> str:
     if gaps:
         notes.append(f"no face in {gaps} frames (filled as gaps)")
     notes.append(clip.extra.get("transcript_fallback", ""))
+    notes.append(clip.extra.get("transcript_doubt", ""))
     return "; ".join(n for n in notes if n)
 
 

@@ -20,6 +20,7 @@ from db.errors import DataError, ParameterError
 from ingest.clip import ChannelSchema, RawClip
 from ingest.formats.phones_csv import Segment
 from ingest.motion import fill_gaps, resample_motion, stabilize_points
+from ingest.speech.ctc import doubts
 from ingest.speech.engines import check_engine, check_transcript
 from ingest.speech.features import RastaPlpConfig, rasta_plp
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
@@ -145,26 +146,31 @@ def prepare_clip(
     fallback: list[str] = []
     text = raw.text or None  # with a word alignment: its words (ingest.readers.common)
     words = raw.words if raw.words and not raw.phones else None
-    if words and text:
-        # Word times are taken as given, but not that the words are what is said (an
-        # alignment of another utterance, or one that leaves words out): the transcript
-        # check that guards every alignment, with recognition as the fallback.
-        try:
-            check_transcript(audio, raw.sample_rate, text, phones_engine)
-        except DataError as exc:
-            fallback.append(f"word alignment failed: {exc}; fell back to phone recognition")
-            words = text = None
-    if words:
-        phones, n_even = align_words(audio, raw.sample_rate, words)
-        method = "aligned-words"
-        if n_even:
-            extra["words_spread_evenly"] = n_even
-    else:
-        phones, method = segment(audio, raw.sample_rate, text=text,
-                                 labels=list(raw.phones) if raw.phones else None,
-                                 engine=phones_engine, on_fallback=fallback.append)
-    if fallback:  # kept (in the clips table too) and said in the clip's report row
+    with doubts() as doubted:  # a transcript aligned, but perhaps another utterance's
+        if words and text:
+            # Word times are taken as given, but not that the words are what is said (an
+            # alignment of another utterance, or one that leaves words out): the transcript
+            # check that guards every alignment, with recognition as the fallback.
+            try:
+                check_transcript(audio, raw.sample_rate, text, phones_engine)
+            except DataError as exc:
+                fallback.append(f"word alignment failed: {exc}; fell back to phone "
+                                "recognition")
+                words = text = None
+        if words:
+            phones, n_even = align_words(audio, raw.sample_rate, words)
+            method = "aligned-words"
+            if n_even:
+                extra["words_spread_evenly"] = n_even
+        else:
+            phones, method = segment(audio, raw.sample_rate, text=text,
+                                     labels=list(raw.phones) if raw.phones else None,
+                                     engine=phones_engine, on_fallback=fallback.append)
+    # Kept (in the clips table too) and said in the clip's report row.
+    if fallback:
         extra["transcript_fallback"] = fallback[0]
+    elif doubted:
+        extra["transcript_doubt"] = doubted[0]
     if all(p.phone == "SIL" for p in phones):
         raise DataError("no speech found in the audio (every phone is silence)")
     prosody = rasta_plp(audio, raw.sample_rate, config=prosody_config)

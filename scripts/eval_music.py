@@ -111,7 +111,7 @@ def _cuts(x: np.ndarray, rng: np.random.Generator, per: int) -> Iterator[tuple[f
 # ---------------------------------------------------------------------------------------------
 
 
-def _room(rng: np.random.Generator, rt60: float) -> np.ndarray:
+def room_impulse(rng: np.random.Generator, rt60: float) -> np.ndarray:
     """A room's impulse response: noise decaying 60 dB in ``rt60`` s after the direct sound."""
     t = np.arange(int(rt60 * RATE)) / RATE
     h = rng.standard_normal(t.size) * np.exp(-6.9 * t / rt60)
@@ -146,10 +146,11 @@ def speech(shared: Path, rng: np.random.Generator) -> Iterator[tuple[str, np.nda
     for path in grid[2::8]:
         x = _at_16k(path)
         for rt60 in (0.5, 1.0):
-            yield f"GRID, reverberation {rt60:g} s", fftconvolve(x, _room(rng, rt60))[: x.size]
+            yield (f"GRID, reverberation {rt60:g} s",
+                   fftconvolve(x, room_impulse(rng, rt60))[: x.size])
     for path in sorted((shared / "talkingface").glob("*/audio_16k.wav")):
         x = _at_16k(path)
-        y = fftconvolve(x, _room(rng, 1.0))[: x.size]
+        y = fftconvolve(x, room_impulse(rng, 1.0))[: x.size]
         for start in range(0, y.size - 5 * RATE, 5 * RATE):
             yield "talkingface, reverberation 1 s (5 s)", y[start:start + 5 * RATE]
 

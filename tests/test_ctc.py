@@ -208,6 +208,32 @@ def test_the_default_aligner_rejects_a_transcript_of_another_utterance(spoken, c
     assert segment(fox.audio, fox.sample_rate, text=wrong)[1] == "recognized"
 
 
+
+#: A GRID clip and a sentence of the same grammar with three words changed: within
+#: MAX_ALIGN_LOSS, beyond DOUBT_ALIGN_LOSS (0.02 and 0.47 nats/frame when measured).
+LOOK_ALIKE = ("lbbk5s.mp4", "lay blue by k five soon", "lay blue by y four please")
+
+
+def test_a_look_alike_transcript_is_aligned_with_a_warning(caplog):
+    """Such a transcript passes the check, so it is aligned; but it is said, once, to
+    whoever collects the doubts (synth's warnings, a clip's report line), else logged."""
+    from ingest.formats.media import read_audio
+
+    name, own, other = LOOK_ALIKE
+    audio, rate = read_audio(require_shared("grid", "s1", name))
+    assert (ctc.transcript_loss(audio, rate, own) < ctc.DOUBT_ALIGN_LOSS
+            < ctc.transcript_loss(audio, rate, other) < ctc.MAX_ALIGN_LOSS)
+    with ctc.doubts() as doubted:
+        ctc.check_transcript(audio, rate, own)
+        assert doubted == []
+        ctc.check_transcript(audio, rate, other)
+        _, method = segment(audio, rate, text=other)  # checked again by the aligner
+    assert method == "aligned" and len(doubted) == 1
+    assert "fits the audio poorly" in doubted[0] and "this recording's" in doubted[0]
+    with caplog.at_level(logging.WARNING, logger="ingest.speech.ctc"):
+        ctc.check_transcript(audio, rate, other)
+    assert "fits the audio poorly" in caplog.text
+
 def test_too_long_transcript_is_a_data_error(spoken):
     u = spoken[0]
     short = u.audio[: int(0.3 * u.sample_rate)]

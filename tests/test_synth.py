@@ -547,3 +547,23 @@ def test_cli_synth_helper(tiny_db, held_out, tmp_path, capsys):
     assert main(argv) == 0
     with np.load(out) as f:
         assert not np.array_equal(anchored, f["motion"])
+
+
+
+def test_synth_says_once_that_a_transcript_may_be_another_utterances(tiny_db, tmp_path,
+                                                                     capsys):
+    from conftest import require_shared
+    from test_ctc import LOOK_ALIKE
+
+    from ingest.speech import ctc
+
+    if not ctc.available():
+        pytest.skip("hama's native library is absent")
+    name, own, other = LOOK_ALIKE
+    video = require_shared("grid", "s1", name)  # synth hears a video's sound track
+    for text, said in ((own, 0), (other, 1)):
+        assert main(["synth", str(video), "--db", str(tiny_db[0]), "--text", text, "-o",
+                     str(tmp_path / "out.npz"), "--guide", "none"]) == 0
+        err = capsys.readouterr().err
+        assert err.count("fits the audio poorly") == said, err
+        assert "phonetic context" in err  # aligned: the transcript's path all the same

@@ -223,3 +223,28 @@ def test_a_word_alignment_is_checked_against_the_speech(tmp_path):
         clip = write_align(wrong)
         assert clip.segmentation == "recognized", wrong
         assert clip.extra["transcript_fallback"].startswith("word alignment failed: ")
+
+
+
+@pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
+def test_a_look_alike_transcript_is_said_on_the_clips_line(tmp_path):
+    """A transcript of another utterance of the same grammar passes the check (it is
+    aligned), and the clip's report line says it may not be this recording's."""
+    from conftest import require_shared
+    from test_ctc import LOOK_ALIKE
+
+    from ingest.formats.media import read_audio
+    from ingest.formats.wav import write_wav
+    from ingest.pipeline import _note
+    from ingest.prepare import prepare_clip
+
+    name, own, other = LOOK_ALIKE
+    audio, rate = read_audio(require_shared("grid", "s1", name))
+    folder = _landmark_folder(tmp_path / "corpus", seconds=len(audio) / rate)
+    write_wav(folder / "audio_16k.wav", audio, rate)
+    for text, doubted in ((own, False), (other, True)):
+        (folder / "transcript.txt").write_text(text)
+        clip = prepare_clip(load(discover([folder])[0]))
+        assert clip.segmentation == "aligned" and "transcript_fallback" not in clip.extra
+        assert ("transcript_doubt" in clip.extra) == doubted
+        assert ("fits the audio poorly" in _note("", clip)) == doubted

@@ -219,10 +219,12 @@ def synthesize(
                              sample_rate)
     emotion = choice.search
     fallback: list[str] = []  # why a transcript was not aligned: the first warning
-    phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
-                                       prosody_config=prosody_config, engine=phones_engine,
-                                       posteriorgram=posteriorgram, on_fallback=fallback.append)
-    warnings = fallback + input_warnings(audio, sample_rate,
+    with ctc.doubts() as doubted:  # ... or why it was, with doubt
+        phones, method_used = query_phones(audio, sample_rate, text=text, labels=labels,
+                                           prosody_config=prosody_config, engine=phones_engine,
+                                           posteriorgram=posteriorgram,
+                                           on_fallback=fallback.append)
+    warnings = fallback + doubted + input_warnings(audio, sample_rate,
                                          method_used == "recognized" or posteriorgram,
                                          phones_heard=method_used != "labels")
     if (guide is None and text is not None and method_used == "recognized"

@@ -44,6 +44,9 @@ recognises instead. The share test is needed because CTC's blank absorbs speech 
 transcript leaves out at little cost per frame: a one-word transcript of a six-word GRID
 sentence falls only 0.3 nats per frame below recognition, inside the right transcripts'
 range.
+An alignment that passes but falls more than :data:`DOUBT_ALIGN_LOSS` below is aligned
+with a warning (collected by :func:`doubts`): most transcripts of another utterance of the
+same words' kind land there.
 ``hama`` missing or unusable raises :class:`~db.errors.DataError` with one line saying so.
 """
 
@@ -77,6 +80,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "FRAME_RATE",
     "IPA_TO_ARPABET",
+    "DOUBT_ALIGN_LOSS",
     "MAX_ALIGN_LOSS",
     "MIN_PAUSE",
     "MIN_PHONE_SHARE",
@@ -85,6 +89,7 @@ __all__ = [
     "align",
     "available",
     "check_transcript",
+    "doubts",
     "phone_share",
     "posteriors",
     "recognize",
@@ -112,8 +117,15 @@ PAUSE_SMOOTH = 5
 #: Largest drop (nats per frame) of an alignment's log posterior below the free best
 #: path before the transcript is judged not to match the audio. Measured: 0.11-0.29 with
 #: the right transcript (eSpeak speech, GRID), 0.9-1.9 with another sentence of the
-#: synthetic corpus; GRID's look-alike sentences (same grammar) 0.21-0.51 are not caught.
+#: synthetic corpus; GRID's look-alike sentences (same grammar) 0.17-0.97, most of them
+#: above :data:`DOUBT_ALIGN_LOSS`.
 MAX_ALIGN_LOSS = 0.6
+#: Above this drop (and up to :data:`MAX_ALIGN_LOSS`) the transcript is aligned with a
+#: warning that it may be another utterance's. Measured (``scripts/eval_transcript_check.py``,
+#: 100 GRID clips): right transcripts 0.00-0.35 (clean, white noise to 0 dB SNR, telephone
+#: band), above 0.4 on 1 clip of 100 with room echo of RT60 0.5 s and 7 with 1 s; the next
+#: clip's transcript (same grammar and length) above it on 68 of 100 (18 above the limit).
+DOUBT_ALIGN_LOSS = 0.4
 #: Fewest phones a transcript must name per phone heard (the unconstrained best path's,
 #: repeats merged). Measured (``scripts/eval_transcript_check.py``): right transcripts
 #: 0.81-1.24 on 100 GRID clips (0.86-2.83 in white noise down to 0 dB SNR; noise hides
@@ -701,7 +713,37 @@ def _fit_transcript(samples16: np.ndarray, text: str, *, check: bool = True,
     if check and len(phones) < MIN_PHONE_SHARE * heard:
         raise DataError(f"the transcript {text[:60]!r} does not match the audio (it names "
                         f"{len(phones)} phones, the audio has about {heard}: words missing?)")
+    if check and loss > DOUBT_ALIGN_LOSS:
+        _doubt(f"the transcript {text[:60]!r} fits the audio poorly (alignment {loss:.2f} "
+               "nats/frame below recognition): is it this recording's? (much room echo "
+               "can also do this)")
     return phones, labels, starts, log_probs, loss
+
+
+#: Where :func:`doubts` collects the lines of transcripts aligned with doubt (None: logged).
+_DOUBTS: contextvars.ContextVar[list[str] | None] = contextvars.ContextVar(
+    "transcript_doubts", default=None)
+
+
+@contextmanager
+def doubts() -> Iterator[list[str]]:
+    """Collect, instead of logging them as warnings, the lines of the transcripts that
+    :func:`check_transcript` or :func:`align` passed with doubt (:data:`DOUBT_ALIGN_LOSS`)
+    in this block, each once: for a caller that reports them its own way."""
+    found: list[str] = []
+    token = _DOUBTS.set(found)
+    try:
+        yield found
+    finally:
+        _DOUBTS.reset(token)
+
+
+def _doubt(line: str) -> None:
+    found = _DOUBTS.get()
+    if found is None:
+        logger.warning("%s", line)
+    elif line not in found:
+        found.append(line)
 
 
 def phone_share(audio: np.ndarray, sample_rate: int, text: str) -> float:
