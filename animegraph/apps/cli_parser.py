@@ -10,17 +10,17 @@ from pathlib import Path
 
 from animegraph import __version__
 from animegraph.apps.commands.common import UsageError
-from animegraph.apps.commands.corpus import _cmd_corpus_synth, _cmd_demo
+from animegraph.apps.commands.corpus import cmd_corpus_synth, cmd_demo
 from animegraph.apps.commands.database import (
-    _cmd_fit,
-    _cmd_info,
-    _cmd_ingest,
-    _cmd_query,
-    _cmd_sql,
+    cmd_fit,
+    cmd_info,
+    cmd_ingest,
+    cmd_query,
+    cmd_sql,
 )
-from animegraph.apps.commands.emotion import _cmd_classify, _cmd_map_emotion
-from animegraph.apps.commands.render import _cmd_plot, _cmd_render
-from animegraph.apps.commands.synth import _cmd_batch, _cmd_synth
+from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
+from animegraph.apps.commands.render import cmd_plot, cmd_render
+from animegraph.apps.commands.synth import cmd_batch, cmd_synth
 from animegraph.baselines import METHODS
 from ingest.speech.engines import ENGINES
 
@@ -114,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="worker processes (default: all cores)")
     synth.add_argument("--force", action="store_true", help="replace a non-empty --out")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
-    synth.set_defaults(func=_cmd_corpus_synth)
+    synth.set_defaults(func=cmd_corpus_synth)
 
     demo = sub.add_parser(
         "demo", help="run the pipeline on the embedded default data",
@@ -128,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--workers", type=_whole_number, default=None,
                       help="worker processes for the corpus (default: all cores)")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
-    demo.set_defaults(func=_cmd_demo)
+    demo.set_defaults(func=cmd_demo)
 
     ing = sub.add_parser(
         "ingest", help="add mocap clips + speech to a motion database",
@@ -161,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
-    ing.set_defaults(func=_cmd_ingest)
+    ing.set_defaults(func=cmd_ingest)
 
     sql = sub.add_parser(
         "sql", help="run a read-only SQL query on a database",
@@ -183,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default 100000)")
     sql.add_argument("--timeout", type=_number, default=None,
                      help="seconds before the query is interrupted (default 60)")
-    sql.set_defaults(func=_cmd_sql)
+    sql.set_defaults(func=cmd_sql)
 
     syn = sub.add_parser(
         "synth", help="facial motion for speech, from a motion database",
@@ -277,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--guide-rank", action="store_true",
                      help="also rank each phone's animes by their distance to the guide's "
                      "motion beside the audio cost (trajectory-guided selection)")
-    syn.set_defaults(func=_cmd_synth)
+    syn.set_defaults(func=cmd_synth)
 
     bat = sub.add_parser(
         "batch", help="animate every line of a dialogue script, in parallel (Dask)",
@@ -300,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also render an MP4 preview of each line (default none)")
     bat.add_argument("--force", action="store_true", help="redo lines finished before")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
-    bat.set_defaults(func=_cmd_batch)
+    bat.set_defaults(func=cmd_batch)
     _add_animator_commands(sub)
     cls = sub.add_parser(
         "classify", help="the emotion of speech, by the database's classifier",
@@ -314,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
     _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
-    cls.set_defaults(func=_cmd_classify)
+    cls.set_defaults(func=cmd_classify)
 
     mp = sub.add_parser(
         "map-emotion", help="change the emotion of a facial motion",
@@ -333,7 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the speech of IN, for --from auto")
     mp.add_argument("-o", "--output", required=True, type=Path,
                     help="motion file to write (.c3d, .csv or .npz)")
-    mp.set_defaults(func=_cmd_map_emotion)
+    mp.set_defaults(func=cmd_map_emotion)
     fit = sub.add_parser(
         "fit", help="fit a baseline method on a database and store it there",
         description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
@@ -343,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _db_option(fit)
     fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
-    fit.set_defaults(func=_cmd_fit)
+    fit.set_defaults(func=cmd_fit)
 
     info = sub.add_parser(
         "info", help="summarise a database",
@@ -353,7 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _db_option(info)
     info.add_argument("--json", action="store_true", help="the summary as JSON")
-    info.set_defaults(func=_cmd_info)
+    info.set_defaults(func=cmd_info)
     return parser
 
 
@@ -401,7 +401,7 @@ def _add_animator_commands(sub) -> None:
     qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
                      help="seconds of motion and speech kept around each anime (0.25)")
     qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
-    qry.set_defaults(func=_cmd_query)
+    qry.set_defaults(func=cmd_query)
 
     ren = sub.add_parser(
         "render", help="render motion: MP4/GIF of a shaded face, glTF, OBJ frames",
@@ -438,7 +438,7 @@ def _add_animator_commands(sub) -> None:
     ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
     ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
     ren.add_argument("--quiet", action="store_true", help="no progress bar")
-    ren.set_defaults(func=_cmd_render)
+    ren.set_defaults(func=cmd_render)
 
     plo = sub.add_parser(
         "plot", help="plot motion against ground truth, with phones and jump matches",
@@ -455,4 +455,4 @@ def _add_animator_commands(sub) -> None:
                      help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
     plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
     plo.add_argument("--title", default="", help="title")
-    plo.set_defaults(func=_cmd_plot)
+    plo.set_defaults(func=cmd_plot)
