@@ -10,17 +10,17 @@ from pathlib import Path
 
 from animegraph import __version__
 from animegraph.apps.commands.common import UsageError
-from animegraph.apps.commands.corpus import _cmd_corpus_synth, _cmd_demo
+from animegraph.apps.commands.corpus import cmd_corpus_synth, cmd_demo
 from animegraph.apps.commands.database import (
-    _cmd_fit,
-    _cmd_info,
-    _cmd_ingest,
-    _cmd_query,
-    _cmd_sql,
+    cmd_fit,
+    cmd_info,
+    cmd_ingest,
+    cmd_query,
+    cmd_sql,
 )
-from animegraph.apps.commands.emotion import _cmd_classify, _cmd_map_emotion
-from animegraph.apps.commands.render import _cmd_plot, _cmd_render
-from animegraph.apps.commands.synth import _cmd_batch, _cmd_synth
+from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
+from animegraph.apps.commands.render import cmd_plot, cmd_render
+from animegraph.apps.commands.synth import cmd_batch, cmd_synth
 from animegraph.baselines import METHODS
 from ingest.speech.engines import ENGINES
 
@@ -72,6 +72,16 @@ def _phones_engine_option(parser, transcript: str) -> None:
                         "its wheel) or pocketsphinx")
 
 
+def _db_option(parser: argparse.ArgumentParser) -> None:
+    """``--db``, which may be left out: ``$ANIMEGRAPH_DB``, else the demo's database."""
+    from animegraph.apps.cache import DB_ENV, default_db_dir
+
+    parser.add_argument("--db", type=Path, default=None,
+                        help=f"database folder (default: ${DB_ENV} if set, else the one "
+                        f"'animegraph demo' builds, {default_db_dir()})")
+    parser.set_defaults(default_db=True)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every sub-command."""
     from animegraph.apps.cache import DB_ENV, default_db_dir
@@ -88,6 +98,24 @@ def build_parser() -> argparse.ArgumentParser:
                         help="more log output (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
+    _add_corpus(sub)
+    _add_demo(sub)
+    _add_ingest(sub)
+    _add_sql(sub)
+    _add_synth(sub)
+    _add_batch(sub)
+    _add_query(sub)
+    _add_render(sub)
+    _add_plot(sub)
+    _add_classify(sub)
+    _add_map_emotion(sub)
+    _add_fit(sub)
+    _add_info(sub)
+    return parser
+
+
+def _add_corpus(sub) -> None:
+    """``corpus`` and its one action, ``corpus synth``."""
     corpus = sub.add_parser("corpus", help="corpus tools",
                             description="Corpus tools: 'corpus synth' generates the "
                             "synthetic expressive speech + facial motion-capture corpus.")
@@ -114,8 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="worker processes (default: all cores)")
     synth.add_argument("--force", action="store_true", help="replace a non-empty --out")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
-    synth.set_defaults(func=_cmd_corpus_synth)
+    synth.set_defaults(func=cmd_corpus_synth)
 
+
+def _add_demo(sub) -> None:
+    """``demo``: the pipeline on the embedded default data."""
     demo = sub.add_parser(
         "demo", help="run the pipeline on the embedded default data",
         description="Create the default corpus in the cache folder (once), then run the "
@@ -128,8 +159,11 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--workers", type=_whole_number, default=None,
                       help="worker processes for the corpus (default: all cores)")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
-    demo.set_defaults(func=_cmd_demo)
+    demo.set_defaults(func=cmd_demo)
 
+
+def _add_ingest(sub) -> None:
+    """``ingest``: clips and their speech into a database."""
     ing = sub.add_parser(
         "ingest", help="add mocap clips + speech to a motion database",
         description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; landmarks "
@@ -161,8 +195,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
-    ing.set_defaults(func=_cmd_ingest)
+    ing.set_defaults(func=cmd_ingest)
 
+
+def _add_sql(sub) -> None:
+    """``sql``: read-only SQL over a database."""
     sql = sub.add_parser(
         "sql", help="run a read-only SQL query on a database",
         description="Run SQL (DuckDB) over the database's tables: clips, animes, frames, "
@@ -183,8 +220,11 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default 100000)")
     sql.add_argument("--timeout", type=_number, default=None,
                      help="seconds before the query is interrupted (default 60)")
-    sql.set_defaults(func=_cmd_sql)
+    sql.set_defaults(func=cmd_sql)
 
+
+def _add_synth(sub) -> None:
+    """``synth``: facial motion for speech (the Anime Graph, or a baseline)."""
     syn = sub.add_parser(
         "synth", help="facial motion for speech, from a motion database",
         description="Segment the speech into phones, search the Anime Graph for the best "
@@ -245,6 +285,13 @@ def build_parser() -> argparse.ArgumentParser:
                      "components ('anchored-nonspeech')")
     syn.add_argument("--no-smooth", action="store_true", help="skip low-pass smoothing")
     _phones_engine_option(syn, "a --text")
+    _synth_beyond_paper_options(syn)
+    syn.set_defaults(func=cmd_synth)
+
+
+def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
+    """``synth``'s options beyond the paper: k-best, its ranking and recentring, the
+    audio cost, the candidates and the guiding baseline."""
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (20 suits real data with recognized phones)")
@@ -277,8 +324,10 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--guide-rank", action="store_true",
                      help="also rank each phone's animes by their distance to the guide's "
                      "motion beside the audio cost (trajectory-guided selection)")
-    syn.set_defaults(func=_cmd_synth)
 
+
+def _add_batch(sub) -> None:
+    """``batch``: every line of a dialogue script."""
     bat = sub.add_parser(
         "batch", help="animate every line of a dialogue script, in parallel (Dask)",
         description="Animate a dialogue script (CSV or JSON Lines: id, text, and optional "
@@ -300,75 +349,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also render an MP4 preview of each line (default none)")
     bat.add_argument("--force", action="store_true", help="redo lines finished before")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
-    bat.set_defaults(func=_cmd_batch)
-    _add_animator_commands(sub)
-    cls = sub.add_parser(
-        "classify", help="the emotion of speech, by the database's classifier",
-        description="Print the probability of each of the database's emotions for the "
-        "speech (any rate, mono or stereo), by the classifier trained on the database's "
-        "clips at ingest: prosodic and spectral features with 50 frame-averaged cepstrum "
-        "coefficients, normalised per speaker (an unknown speaker by the training "
-        "population), and a linear SVM (Cao et al. 2005 §6 uses an SVM on the signal's "
-        "mean, variance, RMS and first 500 real-cepstrum coefficients).",
-    )
-    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
-    _db_option(cls)
-    cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
-    cls.set_defaults(func=_cmd_classify)
-
-    mp = sub.add_parser(
-        "map-emotion", help="change the emotion of a facial motion",
-        description="Map the emotion components of a motion (as written by 'synth': .c3d, "
-        ".csv or .npz, in the database's channels) from one emotion to another with the "
-        "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
-    )
-    mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
-    _db_option(mp)
-    mp.add_argument("--to", required=True, metavar="E|E=W,...",
-                    help="target emotion, or a mix such as happy=0.7,neutral=0.3")
-    mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
-                    help="emotion of IN; 'auto' (default): classify --audio if given, else "
-                    "the emotion whose mean emotion components are nearest IN's")
-    mp.add_argument("--audio", type=Path, default=None,
-                    help="the speech of IN, for --from auto")
-    mp.add_argument("-o", "--output", required=True, type=Path,
-                    help="motion file to write (.c3d, .csv or .npz)")
-    mp.set_defaults(func=_cmd_map_emotion)
-    fit = sub.add_parser(
-        "fit", help="fit a baseline method on a database and store it there",
-        description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
-        "av-hmm: Terissi et al. 2013) on every clip of a database and store the "
-        "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
-        "--method' uses it (and fits it on first use if absent).",
-    )
-    _db_option(fit)
-    fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
-    fit.set_defaults(func=_cmd_fit)
-
-    info = sub.add_parser(
-        "info", help="summarise a database",
-        description="Say which database is used (--db, $ANIMEGRAPH_DB or the demo's) and "
-        "summarise it: clips, emotions, phones, motion components, emotion model and "
-        "fitted baselines.",
-    )
-    _db_option(info)
-    info.add_argument("--json", action="store_true", help="the summary as JSON")
-    info.set_defaults(func=_cmd_info)
-    return parser
+    bat.set_defaults(func=cmd_batch)
 
 
-def _db_option(parser: argparse.ArgumentParser) -> None:
-    """``--db``, which may be left out: ``$ANIMEGRAPH_DB``, else the demo's database."""
-    from animegraph.apps.cache import DB_ENV, default_db_dir
-
-    parser.add_argument("--db", type=Path, default=None,
-                        help=f"database folder (default: ${DB_ENV} if set, else the one "
-                        f"'animegraph demo' builds, {default_db_dir()})")
-    parser.set_defaults(default_db=True)
-
-
-def _add_animator_commands(sub) -> None:
-    """``query``, ``render`` and ``plot``: the animator's commands."""
+def _add_query(sub) -> None:
+    """``query``: anime nodes or clips, exported for other tools."""
     from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
 
     qry = sub.add_parser(
@@ -401,8 +386,11 @@ def _add_animator_commands(sub) -> None:
     qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
                      help="seconds of motion and speech kept around each anime (0.25)")
     qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
-    qry.set_defaults(func=_cmd_query)
+    qry.set_defaults(func=cmd_query)
 
+
+def _add_render(sub) -> None:
+    """``render``: motion onto a face mesh (video, glTF, OBJ frames)."""
     ren = sub.add_parser(
         "render", help="render motion: MP4/GIF of a shaded face, glTF, OBJ frames",
         description="Carry marker or landmark motion onto a face mesh by RBF scattered-data "
@@ -438,8 +426,11 @@ def _add_animator_commands(sub) -> None:
     ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
     ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
     ren.add_argument("--quiet", action="store_true", help="no progress bar")
-    ren.set_defaults(func=_cmd_render)
+    ren.set_defaults(func=cmd_render)
 
+
+def _add_plot(sub) -> None:
+    """``plot``: motion over the speech and its phones."""
     plo = sub.add_parser(
         "plot", help="plot motion against ground truth, with phones and jump matches",
         description="Plot facial measures (mouth opening, width, brow; or the busiest "
@@ -455,4 +446,70 @@ def _add_animator_commands(sub) -> None:
                      help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
     plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
     plo.add_argument("--title", default="", help="title")
-    plo.set_defaults(func=_cmd_plot)
+    plo.set_defaults(func=cmd_plot)
+
+
+def _add_classify(sub) -> None:
+    """``classify``: the emotion of speech."""
+    cls = sub.add_parser(
+        "classify", help="the emotion of speech, by the database's classifier",
+        description="Print the probability of each of the database's emotions for the "
+        "speech (any rate, mono or stereo), by the classifier trained on the database's "
+        "clips at ingest: prosodic and spectral features with 50 frame-averaged cepstrum "
+        "coefficients, normalised per speaker (an unknown speaker by the training "
+        "population), and a linear SVM (Cao et al. 2005 §6 uses an SVM on the signal's "
+        "mean, variance, RMS and first 500 real-cepstrum coefficients).",
+    )
+    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
+    _db_option(cls)
+    cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
+    cls.set_defaults(func=cmd_classify)
+
+
+def _add_map_emotion(sub) -> None:
+    """``map-emotion``: a motion mapped into another emotion."""
+    mp = sub.add_parser(
+        "map-emotion", help="change the emotion of a facial motion",
+        description="Map the emotion components of a motion (as written by 'synth': .c3d, "
+        ".csv or .npz, in the database's channels) from one emotion to another with the "
+        "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
+    )
+    mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
+    _db_option(mp)
+    mp.add_argument("--to", required=True, metavar="E|E=W,...",
+                    help="target emotion, or a mix such as happy=0.7,neutral=0.3")
+    mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
+                    help="emotion of IN; 'auto' (default): classify --audio if given, else "
+                    "the emotion whose mean emotion components are nearest IN's")
+    mp.add_argument("--audio", type=Path, default=None,
+                    help="the speech of IN, for --from auto")
+    mp.add_argument("-o", "--output", required=True, type=Path,
+                    help="motion file to write (.c3d, .csv or .npz)")
+    mp.set_defaults(func=cmd_map_emotion)
+
+
+def _add_fit(sub) -> None:
+    """``fit``: a baseline fitted and stored with a database."""
+    fit = sub.add_parser(
+        "fit", help="fit a baseline method on a database and store it there",
+        description="Fit a baseline (mu-mlp: Hong et al. 2002; hier-pca: Cosker et al.; "
+        "av-hmm: Terissi et al. 2013) on every clip of a database and store the "
+        "trained model as arrays in DB/baselines/<version>/<method>.parquet; 'synth "
+        "--method' uses it (and fits it on first use if absent).",
+    )
+    _db_option(fit)
+    fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
+    fit.set_defaults(func=cmd_fit)
+
+
+def _add_info(sub) -> None:
+    """``info``: what a database holds."""
+    info = sub.add_parser(
+        "info", help="summarise a database",
+        description="Say which database is used (--db, $ANIMEGRAPH_DB or the demo's) and "
+        "summarise it: clips, emotions, phones, motion components, emotion model and "
+        "fitted baselines.",
+    )
+    _db_option(info)
+    info.add_argument("--json", action="store_true", help="the summary as JSON")
+    info.set_defaults(func=cmd_info)

@@ -11,7 +11,9 @@ its command line (:mod:`animegraph.apps.cli_parser`) and chosen it.
 * :mod:`.common` -- what they share: :class:`~.common.UsageError`, progress bars and
   lines, the phone labels beside a file.
 
-Every command is a function of the parsed arguments that returns the exit status. Heavy
+Every command is a function of the parsed arguments that returns the exit status,
+``cmd_<command>`` (``cmd_synth``, ``cmd_map_emotion``). What crosses a module
+boundary has a public name; a leading underscore stays in its own module. Heavy
 modules are imported inside the functions, so that ``animegraph --help`` starts quickly;
 nothing here imports :mod:`animegraph.apps.cli`.
 """

@@ -11,7 +11,7 @@ class UsageError(Exception):
     """The command line itself is wrong (exit status 2)."""
 
 
-def _progress(total: int, quiet: bool, unit: str, step: str):
+def progress(total: int, quiet: bool, unit: str, step: str):
     """A progress bar factory labelled with its step (every step over ~2 s has one)."""
     from functools import partial
 
@@ -21,7 +21,7 @@ def _progress(total: int, quiet: bool, unit: str, step: str):
                    dynamic_ncols=True)
 
 
-def _say(line: str) -> None:
+def say(line: str) -> None:
     print(f"animegraph: {line}", file=sys.stderr)
 
 
@@ -30,7 +30,7 @@ def _say(line: str) -> None:
 SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
 
 
-def _sidecar_labels(path: Path) -> Path | None:
+def sidecar_labels(path: Path) -> Path | None:
     """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``path`` (speech for
     ``synth``, motion for ``render`` and ``plot``), if there is one."""
     for suffix in SIDECAR_LABELS:
@@ -40,13 +40,13 @@ def _sidecar_labels(path: Path) -> Path | None:
     return None
 
 
-def _check_output(command: str, output: Path, names, kind: str) -> None:
+def check_output(command: str, output: Path, names, kind: str) -> None:
     """``-o`` must hold the database's motion (C3D its points, Live Link CSV ARKit
     blendshapes): said before the work, not after it."""
-    from animegraph.motion.files import check_output
+    from animegraph.motion.files import check_output as check_motion_output
     from db.errors import ParameterError
 
     try:
-        check_output(output, names, kind)
+        check_motion_output(output, names, kind)
     except ParameterError as exc:
         raise UsageError(f"animegraph {command}: -o {output.name}: {exc}") from None

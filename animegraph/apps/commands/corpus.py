@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from animegraph.apps.commands.common import UsageError, _progress, _say
+from animegraph.apps.commands.common import UsageError, progress, say
 
 
-def _cmd_corpus_synth(args: argparse.Namespace) -> int:
+def cmd_corpus_synth(args: argparse.Namespace) -> int:
     from ingest.corpus.synthetic import CorpusConfig, generate_corpus, plan_corpus
 
     if args.scale == "paper" and (args.sentences is not None or args.parallel is not None):
@@ -20,9 +20,9 @@ def _cmd_corpus_synth(args: argparse.Namespace) -> int:
     )
     n = len(plan_corpus(config))
     summary = generate_corpus(args.out, config, workers=args.workers, force=args.force,
-                              progress=_progress(n, args.quiet, "clip",
-                                                  "generating the corpus"),
-                              say=None if args.quiet else _say)
+                              progress=progress(n, args.quiet, "clip",
+                                                "generating the corpus"),
+                              say=None if args.quiet else say)
     print(f"wrote {summary.n_clips} clips of {summary.n_sentences} sentences, "
           f"{summary.duration_s / 60:.1f} min of speech, to {summary.path}")
     return 0
@@ -35,14 +35,14 @@ def _default_parallel(args: argparse.Namespace) -> int:
     return min(10, sentences)
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
     from animegraph.apps.demo import run_demo
 
-    def progress(total: int, step: str = "clips"):
-        return _progress(total, args.quiet, "clip", step)
+    def demo_progress(total: int, step: str = "clips"):
+        return progress(total, args.quiet, "clip", step)
 
     result = run_demo(args.out, emotion=args.emotion, text=args.text, workers=args.workers,
-                      progress=progress, say=print)
+                      progress=demo_progress, say=print)
     for line in result.report():
         print(line)
     return 0

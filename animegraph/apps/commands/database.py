@@ -6,10 +6,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from animegraph.apps.commands.common import UsageError, _progress, _say
+from animegraph.apps.commands.common import UsageError, progress, say
 
 
-def _cmd_ingest(args: argparse.Namespace) -> int:
+def cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
     from ingest.plausible import Limits
 
@@ -20,15 +20,15 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
                           posteriorgrams=args.posteriorgrams)
     wait = {} if args.wait is None else {"wait": args.wait}
     report = ingest(args.sources, args.db, config, workers=args.workers,
-                    progress=lambda total: _progress(total, args.quiet, "clip",
-                                                     "ingest: reading clips"),
-                    say=None if args.quiet else _say, **wait)
+                    progress=lambda total: progress(total, args.quiet, "clip",
+                                                    "ingest: reading clips"),
+                    say=None if args.quiet else say, **wait)
     for line in report.lines():
         print(line)
     return 1 if report.count("rejected") else 0
 
 
-def _cmd_sql(args: argparse.Namespace) -> int:
+def cmd_sql(args: argparse.Namespace) -> int:
     from animegraph.apps.tabular import format_table
     from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
@@ -57,7 +57,7 @@ def _cmd_sql(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_query(args: argparse.Namespace) -> int:
+def cmd_query(args: argparse.Namespace) -> int:
     from animegraph.apps.query import QuerySpec, build_sql, export_hits, run_query
     from animegraph.apps.tabular import format_table
     from db.store import Database
@@ -79,14 +79,14 @@ def _cmd_query(args: argparse.Namespace) -> int:
     sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
     if args.export is not None:
         rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
-                           progress=lambda total: _progress(total, False, "hit",
-                                                            "exporting"))
+                           progress=lambda total: progress(total, False, "hit",
+                                                           "exporting"))
         print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
               file=sys.stderr)
     return 0
 
 
-def _cmd_fit(args: argparse.Namespace) -> int:
+def cmd_fit(args: argparse.Namespace) -> int:
     import time
 
     from animegraph.baselines.base import fitted_model, model_path
@@ -98,7 +98,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_info(args: argparse.Namespace) -> int:
+def cmd_info(args: argparse.Namespace) -> int:
     import json
 
     from animegraph.apps.info import database_info, info_lines

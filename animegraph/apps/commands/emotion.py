@@ -6,10 +6,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from animegraph.apps.commands.common import UsageError, _check_output
+from animegraph.apps.commands.common import UsageError, check_output
 
 
-def _cmd_classify(args: argparse.Namespace) -> int:
+def cmd_classify(args: argparse.Namespace) -> int:
     import json
 
     from animegraph.emotion.control import classify_speech
@@ -29,7 +29,7 @@ def _cmd_classify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_map_emotion(args: argparse.Namespace) -> int:
+def cmd_map_emotion(args: argparse.Namespace) -> int:
     import time
 
     from animegraph.emotion.control import check_names, classify_speech, map_motion, parse_emotion
@@ -48,7 +48,7 @@ def _cmd_map_emotion(args: argparse.Namespace) -> int:
         raise UsageError("animegraph map-emotion: --from takes one emotion or auto")
     t0 = time.perf_counter()
     model = Model.load(args.db)
-    _check_output("map-emotion", args.output, model.names, model.kind)
+    check_output("map-emotion", args.output, model.names, model.kind)
     emotions = model.emotion_model
     if emotions is None:
         from db.errors import DataError

@@ -7,10 +7,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from animegraph.apps.commands.common import UsageError, _progress, _sidecar_labels
+from animegraph.apps.commands.common import UsageError, progress, sidecar_labels
 
 
-def _cmd_render(args: argparse.Namespace) -> int:
+def cmd_render(args: argparse.Namespace) -> int:
     import time
 
     from animegraph.face.render import deformer_for, render_motion
@@ -40,8 +40,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
                             rest_frame=_rest(motion, args))
     out = render_motion(motion, args.output, deformer=deformer, audio=args.audio,
                         fps=args.fps, phones=phones, size=size, force=args.force,
-                        progress=lambda total: _progress(total, args.quiet, "frame",
-                                                              "rendering"),
+                        progress=lambda total: progress(total, args.quiet, "frame",
+                                                        "rendering"),
                         beside=args.beside)
     what = "curves" if deformer is None else f"{deformer.mesh.name}, " \
         f"{deformer.markers.n_markers} markers"
@@ -68,7 +68,7 @@ def _phone_track(args: argparse.Namespace) -> list[dict]:
         raise UsageError(f"animegraph {args.command}: give --explain or --labels, not both")
     labels = args.labels
     if labels is None and args.explain is None:
-        labels = _sidecar_labels(args.motion)  # what 'query --export' writes by each snippet
+        labels = sidecar_labels(args.motion)  # what 'query --export' writes by each snippet
     return read_phone_track(labels=labels, explain=args.explain)
 
 
@@ -103,7 +103,7 @@ def _check_db_channels(db_path: Path, motion) -> None:
                         f"{len(motion.names)} are not in it ({', '.join(extra[:3])} ...)")
 
 
-def _cmd_plot(args: argparse.Namespace) -> int:
+def cmd_plot(args: argparse.Namespace) -> int:
     from animegraph.apps.plots import plot_motion
     from animegraph.motion.files import read_motion
     from ingest.formats.media import read_audio

@@ -10,20 +10,20 @@ import sys
 
 from animegraph.apps.commands.common import (
     UsageError,
-    _check_output,
-    _progress,
-    _sidecar_labels,
+    check_output,
+    progress,
+    sidecar_labels,
 )
 from animegraph.apps.commands.synth_plan import (
-    _guide_shortfall,
-    _load_guide,
-    _recognized_guide,
-    _synth_path,
-    _synth_plan,
+    guide_shortfall,
+    load_guide,
+    recognized_guide,
+    synth_path,
+    synth_plan,
 )
 
 
-def _cmd_synth(args: argparse.Namespace) -> int:
+def cmd_synth(args: argparse.Namespace) -> int:
     import time
 
     import numpy as np
@@ -62,9 +62,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                              f"(the exact search), not {method}")
     if args.k_best is not None and args.k_best < 1:
         raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
-    sidecar = _sidecar_labels(args.audio) if args.labels is None and args.text is None else None
+    sidecar = sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
-    k_best, path = _synth_path(args)
+    k_best, path = synth_path(args)
     if args.context_ranking is not None and not k_best:
         raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
                          "averages; the paper's search (--exact, --window, --search) takes "
@@ -77,10 +77,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          "animes; the paper's search (--exact, --window, --search) takes one "
                          "anime a phone")
     audio_cost = args.audio_cost or "plp"
-    path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
+    path, guide_name, guide_blend, guide_rank = synth_plan(args, path)
     t0 = time.perf_counter()
     model = Model.load(args.db)
-    _check_output("synth", args.output, model.names, model.kind)
+    check_output("synth", args.output, model.names, model.kind)
     emotion = parse_emotion(args.emotion_mix if args.emotion_mix is not None else args.emotion)
     if args.emotion_mix is not None and not isinstance(emotion, dict) and "=" not in \
             args.emotion_mix:
@@ -95,8 +95,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                 else None)
     if mismatch is not None:
         args.text = None  # speech alone: its default path and guide, as said
-        k_best, path = _synth_path(args)
-        path, guide_name, guide_blend, guide_rank = _synth_plan(args, path)
+        k_best, path = synth_path(args)
+        path, guide_name, guide_blend, guide_rank = synth_plan(args, path)
     t0 += time.perf_counter() - t_check  # hearing the speech is not loading the database
     if sidecar is not None:
         print(f"animegraph: using the phone labels beside the speech, {sidecar} "
@@ -107,9 +107,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
                              sample_rate)
     t_guide = time.perf_counter()
-    guide = _load_guide(args.db, guide_name, asked=args.guide is not None)
+    guide = load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
-    path += _guide_shortfall(guide_name, guide_names(guide))
+    path += guide_shortfall(guide_name, guide_names(guide))
     print(f"animegraph: loaded {model.graph.n_nodes} animes in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -131,7 +131,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
                      guide_blend=guide_blend, guide_rank=guide_rank,
-                     context=args.context_ranking, recognized_guide=_recognized_guide(args))
+                     context=args.context_ranking, recognized_guide=recognized_guide(args))
     from animegraph.synthesis.path import CONTEXT_PHRASE
 
     if mismatch is not None:
@@ -142,8 +142,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.text is not None and out.segmentation == "recognized":
         # The check passed, the alignment failed: what ran is the speech-alone path.
         alone = argparse.Namespace(**{**vars(args), "text": None})
-        path, name, _, _ = _synth_plan(alone, _synth_path(alone)[1])
-        path += _guide_shortfall(name, out.guided)
+        path, name, _, _ = synth_plan(alone, synth_path(alone)[1])
+        path += guide_shortfall(name, out.guided)
         path += " (transcript alignment failed: synthesized from the speech alone)"
     if out.context_ranked and CONTEXT_PHRASE not in path:
         path += f"; k-best{CONTEXT_PHRASE}"
@@ -266,7 +266,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
-    _check_output("synth", args.output, db.table("channels").column("name").to_pylist(),
+    check_output("synth", args.output, db.table("channels").column("name").to_pylist(),
                   db.manifest["kind"])
     emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
                           .column("emotion").to_pylist())
@@ -286,7 +286,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_batch(args: argparse.Namespace) -> int:
+def cmd_batch(args: argparse.Namespace) -> int:
     from animegraph.apps.batch import BatchOptions, run_batch
 
     if args.scheduler is None and args.workers < 1:
@@ -299,8 +299,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             print(f"animegraph: {line}", file=sys.stderr)
 
     result = run_batch(args.script, options, say=say,
-                       progress=lambda total: _progress(total, args.quiet, "line",
-                                                      "batch: lines"))
+                       progress=lambda total: progress(total, args.quiet, "line",
+                                                       "batch: lines"))
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1

@@ -28,7 +28,7 @@ def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
     return given, args.labels is not None or args.text is not None, searched
 
 
-def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
+def synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
     """The k-best setting ``synth`` uses, and a line saying which path runs and why."""
     from animegraph.synthesis.path import synthesis_path  # shared with batch
 
@@ -37,7 +37,7 @@ def _synth_path(args: argparse.Namespace) -> tuple[int | None, str]:
                           context=args.context_ranking)
 
 
-def _synth_plan(args: argparse.Namespace, path: str) -> tuple[str, str | None, float, bool]:
+def synth_plan(args: argparse.Namespace, path: str) -> tuple[str, str | None, float, bool]:
     """The path line completed with the audio cost, candidates and guide, and the guide
     (:func:`_synth_guide`)."""
     from animegraph.synthesis.path import guide_line
@@ -76,7 +76,7 @@ def _synth_guide(args: argparse.Namespace) -> tuple[str | None, float, bool]:
     return name, share, args.guide_rank
 
 
-def _load_guide(db, name: str | None, *, asked: bool = True):
+def load_guide(db, name: str | None, *, asked: bool = True):
     """The guiding baseline stored with the database ``db`` (mu-mlp and ppg-ridge restored
     without scikit-learn), fitted and stored on first use (saying so on stderr), or None;
     for a mean of several (``mu-mlp+ppg-ridge``), the tuple of those that could be had.
@@ -86,7 +86,7 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
     if name is None:
         return None
     if "+" in name:
-        parts = [_load_guide(db, part, asked=asked) for part in name.split("+")]
+        parts = [load_guide(db, part, asked=asked) for part in name.split("+")]
         parts = [p for p in parts if p is not None]
         return None if not parts else parts[0] if len(parts) == 1 else tuple(parts)
     from animegraph.baselines.stored import load_forward, model_path, record_unfit, unfit_reason
@@ -116,7 +116,7 @@ def _load_guide(db, name: str | None, *, asked: bool = True):
         return None
 
 
-def _guide_shortfall(name: str | None, got: tuple[str, ...]) -> str:
+def guide_shortfall(name: str | None, got: tuple[str, ...]) -> str:
     """What the path line adds when parts of the guide ``name`` could not be had."""
     missing = [part for part in (name or "").split("+") if part and part not in got]
     if not missing:
@@ -124,7 +124,7 @@ def _guide_shortfall(name: str | None, got: tuple[str, ...]) -> str:
     return f"; but without its {' and '.join(missing)} guide, which could not be fitted"
 
 
-def _recognized_guide(args: argparse.Namespace):
+def recognized_guide(args: argparse.Namespace):
     """With ``--text`` and no guide: what loads the speech-alone path's guide, for
     ``synthesize`` to call if the transcript cannot be aligned after all (the check
     before it passed, PocketSphinx found no path); else None."""
@@ -135,4 +135,4 @@ def _recognized_guide(args: argparse.Namespace):
     name = audio_only_guide(known_phones=False, searched=_synth_given(args)[2])
     if name is None:
         return None
-    return lambda: _load_guide(args.db, name, asked=False)
+    return lambda: load_guide(args.db, name, asked=False)
