@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["usable_cpus"]
+__all__ = ["thread_budget", "usable_cpus"]
+
+
+def thread_budget() -> int:
+    """Threads this process should run at once: ``OMP_NUM_THREADS`` where it is set to a
+    whole number (a user's limit, or the share of the cores a worker process was given,
+    :func:`ingest.workers.limit_threads`), else :func:`usable_cpus`."""
+    given = os.environ.get("OMP_NUM_THREADS", "")
+    return max(1, int(given)) if given.strip().isdigit() else usable_cpus()
 
 
 def usable_cpus(cap: int = 8) -> int:

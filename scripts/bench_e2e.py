@@ -5,6 +5,7 @@ Usage::
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
                                 [--phones-engine auto|hama|pocketsphinx] [--k-best K]
                                 [--guide mu-mlp|av-hmm|ppg-ridge|mu-mlp+ppg-ridge [--guide-blend W]]
+                                [--audio RECORDING]
 
 Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
@@ -15,6 +16,8 @@ the process's CPU time (less sensitive to the machine's load than the wall time)
 apart) guides the animes' choice, as ``synth --guide``. Last, hama's model call alone on
 the same audio: the single-threaded floor under the ``segment`` phase when phones are
 recognised or a transcript is checked.
+``--audio`` times a recording instead (a WAV or a video's sound track; phones recognised):
+hama hears one longer than ``ingest.speech.ctc.CHUNK_SECONDS`` in pieces, on every core.
 DB defaults to the default database (built on first use, as by ``animegraph demo``).
 """
 
@@ -37,6 +40,9 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--segmentation", choices=("recognized", "aligned", "labels"),
                         default="recognized")
+    parser.add_argument("--audio", type=Path, default=None,
+                        help="a recording to time instead of the eSpeak sentence (phones "
+                             "recognised)")
     parser.add_argument("--phones-engine", default=None,
                         help="phone engine (ingest.speech.engines.ENGINES; default auto)")
     parser.add_argument("--k-best", type=int, default=None,
@@ -60,7 +66,16 @@ def main() -> int:
 
         corpus, _, _ = ensure_default_corpus()
         args.db, _ = ensure_default_db(corpus)
+    if args.audio is not None and args.segmentation != "recognized":
+        parser.error("--audio has no transcript or labels: --segmentation recognized")
     utt = speak(TEXT)
+    if args.audio is not None:
+        from types import SimpleNamespace
+
+        from ingest.formats.media import read_audio
+
+        audio, rate = read_audio(args.audio)
+        utt = SimpleNamespace(audio=audio, sample_rate=rate)
     seconds = len(utt.audio) / utt.sample_rate
     model = Model.load(args.db)
     kwargs = {"phones_engine": args.phones_engine, "k_best": args.k_best}

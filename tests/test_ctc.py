@@ -136,6 +136,30 @@ def test_threads_each_take_a_session_and_get_what_one_thread_gets(spoken):
     model.limit = limit
 
 
+
+def test_long_audio_is_heard_in_pieces_on_every_core_as_on_one(spoken, monkeypatch):
+    """Pieces of a long recording run on threads of their own, with the one-thread
+    result bit for bit (the same pieces, each on a session of its own)."""
+    u = spoken[1]
+    gap = np.zeros(u.sample_rate // 2, dtype=np.float32)
+    long = np.concatenate([np.concatenate([u.audio, gap])] * 14)  # about 60 s: 3 pieces
+    assert len(long) / u.sample_rate > 2 * ctc.CHUNK_SECONDS
+    results, threads = [], []
+    real_pool = __import__("concurrent.futures").futures.ThreadPoolExecutor
+
+    def counting_pool(n, **kwargs):
+        threads.append(n)
+        return real_pool(n, **kwargs)
+
+    monkeypatch.setattr("concurrent.futures.ThreadPoolExecutor", counting_pool)
+    for budget in (1, 2):
+        monkeypatch.setattr(ctc, "thread_budget", lambda budget=budget: budget)
+        ctc.forget()
+        results.append(ctc.posteriors(long, u.sample_rate))
+    ctc.forget()
+    np.testing.assert_array_equal(results[0], results[1])
+    assert threads == ([2] if ctc._model().limit >= 2 else [])
+
 def test_recognize_is_roughly_right(spoken):
     for u in spoken:
         segments = ctc.recognize(u.audio, u.sample_rate)

@@ -42,3 +42,14 @@ def test_pools_loaded_before_the_limit_are_limited_too():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
     assert out == ["1", "1"], out
+
+
+def test_thread_budget_follows_omp_num_threads(monkeypatch):
+    from db.system import thread_budget, usable_cpus
+
+    for given, expected in (("3", 3), ("0", 1), (" 2 ", 2), ("lots", usable_cpus()),
+                            ("", usable_cpus())):
+        monkeypatch.setenv("OMP_NUM_THREADS", given)
+        assert thread_budget() == expected, given
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert thread_budget() == usable_cpus()

@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from db.errors import DataError
-from db.system import usable_cpus
+from db.system import thread_budget, usable_cpus
 from ingest.formats.phones_csv import Segment
 from ingest.speech.g2p import pronounce, transcript_words
 from ingest.speech.phones import PHONES, SILENCE
@@ -258,13 +258,18 @@ def _model() -> _Model:
 
 
 def _log_probs(samples: np.ndarray) -> np.ndarray:
-    """16 kHz float audio -> the model's log posteriors, shape (n_frames, n_symbols)."""
+    """16 kHz float audio -> the model's log posteriors, shape (n_frames, n_symbols).
+
+    Audio longer than :data:`CHUNK_SECONDS` is heard in pieces, on as many threads as
+    this process has cores for (:func:`db.system.thread_budget`; each thread its own
+    session, :class:`_Model`): the same pieces as one after another, so the same output.
+    """
     model = _model()
     size = int(CHUNK_SECONDS * SAMPLE_RATE)
     context = int(CHUNK_CONTEXT * SAMPLE_RATE)
     hop = SAMPLE_RATE // FRAME_RATE
-    pieces = []
-    for a in range(0, max(len(samples), 1), size):
+
+    def piece(a: int) -> np.ndarray:
         lo, hi = max(0, a - context), min(len(samples), a + size + context)
         wav = np.ascontiguousarray(samples[lo:hi], dtype=np.float32)
         with model.session() as session:
@@ -277,10 +282,20 @@ def _log_probs(samples: np.ndarray) -> np.ndarray:
         out = np.asarray(log_probs[0][: int(np.asarray(lengths).reshape(-1)[0])])
         first = (a - lo) // hop
         count = int(math.ceil(min(size, len(samples) - a) / hop))
-        piece = out[first: first + count]
-        if 0 < len(piece) < count:  # the model's last frame may fall short of the end
-            piece = np.concatenate([piece, np.repeat(piece[-1:], count - len(piece), axis=0)])
-        pieces.append(piece)
+        out = out[first: first + count]
+        if 0 < len(out) < count:  # the model's last frame may fall short of the end
+            out = np.concatenate([out, np.repeat(out[-1:], count - len(out), axis=0)])
+        return out
+
+    starts = range(0, max(len(samples), 1), size)
+    threads = min(len(starts), model.limit, thread_budget())
+    if threads > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(threads, thread_name_prefix="hama") as pool:
+            pieces = list(pool.map(piece, starts))
+    else:
+        pieces = [piece(a) for a in starts]
     return np.concatenate(pieces) if pieces else np.zeros((0, model.merge.shape[0]))
 
 
