@@ -3,8 +3,9 @@
 Every line of the script (:mod:`animegraph.apps.script`) becomes a folder ``OUT/<id>/``:
 
 - ``speech.wav``: the speech used (the recording, or eSpeak NG's speech);
-- ``motion.c3d`` (marker and landmark databases), ``motion.livelink.csv`` (ARKit
-  databases: Live Link Face CSV) or ``motion.csv`` (other curves);
+- ``motion.c3d`` (marker databases), ``motion.livelink.csv`` (ARKit databases: Live Link
+  Face CSV) or ``motion.csv`` (landmark databases, whose head pose C3D has no place for;
+  other curves): :func:`animegraph.motion.files.motion_suffix`;
 - ``phones.csv``: the phone timing the motion was made for;
 - ``explain.json``: where every phone's motion came from and what it cost (the record of
   ``synth --explain-json``), with the line's inputs;
@@ -577,9 +578,9 @@ def run_line(task: LineTask) -> dict:
 
 
 def _make_line(task: LineTask, model, folder: Path) -> dict:
+    from animegraph.motion.files import motion_suffix
     from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis.path import audio_only_guide
-    from ingest.formats.livelink import is_arkit
     from ingest.formats.phones_csv import write_phones_csv
     from ingest.formats.wav import read_wav, write_wav
 
@@ -619,8 +620,7 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     if missing:
         warnings.append(f"phones missing from the database, backed off: {', '.join(missing)}")
 
-    motion_name = ("motion.c3d" if model.kind in ("markers", "landmarks")
-                   else "motion.livelink.csv" if is_arkit(model.names) else "motion.csv")
+    motion_name = "motion" + motion_suffix(model.names, model.kind)
     write_wav(folder / "speech.wav", audio, sample_rate)
     write_motion(synth, model, folder / motion_name)
     write_phones_csv(folder / "phones.csv", synth.phones)

@@ -293,22 +293,26 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     """C3D for marker databases, Live Link Face CSV for ARKit
     databases (timecode = the snippet's start in its recording), else channel CSV; the
     file name."""
-    from animegraph.motion.files import LIVELINK_SUFFIX, point_labels, write_channel_csv
-    from ingest.formats.c3d import MAX_MARKERS, MarkerData, write_c3d
-    from ingest.formats.livelink import LIVELINK_FPS, format_timecode, is_arkit, write_livelink
+    from animegraph.motion.files import (
+        LIVELINK_SUFFIX,
+        motion_suffix,
+        point_labels,
+        write_channel_csv,
+    )
+    from ingest.formats.c3d import MarkerData, write_c3d
+    from ingest.formats.livelink import LIVELINK_FPS, format_timecode, write_livelink
 
     part = clip.motion[f0:f1]
-    labels = point_labels(clip.names)
-    if is_arkit(clip.names):
+    suffix = motion_suffix(clip.names, clip.kind)
+    if suffix == LIVELINK_SUFFIX:
         path = stem.with_name(stem.name + LIVELINK_SUFFIX)
         write_livelink(path, part, clip.names, clip.fps,
                        start=format_timecode(f0 / clip.fps * LIVELINK_FPS, LIVELINK_FPS),
                        timecode_rate=LIVELINK_FPS)
-    elif clip.kind == "markers" and labels and 3 * len(labels) == len(clip.names) \
-            and len(labels) <= MAX_MARKERS:
+    elif suffix == ".c3d":
         path = stem.with_suffix(".c3d")
-        write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3), labels=labels,
-                                   rate=clip.fps))
+        write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3),
+                                   labels=point_labels(clip.names), rate=clip.fps))
     else:
         path = stem.with_suffix(".csv")
         write_channel_csv(path, part, clip.names, clip.fps, start_frame=0)

@@ -9,6 +9,7 @@ frame rate — the layout of the database's ``frames`` table and of what
 from __future__ import annotations
 
 import json
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,8 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -202,6 +205,12 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 
         point_cols = point_columns(names)
         labels = tuple(names[i][:-2] for i in point_cols[::3])
+        others = [n for i, n in enumerate(names) if i not in set(point_cols)]
+        if others:  # e.g. a landmark database's head pose: said, not dropped in silence
+            logger.warning("%s holds the %d points; the %d channels that are not a "
+                           "point's (%s) are left out: write .csv or .npz to keep them",
+                           path.name, len(labels), len(others), ", ".join(others[:4])
+                           + (" ..." if len(others) > 4 else ""))
         points = motion[:, point_cols].reshape(len(motion), -1, 3)
         write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
@@ -252,6 +261,23 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
     if suffix == ".c3d" and (kind not in ("markers", "landmarks") or not point_labels(names)):
         raise ParameterError(f"C3D holds 3D points; this database has {kind} "
                              "(write .csv or .npz)")
+
+
+def motion_suffix(names, kind: str) -> str:
+    """The file type that keeps every channel of such motion, in the format its users'
+    tools read: Live Link Face CSV (:data:`LIVELINK_SUFFIX`) for ARKit blendshapes, C3D
+    when every channel is a coordinate of a point (marker databases; landmark databases
+    carry their head pose as channels, which C3D has no place for), else CSV."""
+    from ingest.formats.c3d import MAX_MARKERS
+    from ingest.formats.livelink import is_arkit
+
+    if is_arkit(names):
+        return LIVELINK_SUFFIX
+    labels = point_labels(names)
+    if kind in ("markers", "landmarks") and labels and 3 * len(labels) == len(names) \
+            and len(labels) <= MAX_MARKERS:
+        return ".c3d"
+    return ".csv"
 
 
 def point_columns(names) -> list[int]:
