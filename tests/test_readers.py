@@ -94,6 +94,27 @@ def test_discover_synthetic_corpus(corpus):
     assert discover([corpus / "clips" / f"{first.clip_id}.controls.csv"]) == []
 
 
+
+def test_one_file_says_nothing_of_the_other_clips_around_it(corpus, tmp_path, caplog):
+    """Ingesting one file reads its folder (and FACEGOOD's folder above wav/), but what
+    is odd about the other clips there is not this command's business: said before of
+    a neighbour with two motion files, and of a clip in the folder above."""
+    import logging
+
+    ids = sorted(p.name[: -len(".json")] for p in (corpus / "clips").glob("*.json"))
+    folder = tmp_path / "take" / "day1"
+    wanted = _copy_clip(corpus, ids[0], folder, ".c3d", ".wav")
+    other = _copy_clip(corpus, ids[1], folder, ".c3d", ".wav")
+    above = _copy_clip(corpus, ids[2], folder.parent, ".c3d", ".wav")
+    for odd in (other, above):  # two motion files for one clip: the CSV is ignored
+        (odd.parent / f"{odd.name}.csv").write_text("frame,time,a.x,a.y,a.z\n0,0,0,0,0\n")
+    with caplog.at_level(logging.WARNING, logger="ingest.readers.discovery"):
+        assert _one([wanted.with_suffix(".wav")]).clip_id == ids[0]
+    assert caplog.text == ""
+    with caplog.at_level(logging.WARNING, logger="ingest.readers.discovery"):
+        assert len(discover([folder])) == 2  # the folder: its clips and what is odd
+    assert f"{other.name}: using {other.name}.c3d, ignoring {other.name}.csv" in caplog.text
+
 def test_load_synthetic_clip(corpus):
     sources = discover([corpus])
     clips = [load(s) for s in sources]

@@ -100,14 +100,17 @@ def _files(folder: Path) -> list[Path]:
 
 
 def _stem_clips(folder: Path, corpus: str, layout_markers: str,
-                marker_table: Path | None, settings: Path | None) -> list[ClipSource]:
-    """Generic per-stem clips of one folder (also the synthetic corpus's clips/)."""
+                marker_table: Path | None, settings: Path | None,
+                stems: set[str] | None = None) -> list[ClipSource]:
+    """Generic per-stem clips of one folder (also the synthetic corpus's clips/); only
+    those of ``stems`` if given (what is said of the others is not asked for)."""
     by_stem: dict[str, dict[str, Path]] = {}
     for path in _files(folder):
         if path.name.lower() in RESERVED_NAMES:
             continue
         stem, suffix = split_name(path.name)
-        by_stem.setdefault(stem, {})[suffix] = path
+        if stems is None or stem in stems:
+            by_stem.setdefault(stem, {})[suffix] = path
     sources = []
     for stem, files in sorted(by_stem.items()):
         markers = [files[s] for s in MARKER_SUFFIXES if s in files
@@ -157,6 +160,10 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
     return sources
 
 
+def _is_facegood(folder: Path) -> bool:
+    return (folder / "bs_value").is_dir() and (folder / "wav").is_dir()
+
+
 def _facegood_clips(root: Path) -> list[ClipSource]:
     names = _first_existing(root / FACEGOOD_NAMES[0])
     listing = _first_existing(root / FACEGOOD_NAMES[1])
@@ -192,8 +199,10 @@ def _talkingface_clip(folder: Path) -> ClipSource:
     })
 
 
-def _scan(folder: Path, recursive: bool = True) -> Iterable[ClipSource]:
-    """Clips in ``folder`` (and below, if ``recursive``)."""
+def _scan(folder: Path, recursive: bool = True,
+          stems: set[str] | None = None) -> Iterable[ClipSource]:
+    """Clips in ``folder`` (and below, if ``recursive``); of per-stem clips only those of
+    ``stems``, if given."""
     if folder.name == "clips" and _synthetic_root(folder.parent):
         folder = folder.parent
     stack = [folder]
@@ -207,9 +216,9 @@ def _scan(folder: Path, recursive: bool = True) -> Iterable[ClipSource]:
         skip: set[str] = set()
         if _synthetic_root(here):
             yield from _stem_clips(here / "clips", here.name, "synthetic",
-                                   here / "markers.csv", None)
+                                   here / "markers.csv", None, stems)
             skip = {"clips"}
-        elif (here / "bs_value").is_dir() and (here / "wav").is_dir():
+        elif _is_facegood(here):
             yield from _facegood_clips(here)
             skip = {"bs_value", "wav"}
         elif (here / "landmarks.npy").is_file():
@@ -219,6 +228,7 @@ def _scan(folder: Path, recursive: bool = True) -> Iterable[ClipSource]:
                 here, here.name, "markers",
                 _first_existing(here / "markers.csv", here.parent / "markers.csv"),
                 _first_existing(here / "curves.json", here.parent / "curves.json"),
+                stems,
             )
         if not recursive:
             break
@@ -260,9 +270,13 @@ def discover(paths: Sequence[str | os.PathLike[str]]) -> list[ClipSource]:
             candidates = list(_scan(path))
         else:
             # The clip may be described by the file's folder or, for FACEGOOD's wav/ and
-            # bs_value/, by the folder above.
+            # bs_value/, by the folder above; of the clips named by their files' stem,
+            # only this file's stem is read (nothing is said of the others).
             wanted = path.resolve()
-            nearby = [c for f in (path.parent, path.parent.parent) for c in _scan(f, False)]
+            stems = {split_name(path.name)[0]}
+            above = path.parent.parent
+            folders = [path.parent] + ([above] if _is_facegood(above) else [])
+            nearby = [c for f in folders for c in _scan(f, False, stems)]
             candidates = [s for s in nearby if wanted in {p.resolve() for p in s.paths}]
             if not candidates:
                 logger.warning("%s is not part of a clip this reader recognises", path)
