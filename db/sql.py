@@ -143,6 +143,12 @@ def check_read_only(sql: str) -> list[str]:
             kind = inner_statements[0].type if len(inner_statements) == 1 else kind
             raise ParameterError(f"only SELECT queries run here (the database is read-only); "
                                  f"got EXPLAIN {kind.name}")
+        if kind.name == "MULTI":  # DuckDB's PIVOT without IN: it creates a type first
+            raise ParameterError("a PIVOT without IN (...) runs more than one statement "
+                                 "(DuckDB first creates a type of the values), which this "
+                                 "read-only sandbox does not: name the values, e.g. PIVOT "
+                                 "animes ON emotion IN ('happy', 'sad') USING count(*) "
+                                 "GROUP BY phoneme")
         if kind not in _ALLOWED:
             raise ParameterError(f"only SELECT queries run here (the database is read-only); "
                                  f"got {kind.name}")

@@ -110,6 +110,22 @@ def test_cli_prints_each_statement_and_one_line_errors(db, tmp_path):
     assert "first 5 rows" in capped.stderr
 
 
+
+def test_cli_prints_a_plan_whole_and_names_pivot_values(db):
+    cmd = [sys.executable, "-m", "animegraph", "sql", "--db", str(db.root)]
+    plan = subprocess.run(cmd + ["EXPLAIN SELECT count(*) FROM animes WHERE emotion = 'sad'"],
+                          capture_output=True, text=True)
+    assert plan.returncode == 0 and plan.stdout.count("\n") > 5, plan.stdout
+    assert "FILTER" in plan.stdout or "emotion" in plan.stdout
+    pivot = subprocess.run(cmd + ["PIVOT animes ON emotion USING count(*) GROUP BY clip_id"],
+                           capture_output=True, text=True)
+    assert pivot.returncode != 0 and len(pivot.stderr.strip().splitlines()) == 1
+    assert "name the values, e.g. PIVOT" in pivot.stderr
+    named = subprocess.run(cmd + ["PIVOT animes ON emotion IN ('happy', 'sad') USING count(*) "
+                                  "GROUP BY clip_id ORDER BY clip_id"],
+                           capture_output=True, text=True)
+    assert named.returncode == 0 and "happy" in named.stdout, named.stderr
+
 def test_a_result_repeating_a_column_name_prints(db, tmp_path):
     from animegraph.apps.tabular import format_table
 

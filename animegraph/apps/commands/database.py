@@ -28,6 +28,10 @@ def cmd_ingest(args: argparse.Namespace) -> int:
     return 1 if report.count("rejected") else 0
 
 
+#: The columns of DuckDB's EXPLAIN (and EXPLAIN ANALYZE) result.
+EXPLAIN_COLUMNS = ["explain_key", "explain_value"]
+
+
 def cmd_sql(args: argparse.Namespace) -> int:
     from animegraph.apps.tabular import format_table
     from db.sql import ROW_LIMIT, TIMEOUT_S, run
@@ -47,8 +51,12 @@ def cmd_sql(args: argparse.Namespace) -> int:
     for i, result in enumerate(results):
         if i and args.format == "table":
             sys.stdout.write("\n")
-        text = format_table(result.table, args.format, max_rows=args.max_rows,
-                            output=args.output)
+        if args.format == "table" and result.table.column_names == EXPLAIN_COLUMNS:
+            # A plan is a drawing over many lines: a table cell would show its first.
+            text = "".join(f"{value}\n" for value in result.table.column(1).to_pylist())
+        else:
+            text = format_table(result.table, args.format, max_rows=args.max_rows,
+                                output=args.output)
         if text is not None:
             sys.stdout.write(text)
         if result.truncated:
