@@ -55,8 +55,9 @@ from ingest.emotion.model import fit_emotion_model
 from ingest.lag import decide_lags
 from ingest.motion import fill_gaps, head_points
 from ingest.plausible import Limits, check_clip
-from ingest.prepare import PreparedClip, prepare_clip
+from ingest.prepare import MIN_LAG_CORRECTED_S, PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
+from ingest.readers.sync import MIN_EVIDENCE_S, MIN_PEAK_MARGIN
 from ingest.speech.ctc import kept_on_disk
 from ingest.tables import build_tables, prepared_from_database
 from ingest.workers import map_in_processes
@@ -165,7 +166,8 @@ class IngestReport:
             detail = (f", r {first.lag_confidence:.2f}, margin {first.lag_margin:.2f}"
                       if len(rows) == 1 or lags[0] == lags[-1] else "")
             out.append(f"lip-audio lag {found} ({basis}{detail}): "
-                       + ("applied to " if applied else "not applied to ") + _clips(len(rows)))
+                       + (f"applied to {_clips(len(rows))}" if applied else
+                          f"not applied to {_clips(len(rows))} ({_not_applied(basis, rows)})"))
         return out
 
     def to_csv(self) -> str:
@@ -590,6 +592,18 @@ def _save_report(db_path: Path, report: IngestReport) -> None:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     with atomic_write(folder / f"ingest-{stamp}-{os.getpid()}.csv") as handle:
         handle.write(report.to_csv().encode())
+
+
+def _not_applied(basis: str, rows: list[ClipReport]) -> str:
+    """Why a lag was not applied to ``rows`` (ingest.lag.decide_lags' rules)."""
+    if basis == "not identifiable":
+        if min(r.lag_margin for r in rows) >= MIN_PEAK_MARGIN:
+            return (f"less than {MIN_EVIDENCE_S:g} s of audio to tell its peak from the side "
+                    "peaks a syllable away")
+        return f"its peak beats the side peaks by less than {MIN_PEAK_MARGIN:g}"
+    if all(abs(r.lag_estimate_s) < MIN_LAG_CORRECTED_S for r in rows):
+        return f"under the {1000 * MIN_LAG_CORRECTED_S:.0f} ms worth correcting"
+    return "lag correction is off"
 
 
 def _clips(n: int) -> str:

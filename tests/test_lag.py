@@ -161,6 +161,8 @@ def test_ingest_reports_and_applies_the_pooled_lag(tmp_path):
     assert lone.lag_basis == "not identifiable" and lone.lag_applied_s == 0.0
     text = "\n".join(report.lines())
     assert "(pooled over 2 clips, r " in text and "applied to 2 clips" in text
+    assert "not identifiable, r " in text and "not applied to 1 clip (" in text
+    assert ("less than 20 s of audio" in text) == (lone.lag_margin >= 0.05)
     assert "lag_basis" in report.to_csv().splitlines()[0]
 
 
@@ -180,3 +182,19 @@ def test_prepared_clips_read_back_from_the_database(tiny_db, tiny_corpus):
     np.testing.assert_allclose(back.motion, original.motion, atol=1e-3)
     np.testing.assert_array_equal(back.missing, original.missing)
     assert back.phones == original.phones and back.extra == original.extra
+
+
+def test_a_lag_not_applied_says_why():
+    from types import SimpleNamespace
+
+    from ingest.pipeline import _not_applied
+
+    def rows(margin, lag):
+        return [SimpleNamespace(lag_margin=margin, lag_estimate_s=lag)]
+
+    assert _not_applied("own", rows(0.2, -0.02)) == "under the 80 ms worth correcting"
+    assert _not_applied("not identifiable", rows(0.67, 0.12)).startswith(
+        "less than 20 s of audio")
+    assert _not_applied("not identifiable", rows(0.01, 0.12)) == (
+        "its peak beats the side peaks by less than 0.05")
+    assert _not_applied("pooled over 3 clips", rows(0.2, 0.2)) == "lag correction is off"
