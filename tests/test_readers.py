@@ -115,6 +115,18 @@ def test_one_file_says_nothing_of_the_other_clips_around_it(corpus, tmp_path, ca
         assert len(discover([folder])) == 2  # the folder: its clips and what is odd
     assert f"{other.name}: using {other.name}.c3d, ignoring {other.name}.csv" in caplog.text
 
+
+def test_speech_without_its_motion_is_said(corpus, tmp_path, caplog):
+    import logging
+
+    ids = sorted(p.name[: -len(".json")] for p in (corpus / "clips").glob("*.json"))
+    clip = _copy_clip(corpus, ids[0], tmp_path / "takes", ".c3d", ".wav")
+    shutil.copy(clip.with_suffix(".wav"), clip.parent / "lonely.wav")
+    with caplog.at_level(logging.WARNING, logger="ingest.readers.discovery"):
+        assert [s.clip_id for s in discover([clip.parent])] == [ids[0]]
+    assert "lonely.wav: no motion beside it (lonely.c3d" in caplog.text
+    assert ids[0] not in caplog.text
+
 def test_load_synthetic_clip(corpus):
     sources = discover([corpus])
     clips = [load(s) for s in sources]
@@ -330,6 +342,12 @@ def test_truncated_wav(clip_folder):
     with pytest.raises(DataError, match=r"truncated audio file .*s0001_sad_1\.wav"):
         load(_one([clip_folder.parent]))
 
+
+
+def test_empty_wav(clip_folder):
+    clip_folder.with_suffix(".wav").write_bytes(b"")
+    with pytest.raises(DataError, match=r"empty audio file .*s0001_sad_1\.wav \(0 bytes\)"):
+        load(_one([clip_folder.parent]))
 
 def test_wav_at_96k_is_ingested_at_48k(clip_folder):
     """A studio recorder's 96 kHz: read at 48 kHz (the fastest the prosody features take),

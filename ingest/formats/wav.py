@@ -64,6 +64,8 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
     path = Path(path)
     if not path.is_file():
         raise DataError(f"audio file not found: {path}")
+    if path.stat().st_size == 0:  # libsndfile would say "Format not recognised"
+        raise DataError(f"empty audio file {path} (0 bytes)")
     try:
         info = soundfile.info(str(path))
         audio, sample_rate = soundfile.read(str(path), dtype="float32", always_2d=True)

@@ -139,6 +139,9 @@ def _stem_clips(folder: Path, corpus: str, layout_markers: str,
         else:
             if curves:
                 logger.debug("%s: no %s.wav; not a clip", curves[0], stem)
+            elif audio is not None:  # speech whose motion is missing: said, not skipped
+                logger.warning("%s: no motion beside it (%s.c3d, .trc, .csv, .npy, "
+                               ".curves.csv or a video); not a clip", audio.name, stem)
             continue
         if ignored:
             logger.warning("%s: using %s, ignoring %s", folder / stem, motion.name,
