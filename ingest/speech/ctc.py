@@ -123,8 +123,8 @@ MAX_ALIGN_LOSS = 0.6
 #: Above this drop (and up to :data:`MAX_ALIGN_LOSS`) the transcript is aligned with a
 #: warning that it may be another utterance's. Measured (``scripts/eval_transcript_check.py``,
 #: 100 GRID clips): right transcripts 0.00-0.35 (clean, white noise to 0 dB SNR, telephone
-#: band), above 0.4 on 1 clip of 100 with room echo of RT60 0.5 s and 7 with 1 s; the next
-#: clip's transcript (same grammar and length) above it on 68 of 100 (18 above the limit).
+#: band, room echo of RT60 0.5 s), above 0.4 on 6 of 100 with 1 s of echo; the next
+#: clip's transcript (same grammar and length) on 68 of 100 (18 of them above the limit).
 DOUBT_ALIGN_LOSS = 0.4
 #: Fewest phones a transcript must name per phone heard (the unconstrained best path's,
 #: repeats merged). Measured (``scripts/eval_transcript_check.py``): right transcripts
