@@ -67,7 +67,7 @@ def test_bag_of_audio_words_counts_nearest_words(rng):
 
 
 def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
-    from ingest.emotion.classifier import EmotionClassifier, block_weights
+    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier, block_weights
 
     w = block_weights((1, 4))
     np.testing.assert_allclose(w, [np.sqrt(2.5)] + [np.sqrt(5 / 8)] * 4)
@@ -83,7 +83,7 @@ def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
     np.testing.assert_allclose(weighted.pipeline_[:-1].transform(
         weighted.normalizer_.transform(F, spk)), scaled * w)
     arrays = weighted.to_arrays()
-    assert int(arrays["format"]) == 5 and arrays["block_widths"].tolist() == [1, 4]
+    assert int(arrays["format"]) == CLASSIFIER_FORMAT and arrays["block_widths"].tolist() == [1, 4]
     assert arrays["block_widths_fitted"].tolist() == [1, 4] and "boaw_mean" not in arrays
     back = EmotionClassifier.from_arrays(arrays)
     assert back.block_widths == back.block_widths_ == (1, 4)
@@ -136,7 +136,7 @@ def test_stored_codebooks_are_checked(rng):
 
 def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
     from db.errors import DataError
-    from ingest.emotion.classifier import EmotionClassifier, SpeechFeatures
+    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier, SpeechFeatures
 
     f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
     audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]
@@ -155,7 +155,8 @@ def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
         SpeechFeatures(described.functionals, described.frames), y, speakers=spk)
     np.testing.assert_array_equal(again.bag_.codebooks_[1], model.bag_.codebooks_[1])
     arrays = model.to_arrays()
-    assert int(arrays["format"]) == 5 and arrays["boaw_codebook0"].shape == (500, 22)
+    assert int(arrays["format"]) == CLASSIFIER_FORMAT
+    assert arrays["boaw_codebook0"].shape == (500, 22)
     back = EmotionClassifier.from_arrays(arrays)
     np.testing.assert_allclose(back.decision_function(audio), model.decision_function(audio))
     np.testing.assert_allclose(back.predict_proba(audio[:2]), model.predict_proba(audio[:2]))
@@ -240,7 +241,7 @@ def test_the_ensemble_kernel_varies_less_with_the_seed(rng):
 
 def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     from db.errors import DataError
-    from ingest.emotion.classifier import EmotionClassifier
+    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier
 
     f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
     audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]
@@ -256,7 +257,7 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     assert model.kernel_width_ == 1171 and (w**2).sum() == pytest.approx(1171)
     assert (w[:171] ** 2).sum() == pytest.approx((w[171:] ** 2).sum())
     arrays = model.to_arrays()
-    assert int(arrays["format"]) == 5 and int(arrays["n_codebooks"]) == 2
+    assert int(arrays["format"]) == CLASSIFIER_FORMAT and int(arrays["n_codebooks"]) == 2
     assert int(arrays["boaw_n_codebooks"]) == 2 and arrays["boaw_codebook3"].shape == (500, 22)
     back = EmotionClassifier.from_arrays(arrays)
     assert back.n_codebooks == 2 and back.bag_.n_codebooks == 2
@@ -290,9 +291,10 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     for bad in (0, 1.5, True):
         with pytest.raises(ParameterError, match="kernel_width"):
             EmotionClassifier(kernel_width=bad).fit(X, y)
-    # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it
-    single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2).fit(
-        described, y, speakers=spk)
+    # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it (its
+    # features without the silence floor)
+    single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2,
+                               silence_floor=None).fit(audio, y, speakers=spk)
     four = {**{k: v for k, v in single.to_arrays().items()
                if k not in ("n_codebooks", "boaw_n_codebooks")}, "format": np.array(4)}
     old = EmotionClassifier.from_arrays(four)
@@ -300,4 +302,5 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     np.testing.assert_allclose(old.decision_function(audio), single.decision_function(audio))
     np.testing.assert_allclose(old.predict_proba(audio), single.predict_proba(audio))
     # the first pair of the ensemble is the single model's (the same seed)
-    np.testing.assert_array_equal(model.bag_.codebooks_[1], single.bag_.codebooks_[1])
+    one = EmotionClassifier(C=1.0, n_codebooks=1).fit(described, y, speakers=spk)
+    np.testing.assert_array_equal(model.bag_.codebooks_[1], one.bag_.codebooks_[1])

@@ -21,6 +21,7 @@ deprecated); without them :meth:`~EmotionClassifier.fit` fits the SVM once.
 from __future__ import annotations
 
 import json
+import logging
 from typing import NamedTuple
 
 import numpy as np
@@ -41,6 +42,7 @@ from ingest.emotion.boaw import ENSEMBLE, BagOfAudioWords
 from ingest.emotion.emodb import EMODB_EMOTIONS, load_emodb
 from ingest.emotion.features import (
     N_CEPSTRUM,
+    SILENCE_FLOOR,
     WORDS_BLOCK,
     block_features,
     emotion_features,
@@ -59,6 +61,7 @@ __all__ = [
     "FUNCTIONALS",
     "MIN_DURATION",
     "N_CEPSTRUM",
+    "SILENCE_FLOOR",
     "EmotionClassifier",
     "SpeechFeatures",
     "emotion_features",
@@ -83,10 +86,17 @@ DEFAULT_C = 0.1
 #: Format 2: no block weights; 3: ``block_widths``; 4: the fitted block widths
 #: (``block_widths_fitted``, when any) and the bag-of-audio-words' codebooks (``boaw_*``,
 #: when the ``boaw`` block is used); 5 (what is written): ``n_codebooks`` and the
-#: ensemble's codebooks (``boaw_n_codebooks``, ``boaw_codebook0`` ... ``2K - 1``).
-CLASSIFIER_FORMAT = 5
+#: ensemble's codebooks (``boaw_n_codebooks``, ``boaw_codebook0`` ... ``2K - 1``); 6 (what
+#: is written): features with the silence floor, ``silence_floor`` (absent: None).
+#: Formats 2 to 5 were fitted on features without the floor, and are read with
+#: ``silence_floor=None`` (predicting as they did) and a warning.
+CLASSIFIER_FORMAT = 6
 #: Formats :meth:`EmotionClassifier.from_arrays` reads.
-READABLE_FORMATS = (2, 3, 4, 5)
+READABLE_FORMATS = (2, 3, 4, 5, 6)
+#: The first format whose features have the silence floor.
+SILENCE_FLOOR_FORMAT = 6
+
+logger = logging.getLogger(__name__)
 
 _KERNELS = ("linear", "rbf", "poly", "sigmoid")
 
@@ -174,6 +184,23 @@ def _stored_count(arrays, key: str) -> int | None:
         raise DataError(f"stored emotion classifier: {key} must be an integer >= 1, "
                         f"got {v.tolist()}")
     return int(v)
+
+
+def _stored_floor(arrays, fmt: int) -> float | None:
+    """The silence floor a stored classifier's features were computed with, checked."""
+    if fmt < SILENCE_FLOOR_FORMAT:
+        logger.warning(
+            "the stored emotion classifier (format %d) predates the silence floor: speech "
+            "whose pauses are digital silence may be misclassified; re-ingest the database "
+            "(animegraph ingest SRC --db DB) to refit it", fmt)
+        return None
+    if "silence_floor" not in arrays:
+        return None
+    v = np.asarray(arrays["silence_floor"])
+    if v.shape != () or v.dtype.kind not in "iuf" or not 0 < float(v) < 200:
+        raise DataError(f"stored emotion classifier: silence_floor must be a number of dB in "
+                        f"(0, 200), got {v.tolist()}")
+    return float(v)
 
 
 def _check_stored(a: dict, arrays, probability: bool) -> None:
@@ -284,6 +311,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         :data:`ingest.emotion.boaw.ENSEMBLE` = 5 was decided before measuring and made
         the default by it, ``docs/results.md`` "Issue 16, fifth session"; 1: one pair,
         the stored default of issue #16's fourth session).
+    silence_floor : float or None, optional
+        Frames more than this many dB below the utterance's loudest frame are silence,
+        replaced by the floor so that digital silence and a quiet noise floor give the
+        same features (:mod:`ingest.emotion.features`, "Silence floor"; 50 dB as HTK's
+        ``SILFLOOR``). None: no floor, the features of classifiers stored before it.
     kernel_width : int, optional
         The total variance of the weighted columns (the linear kernel's scale, and
         ``gamma = 1 / kernel_width``). None (default): :attr:`kernel_width_` as described
@@ -344,6 +376,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         class_weight: str | dict | None = None,
         block_widths: tuple | None = None,
         n_codebooks: int = ENSEMBLE,
+        silence_floor: float | None = SILENCE_FLOOR,
         kernel_width: int | None = None,
         probability: bool = False,
         calibration_cv: int = 5,
@@ -358,6 +391,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         self.class_weight = class_weight
         self.block_widths = block_widths
         self.n_codebooks = n_codebooks
+        self.silence_floor = silence_floor
         self.kernel_width = kernel_width
         self.probability = probability
         self.calibration_cv = calibration_cv
@@ -401,6 +435,11 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 self.n_codebooks, int | np.integer) or self.n_codebooks < 1:
             raise ParameterError(f"n_codebooks must be an integer >= 1, "
                                  f"got {self.n_codebooks!r}")
+        sf = self.silence_floor
+        if sf is not None and (isinstance(sf, bool) or not isinstance(sf, int | float | np.number)
+                               or not 0 < float(sf) < 200):
+            raise ParameterError(f"silence_floor must be None or a number of dB in (0, 200), "
+                                 f"got {sf!r}")
         kw = self.kernel_width
         if kw is not None and (isinstance(kw, bool) or not isinstance(kw, int | np.integer)
                                or kw < 1):
@@ -454,7 +493,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         for i, (audio, sr) in enumerate(items):
             try:
                 part = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
-                                      cepstrum=self.cepstrum)
+                                      cepstrum=self.cepstrum, silence_floor=self._floor())
             except DataError as exc:
                 raise DataError(f"utterance {i}: {exc}") from exc
             if words:
@@ -509,6 +548,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         """
         described = self.describe(X)
         return self._words(described) if hasattr(self, "bag_") else described.functionals
+
+    def _floor(self) -> float | None:
+        return None if self.silence_floor is None else float(self.silence_floor)
 
     def _kernel_width(self, n_features: int) -> int:
         """:attr:`kernel_width_` of a fitted bag of words and ``n_features`` columns."""
@@ -711,7 +753,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             (n_sv, n_features), ``support`` (n_sv,), ``n_support`` (n_classes,),
             ``dual_coef`` (n_classes - 1, n_sv), ``intercept`` (n_classes * (n_classes -
             1) / 2,), with probabilities ``calib_coef`` and ``calib_intercept``, with
-            ``kernel_width`` set ``kernel_width``, with block widths ``block_widths`` (the
+            ``kernel_width`` set ``kernel_width``, with a silence floor ``silence_floor``
+            (dB), with block widths ``block_widths`` (the
             parameter) and ``block_widths_fitted``
             (what the pipeline weights by), with audio words the codebooks
             (:meth:`ingest.emotion.boaw.BagOfAudioWords.to_arrays`: ``boaw_mean``,
@@ -747,6 +790,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             out["block_widths"] = np.array([int(w) for w in self.block_widths])
         if self.kernel_width is not None:
             out["kernel_width"] = np.array(int(self.kernel_width))
+        if self.silence_floor is not None:
+            out["silence_floor"] = np.array(float(self.silence_floor))
         if self.block_widths_ is not None:
             out["block_widths_fitted"] = np.array(self.block_widths_)
         if self.bag_ is not None:
@@ -851,6 +896,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                                 f"({a['scale_min'].shape[0]} features, block widths "
                                 f"{list(fitted) if fitted else None})")
         model = cls(features=str(a["features"]), n_cepstrum=int(a["n_cepstrum"]),
+                    silence_floor=_stored_floor(arrays, fmt),
                     cepstrum=str(a["cepstrum"]), normalize=str(a["normalize"]),
                     kernel=str(a["kernel"]), C=float(a["C"]),
                     class_weight=weight, block_widths=widths, n_codebooks=n_codebooks,

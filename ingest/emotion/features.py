@@ -26,10 +26,31 @@ boaw     bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`)  1
   ``k / 16000`` s whatever the input rate.
 * ``cepstrum="utterance"`` (paper-literal): one real cepstrum of the whole utterance (FFT
   length = number of samples). ``cepstrum="frames"``: the mean real cepstrum of 2048-sample
-  Hann frames (hop 512), frames more than 60 dB below the loudest dropped.
+  Hann frames (hop 512), silent frames (below the silence floor, below) left out.
 * "RMS error" of the signal is read as the root mean square of the (16 kHz) samples.
 * The level is normalised first (issue #16), so mean, variance and RMS describe the
   signal's shape (its crest factor), not how loud it was recorded.
+
+Silence floor (issue s18). A pause is digital silence (exact zeros) in synthetic, noise-gated
+or clean studio speech, and a noise floor some 60 dB below the speech elsewhere (the
+synthetic corpus, most recordings). Frame statistics that include the pauses then describe
+the recording, not the speaker: the 10th percentile of the log energy *is* the pause level
+(-18.4 for zeros against -8 for the corpus' floor), and an all-zero frame has a spectral
+centroid and a zero-crossing rate of 0 where noise has 4 kHz and 0.5 -- enough for the
+database classifier, trained on one noise floor, to call any speech with zero pauses
+"angry". So, as HTK's energy floor (``SILFLOOR``, 50 dB below the utterance's loudest
+frame: Young et al., *The HTK Book*, §5.6), every frame more than ``silence_floor`` dB below
+the loudest frame of the utterance is *silence* and is replaced by that floor
+(:func:`frame_analysis`): a flat spectrum of the floor's power, the zero-crossing rate of
+white noise (0.5); in the other frames every bin of the spectrum is floored at the same
+power, so that a noise floor does not fill the spectral valleys of quiet speech either (the
+spectral contrast of the upper bands moved most after the silent frames were floored); the
+frame-averaged cepstrum leaves silent frames out. Whatever lies below the floor -- zeros,
+dither, a quiet noise floor -- then gives nearly the same features (what is left: the
+zero-crossing rate of speech frames and the cepstrum block, about one corpus standard
+deviation at most); a noise floor above it still shows. ``silence_floor=None`` is the
+analysis before the floor (no floor; the frame-averaged cepstrum dropping frames 60 dB
+down), which classifiers stored before it (format < 6) were fitted on.
 """
 
 from __future__ import annotations
@@ -45,6 +66,7 @@ __all__ = [
     "CEPSTRUM_FRAME",
     "CEPSTRUM_HOP",
     "N_CEPSTRUM",
+    "SILENCE_FLOOR",
     "WORDS_BLOCK",
     "block_features",
     "emotion_features",
@@ -52,6 +74,7 @@ __all__ = [
     "parse_features",
     "real_cepstrum",
     "rich_features",
+    "silent_frames",
 ]
 
 #: Cepstrum coefficients in the paper's feature vector (§6).
@@ -69,7 +92,13 @@ WORDS_BLOCK = "boaw"
 #: Width of each block (``paper``: 3 + n_cepstrum).
 RICH_WIDTH, EGEMAPS_WIDTH, COMPARE_WIDTH = 121, 88, 6373
 
+#: Frames more than this many dB below the loudest frame of the utterance are silence
+#: (the module docstring; HTK's ``SILFLOOR`` default). The synthetic corpus' noise floor lies
+#: about 59 dB below its loudest frames, its speech above -45 dB.
+SILENCE_FLOOR = 50.0
+
 _CEPSTRA = ("utterance", "frames")
+_LEGACY_CEPSTRUM_FLOOR = 60.0  # dB: the frame-averaged cepstrum's cut without the floor
 _LOG_FLOOR = 1e-10  # |FFT| floor relative to its peak before the log (-200 dB)
 _OPENSMILE_SETS = {"egemaps": "eGeMAPSv02", "compare": "ComParE_2016"}
 _smiles: dict = {}
@@ -106,14 +135,16 @@ def real_cepstrum(x: np.ndarray, n_fft: int | None = None) -> np.ndarray:
     return np.fft.irfft(np.log(np.maximum(mag, _LOG_FLOOR * peak)), n)
 
 
-def _frame_cepstrum(x: np.ndarray, n_cepstrum: int) -> np.ndarray:
+def _frame_cepstrum(x: np.ndarray, n_cepstrum: int,
+                    silence_floor: float | None = SILENCE_FLOOR) -> np.ndarray:
     if x.size < CEPSTRUM_FRAME:
         x = np.pad(x, (0, CEPSTRUM_FRAME - x.size))
     n_frames = 1 + (x.size - CEPSTRUM_FRAME) // CEPSTRUM_HOP
     idx = np.arange(CEPSTRUM_FRAME)[None, :] + CEPSTRUM_HOP * np.arange(n_frames)[:, None]
     frames = x[idx] * np.hanning(CEPSTRUM_FRAME)
     energy = np.sum(frames * frames, axis=1)
-    frames = frames[energy >= 1e-6 * energy.max()]
+    cut = _LEGACY_CEPSTRUM_FLOOR if silence_floor is None else silence_floor
+    frames = frames[energy >= 10 ** (-cut / 10) * energy.max()]  # silence says nothing
     mag = np.abs(np.fft.rfft(frames, axis=1))
     logmag = np.log(np.maximum(mag, _LOG_FLOOR * mag.max(axis=1, keepdims=True)))
     return np.fft.irfft(logmag, CEPSTRUM_FRAME, axis=1).mean(axis=0)[:n_cepstrum]
@@ -131,7 +162,8 @@ def _check_cepstrum(n_cepstrum, cepstrum: str) -> None:
         )
 
 
-def _paper(x: np.ndarray, n_cepstrum: int, cepstrum: str) -> np.ndarray:
+def _paper(x: np.ndarray, n_cepstrum: int, cepstrum: str,
+           silence_floor: float | None = SILENCE_FLOOR) -> np.ndarray:
     if cepstrum == "utterance":
         if n_cepstrum > x.size // 2:
             raise DataError(
@@ -139,7 +171,7 @@ def _paper(x: np.ndarray, n_cepstrum: int, cepstrum: str) -> np.ndarray:
             )
         ceps = real_cepstrum(x)[:n_cepstrum]
     else:
-        ceps = _frame_cepstrum(x, n_cepstrum)
+        ceps = _frame_cepstrum(x, n_cepstrum, silence_floor)
     return np.concatenate([[x.mean(), x.var(), np.sqrt(np.mean(x * x))], ceps])
 
 
@@ -149,6 +181,7 @@ def emotion_features(
     *,
     n_cepstrum: int = N_CEPSTRUM,
     cepstrum: str = "utterance",
+    silence_floor: float | None = SILENCE_FLOOR,
 ) -> np.ndarray:
     """The paper's emotion feature vector of one utterance (§6).
 
@@ -164,6 +197,9 @@ def emotion_features(
         ``"utterance"`` (paper-literal): one cepstrum of the whole signal;
         ``"frames"``: the mean cepstrum of 2048-sample Hann frames (``n_cepstrum`` at most
         1024).
+    silence_floor : float or None, optional
+        dB below the loudest frame under which a frame is silence, left out of the
+        frame-averaged cepstrum (the module docstring; None: the cut before the floor).
 
     Returns
     -------
@@ -178,7 +214,8 @@ def emotion_features(
         Bad ``n_cepstrum``, ``cepstrum``, ``sample_rate`` or audio shape.
     """
     _check_cepstrum(n_cepstrum, cepstrum)
-    return _paper(prepare_audio(audio, sample_rate), n_cepstrum, cepstrum)
+    _check_floor(silence_floor)
+    return _paper(prepare_audio(audio, sample_rate), n_cepstrum, cepstrum, silence_floor)
 
 
 # --------------------------------------------------------------------------- rich
@@ -189,32 +226,76 @@ def _stats(v: np.ndarray) -> list[float]:
     return [float(v.mean()), float(v.std()), float(p10), float(p90), float(p90 - p10)]
 
 
-def frame_analysis(x: np.ndarray) -> dict[str, np.ndarray]:
+def _check_floor(silence_floor) -> None:
+    if silence_floor is not None and (
+            isinstance(silence_floor, bool) or not isinstance(silence_floor, int | float)
+            or not 0 < silence_floor < 200):
+        raise ParameterError(f"silence_floor must be None or a number of dB in (0, 200), "
+                             f"got {silence_floor!r}")
+
+
+def silent_frames(spec: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
+                  ) -> tuple[np.ndarray, float]:
+    """Which frames of a magnitude spectrogram are silence, and the floor's power.
+
+    Parameters
+    ----------
+    spec : np.ndarray, shape (n_bins, n_frames)
+    silence_floor : float or None
+        dB below the loudest frame's mean power (None: no frame is silence).
+
+    Returns
+    -------
+    silent : np.ndarray of bool, shape (n_frames,)
+    floor : float
+        Mean power per bin of the floor (0 when ``silence_floor`` is None).
+    """
+    power = np.mean(spec.astype(np.float64) ** 2, axis=0)
+    if silence_floor is None or power.size == 0:
+        return np.zeros(power.shape, dtype=bool), 0.0
+    floor = float(power.max()) * 10 ** (-silence_floor / 10)
+    return power < floor, floor
+
+
+def frame_analysis(x: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
+                   ) -> dict[str, np.ndarray]:
     """Frame-level analysis of prepared 16 kHz speech ``x`` (shared by the ``rich``
     block and :mod:`ingest.emotion.boaw`), 32 ms frames, hop 10 ms: the magnitude
     spectrogram ``spec`` (257, T), 20 MFCCs ``mfcc`` (20, T) from 40 mel bands, ``rms``
-    (T,) and the YIN F0 ``f0`` (Hz, about T frames; 60-500 Hz)."""
+    (T,), the YIN F0 ``f0`` (Hz, about T frames; 60-500 Hz) and ``silent`` (T,), the
+    frames below the silence floor (``silence_floor`` dB under the loudest; None: none),
+    whose spectrum is replaced by the floor's, flat (the module docstring)."""
     import librosa
 
     sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
     xf = x.astype(np.float32)
     spec = np.abs(librosa.stft(xf, n_fft=n_fft, hop_length=hop))
+    silent, floor = silent_frames(spec, silence_floor)
+    # Silent frames become the floor, flat; in the others every bin is floored too, so that
+    # a noise floor under it does not fill the spectral valleys of speech either.
+    spec[:, silent] = np.sqrt(floor)
+    np.maximum(spec, np.float32(np.sqrt(floor)), out=spec)
     mel = librosa.feature.melspectrogram(S=spec**2, sr=sr, n_mels=40)
     return {
         "spec": spec,
         "mfcc": librosa.feature.mfcc(S=librosa.power_to_db(mel), n_mfcc=20),
         "rms": librosa.feature.rms(S=spec, frame_length=n_fft, hop_length=hop)[0],
         "f0": librosa.yin(xf, fmin=60, fmax=500, sr=sr, frame_length=1024, hop_length=hop),
+        "silent": silent,
     }
 
 
-def _rich(x: np.ndarray, fr: dict | None = None) -> np.ndarray:
+def _rich(x: np.ndarray, fr: dict | None = None,
+          silence_floor: float | None = SILENCE_FLOOR) -> np.ndarray:
     import librosa
 
     sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
     xf = x.astype(np.float32)
-    fr = frame_analysis(x) if fr is None else fr
+    fr = frame_analysis(x, silence_floor) if fr is None else fr
     spec, mfcc, rms, f0 = fr["spec"], fr["mfcc"], fr["rms"], fr["f0"]
+    zcr = librosa.feature.zero_crossing_rate(xf, frame_length=n_fft, hop_length=hop)
+    n = min(zcr.shape[1], fr["silent"].size)
+    zcr[0, :n][fr["silent"][:n]] = 0.5  # the floor is white: half the samples cross
     d1 = librosa.feature.delta(mfcc, width=5)
     d2 = librosa.feature.delta(mfcc, order=2, width=5)
     parts = [mfcc.mean(1), mfcc.std(1), d1.std(1), d2.std(1)]
@@ -235,7 +316,7 @@ def _rich(x: np.ndarray, fr: dict | None = None) -> np.ndarray:
         librosa.feature.spectral_bandwidth(S=spec, sr=sr),
         librosa.feature.spectral_rolloff(S=spec, sr=sr),
         librosa.feature.spectral_flatness(S=spec),
-        librosa.feature.zero_crossing_rate(xf, frame_length=n_fft, hop_length=hop),
+        zcr,
         librosa.feature.spectral_contrast(S=spec, sr=sr, n_bands=6),
     ):
         parts += [feat.mean(1), feat.std(1)]
@@ -244,7 +325,8 @@ def _rich(x: np.ndarray, fr: dict | None = None) -> np.ndarray:
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 
-def rich_features(audio: np.ndarray, sample_rate: float) -> np.ndarray:
+def rich_features(audio: np.ndarray, sample_rate: float,
+                  silence_floor: float | None = SILENCE_FLOOR) -> np.ndarray:
     """A richer utterance-level feature set (not in the paper).
 
     Computed at 16 kHz with 32 ms frames (hop 10 ms): 20 MFCCs (mean and standard
@@ -260,6 +342,9 @@ def rich_features(audio: np.ndarray, sample_rate: float) -> np.ndarray:
         Speech.
     sample_rate : int or float
         Its sampling rate in Hz.
+    silence_floor : float or None, optional
+        dB below the loudest frame under which frames are silence, replaced by the floor
+        (the module docstring; None: no floor).
 
     Returns
     -------
@@ -271,7 +356,8 @@ def rich_features(audio: np.ndarray, sample_rate: float) -> np.ndarray:
     DataError
         Audio shorter than 0.25 s, silent, or non-finite.
     """
-    return _rich(prepare_audio(audio, sample_rate))
+    _check_floor(silence_floor)
+    return _rich(prepare_audio(audio, sample_rate), silence_floor=silence_floor)
 
 
 # --------------------------------------------------------------------------- openSMILE
@@ -311,7 +397,8 @@ def parse_features(spec: str) -> tuple[str, ...]:
 
 
 def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int = N_CEPSTRUM,
-                   cepstrum: str = "utterance") -> dict[str, np.ndarray]:
+                   cepstrum: str = "utterance", silence_floor: float | None = SILENCE_FLOOR
+                   ) -> dict[str, np.ndarray]:
     """Each block of ``spec`` for one utterance (the audio prepared once).
 
     Parameters
@@ -322,6 +409,9 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
         Blocks joined by ``+`` (see the module docstring).
     n_cepstrum, cepstrum
         Of the ``paper`` block (:func:`emotion_features`).
+    silence_floor : float or None, optional
+        dB below the loudest frame under which frames are silence (the module docstring;
+        None: the analysis before the floor, of classifiers stored before it).
 
     Returns
     -------
@@ -334,12 +424,14 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
     blocks = parse_features(spec)
     if "paper" in blocks:
         _check_cepstrum(n_cepstrum, cepstrum)
+    _check_floor(silence_floor)
     x = prepare_audio(audio, sample_rate)
-    fr = frame_analysis(x) if "rich" in blocks or WORDS_BLOCK in blocks else None
+    fr = frame_analysis(x, silence_floor) if "rich" in blocks or WORDS_BLOCK in blocks \
+        else None
     out = {}
     for block in blocks:
         if block == "paper":
-            out[block] = _paper(x, n_cepstrum, cepstrum)
+            out[block] = _paper(x, n_cepstrum, cepstrum, silence_floor)
         elif block == "rich":
             out[block] = _rich(x, fr)
         elif block == WORDS_BLOCK:
@@ -347,7 +439,7 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
 
             out[block] = descriptors(fr)
         elif block == "cepstrum":
-            out[block] = _frame_cepstrum(x, CEPSTRUM_BLOCK)
+            out[block] = _frame_cepstrum(x, CEPSTRUM_BLOCK, silence_floor)
         else:
             out[block] = _opensmile(x, block)
     return out
