@@ -51,7 +51,7 @@ from ingest.decompose import (
     cutoff_frequencies,
     pcs_of_clips,
 )
-from ingest.emotion.model import fit_emotion_model
+from ingest.emotion.model import fit_emotion_model, stored_model_current
 from ingest.lag import decide_lags
 from ingest.motion import fill_gaps, head_points
 from ingest.plausible import Limits, check_clip
@@ -361,8 +361,9 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         if everything:
             _write(db_path, everything, config, target_fps, report, reference, based_on,
                    say)
-    elif existing is not None and "emotion" not in existing.manifest:
-        # Written before emotion models existed: learn it now from the stored clips.
+    elif existing is not None and not stored_model_current(existing.manifest):
+        # Written before emotion models existed, or before this version's classifier:
+        # learn it now from the stored clips.
         _write(db_path, prepared_from_database(existing), config, fps, report, reference,
                based_on, say)
     report.seconds = time.perf_counter() - started

@@ -109,3 +109,30 @@ def test_silence_floor_stored_and_older_formats_read_without_it(clips, tiny_conf
     np.testing.assert_array_equal(back.featurize(audio[:2]), none.featurize(audio[:2]))
     with pytest.raises(DataError, match="silence_floor"):
         EmotionClassifier.from_arrays({**arrays, "silence_floor": np.array(np.nan)})
+
+
+def test_a_classifier_from_before_the_floor_is_learnt_again_by_the_next_ingest():
+    """``stored_model_current`` decides it, for ingest (learn the model again from the
+    stored clips) and for the default database (brought up to date on first use)."""
+    from ingest.emotion.classifier import SILENCE_FLOOR_FORMAT
+    from ingest.emotion.model import stored_model_current
+
+    def manifest(classifier):
+        return {"emotion": {"emotions": ["happy", "sad"], "classifier": classifier}}
+
+    assert not stored_model_current({})  # before emotion models
+    assert stored_model_current(manifest(None))  # one emotion: no classifier to refit
+    assert not stored_model_current(manifest({"kernel": "linear"}))  # before the format
+    assert not stored_model_current(manifest({"format": SILENCE_FLOOR_FORMAT - 1}))
+    assert stored_model_current(manifest({"format": SILENCE_FLOOR_FORMAT}))
+
+
+def test_ingest_writes_its_classifiers_format_in_the_manifest(tiny_db):
+    from db.store import Database
+    from ingest.emotion.classifier import CLASSIFIER_FORMAT
+    from ingest.emotion.model import stored_model_current
+
+    manifest = Database.open(tiny_db[0]).manifest
+    if manifest["emotion"].get("classifier"):
+        assert manifest["emotion"]["classifier"]["format"] == CLASSIFIER_FORMAT
+    assert stored_model_current(manifest)

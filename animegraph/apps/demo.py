@@ -219,15 +219,21 @@ def ensure_default_db(
     progress: Callable[..., Callable] | None = None,
     say: Callable[[str], object] | None = None,
 ) -> tuple[Path, bool]:
-    """Ingest the default corpus into the default database unless it is there already."""
+    """Ingest the default corpus into the default database unless it is there already and
+    its emotion model is this version's (:func:`ingest.emotion.model.stored_model_current`)."""
+    from ingest.emotion.model import stored_model_current
     from ingest.pipeline import ingest
 
     path = default_db_dir()
-    if is_database(path) and "emotion" in Database.open(path).manifest:
+    manifest = Database.open(path).manifest if is_database(path) else None
+    if manifest is not None and stored_model_current(manifest):
         return path, False
-    # (A database from before emotion models is brought up to date by ingest.)
+    # A database from before emotion models, or before this version's emotion classifier:
+    # brought up to date by ingest (which learns the model again from the stored clips).
     if say:
-        say(f"building the default database in {path} (once) ...")
+        say(f"building the default database in {path} (once) ..." if manifest is None else
+            f"updating the default database in {path}: its emotion model predates this "
+            "version's ...")
     ingest([corpus], path, workers=workers or os.cpu_count() or 1,
            progress=(lambda total: progress(total, "ingest: reading clips")) if progress
            else None, say=say)

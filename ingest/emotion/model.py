@@ -133,6 +133,21 @@ def correspondences(data: ParallelData, src: str, dst: str, sentences: Sequence[
     return np.concatenate(xs), np.concatenate(ys)
 
 
+def stored_model_current(manifest: dict) -> bool:
+    """Whether a database's emotion model (its manifest's ``emotion``) is what ingest
+    makes now: present, and its classifier, if it has one, of a format whose features
+    ingest computes (one stored before the silence floor misjudged speech whose pauses
+    are digital silence). If not, the next ingest learns it again from the stored clips.
+    """
+    from ingest.emotion.classifier import SILENCE_FLOOR_FORMAT
+
+    emotion = manifest.get("emotion")
+    if emotion is None:
+        return False
+    classifier = emotion.get("classifier")
+    return not classifier or classifier.get("format", 0) >= SILENCE_FLOOR_FORMAT
+
+
 def find_emotion(name: str, known: Collection[str]) -> str:
     """``name`` as ``known`` spells it, whatever its case.
 
@@ -282,6 +297,8 @@ class EmotionModel:
         if self.classifier is not None:
             raw = self.classifier.to_arrays()
             classifier = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS if k in raw}
+            # Readable without the arrays: a cached database can tell it predates a format.
+            classifier["format"] = int(np.asarray(raw["format"]))
             for key, value in raw.items():
                 if key not in _CLASSIFIER_STRINGS:
                     arrays[f"{PREFIX}classifier/{key}"] = np.asarray(value, dtype=np.float64)
