@@ -288,12 +288,44 @@ def test_batch_on_a_two_worker_cluster(tiny_db, dialogue, tmp_path, capsys):
 def test_an_unreachable_scheduler_is_one_line(tiny_db, tmp_path, capsys):
     script = tmp_path / "s.csv"
     script.write_text("id,text\na,Hello there.\n")
-    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(tmp_path / "out"),
-                 "--scheduler", "tcp://127.0.0.1:9"])
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out",
+                 str(tmp_path / "new" / "out"), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1, err
     assert err[0].startswith("animegraph: error: cannot reach the Dask scheduler at "
                               "tcp://127.0.0.1:9")
+    assert not (tmp_path / "new").exists()  # no folder, lock or report of "not run" lines
+    # An output folder that was there keeps what it had: its report is not overwritten.
+    out = tmp_path / "old"
+    out.mkdir()
+    (out / "report.csv").write_text("id,status\na,done\n")
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(out),
+                 "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 1 and len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert (out / "report.csv").read_text() == "id,status\na,done\n"
+
+
+def test_a_malformed_scheduler_address_is_one_line_at_once(tiny_db, tmp_path):
+    # The Client that failed to connect was left to the garbage collector: at exit it
+    # waited 10 s and printed "Exception ignored in: Client.__del__" with a traceback.
+    import os
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello there.\n")
+    t0 = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "animegraph", "batch", str(script), "--db",
+                           str(tiny_db[0]), "--out", str(tmp_path / "out"), "--scheduler",
+                           "nonsense"], capture_output=True, text=True, env=dict(os.environ),
+                          timeout=120)
+    err = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(err) == 1, done.stderr
+    assert err[0].startswith("animegraph: error: cannot reach the Dask scheduler at "
+                              "nonsense: missing port number")
+    assert time.monotonic() - t0 < 9
+    assert not (tmp_path / "out").exists()
 
 
 def test_run_line_renders_an_mp4_preview(tiny_db, tmp_path):
