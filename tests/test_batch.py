@@ -196,6 +196,32 @@ def test_run_line_in_process(tiny_db, tmp_path):
         batch.worker_model(str(db), "v000999")
 
 
+def test_run_line_reads_a_videos_sound_track(tiny_db, tiny_corpus, tmp_path):
+    # A line's recording may be a video, as synth's may: it was read as a WAV and failed
+    # with "corrupt or unreadable audio file ... Format not recognised".
+    import subprocess
+
+    import imageio_ffmpeg
+
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    clip = sorted((tiny_corpus / "clips").glob("*_neutral_*.json"))[0]
+    video = tmp_path / "take.mp4"
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-v", "error", "-f",
+                    "lavfi", "-i", "color=c=gray:s=64x48:r=25", "-i",
+                    str(clip.with_suffix(".wav")), "-shortest", "-c:v", "libx264", "-c:a",
+                    "aac", str(video)], check=True)
+    folder = tmp_path / "out" / "v"
+    line = ScriptLine(id="v", text=json.loads(clip.read_text())["text"], line_no=2,
+                      audio=video)
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="none", key=line_key(line, identity, "none")))
+    assert row["status"] == "done", row
+    audio, rate = read_wav(folder / "speech.wav")
+    wav, wav_rate = read_wav(clip.with_suffix(".wav"))
+    assert rate == wav_rate and abs(len(audio) / rate - len(wav) / wav_rate) < 0.1
+
+
 # --------------------------------------------------------------------------- the cluster
 
 

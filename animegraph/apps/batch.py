@@ -628,13 +628,14 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis.path import audio_only_guide
     from ingest.formats.livelink import is_arkit
+    from ingest.formats.media import read_audio
     from ingest.formats.phones_csv import write_phones_csv
-    from ingest.formats.wav import read_wav, write_wav
+    from ingest.formats.wav import write_wav
 
     line = task.line
     warnings: list[str] = []
     if line.audio is not None:
-        audio, sample_rate = read_wav(line.audio)
+        audio, sample_rate = read_audio(line.audio)  # a WAV, or a video's sound track
         text, labels, speech = line.text, None, "recording"
     else:
         audio, sample_rate, labels = _speak(line, warnings)

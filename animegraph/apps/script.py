@@ -9,7 +9,8 @@ column     required meaning
                     folder is ``OUT/<id>/``); unique, ignoring case
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
                     transcript for forced alignment when there is
-``audio``           a recording (WAV), relative to the script's folder
+``audio``           a recording (WAV, or a video's or ``.m4a``'s sound track, as ``synth``
+                    reads it), relative to the script's folder
 ``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
                     from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
                     emotion preference
