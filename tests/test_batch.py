@@ -222,6 +222,43 @@ def test_run_line_reads_a_videos_sound_track(tiny_db, tiny_corpus, tmp_path):
     assert rate == wav_rate and abs(len(audio) / rate - len(wav) / wav_rate) < 0.1
 
 
+def test_emotions_are_checked_before_any_worker_starts(tiny_db, tmp_path):
+    # An emotion the database lacks failed its line only on a worker, after the
+    # cluster's start-up; a script of such lines started a cluster for nothing.
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\n"
+                      "a,bored,Hello there.\n"
+                      "b,\"bored=0.5,happy=0.5\",Hello there.\n")
+    result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
+    assert result.n_workers == 0  # no cluster
+    assert [r["status"] for r in result.rows] == ["failed", "failed"]
+    for row in result.rows:
+        assert row["error"].startswith("unknown emotion 'bored': it is not in the database "
+                                       "(it has angry, frustrated, happy, neutral, sad)")
+    assert [r["status"] for r in read_report(result.report)] == ["failed", "failed"]
+
+
+def test_a_database_without_emotion_labels_fails_emotion_lines_at_once(unlabelled_db,
+                                                                       tmp_path):
+    # Each line failed on a worker after its start-up with "unknown emotion 'happy': it is
+    # not in the database (it has unknown)".
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\n"
+                      "a,happy,Hello there.\n"
+                      "b,auto,Hello there.\n"
+                      "c,\"happy=0.7,neutral=0.3\",Hello there.\n")
+    result = run_batch(script, BatchOptions(db=unlabelled_db, out=tmp_path / "out"))
+    assert result.n_workers == 0
+    errors = [r["error"] for r in result.rows]
+    assert errors == [
+        "unknown emotion 'happy': the database has no emotions (its clips carry no emotion "
+        "labels): leave the emotion out",
+        "the database has no emotion classifier (its clips carry no emotion labels): leave "
+        "the emotion out instead of 'auto'",
+        "unknown emotion 'happy': the database has no emotions (its clips carry no emotion "
+        "labels): leave the emotion out"]
+
+
 # --------------------------------------------------------------------------- the cluster
 
 

@@ -222,6 +222,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         stored.update(guide_state(db, [p for p in parts if p not in stored]))
         return {p: stored[p] for p in parts}
 
+    check_emotion = EmotionCheck(db)
     for line in lines:
         folder = out / line.id
         try:
@@ -232,6 +233,11 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         saved = None if options.force else finished(folder, key, guides)
         if saved is not None:
             rows[line.id] = {**saved, "status": "skipped"}
+            continue
+        try:
+            check_emotion(line.emotion)  # here, not in each worker after its start-up
+        except LineError as exc:
+            rows[line.id] = _row(line, status="failed", error=str(exc))
             continue
         tasks.append(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
                               render=options.render, key=key))
@@ -429,6 +435,42 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
 # --------------------------------------------------------------------------------------
 # Keys and markers
 # --------------------------------------------------------------------------------------
+
+
+class EmotionCheck:
+    """``check(spec)``: a line's emotion checked against the database as synthesis will
+    check it (names, a mix's mappings, a classifier for ``auto``), before any worker
+    starts. Raises :class:`LineError` with synthesis' own message. The database's emotion
+    model is read on the first line that has an emotion."""
+
+    def __init__(self, db: Path):
+        self.db = db
+        self._loaded: tuple | None = None
+
+    def __call__(self, spec: EmotionSpec) -> None:
+        from animegraph.emotion.control import AUTO, no_classifier, resolve_emotion
+        from ingest.emotion.model import EmotionModel, NoEmotionModel
+
+        if spec.argument is None:
+            return
+        if self._loaded is None:
+            database = Database.open(self.db)
+            try:
+                model = EmotionModel.from_database(database)
+            except NoEmotionModel:  # an older database: names are still checked
+                model = None
+            # The Anime Graph's emotions (animegraph.search.graph.AnimeGraph.emotions).
+            names = database.table("animes", columns=["emotion"]).column("emotion")
+            self._loaded = (model, tuple(sorted(set(names.to_pylist()))))
+        model, graph_emotions = self._loaded
+        try:
+            if spec.argument == AUTO:
+                if model is None or model.classifier is None:
+                    raise DataError(no_classifier(model))
+            else:
+                resolve_emotion(spec.argument, model, graph_emotions)
+        except AnimeGraphError as exc:
+            raise LineError(str(exc)) from None
 
 
 def database_identity(db: Path) -> tuple[str, str]:

@@ -25,7 +25,8 @@ column     required meaning
 The whole script is checked before any work: a malformed row (with its line number), a
 duplicate id or an unknown column raises :class:`ScriptError`. Problems that depend on
 the database or on files (an emotion the database lacks, a missing recording, text eSpeak
-cannot speak) are left to the line itself.
+cannot speak) are left to the line itself (``animegraph.apps.batch`` fails a line with a
+missing recording or an emotion the database cannot give before any worker starts).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ def cmd_classify(args: argparse.Namespace) -> int:
     db = Database.open(args.db)
     model = EmotionModel.from_database(db)
     audio, sample_rate = read_audio(args.audio)  # mono, whatever the file holds
-    probabilities = classify_speech(model, audio, sample_rate)
+    probabilities = classify_speech(model, audio, sample_rate, auto=False)
     if args.json:
         print(json.dumps(probabilities, indent=1))
     else:
