@@ -137,6 +137,19 @@ def test_cli_refuses_a_bad_script_in_one_line(tmp_path, capsys):
 # --------------------------------------------------------------------------- markers
 
 
+def test_summary_counts_in_the_singular_too(tmp_path):
+    from animegraph.apps.batch import BatchResult
+
+    row = {"id": "a", "status": "done", "duration_s": "1.5", "error": ""}
+    result = BatchResult(rows=[row], report=tmp_path / "report.csv", n_workers=1,
+                         elapsed_s=3.0)
+    assert result.summary()[:2] == [
+        "batch: 1 line: 1 made, 0 skipped (finished before), 0 failed",  # was "1 lines"
+        "batch: 1.5 s of speech animated in 3.0 s on 1 worker (20.0 lines/min)"]
+    result.rows = [row, {**row, "id": "b"}]
+    assert result.summary()[0].startswith("batch: 2 lines: 2 made")
+
+
 def test_finished_needs_the_same_key_and_every_output(tmp_path):
     folder = tmp_path / "a"
     folder.mkdir()

@@ -128,7 +128,8 @@ class BatchResult:
         """A few lines for the user."""
         done, skipped, failed = self.count("done"), self.count("skipped"), self.count("failed")
         speech = sum(float(r["duration_s"] or 0) for r in self.rows if r["status"] == "done")
-        lines = [f"batch: {len(self.rows)} lines: {done} made, {skipped} skipped (finished "
+        n = len(self.rows)
+        lines = [f"batch: {n} line{'s' * (n != 1)}: {done} made, {skipped} skipped (finished "
                  f"before), {failed} failed" + (f", {self.count('not run')} not run"
                                                  if self.count("not run") else "")]
         if done:
@@ -261,7 +262,8 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
                 with dask_client(options, prepare=prepare) as (client, n_workers):
                     entered = True
                     result.n_workers = n_workers
-                    say(f"{len(tasks)} lines to make on {n_workers} Dask worker"
+                    say(f"{len(tasks)} line{'s' * (len(tasks) != 1)} to make on "
+                        f"{n_workers} Dask worker"
                         f"{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} skipped or "
                         f"failed before starting)")
                     for task, row in _run_tasks(client, tasks, progress):
