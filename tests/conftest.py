@@ -44,6 +44,23 @@ def tiny_db(tiny_corpus, tmp_path_factory):
     return path, report
 
 
+@pytest.fixture(scope="session")
+def unlabelled_db(tiny_db, tmp_path_factory):
+    """The tiny database's clips of two sentences without their emotion labels (as GRID's
+    come): a database whose clips carry no emotion labels."""
+    from dataclasses import replace
+
+    from db.store import Database
+    from ingest.pipeline import build_database
+    from ingest.tables import prepared_from_database
+
+    clips = [replace(c, emotion="unknown") for c in prepared_from_database(
+        Database.open(tiny_db[0])) if c.sentence_id in ("s0001", "s0002")]
+    path = tmp_path_factory.mktemp("unlabelled") / "db"
+    build_database(path, clips)
+    return path
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _isolated_cache(tmp_path_factory):
     """Keep every test's cache (the demo's default corpus, the phone posteriors ingest

@@ -137,6 +137,19 @@ def test_cli_refuses_a_bad_script_in_one_line(tmp_path, capsys):
 # --------------------------------------------------------------------------- markers
 
 
+def test_summary_counts_in_the_singular_too(tmp_path):
+    from animegraph.apps.batch import BatchResult
+
+    row = {"id": "a", "status": "done", "duration_s": "1.5", "error": ""}
+    result = BatchResult(rows=[row], report=tmp_path / "report.csv", n_workers=1,
+                         elapsed_s=3.0)
+    assert result.summary()[:2] == [
+        "batch: 1 line: 1 made, 0 skipped (finished before), 0 failed",  # was "1 lines"
+        "batch: 1.5 s of speech animated in 3.0 s on 1 worker (20.0 lines/min)"]
+    result.rows = [row, {**row, "id": "b"}]
+    assert result.summary()[0].startswith("batch: 2 lines: 2 made")
+
+
 def test_finished_needs_the_same_key_and_every_output(tmp_path):
     folder = tmp_path / "a"
     folder.mkdir()
@@ -194,6 +207,69 @@ def test_run_line_in_process(tiny_db, tmp_path):
     with pytest.raises(DataError, match="changed during the batch"):
         batch._MODELS.clear()
         batch.worker_model(str(db), "v000999")
+
+
+def test_run_line_reads_a_videos_sound_track(tiny_db, tiny_corpus, tmp_path):
+    # A line's recording may be a video, as synth's may: it was read as a WAV and failed
+    # with "corrupt or unreadable audio file ... Format not recognised".
+    import subprocess
+
+    import imageio_ffmpeg
+
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    clip = sorted((tiny_corpus / "clips").glob("*_neutral_*.json"))[0]
+    video = tmp_path / "take.mp4"
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-v", "error", "-f",
+                    "lavfi", "-i", "color=c=gray:s=64x48:r=25", "-i",
+                    str(clip.with_suffix(".wav")), "-shortest", "-c:v", "libx264", "-c:a",
+                    "aac", str(video)], check=True)
+    folder = tmp_path / "out" / "v"
+    line = ScriptLine(id="v", text=json.loads(clip.read_text())["text"], line_no=2,
+                      audio=video)
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="none", key=line_key(line, identity, "none")))
+    assert row["status"] == "done", row
+    audio, rate = read_wav(folder / "speech.wav")
+    wav, wav_rate = read_wav(clip.with_suffix(".wav"))
+    assert rate == wav_rate and abs(len(audio) / rate - len(wav) / wav_rate) < 0.1
+
+
+def test_emotions_are_checked_before_any_worker_starts(tiny_db, tmp_path):
+    # An emotion the database lacks failed its line only on a worker, after the
+    # cluster's start-up; a script of such lines started a cluster for nothing.
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\n"
+                      "a,bored,Hello there.\n"
+                      "b,\"bored=0.5,happy=0.5\",Hello there.\n")
+    result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
+    assert result.n_workers == 0  # no cluster
+    assert [r["status"] for r in result.rows] == ["failed", "failed"]
+    for row in result.rows:
+        assert row["error"].startswith("unknown emotion 'bored': it is not in the database "
+                                       "(it has angry, frustrated, happy, neutral, sad)")
+    assert [r["status"] for r in read_report(result.report)] == ["failed", "failed"]
+
+
+def test_a_database_without_emotion_labels_fails_emotion_lines_at_once(unlabelled_db,
+                                                                       tmp_path):
+    # Each line failed on a worker after its start-up with "unknown emotion 'happy': it is
+    # not in the database (it has unknown)".
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\n"
+                      "a,happy,Hello there.\n"
+                      "b,auto,Hello there.\n"
+                      "c,\"happy=0.7,neutral=0.3\",Hello there.\n")
+    result = run_batch(script, BatchOptions(db=unlabelled_db, out=tmp_path / "out"))
+    assert result.n_workers == 0
+    errors = [r["error"] for r in result.rows]
+    assert errors == [
+        "unknown emotion 'happy': the database has no emotions (its clips carry no emotion "
+        "labels): leave the emotion out",
+        "the database has no emotion classifier (its clips carry no emotion labels): leave "
+        "the emotion out instead of 'auto'",
+        "unknown emotion 'happy': the database has no emotions (its clips carry no emotion "
+        "labels): leave the emotion out"]
 
 
 # --------------------------------------------------------------------------- the cluster
@@ -288,12 +364,44 @@ def test_batch_on_a_two_worker_cluster(tiny_db, dialogue, tmp_path, capsys):
 def test_an_unreachable_scheduler_is_one_line(tiny_db, tmp_path, capsys):
     script = tmp_path / "s.csv"
     script.write_text("id,text\na,Hello there.\n")
-    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(tmp_path / "out"),
-                 "--scheduler", "tcp://127.0.0.1:9"])
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out",
+                 str(tmp_path / "new" / "out"), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1, err
     assert err[0].startswith("animegraph: error: cannot reach the Dask scheduler at "
                               "tcp://127.0.0.1:9")
+    assert not (tmp_path / "new").exists()  # no folder, lock or report of "not run" lines
+    # An output folder that was there keeps what it had: its report is not overwritten.
+    out = tmp_path / "old"
+    out.mkdir()
+    (out / "report.csv").write_text("id,status\na,done\n")
+    code = main(["batch", str(script), "--db", str(tiny_db[0]), "--out", str(out),
+                 "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 1 and len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert (out / "report.csv").read_text() == "id,status\na,done\n"
+
+
+def test_a_malformed_scheduler_address_is_one_line_at_once(tiny_db, tmp_path):
+    # The Client that failed to connect was left to the garbage collector: at exit it
+    # waited 10 s and printed "Exception ignored in: Client.__del__" with a traceback.
+    import os
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello there.\n")
+    t0 = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "animegraph", "batch", str(script), "--db",
+                           str(tiny_db[0]), "--out", str(tmp_path / "out"), "--scheduler",
+                           "nonsense"], capture_output=True, text=True, env=dict(os.environ),
+                          timeout=120)
+    err = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(err) == 1, done.stderr
+    assert err[0].startswith("animegraph: error: cannot reach the Dask scheduler at "
+                              "nonsense: missing port number")
+    assert time.monotonic() - t0 < 9
+    assert not (tmp_path / "out").exists()
 
 
 def test_run_line_renders_an_mp4_preview(tiny_db, tmp_path):

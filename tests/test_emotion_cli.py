@@ -245,6 +245,36 @@ def test_too_few_clips_per_emotion_still_ingests(few_clips_db, tiny_corpus, tmp_
     assert not (tmp_path / "o.npz").exists()
 
 
+def test_a_database_without_emotion_labels_says_so(unlabelled_db, tiny_corpus, tmp_path,
+                                                   capsys):
+    # It said "it is not in the database (it has unknown)", and classify "give the
+    # emotion instead of 'auto'", an option classify does not have.
+    stem = _clip(tiny_corpus, "sad")
+    wav = str(stem.with_suffix(".wav"))
+    assert main(["classify", wav, "--db", str(unlabelled_db)]) == 1
+    _one_error_line(capsys, "the database has no emotion classifier (its clips carry no "
+                            "emotion labels): classifying needs a database of clips labelled "
+                            "with two emotions or more")
+    synth = ["synth", wav, "--db", str(unlabelled_db), "--labels", f"{stem}.phones.csv",
+             "-o", str(tmp_path / "o.npz"), "--emotion"]
+    assert main([*synth, "happy"]) == 1
+    _one_error_line(capsys, "unknown emotion 'happy': the database has no emotions (its "
+                            "clips carry no emotion labels): leave the emotion out")
+    assert main([*synth, "auto"]) == 1
+    _one_error_line(capsys, "the database has no emotion classifier (its clips carry no "
+                            "emotion labels): leave the emotion out instead of 'auto'")
+    assert not (tmp_path / "o.npz").exists()
+
+
+def test_classify_on_too_few_clips_names_the_labels(few_clips_db, tiny_corpus, capsys):
+    wav = str(_clip(tiny_corpus, "sad").with_suffix(".wav"))
+    assert main(["classify", wav, "--db", str(few_clips_db)]) == 1
+    _one_error_line(capsys, "the database has no emotion classifier (its clips carry 5 "
+                            "emotion labels, angry, frustrated, happy, neutral, sad; it needs "
+                            "two emotions with at least 2 usable clips each): re-ingest with "
+                            "more labelled clips to classify")
+
+
 def test_classify_silence_and_stereo(tiny_db, tiny_corpus, tmp_path, capsys):
     write_wav(tmp_path / "hush.wav", np.zeros(16000, np.float32), 16000)
     assert main(["classify", str(tmp_path / "hush.wav"), "--db", str(tiny_db[0])]) == 1

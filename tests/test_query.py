@@ -135,7 +135,7 @@ def test_export_of_clips_and_nothing_matched(tiny_db, tmp_path, capsys):
                  "1", "--export", str(out)]) == 0
     index = list(csv.DictReader((out / "index.csv").open()))
     assert len(index) == 1 and index[0]["snippet_start"] == "0.0"
-    capsys.readouterr()
+    assert f"exported 1 hit to {out} (index.csv)" in capsys.readouterr().err  # not "1 hits"
     assert main(["query", "--db", str(tiny_db[0]), "--speaker", "nobody", "--export",
                  str(tmp_path / "none")]) == 1
     assert "nothing matched" in capsys.readouterr().err

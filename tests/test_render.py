@@ -435,6 +435,42 @@ def test_plot_against_truth(take, tmp_path, capsys):
     assert not (tmp_path / "q.png").exists()
 
 
+def test_plot_refuses_a_truth_of_other_channels(take, tmp_path, capsys):
+    # A truth with none of the motion's channels used to draw no truth at all (exit 0).
+    from animegraph.motion.files import write_channel_csv
+
+    motion = read_motion(take / "take.c3d")
+    curves = ("jawOpen", "mouthSmileLeft", "eyeBlinkLeft")
+    write_channel_csv(tmp_path / "curves.csv", np.random.default_rng(0).random((60, 3)),
+                      curves, 60.0)
+    out = tmp_path / "p.png"
+    for a, b in ((take / "take.c3d", tmp_path / "curves.csv"),
+                 (tmp_path / "curves.csv", take / "take.c3d")):
+        line = _one_line(capsys, main(["plot", str(a), "--truth", str(b), "-o", str(out)]), 1)
+        assert "the truth's channels are not the motion's: none of the motion's" in line
+        assert "jawOpen" in line and "give a truth with the motion's channels" in line, line
+        assert not out.exists()
+    # Some in common: the truth is drawn where it can be, and the user is told.
+    keep = [i for i, n in enumerate(motion.names) if not n.startswith("ulip_in_c.")]
+    write_channel_csv(tmp_path / "part.csv", motion.values[:, keep],
+                      [motion.names[i] for i in keep], motion.fps)
+    assert main(["plot", str(take / "take.c3d"), "--truth", str(tmp_path / "part.csv"),
+                 "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (f"the truth has {len(keep)} of the motion's {len(motion.names)} channels (not "
+            "ulip_in_c.x, ...): ground truth drawn in 2 of 3 panels") in err, err
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    # Too few in common for any measure: refused.
+    few = [i for i, n in enumerate(motion.names) if n.startswith("lip_corner_r.")]
+    write_channel_csv(tmp_path / "few.csv", motion.values[:, few],
+                      [motion.names[i] for i in few], motion.fps)
+    line = _one_line(capsys, main(["plot", str(take / "take.c3d"), "--truth",
+                                   str(tmp_path / "few.csv"), "-o", str(tmp_path / "f.png")]),
+                     1)
+    assert "only 3 of the motion's" in line and "too few for any plotted measure" in line
+    assert not (tmp_path / "f.png").exists()
+
+
 def test_rest_frame_is_the_mesh_as_modelled(take, tmp_path):
     # With frame 30 as the rest frame, that frame shows the mesh exactly as it is.
     assert main(["render", str(take / "take.c3d"), "--rest-frame", "30", "-o",

@@ -50,7 +50,7 @@ from animegraph import __version__
 from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
-from db.lock import writer_lock
+from db.lock import lock_path, writer_lock
 from db.store import Database, current_version
 from ingest.workers import sigint_ignored_by_children
 
@@ -75,6 +75,10 @@ EXAMPLE_SCRIPT = Path(__file__).resolve().parent / "examples" / "dialogue.csv"
 
 class LineError(AnimeGraphError):
     """One line cannot be made; the batch goes on."""
+
+
+class NotStarted(DataError):
+    """The cluster could not be had: no line ran, and the batch leaves nothing behind."""
 
 
 @dataclass(frozen=True)
@@ -125,7 +129,8 @@ class BatchResult:
         """A few lines for the user."""
         done, skipped, failed = self.count("done"), self.count("skipped"), self.count("failed")
         speech = sum(float(r["duration_s"] or 0) for r in self.rows if r["status"] == "done")
-        lines = [f"batch: {len(self.rows)} lines: {done} made, {skipped} skipped (finished "
+        n = len(self.rows)
+        lines = [f"batch: {n} line{'s' * (n != 1)}: {done} made, {skipped} skipped (finished "
                  f"before), {failed} failed" + (f", {self.count('not run')} not run"
                                                  if self.count("not run") else "")]
         if done:
@@ -168,7 +173,9 @@ def run_batch(
         The script is malformed (nothing runs).
     AnimeGraphError
         The database cannot be opened, rendering is unavailable, the scheduler cannot be
-        reached, another batch is writing into ``options.out``: nothing runs.
+        reached, another batch is writing into ``options.out``: nothing runs. A cluster
+        that cannot be had (:class:`NotStarted`) leaves nothing behind: no report, and no
+        ``options.out`` if this batch made it.
     """
     say = say or (lambda _line: None)
     if options.render not in RENDER_MODES:
@@ -183,13 +190,28 @@ def run_batch(
     out = Path(options.out).absolute()
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {out} is a file, not a folder")
+    made = [folder for folder in (out, *out.parents) if not folder.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ParameterError(f"cannot create --out {out}: {exc.strerror or exc}") from None
-    # One batch per output folder: a second one would delete the first's temporaries.
-    with writer_lock(out, wait=0, what="batch output folder"):
-        return _run_locked(lines, options, db, version, identity, out, progress, say)
+    try:
+        # One batch per output folder: a second one would delete the first's temporaries.
+        with writer_lock(out, wait=0, what="batch output folder"):
+            try:
+                return _run_locked(lines, options, db, version, identity, out, progress,
+                                   say)
+            except NotStarted:
+                if made:  # the folder is this batch's: its lock goes with it
+                    lock_path(out).unlink(missing_ok=True)
+                raise
+    except NotStarted:
+        for folder in made:  # innermost first; only if still empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: Path,
@@ -202,6 +224,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         stored.update(guide_state(db, [p for p in parts if p not in stored]))
         return {p: stored[p] for p in parts}
 
+    check_emotion = EmotionCheck(db)
     for line in lines:
         folder = out / line.id
         try:
@@ -213,12 +236,18 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         if saved is not None:
             rows[line.id] = {**saved, "status": "skipped"}
             continue
+        try:
+            check_emotion(line.emotion)  # here, not in each worker after its start-up
+        except LineError as exc:
+            rows[line.id] = _row(line, status="failed", error=str(exc))
+            continue
         tasks.append(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
                               render=options.render, key=key))
 
     report = out / "report.csv"
     result = BatchResult(rows=[], report=report)
     t0 = time.perf_counter()
+    written = True
     try:
         if tasks:
             def prepare() -> None:
@@ -229,20 +258,30 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
                 except AnimeGraphError as exc:  # the lines will meet it and say so
                     logger.warning("warming up the search kernels failed: %s", exc)
 
-            with dask_client(options, prepare=prepare) as (client, n_workers):
-                result.n_workers = n_workers
-                say(f"{len(tasks)} lines to make on {n_workers} Dask worker"
-                    f"{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} skipped or failed "
-                    f"before starting)")
-                for task, row in _run_tasks(client, tasks, progress):
-                    pid, loads = row.pop("_pid", None), row.pop("_loads", None)
-                    if pid is not None:
-                        result.loads[pid] = loads
-                    rows[task.line.id] = row
+            entered = False
+            try:
+                with dask_client(options, prepare=prepare) as (client, n_workers):
+                    entered = True
+                    result.n_workers = n_workers
+                    say(f"{len(tasks)} line{'s' * (len(tasks) != 1)} to make on "
+                        f"{n_workers} Dask worker"
+                        f"{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} skipped or "
+                        f"failed before starting)")
+                    for task, row in _run_tasks(client, tasks, progress):
+                        pid, loads = row.pop("_pid", None), row.pop("_loads", None)
+                        if pid is not None:
+                            result.loads[pid] = loads
+                        rows[task.line.id] = row
+            except AnimeGraphError as exc:
+                if entered:
+                    raise
+                written = False  # no cluster: no line ran, nothing to report
+                raise NotStarted(str(exc)) from None
     finally:
         result.elapsed_s = time.perf_counter() - t0
         result.rows = [rows.get(line.id) or _row(line, status="not run") for line in lines]
-        write_report(report, result.rows)
+        if written:
+            write_report(report, result.rows)
     return result
 
 
@@ -302,10 +341,19 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
     try:
         if options.scheduler:
             address = options.scheduler
+            # Made in two steps so that a Client that fails to connect can be closed here:
+            # left to the garbage collector, it waits 10 s for its stopped event loop
+            # and prints a traceback ("Exception ignored in: Client.__del__").
+            client = Client.__new__(Client)
             try:
-                client = Client(address, timeout=options.connect_timeout, set_as_default=False)
+                client.__init__(address, timeout=options.connect_timeout,
+                                set_as_default=False)
             except (OSError, TimeoutError, ValueError) as exc:
-                raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+                _close_unconnected(client)
+                client = None
+                raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}; give "
+                                "the address of a running one, e.g. tcp://127.0.0.1:8786"
+                                ) from None
             try:
                 client.wait_for_workers(1, timeout=options.connect_timeout)
             except (OSError, TimeoutError) as exc:
@@ -349,6 +397,14 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
             cluster.close()
 
 
+def _close_unconnected(client) -> None:
+    """Close a Client whose constructor failed, quietly."""
+    try:
+        client.close(timeout=1)
+    except Exception:  # half made: whatever it lacks, it is no longer used
+        logger.debug("closing an unconnected Dask client", exc_info=True)
+
+
 def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = False) -> None:
     """Compile (and cache) every numba kernel a line will run, in this process.
 
@@ -382,6 +438,42 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
 # --------------------------------------------------------------------------------------
 # Keys and markers
 # --------------------------------------------------------------------------------------
+
+
+class EmotionCheck:
+    """``check(spec)``: a line's emotion checked against the database as synthesis will
+    check it (names, a mix's mappings, a classifier for ``auto``), before any worker
+    starts. Raises :class:`LineError` with synthesis' own message. The database's emotion
+    model is read on the first line that has an emotion."""
+
+    def __init__(self, db: Path):
+        self.db = db
+        self._loaded: tuple | None = None
+
+    def __call__(self, spec: EmotionSpec) -> None:
+        from animegraph.emotion.control import AUTO, no_classifier, resolve_emotion
+        from ingest.emotion.model import EmotionModel, NoEmotionModel
+
+        if spec.argument is None:
+            return
+        if self._loaded is None:
+            database = Database.open(self.db)
+            try:
+                model = EmotionModel.from_database(database)
+            except NoEmotionModel:  # an older database: names are still checked
+                model = None
+            # The Anime Graph's emotions (animegraph.search.graph.AnimeGraph.emotions).
+            names = database.table("animes", columns=["emotion"]).column("emotion")
+            self._loaded = (model, tuple(sorted(set(names.to_pylist()))))
+        model, graph_emotions = self._loaded
+        try:
+            if spec.argument == AUTO:
+                if model is None or model.classifier is None:
+                    raise DataError(no_classifier(model))
+            else:
+                resolve_emotion(spec.argument, model, graph_emotions)
+        except AnimeGraphError as exc:
+            raise LineError(str(exc)) from None
 
 
 def database_identity(db: Path) -> tuple[str, str]:
@@ -581,13 +673,14 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     from animegraph.motion.files import motion_suffix
     from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis.path import audio_only_guide
+    from ingest.formats.media import read_audio
     from ingest.formats.phones_csv import write_phones_csv
-    from ingest.formats.wav import read_wav, write_wav
+    from ingest.formats.wav import write_wav
 
     line = task.line
     warnings: list[str] = []
     if line.audio is not None:
-        audio, sample_rate = read_wav(line.audio)
+        audio, sample_rate = read_audio(line.audio)  # a WAV, or a video's sound track
         text, labels, speech = line.text, None, "recording"
     else:
         audio, sample_rate, labels = _speak(line, warnings)

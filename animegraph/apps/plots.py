@@ -11,13 +11,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from animegraph.motion.files import Motion
-from animegraph.motion.measures import measures, mouth_opening
+from animegraph.motion.measures import measures, mouth_opening, point_kind
 from ingest.corpus import face
 
 #: Distances between markers that read as facial actions whatever the head does.
@@ -207,17 +207,26 @@ def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], 
 
 def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
                 phones: Sequence[dict] = (), audio: tuple[np.ndarray, int] | None = None,
-                title: str = "") -> Path:
+                title: str = "", say: Callable[[str], object] | None = None) -> Path:
     """Plot synthesized ``motion`` (against ``truth``) with speech, phones and jumps.
 
     Parameters
     ----------
     motion, truth : Motion
-        Channels are matched by name; the truth may be at another frame rate.
+        Channels are matched by name; the truth may be at another frame rate. A truth
+        that shares only some of the motion's channels is drawn where it can be, and
+        ``say`` is told so.
     phones : sequence of dict
         ``phone``, ``start``, ``end`` and optionally ``clip_id`` (source recording) and
         ``jump`` (a jump match into the phone), as in ``synth --explain-json``.
     audio : (samples, sample_rate), optional
+    say : callable, optional
+        Receives a line of news (the truth drawn in only some panels).
+
+    Raises
+    ------
+    DataError
+        ``truth`` has none of the motion's channels, or too few to draw any measure.
     """
     import matplotlib
 
@@ -227,7 +236,13 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
     from db.atomic import atomic_write
 
     rows = measures(motion.values, motion.names, reference=truth)
-    truth_rows = dict(measures(truth.values, truth.names, reference=truth)) if truth else {}
+    # The truth measured as the motion is (a marker set missing a few markers too).
+    truth_rows = dict(measures(truth.values, truth.names, point_kind(motion.names),
+                               reference=truth)) if truth else {}
+    if truth is not None:
+        note = _truth_overlap(motion, truth, [label for label, _ in rows], truth_rows)
+        if note and say is not None:
+            say(note)
     top_panel = audio is not None or bool(phones)  # else it would be an empty box
     n_panels = int(top_panel) + len(rows)
     heights = [1.3] * int(top_panel) + [1.0] * len(rows)
@@ -268,6 +283,36 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
         fig.savefig(handle, format="png", dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def _truth_overlap(motion: Motion, truth: Motion, labels: Sequence[str],
+                   truth_rows: dict) -> str | None:
+    """Check that ``truth`` is a ground truth of ``motion``'s channels: an error if no
+    panel could show it, a note (else None) if it shares only some of them."""
+    from db.errors import DataError
+
+    have = set(truth.names)
+    common = [n for n in motion.names if n in have]
+    drawn = [label for label in labels if label in truth_rows]
+    if not common or not drawn:
+        if not common:
+            mine = motion.names[0]
+            theirs = next(iter(truth.names), "nothing")
+            shared = (f"none of the motion's {len(motion.names)} channels is in the truth's "
+                      f"{len(truth.names)} (the motion has {mine}, the truth {theirs})")
+        else:
+            lacking = next((n for n in motion.names if n not in have), motion.names[0])
+            shared = (f"only {len(common)} of the motion's {len(motion.names)} channels are "
+                      f"in the truth, too few for any plotted measure (it lacks {lacking})")
+        raise DataError(f"the truth's channels are not the motion's: {shared}; give a "
+                        f"truth with the motion's channels (a take of its database)")
+    if len(common) == len(motion.names) and len(drawn) == len(labels):
+        return None
+    lacking = [n for n in motion.names if n not in have]
+    return (f"the truth has {len(common)} of the motion's {len(motion.names)} channels"
+            + (f" (not {lacking[0]}" + (", ..." if len(lacking) > 1 else "") + ")"
+               if lacking else "")
+            + f": ground truth drawn in {len(drawn)} of {len(labels)} panels")
 
 
 #: Rows of clip-id labels at the jump lines in ``plot``, and the width of one character

@@ -9,7 +9,8 @@ column     required meaning
                     folder is ``OUT/<id>/``); unique, ignoring case
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
                     transcript for forced alignment when there is
-``audio``           a recording (WAV), relative to the script's folder
+``audio``           a recording (WAV, or a video's or ``.m4a``'s sound track, as ``synth``
+                    reads it), relative to the script's folder
 ``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
                     from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
                     emotion preference
@@ -24,7 +25,8 @@ column     required meaning
 The whole script is checked before any work: a malformed row (with its line number), a
 duplicate id or an unknown column raises :class:`ScriptError`. Problems that depend on
 the database or on files (an emotion the database lacks, a missing recording, text eSpeak
-cannot speak) are left to the line itself.
+cannot speak) are left to the line itself (``animegraph.apps.batch`` fails a line with a
+missing recording or an emotion the database cannot give before any worker starts).
 """
 
 from __future__ import annotations

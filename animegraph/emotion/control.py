@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from db.errors import DataError, ParameterError
-from ingest.emotion.model import EmotionModel, find_emotion
+from ingest.emotion.model import NO_EMOTION_LABELS, EmotionModel, find_emotion
 from ingest.lowpass import smooth
 from ingest.motion import unstabilize_points
 
@@ -87,18 +87,44 @@ def parse_emotion(spec) -> str | dict[str, float] | None:
     return next(iter(mix)) if len(mix) == 1 else mix
 
 
-def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int) -> dict[str, float]:
+def no_classifier(model: EmotionModel | None, *, auto: bool = True) -> str:
+    """Why the database cannot classify speech, and what to do: the one wording of
+    ``classify`` (``auto=False``) and of the emotion ``auto`` (synthesis, ``batch``)."""
+    if model is None:
+        return ("the database has no emotion model: give the emotion instead of 'auto'"
+                if auto else "the database has no emotion model (it was built by an older "
+                "animegraph): re-ingest it (animegraph ingest SRC --db DB) to learn one")
+    if model.classifier_note:  # one stored by an older animegraph: re-ingest
+        return model.classifier_note
+    if not model.emotions:
+        return (f"the database has no emotion classifier ({NO_EMOTION_LABELS}): "
+                + ("leave the emotion out instead of 'auto'" if auto else
+                   "classifying needs a database of clips labelled with two emotions or more"))
+    from ingest.emotion.model import MIN_CLASSIFIER_CLIPS
+
+    n = len(model.emotions)
+    return (f"the database has no emotion classifier (its clips carry {n} emotion "
+            f"label{'s' * (n != 1)}, {', '.join(model.emotions)}; it needs two emotions with "
+            f"at least {MIN_CLASSIFIER_CLIPS} usable clips each): "
+            + ("give the emotion instead of 'auto'" if auto else
+               "re-ingest with more labelled clips to classify"))
+
+
+def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
+                    auto: bool = True) -> dict[str, float]:
     """Probabilities of the database's emotions for an utterance (§6), most likely first.
+
+    ``auto``: asked for by the emotion ``auto`` (the error says to name the emotion
+    instead), else by ``classify``.
 
     Raises
     ------
     DataError
-        No classifier in the database; audio too short (< 0.25 s), silent or non-finite.
+        No classifier in the database (:func:`no_classifier`); audio too short (< 0.25 s),
+        silent or non-finite.
     """
     if model.classifier is None:
-        raise DataError(model.classifier_note or "the database has no emotion classifier (it "
-                        "needs two emotions with enough clips each): give the emotion instead "
-                        "of 'auto'")
+        raise DataError(no_classifier(model, auto=auto))
     proba = model.classifier.predict_proba([(audio, sample_rate)])[0]
     order = np.argsort(-proba)
     return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
@@ -176,8 +202,7 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
     probabilities = None
     if spec == AUTO:
         if model is None:
-            raise DataError("the database has no emotion model: give the emotion instead "
-                            "of 'auto'")
+            raise DataError(no_classifier(None))
         if audio is None or sample_rate is None:
             raise ParameterError("emotion 'auto' needs the speech to classify")
         probabilities = classify_speech(model, audio, sample_rate)

@@ -133,6 +133,11 @@ def correspondences(data: ParallelData, src: str, dst: str, sentences: Sequence[
     return np.concatenate(xs), np.concatenate(ys)
 
 
+#: A database whose clips carry no emotion label, as every message says it (an unknown
+#: emotion, ``auto``, ``classify``).
+NO_EMOTION_LABELS = "its clips carry no emotion labels"
+
+
 def stored_model_current(manifest: dict) -> bool:
     """Whether a database's emotion model (its manifest's ``emotion``) is what ingest
     makes now: present, and its classifier, if it has one, of a format whose features
@@ -164,8 +169,11 @@ def find_emotion(name: str, known: Collection[str]) -> str:
     same = [k for k in known if k.casefold() == name.casefold()]
     if len(same) == 1:
         return same[0]
+    if not set(known) - {"unknown"}:  # the label of clips without one
+        raise ParameterError(f"unknown emotion {name!r}: the database has no emotions "
+                             f"({NO_EMOTION_LABELS}): leave the emotion out")
     raise ParameterError(f"unknown emotion {name!r}: it is not in the database (it has "
-                         f"{', '.join(sorted(known)) or 'no labelled emotions'})")
+                         f"{', '.join(sorted(known))})")
 
 
 @dataclass(frozen=True, eq=False)

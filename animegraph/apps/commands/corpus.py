@@ -23,7 +23,8 @@ def cmd_corpus_synth(args: argparse.Namespace) -> int:
                               progress=progress(n, args.quiet, "clip",
                                                 "generating the corpus"),
                               say=None if args.quiet else say)
-    print(f"wrote {summary.n_clips} clips of {summary.n_sentences} sentences, "
+    print(f"wrote {summary.n_clips} clip{'s' * (summary.n_clips != 1)} of "
+          f"{summary.n_sentences} sentence{'s' * (summary.n_sentences != 1)}, "
           f"{summary.duration_s / 60:.1f} min of speech, to {summary.path}")
     return 0
 

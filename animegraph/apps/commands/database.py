@@ -60,7 +60,8 @@ def cmd_sql(args: argparse.Namespace) -> int:
         if text is not None:
             sys.stdout.write(text)
         if result.truncated:
-            print(f"animegraph sql: only the first {limit} rows were read (raise --limit)",
+            print(f"animegraph sql: only the first {limit} row{'s' * (limit != 1)} "
+                  f"{'were' if limit != 1 else 'was'} read (raise --limit)",
                   file=sys.stderr)
     return 0
 
@@ -89,7 +90,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
                            progress=lambda total: progress(total, False, "hit",
                                                            "exporting"))
-        print(f"animegraph: exported {len(rows)} hits to {args.export} (index.csv)",
+        print(f"animegraph: exported {len(rows)} hit{'s' * (len(rows) != 1)} to "
+              f"{args.export} (index.csv)",
               file=sys.stderr)
     return 0
 

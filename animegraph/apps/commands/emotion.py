@@ -20,7 +20,7 @@ def cmd_classify(args: argparse.Namespace) -> int:
     db = Database.open(args.db)
     model = EmotionModel.from_database(db)
     audio, sample_rate = read_audio(args.audio)  # mono, whatever the file holds
-    probabilities = classify_speech(model, audio, sample_rate)
+    probabilities = classify_speech(model, audio, sample_rate, auto=False)
     if args.json:
         print(json.dumps(probabilities, indent=1))
     else:
@@ -76,6 +76,7 @@ def cmd_map_emotion(args: argparse.Namespace) -> int:
     write_channels(mapped, fps, model.names, model.kind, args.output)
     name = target if isinstance(target, str) else ",".join(f"{k}={v:.2f}"
                                                             for k, v in target.items())
-    print(f"animegraph: mapped {len(motion)} frames from {source} ({how}) to {name} in "
-          f"{time.perf_counter() - t0:.2f} s; wrote {args.output}", file=sys.stderr)
+    print(f"animegraph: mapped {len(motion)} frame{'s' * (len(motion) != 1)} from {source} "
+          f"({how}) to {name} in {time.perf_counter() - t0:.2f} s; wrote {args.output}",
+          file=sys.stderr)
     return 0

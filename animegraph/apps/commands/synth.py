@@ -110,7 +110,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     guide = load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
     path += guide_shortfall(guide_name, guide_names(guide))
-    print(f"animegraph: loaded {model.graph.n_nodes} animes in "
+    print(f"animegraph: loaded {model.graph.n_nodes} anime{'s' * (model.graph.n_nodes != 1)} in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
@@ -167,11 +167,13 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(f"animegraph: {note}", file=sys.stderr)
     r = out.result
     t = out.timings
-    print(f"animegraph: {len(out.phones)} phones ({out.segmentation}), {r.n_jumps} jump "
-          f"matches, cost {r.cost:.3f} ({r.method}, {r.n_expanded} expansions); "
+    print(f"animegraph: {len(out.phones)} phone{'s' * (len(out.phones) != 1)} "
+          f"({out.segmentation}), {r.n_jumps} jump match{'es' * (r.n_jumps != 1)}, cost "
+          f"{r.cost:.3f} ({r.method}, {r.n_expanded} expansion{'s' * (r.n_expanded != 1)}); "
           f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
           f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
-          + (f" (k-best {k_best}: each phone the mean of up to {k_best} animes, "
+          + (f" (k-best {k_best}: each phone the mean of up to {k_best} "
+             f"anime{'s' * (k_best != 1)}, "
              + ("cross-faded into its neighbours through the recorded transitions"
                 if out.cross_faded else "cut at its boundaries") + ")"
              if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
