@@ -143,6 +143,8 @@ def test_default_pipeline_learns_with_speakers_and_round_trips(rng, tmp_path):
     np.testing.assert_array_equal(back.predict(gen), model.predict(X[36:40]))
     with pytest.raises(DataError, match="utterance 1: audio is silence"):
         model.predict([X[0], (np.zeros(SR, np.int16), SR)])
+    with pytest.raises(DataError, match="^audio is silence"):  # one: no number to tell it
+        model.predict([(np.zeros(SR, np.int16), SR)])
 
 
 @pytest.mark.shared

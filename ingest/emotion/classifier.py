@@ -494,8 +494,9 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
             try:
                 part = block_features(audio, sr, self.features, n_cepstrum=self.n_cepstrum,
                                       cepstrum=self.cepstrum, silence_floor=self._floor())
-            except DataError as exc:
-                raise DataError(f"utterance {i}: {exc}") from exc
+            except DataError as exc:  # which one, when there are several
+                raise DataError(f"utterance {i}: {exc}" if len(items) > 1 else str(exc)
+                                ) from exc
             if words:
                 frames.append(part.pop(WORDS_BLOCK))
             rows.append(np.concatenate([np.zeros(0), *part.values()]))
