@@ -365,7 +365,8 @@ class EmotionModel:
         if entry.get("classifier"):
             prefix = PREFIX + "classifier/"
             stored = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
-            stored.update({k: np.array(v) for k, v in entry["classifier"].items()})
+            stored.update({k: np.array(v) for k, v in entry["classifier"].items()
+                           if k in _CLASSIFIER_STRINGS})  # (its "format" says what the arrays say)
             for key in ("support", "n_support"):
                 stored[key] = stored[key].astype(np.int64)
             classifier = stored  # rebuilt on first use (_StoredClassifier)
