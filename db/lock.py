@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 import threading
 import time
 from collections.abc import Iterator
@@ -89,10 +90,20 @@ def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0,
 
 
 def _acquire(root: Path, wait: float, what: str) -> int:
+    # The folder may come from someone else: a lock file that is a symbolic link (to a
+    # file of the user's elsewhere) is not followed, and anything but a regular file is
+    # refused, since the lock file is truncated and written.
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
     try:
-        fd = os.open(lock_path(root), os.O_RDWR | os.O_CREAT, 0o666)
+        fd = os.open(lock_path(root), flags, 0o666)
     except OSError as exc:
-        raise DataError(f"cannot lock {what} {root}: {exc.strerror or exc}") from None
+        why = ("its lock file is a symbolic link" if exc.errno == errno.ELOOP
+               else exc.strerror or str(exc))
+        raise DataError(f"cannot lock {what} {root}: {why}") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise DataError(f"cannot lock {what} {root}: its lock file "
+                        f"{lock_path(root).name} is not a regular file")
     if fcntl is None:  # pragma: no cover
         return fd
     deadline = time.monotonic() + max(0.0, wait)

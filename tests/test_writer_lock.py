@@ -125,3 +125,18 @@ def test_a_second_batch_into_one_folder_fails_with_one_line(tiny_db, tmp_path):
     assert run.returncode != 0
     assert run.stderr.strip().count("\n") == 0
     assert "batch output folder" in run.stderr and "another process" in run.stderr
+
+
+def test_a_lock_file_planted_as_a_link_or_a_fifo_is_refused_untouched(tmp_path):
+    """A database folder from someone else: its lock file, linked to a file of the
+    user's, would have been truncated and written with the writer's process id."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    for name, plant in (("link", lambda p: p.symlink_to(victim)), ("fifo", os.mkfifo)):
+        root = tmp_path / name
+        root.mkdir()
+        plant(root / LOCK_NAME)
+        with pytest.raises(DataError, match="cannot lock .*(symbolic link|not a regular file)"):
+            with writer_lock(root, wait=0):
+                pass
+    assert victim.read_text() == "precious"
