@@ -135,7 +135,7 @@ class IngestReport:
         out += self._lag_lines()
         if self.written:
             s = self.summary
-            out.append(f"database {self.db} is now {self.version}: {s['n_clips']} clips, "
+            out.append(f"database {self.db} is now {self.version}: {_clips(s['n_clips'])}, "
                        f"{s['n_animes']} animes, {s['duration_s'] / 60:.1f} min, "
                        f"{s['n_pcs']} principal / independent components "
                        f"({100 * s['variance_kept']:.1f} % of the variance)")

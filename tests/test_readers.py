@@ -677,3 +677,40 @@ def test_facegood_names_line_up_with_their_columns():
     for left in ("mouth_lipCornerPull_l", "mouth_pucker_l", "mouth_press_l"):
         right = left[:-1] + "r"
         assert np.corrcoef(col(left), col(right))[0, 1] > 0.95, left
+
+
+def _claiming(shape, dtype="<f8") -> bytes:
+    """A ``.npy`` whose header claims ``shape`` over 64 bytes of data."""
+    import io
+
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buffer, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return buffer.getvalue() + bytes(64)
+
+
+def test_an_array_header_claiming_more_than_its_file_is_refused_unallocated(tmp_path):
+    """A 200-byte .npy claiming (10**12, 2) float64 asked numpy for 14.6 TiB: a
+    MemoryError traceback that lost the whole ingest (or minutes of swapping)."""
+    import zipfile
+
+    from animegraph.motion.files import read_motion
+    from db.npyfile import check_npz
+
+    bomb = tmp_path / "c1.npy"
+    bomb.write_bytes(_claiming((10**12, 2)))
+    with pytest.raises(DataError, match="declares 16000000000000 bytes of data, the file "
+                                        "holds 64"):
+        load_npy(bomb)
+    fine = tmp_path / "fine.npy"
+    fine.write_bytes(_claiming((4, 2)))
+    assert load_npy(fine).shape == (4, 2)
+    motion = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(motion, "w") as archive:
+        archive.writestr("motion.npy", _claiming((10**12, 216)))
+        archive.writestr("fps.npy", _claiming(()))
+        archive.writestr("channels.npy", _claiming((1,), "<U3"))
+    with pytest.raises(DataError, match="motion.npy declares"):
+        read_motion(motion)
+    with pytest.raises(DataError, match="unpacks to more than"):
+        check_npz(motion, max_bytes=100)

@@ -86,6 +86,9 @@ def read_motion(path: str | os.PathLike) -> Motion:
             return Motion(values=values, names=names, fps=fps)
         return _read_channel_csv(path)
     if suffix == ".npz":
+        from db.npyfile import check_npz
+
+        check_npz(path)  # sizes its headers declare, before numpy allocates them
         try:
             with np.load(path, allow_pickle=False) as z:
                 values, fps, names = z["motion"], float(z["fps"]), tuple(z["channels"].tolist())

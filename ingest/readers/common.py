@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from db.errors import DataError
+from db.npyfile import check_npy
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
 from ingest.formats.text import read_utf8
@@ -369,13 +370,16 @@ def load_npy(path: Path) -> np.ndarray:
     Raises
     ------
     DataError
-        If the file is missing, truncated, not a ``.npy`` array, or needs unpickling.
+        If the file is missing, truncated (also: a header declaring more data than the
+        file holds, :func:`db.npyfile.check_npy`), not a ``.npy`` array, or needs
+        unpickling.
     """
     if not path.is_file():
         raise DataError(f"array file not found: {path}")
     with warnings.catch_warnings():
         # numpy warns when it has to parse a Python-2 header ("(3295L, 116L)").
         warnings.simplefilter("ignore", UserWarning)
+        check_npy(path)  # a header's shape is not allocated before the file can hold it
         try:
             array = np.load(path, allow_pickle=False)
         except ValueError as exc:
