@@ -57,6 +57,10 @@ def _clips(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "clips"), change)
 
 
+def _audio(root: Path, change) -> None:
+    _rewrite(_first_part(_live(root) / "audio"), change)
+
+
 def edit_arrays(root: Path, change: Callable[[dict], dict], *, checksum: bool = True) -> None:
     """Change the model arrays; with ``checksum``, as a deliberate editor would, the
     manifest's checksum of them too (so that what is checked is the arrays)."""
@@ -158,6 +162,14 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "prosody_nan": lambda r: _animes(r, _replace_column("prosody",
                                                         lambda t: _nan_list(t, "prosody"))),
     "phoneme_unknown": lambda r: _animes(r, _set("phoneme", 0, "XYZ")),
+    # What query --export puts in file names, divides by, counts or pairs up.
+    "phoneme_path": lambda r: _animes(r, _set("phoneme", 0, "x/../../../../PWN")),
+    "phoneme_nul": lambda r: _animes(r, _set("phoneme", 0, "A\x00A")),
+    "start_time_inf": lambda r: _animes(r, _set("start_time", 0, float("inf"))),
+    "clip_fps_zero": lambda r: _clips(r, _set("fps", 0, 0.0)),
+    "clip_fps_nan": lambda r: _clips(r, _set("fps", 0, float("nan"))),
+    "clip_phones_mismatch": lambda r: _clips(r, _set("phones", 0, "AA B")),
+    "audio_odd_bytes": lambda r: _audio(r, _set("pcm16", 0, b"\x01\x02\x03")),
     # A clip's lists that do not fit their frame counts (read when a baseline is fitted
     # on the database, or when clips are added to it).
     "clip_prosody_short": lambda r: _clips(r, _replace_column(

@@ -49,6 +49,45 @@ def test_crafted_databases_are_read_or_refused_in_one_line(tiny_db, tmp_path, mu
             assert str(path) in str(exc), str(exc)
 
 
+@pytest.mark.parametrize("mutation", ["phoneme_path", "phoneme_nul", "start_time_inf",
+                                      "clip_fps_zero", "clip_fps_nan",
+                                      "clip_phones_mismatch", "audio_odd_bytes"])
+def test_export_of_a_crafted_database_stays_in_its_folder_or_is_one_line(tiny_db, tmp_path,
+                                                                         mutation):
+    """query --export puts a database's values in file names and divides by them: they
+    were a traceback (a NUL, inf, a frame rate of 0, odd PCM bytes, phones and times of
+    different counts) and a phoneme with '/' and '..' went into a path unsanitised."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from animegraph.apps.query import QuerySpec, export_hits, run_query
+    from db.store import Database
+
+    path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
+    db = Database.open(path)
+    live = path / (path / "CURRENT").read_text().strip()
+    # the damaged rows: the first of the first part of animes, clips and audio
+    first = {name: pq.read_table(sorted((live / name).rglob("*.parquet"))[0],
+                                 partitioning=None).slice(0, 1).to_pylist()[0]
+             for name in ("animes", "clips", "audio")}
+    for k, (spec, column, value) in enumerate((
+            (QuerySpec(limit=None), "node_id", first["animes"]["node_id"]),
+            (QuerySpec(clips=True, limit=None), "clip_id", first["clips"]["clip_id"]),
+            (QuerySpec(clips=True, limit=None), "clip_id", first["audio"]["clip_id"]))):
+        hits = run_query(db, spec)
+        hits = hits.filter(pc.equal(hits[column], value))
+        assert hits.num_rows == 1
+        out = tmp_path / f"export-{k}"
+        try:
+            export_hits(db, hits, out)
+        except DataError as exc:
+            assert "\n" not in str(exc).strip() and str(path) in str(exc), str(exc)
+            assert not out.exists()
+            continue
+        written = [p.resolve() for p in out.rglob("*")]
+        assert written and all(p.is_relative_to(out.resolve()) for p in written)
+    assert not (tmp_path.parent / "PWN").exists() and not list(tmp_path.rglob("PWN*"))
+
 def test_every_crafted_model_problem_is_refused(tiny_db, tmp_path):
     # Those that would crash a kernel or poison a synthesis must not load at all.
     from animegraph.synthesis.model import Model

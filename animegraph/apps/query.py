@@ -173,13 +173,24 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
     frames = db.table("frames", columns=["frame", *names], filter=mask).sort_by("frame")
     motion = np.stack([frames.column(n).to_numpy() for n in names], axis=1).astype(np.float64)
     motion = to_world(motion, groups, db.arrays().get("head_reference"))
-    sound = db.table("audio", filter=mask).to_pylist()[0]
+    sound = db.table("audio", filter=mask).to_pylist()
+    # The database may come from someone else: what an export divides by, counts or
+    # pairs up is checked, for one line naming the clip rather than a traceback.
+    damaged = f"database {db.root} is damaged: clip {clip_id!r}"
+    fps, phone_list = clip["fps"], (clip["phones"] or "").split()
+    starts, ends = clip["phone_starts"] or [], clip["phone_ends"] or []
+    if not sound or len(sound[0]["pcm16"] or b"") % 2 or not (sound[0]["sample_rate"] or 0) > 0:
+        raise DataError(f"{damaged} has no usable speech")
+    if not (fps is not None and np.isfinite(fps) and fps > 0):
+        raise DataError(f"{damaged} has frame rate {fps}")
+    if not len(phone_list) == len(starts) == len(ends):
+        raise DataError(f"{damaged} has {len(phone_list)} phones but {len(starts)} starts "
+                        f"and {len(ends)} ends")
     phones = [{"phone": p, "start": s, "end": e, "clip_id": clip_id, "jump": False}
-              for p, s, e in zip(clip["phones"].split(), clip["phone_starts"],
-                                 clip["phone_ends"], strict=True)]
+              for p, s, e in zip(phone_list, starts, ends, strict=True)]
     return ClipData(motion=motion, names=names, groups=groups, kind=channels[0]["kind"],
-                    fps=float(clip["fps"]), audio=np.frombuffer(sound["pcm16"], dtype=np.int16),
-                    sample_rate=int(sound["sample_rate"]), phones=phones)
+                    fps=float(fps), audio=np.frombuffer(sound[0]["pcm16"], dtype=np.int16),
+                    sample_rate=int(sound[0]["sample_rate"]), phones=phones)
 
 
 def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,
@@ -248,7 +259,11 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
         if anime_mode:
             a0, a1 = float(hit["start_time"]), float(hit["end_time"])
             t0, t1 = max(0.0, a0 - context), min(duration, a1 + context)
-            stem = f"{n:03d}_{_safe(hit['clip_id'])}_{hit['phoneme']}_{hit['node_id']}"
+            if not (np.isfinite(a0) and np.isfinite(a1)):
+                raise DataError(f"database {db.root} is damaged: anime {hit['node_id']} of "
+                                f"{hit['clip_id']!r} has times {a0} to {a1}")
+            stem = (f"{n:03d}_{_safe(hit['clip_id'])}_{_safe(str(hit['phoneme']))}_"
+                    f"{int(hit['node_id'])}")
         else:
             a0, a1 = 0.0, duration
             t0, t1 = 0.0, duration
