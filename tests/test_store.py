@@ -191,3 +191,51 @@ def test_sql_errors_are_one_line(tmp_path):
     assert "\n" not in str(err.value)
     with pytest.raises(ParameterError, match="parse"):
         check_read_only("SELEC 1")
+
+
+def _footer_bomb(path, rows=2_000_000):
+    """Replace the Parquet file at ``path`` with a small one whose footer declares
+    ``rows`` rows: one dictionary-encoded string, run-length encoded (a few KB on disk,
+    about 10 MB once decoded; the crafted ones decode into gigabytes)."""
+    phoneme = pa.DictionaryArray.from_arrays(pa.array(np.zeros(rows, np.int8)), ["AA"])
+    pq.write_table(pa.table({"phoneme": phoneme}), path, use_dictionary=True,
+                   compression="zstd", row_group_size=rows)
+    assert path.stat().st_size < rows // 100
+
+
+def test_a_footer_declaring_more_rows_than_the_manifest_is_refused_unread(
+        tmp_path, monkeypatch):
+    import json
+
+    from db.sql import run
+
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    part = db.version_dir / "animes" / "emotion=happy" / "part-0.parquet"
+    _footer_bomb(part)
+
+    def no_reading(*args, **kwargs):
+        raise AssertionError("the table's data was read")
+
+    monkeypatch.setattr(pq.ParquetFile, "read", no_reading)
+    monkeypatch.setattr(pq.ParquetFile, "iter_batches", no_reading)
+    for how in ({}, {"columns": ["phoneme"]}, {"filter": pa.compute.field("phoneme") == "AA"}):
+        with pytest.raises(DataError) as err:
+            db.table("animes", **how)
+        message = str(err.value)
+        assert "\n" not in message and message.startswith(f"database {db.root} is damaged: ")
+        assert "animes" in message and "2000002 rows, the manifest 4" in message
+    with pytest.raises(DataError, match=r"animes: its files' footers declare 2000002 rows"):
+        run(db, "SELECT count(*) FROM clips")  # DuckDB's views are refused before a scan
+    monkeypatch.undo()
+    assert db.table("clips").num_rows == 2  # the other tables read as before
+
+    # A manifest edited to match the footer (or without counts): the footer is still
+    # implausible for a file of its size.
+    manifest = json.loads((db.version_dir / "manifest.json").read_text())
+    for counts in ({**manifest["tables"], "animes": 2_000_002}, None):
+        edited = {**manifest, "tables": counts}
+        (db.version_dir / "manifest.json").write_text(json.dumps(edited))
+        with pytest.raises(DataError, match=r"emotion=happy/part-0.parquet declares 2000000 "
+                                             r"rows in \d+ bytes, more than 1 a byte"):
+            Database.open(tmp_path / "db").table("animes")
