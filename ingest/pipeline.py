@@ -352,7 +352,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         kept = []
         if existing is not None:
             replaced = {c.key for c in new}
-            kept = [c for c in prepared_from_database(existing) if c.key not in replaced]
+            kept = [c for c in prepared_from_database(existing, config.limits)
+                    if c.key not in replaced]
         new = decide_lags(new, kept, correct=config.correct_lag, pooled=config.pool_lag)
         _report_lags(report, new)
         target_fps = fps or max(c.fps for c in new)
@@ -364,8 +365,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
     elif existing is not None and not stored_model_current(existing.manifest):
         # Written before emotion models existed, or before this version's classifier:
         # learn it now from the stored clips.
-        _write(db_path, prepared_from_database(existing), config, fps, report, reference,
-               based_on, say)
+        _write(db_path, prepared_from_database(existing, config.limits), config, fps, report,
+               reference, based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
     if not report.written and report.count("rejected") == len(report.clips):

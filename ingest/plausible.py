@@ -179,53 +179,123 @@ def check_motion(clip: RawClip, limits: Limits) -> tuple[RawClip, str]:
         note saying how many were (empty if none).
     """
     motion = np.array(clip.motion, dtype=np.float64)
-    if motion.ndim != 2 or not np.isfinite(motion[~np.isnan(motion)]).all():
-        raise DataError(f"{clip.source}: motion has infinite values")
-    n = len(motion)
-    names, columns = _tracks(clip.schema.names)
-    is_point = np.array([len(c) == 3 for c in columns], bool)
-    bad = np.zeros((n, len(columns)), bool)
-    reason = np.full(bad.shape, "", dtype=object)
-    if is_point.any():
-        cols = np.concatenate([columns[j] for j in np.flatnonzero(is_point)])
-        bad[:, is_point], reason[:, is_point] = _implausible_points(motion[:, cols], clip.fps,
-                                                                    limits)
-    limit = limits.max_coordinate_mm if clip.schema.units == "mm" else limits.max_curve_value
-    for j in np.flatnonzero(~is_point):
-        with np.errstate(invalid="ignore"):
-            far = np.abs(motion[:, columns[j][0]]) > limit
-        bad[far, j] = True
-        reason[far, j] = f"beyond {limit:g} {clip.schema.units}"
-    budget = max(int(limits.max_dropout_share * n), 0)
-    longest = int(round(limits.max_dropout_s * clip.fps))
-    for j in np.flatnonzero(bad.any(axis=0)):
-        count, run = int(bad[:, j].sum()), _longest_run(bad[:, j])
-        first = int(np.flatnonzero(bad[:, j])[0])
-        if count > budget or run > longest:
-            raise DataError(
-                f"{clip.source}: {names[j]} implausible in {count} frame(s) (longest run "
-                f"{run / clip.fps:.3f} s, first at frame {first}: {reason[first, j]}); "
-                f"rejected, more than a dropout")
-    for j in np.flatnonzero(bad.any(axis=0)):
-        motion[np.ix_(bad[:, j], columns[j])] = np.nan
-    _check_moves(motion, [(names[j], columns[j]) for j in np.flatnonzero(is_point)], clip)
-    if not bad.any():
+    try:
+        if motion.ndim != 2 or not np.isfinite(motion[~np.isnan(motion)]).all():
+            raise DataError("motion has infinite values")
+        checked = _implausible(motion, clip.schema, clip.fps, limits)
+        n = len(motion)
+        budget = max(int(limits.max_dropout_share * n), 0)
+        longest = int(round(limits.max_dropout_s * clip.fps))
+        for j in checked.tracks:
+            count, run = int(checked.bad[:, j].sum()), _longest_run(checked.bad[:, j])
+            if count > budget or run > longest:
+                raise DataError(f"{checked.describe(j, run / clip.fps)}; rejected, more "
+                                f"than a dropout")
+        for j in checked.tracks:
+            motion[np.ix_(checked.bad[:, j], checked.columns[j])] = np.nan
+        _check_moves(motion, checked)
+    except DataError as exc:
+        raise DataError(f"{clip.source}: {exc}") from None
+    if not checked.tracks.size:
         return clip, ""
-    tracks = np.flatnonzero(bad.any(axis=0))
-    note = (f"{int(bad.sum())} implausible sample(s) of {len(tracks)} track(s) (first: "
-            f"{names[tracks[0]]}, {reason[bad[:, tracks[0]], tracks[0]][0]}) filled as "
+    first = checked.tracks[0]
+    note = (f"{int(checked.bad.sum())} implausible sample(s) of {len(checked.tracks)} "
+            f"track(s) (first: {checked.names[first]}, {checked.reason(first)}) filled as "
             f"dropouts")
     return replace(clip, motion=motion), note
 
 
-def _tracks(channel_names) -> tuple[list[str], list[np.ndarray]]:
-    """Points (``p.x, p.y, p.z`` in a row) and single channels: (names, column indices)."""
-    names, columns = _tracks_of(tuple(channel_names))
-    return list(names), [c.copy() for c in columns]
+def check_stored_motion(motion: np.ndarray, schema, fps: float,
+                        limits: Limits | None = None) -> None:
+    """The motion checks of :func:`check_motion` on a clip's motion as a database stores
+    it (checked and gap-filled when it was ingested, :mod:`ingest.prepare`): no sample
+    may be implausible any more, nor missing (NaN), nor infinite; no track constant.
+
+    Parameters
+    ----------
+    motion : np.ndarray, shape (n_frames, n_channels)
+    schema : ingest.clip.ChannelSchema
+    fps : float
+    limits : Limits, optional
+
+    Raises
+    ------
+    DataError
+        One line saying what is wrong (without naming the clip: the caller does).
+    """
+    motion = np.asarray(motion)
+    if motion.ndim != 2 or motion.shape[1] != schema.n_channels or not len(motion):
+        raise DataError(f"motion of shape {motion.shape}, not (frames, {schema.n_channels})")
+    finite = np.isfinite(motion)
+    if not finite.all():
+        j = int(np.flatnonzero(~finite.all(axis=0))[0])
+        raise DataError(f"motion has {motion.size - int(finite.sum())} NaN or infinite "
+                        f"value(s) (first: {schema.names[j]}, frame "
+                        f"{int(np.flatnonzero(~finite[:, j])[0])}); stored motion is filled")
+    checked = _implausible(motion.astype(np.float64, copy=False), schema, fps,
+                           limits or Limits())
+    if checked.tracks.size:
+        j = checked.tracks[0]
+        raise DataError(checked.describe(j, _longest_run(checked.bad[:, j]) / fps))
+    _check_moves(motion, checked)
+
+
+@dataclass(frozen=True)
+class _Checked:
+    """Implausible samples of a motion: ``bad`` (n_frames, n_tracks), the tracks' names
+    and columns, and why each bad sample is (kept for the tracks that have one)."""
+
+    bad: np.ndarray
+    names: tuple[str, ...]
+    columns: tuple[np.ndarray, ...]
+    is_point: np.ndarray
+    why: dict[int, np.ndarray]
+
+    @property
+    def tracks(self) -> np.ndarray:
+        """The tracks with an implausible sample, in channel order."""
+        return np.flatnonzero(self.bad.any(axis=0))
+
+    def reason(self, j: int) -> str:
+        """Why the first bad sample of track ``j`` is."""
+        return str(self.why[j][np.flatnonzero(self.bad[:, j])[0]])
+
+    def describe(self, j: int, run_s: float) -> str:
+        first = int(np.flatnonzero(self.bad[:, j])[0])
+        return (f"{self.names[j]} implausible in {int(self.bad[:, j].sum())} frame(s) "
+                f"(longest run {run_s:.3f} s, first at frame {first}: {self.reason(j)})")
+
+
+def _implausible(motion: np.ndarray, schema, fps: float, limits: Limits) -> _Checked:
+    """Every implausible sample of ``motion`` (float64, NaN for dropouts) by the limits."""
+    n = len(motion)
+    names, columns = _tracks_of(tuple(schema.names))
+    is_point = np.array([len(c) == 3 for c in columns], bool)
+    bad = np.zeros((n, len(columns)), bool)
+    why: dict[int, np.ndarray] = {}
+    if is_point.any():
+        cols = np.concatenate([columns[j] for j in np.flatnonzero(is_point)])
+        point_bad, point_why = _implausible_points(motion[:, cols], fps, limits)
+        bad[:, is_point] = point_bad
+        tracks = np.flatnonzero(is_point)
+        why.update({int(tracks[k]): r for k, r in point_why.items()})
+    single = np.flatnonzero(~is_point)
+    if single.size:
+        limit = limits.max_coordinate_mm if schema.units == "mm" else limits.max_curve_value
+        chans = np.array([columns[j][0] for j in single])
+        with np.errstate(invalid="ignore"):
+            far = np.abs(motion[:, chans]) > limit
+        bad[:, single] = far
+        for k in np.flatnonzero(far.any(axis=0)):
+            why[int(single[k])] = np.where(far[:, k], f"beyond {limit:g} {schema.units}",
+                                           "").astype(object)
+    return _Checked(bad, names, columns, is_point, why)
 
 
 @functools.lru_cache(maxsize=8)
 def _tracks_of(channel_names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[np.ndarray, ...]]:
+    """Points (``p.x, p.y, p.z`` in a row) and single channels: (names, column indices,
+    read-only: they are shared)."""
     names, columns, i = [], [], 0
     channel_names = list(channel_names)
     while i < len(channel_names):
@@ -239,11 +309,13 @@ def _tracks_of(channel_names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[n
             names.append(channel_names[i])
             columns.append(np.array([i]))
             i += 1
+    for c in columns:
+        c.setflags(write=False)
     return tuple(names), tuple(columns)
 
 
 def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
-    """(bad (n_frames, n_points), reason per sample) of x/y/z point tracks.
+    """(bad (n_frames, n_points), {point: reason per frame}) of x/y/z point tracks.
 
     A point's valid samples are cut into segments wherever it moves faster than the
     limit from one sample to the next. The longest segment is trusted; going outwards
@@ -257,8 +329,9 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
         far = np.abs(pts).max(axis=2) > limits.max_coordinate_mm
     far &= ~np.isnan(pts).any(axis=2)
     bad = far.copy()
-    reason = np.where(far, f"beyond {limits.max_coordinate_mm:g} mm", "").astype(object)
-    for j in _points_to_check(pts, bad, fps, limits):
+    why = {int(j): np.where(far[:, j], f"beyond {limits.max_coordinate_mm:g} mm",
+                            "").astype(object) for j in np.flatnonzero(far.any(axis=0))}
+    for j in map(int, _points_to_check(pts, bad, fps, limits)):
         p = pts[:, j]
         idx = np.flatnonzero(~np.isnan(p).any(axis=1) & ~bad[:, j])
         if len(idx) < 2:
@@ -279,9 +352,11 @@ def _implausible_points(motion: np.ndarray, fps: float, limits: Limits):
                     continue
                 frames = idx[segments[i]]
                 bad[frames, j] = True
-                reason[frames, j] = (f"moves at {step:.3g} mm/s, above "
-                                     f"{limits.max_speed_mm_s:g} mm/s")
-    return bad, reason
+                if j not in why:
+                    why[j] = np.full(n, "", dtype=object)
+                why[j][frames] = (f"moves at {step:.3g} mm/s, above "
+                                  f"{limits.max_speed_mm_s:g} mm/s")
+    return bad, why
 
 
 def _points_to_check(pts: np.ndarray, bad: np.ndarray, fps: float, limits: Limits
@@ -296,12 +371,16 @@ def _points_to_check(pts: np.ndarray, bad: np.ndarray, fps: float, limits: Limit
     idx = np.flatnonzero(frames)
     if len(idx) < 2 or not shared.any():
         return np.arange(pts.shape[1])
-    p = pts[idx][:, shared]
+    # Squared steps against the squared farthest step allowed (no square root: this is
+    # every frame of every point, of every stored clip at each ingest too).
+    p = pts if len(idx) == len(pts) and shared.all() else pts[idx][:, shared]
+    step = p[1:] - p[:-1]
     with np.errstate(over="ignore", invalid="ignore"):
-        speed = (np.linalg.norm(p[1:] - p[:-1], axis=2) * fps
-                 / np.diff(idx).astype(np.float64)[:, None])
+        squared = np.einsum("ijk,ijk->ij", step, step)
+        farthest = (limits.max_speed_mm_s / fps * np.diff(idx).astype(np.float64)) ** 2
+        moves_fine = (squared <= farthest[:, None]).all(axis=0)
     fine = np.zeros(pts.shape[1], bool)
-    fine[np.flatnonzero(shared)] = (speed <= limits.max_speed_mm_s).all(axis=0)
+    fine[np.flatnonzero(shared)] = moves_fine
     return np.flatnonzero(~fine)
 
 
@@ -317,16 +396,21 @@ def _longest_run(flags: np.ndarray) -> int:
     return int((np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)).max())
 
 
-def _check_moves(motion: np.ndarray, points, clip: RawClip) -> None:
+def _check_moves(motion: np.ndarray, checked: _Checked) -> None:
+    """DataError unless every point, and the motion as a whole, moves."""
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN column
         span = np.nanmax(motion, axis=0) - np.nanmin(motion, axis=0)
     if not (span > MIN_RANGE).any():
-        raise DataError(f"{clip.source}: the motion never moves (every channel constant)")
-    for name, cols in points:
-        if not (span[cols] > MIN_RANGE).any():
-            raise DataError(f"{clip.source}: {name} never moves (a constant or all-zero "
-                            f"track: a dead marker)")
+        raise DataError("the motion never moves (every channel constant)")
+    points = np.flatnonzero(checked.is_point)
+    if not points.size:
+        return
+    cols = np.stack([checked.columns[j] for j in points])
+    dead = ~(span[cols] > MIN_RANGE).any(axis=1)
+    if dead.any():
+        raise DataError(f"{checked.names[points[np.argmax(dead)]]} never moves (a constant "
+                        f"or all-zero track: a dead marker)")
 
 
 def check_clip(clip: RawClip, limits: Limits | None = None) -> tuple[RawClip, str]:

@@ -15,8 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 import pyarrow as pa
 
+from db.errors import DataError
 from db.store import arrays_to_table
 from ingest.decompose import MotionDecomposer, pcs_of_clips
+from ingest.plausible import Limits, check_stored_motion
 from ingest.prepare import PreparedClip
 from ingest.speech.features import RastaPlpConfig, slice_frames
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
@@ -236,25 +238,38 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
     })
 
 
-def prepared_from_database(db) -> list[PreparedClip]:
+def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedClip]:
     """The clips of a database as :class:`PreparedClip` (to refit the model with more, or
     to fit a baseline on it).
+
+    Every clip's motion is checked as a new clip's is before anything is fitted to it
+    (:func:`ingest.plausible.check_stored_motion`): a database is someone else's data,
+    and one clip of damaged frames (a marker at 500 m, NaN) would silently ruin the
+    model refitted over all of them.
 
     Parameters
     ----------
     db : db.store.Database
+    limits : ingest.plausible.Limits, optional
+        The physical limits of the motion checks (``animegraph ingest --max-speed``).
 
     Raises
     ------
     DataError
         One line naming the database, when a clip's row does not hold up (a list whose
-        length does not fit its frame count, a missing column): a database is someone
-        else's data.
+        length does not fit its frame count, a missing column), or naming the database
+        and the clip, when its stored motion is implausible, NaN or infinite.
     """
     try:
-        return _read_prepared(db)
+        clips = _read_prepared(db)
     except (KeyError, IndexError, TypeError, ValueError) as exc:
         raise db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
+    for clip in clips:
+        try:
+            check_stored_motion(clip.motion, clip.schema, clip.fps, limits)
+        except DataError as exc:
+            raise db.damaged("frames", f"clip {clip.corpus}/{clip.clip_id}: {exc}") from None
+    return clips
 
 
 def _read_prepared(db) -> list[PreparedClip]:

@@ -4,21 +4,24 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import shutil
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
 from animegraph.apps.cli import main
-from db.errors import ParameterError
+from db.errors import DataError, ParameterError
 from db.sql import query
 from db.store import Database, current_version
 from ingest.decompose import MotionDecomposer
 from ingest.formats.phones_csv import read_phones_csv
 from ingest.pipeline import ingest, prepare_sources
 from ingest.readers import discover
+from ingest.tables import prepared_from_database
 
 
 def test_every_clip_goes_in(tiny_db, tiny_corpus):
@@ -308,3 +311,50 @@ def test_a_first_ingest_that_rejects_every_clip_leaves_no_folder(tiny_corpus, tm
     with pytest.raises(ParameterError):
         ingest([src], db)
     assert not db.exists()  # not even the folder with the lock file it was made under
+
+
+def _damage_stored_frames(db, how: str) -> str:
+    """Damage one stored clip's frames in place (10 samples of one marker's y at 500 m,
+    or NaN); returns the clip's "corpus/clip id"."""
+    part = sorted((db / current_version(db) / "frames").rglob("*.parquet"))[0]
+    table = pq.read_table(part, partitioning=None)
+    corpus, clip_id = table.column("corpus")[0].as_py(), table.column("clip_id")[0].as_py()
+    rows = np.flatnonzero(np.asarray(pc.equal(table.column("clip_id"), clip_id)))[50:60]
+    name = [c for c in table.column_names if c.endswith(".y")][5]
+    values = table.column(name).to_numpy().copy()
+    values[rows] = 5e5 if how == "spike" else np.nan
+    i = table.column_names.index(name)
+    pq.write_table(table.set_column(i, name, pa.array(values, table.schema.field(name).type)),
+                   part)
+    return f"{corpus}/{clip_id}"
+
+
+@pytest.mark.parametrize("how, reason", [("spike", "implausible in 10 frame(s)"),
+                                         ("nan", "10 NaN or infinite value(s)")])
+def test_damaged_stored_frames_refuse_the_database_before_a_refit(tiny_db, tiny_corpus,
+                                                                  tmp_path, capsys, how,
+                                                                  reason):
+    # Someone else's database whose stored frames were damaged: adding a clip refits the
+    # model over every stored clip, so they are checked as a new clip is (issue #18).
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    damaged = _damage_stored_frames(db, how)
+    src = tmp_path / "new" / tiny_corpus.name
+    (src / "clips").mkdir(parents=True)
+    for name in ("corpus.json", "markers.csv"):
+        shutil.copy(tiny_corpus / name, src)
+    stem = sorted(p.name.split(".")[0] for p in (tiny_corpus / "clips").glob("*.c3d"))[0]
+    for f in (tiny_corpus / "clips").glob(f"{stem}.*"):
+        shutil.copy(f, src / "clips" / f.name.replace(stem, "zz_new"))
+    meta = src / "clips" / "zz_new.json"  # not byte for byte the stored clip's files
+    meta.write_text(json.dumps({**json.loads(meta.read_text()), "take": "new"}))
+    before = sorted(p.name for p in db.iterdir())
+
+    assert main(["ingest", str(src), "--db", str(db), "--quiet"]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert f"database {db} is damaged" in err and f"clip {damaged}: " in err, err
+    assert reason in err and "Traceback" not in err, err
+    assert current_version(db) == "v000001" and sorted(p.name for p in db.iterdir()) == before
+    with pytest.raises(DataError, match=re.escape(f"clip {damaged}: ") + ".*" + re.escape(reason)):
+        prepared_from_database(Database.open(db))
