@@ -714,3 +714,20 @@ def test_an_array_header_claiming_more_than_its_file_is_refused_unallocated(tmp_
         read_motion(motion)
     with pytest.raises(DataError, match="unpacks to more than"):
         check_npz(motion, max_bytes=100)
+
+
+def test_a_side_file_linked_to_a_file_outside_the_clip_is_refused(clip_folder, tmp_path):
+    """A clip from someone else carried any file the user could read (a key) into the
+    database as its transcript; a link inside the clip's folder still reads."""
+    secret = tmp_path / "secret_key"
+    secret.write_text("-----BEGIN OPENSSH PRIVATE KEY-----")
+    transcript = clip_folder.with_suffix(".txt")
+    transcript.symlink_to(secret)
+    with pytest.raises(DataError, match="is a symbolic link to .*secret_key, outside the "
+                                        "clip's folder"):
+        load(_one([clip_folder.parent]))
+    transcript.unlink()
+    inside = clip_folder.parent / "words.txt"
+    inside.write_text("the words")
+    transcript.symlink_to(inside)
+    assert load(_one([clip_folder.parent])).text == "the words"

@@ -27,6 +27,8 @@ Checks common to all kinds, and their tolerances, are in :mod:`ingest.readers.co
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 
 from db.errors import AnimeGraphError, DataError, ParameterError
 from ingest.clip import RawClip
@@ -85,6 +87,7 @@ def load(source: ClipSource) -> RawClip:
     loader = _LOADERS.get(source.layout)
     if loader is None:
         raise ParameterError(f"source.layout: unknown layout {source.layout!r}")
+    _check_links(source)
     try:
         clip = loader(source)
     except DataError:
@@ -96,6 +99,20 @@ def load(source: ClipSource) -> RawClip:
     logger.debug("loaded %s/%s: %d frames x %d channels at %g fps", clip.corpus, clip.clip_id,
                  clip.n_frames, clip.schema.n_channels, clip.fps)
     return clip
+
+
+def _check_links(source: ClipSource) -> None:
+    """DataError if one of the clip's files is a symbolic link to a file outside the
+    folder that holds the clip's files: a clip from someone else would otherwise carry
+    any file the user can read (a key, a document) into the database as its transcript
+    or metadata. Links within that folder, and folders reached through links above it,
+    are read as before."""
+    paths = [Path(path) for _, path in source.files]
+    place = Path(os.path.commonpath([p.parent.absolute() for p in paths])).resolve()
+    for path in paths:
+        if path.is_symlink() and not path.resolve().is_relative_to(place):
+            raise DataError(f"{path} is a symbolic link to {path.resolve()}, outside the "
+                            f"clip's folder {place}; refused: copy the file in instead")
 
 
 __all__ = [
