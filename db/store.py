@@ -274,6 +274,19 @@ def _json(value):
     raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
 
 
+def own_folder(root: Path, *parts: str) -> Path:
+    """``root / parts...``, a folder the database keeps beside its versions (reports,
+    stored models); DataError if one of them is a symbolic link: a database from
+    someone else would otherwise have the user's writes land where the link points."""
+    path = Path(root)
+    for part in parts:
+        path = path / part
+        if path.is_symlink():
+            raise DataError(f"database {root} is damaged: {path} is a symbolic link "
+                            f"(to {path.resolve()}); refused")
+    return path
+
+
 def current_version(path: str | os.PathLike) -> str:
     """Name of the live version of the database at ``path``."""
     root = Path(path)

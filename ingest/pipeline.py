@@ -41,6 +41,7 @@ from db.store import (
     Database,
     is_database,
     is_staging,
+    own_folder,
     write_version,
 )
 from ingest.clip import checksum_files
@@ -589,7 +590,11 @@ def build_database(
 def _save_report(db_path: Path, report: IngestReport) -> None:
     if not is_database(db_path):  # nothing written into a new folder: leave it empty
         return
-    folder = db_path / "reports"
+    try:
+        folder = own_folder(db_path, "reports")
+    except DataError as exc:  # the clips are in: only the report is not kept
+        logger.warning("%s: the ingest report is not saved", exc)
+        return
     folder.mkdir(exist_ok=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     with atomic_write(folder / f"ingest-{stamp}-{os.getpid()}.csv") as handle:

@@ -140,3 +140,26 @@ def test_a_lock_file_planted_as_a_link_or_a_fifo_is_refused_untouched(tmp_path):
             with writer_lock(root, wait=0):
                 pass
     assert victim.read_text() == "precious"
+
+
+def test_a_database_folder_linked_elsewhere_takes_no_write(tiny_db, tmp_path, caplog):
+    """reports/ or baselines/ planted as links: ingest's report and a fitted model were
+    written where they pointed."""
+    import logging
+
+    from animegraph.baselines.stored import model_path
+    from ingest.pipeline import _save_report
+
+    good = tmp_path / "db"
+    shutil.copytree(tiny_db[0], good, ignore=shutil.ignore_patterns("baselines", "reports"))
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    for name in ("reports", "baselines"):
+        (good / name).symlink_to(victim)
+    with pytest.raises(DataError, match="baselines is a symbolic link"):
+        model_path(good, "hier-pca")
+    from ingest.pipeline import IngestReport
+
+    with caplog.at_level(logging.WARNING, logger="ingest.pipeline"):
+        _save_report(good, IngestReport(db=good))
+    assert "reports is a symbolic link" in caplog.text and not list(victim.iterdir())

@@ -52,10 +52,10 @@ def stored_models(db_root) -> list[dict]:
 
 def model_path(db_root, method: str) -> Path:
     """Where the model ``method`` fitted on the live version of ``db_root`` is stored."""
-    from db.store import current_version
+    from db.store import current_version, own_folder
 
     root = Path(db_root)
-    return root / MODELS_DIR / current_version(root) / f"{method}.parquet"
+    return own_folder(root, MODELS_DIR, current_version(root)) / f"{method}.parquet"
 
 
 
