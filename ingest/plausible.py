@@ -226,6 +226,8 @@ def check_stored_motion(motion: np.ndarray, schema, fps: float,
     motion = np.asarray(motion)
     if motion.ndim != 2 or motion.shape[1] != schema.n_channels or not len(motion):
         raise DataError(f"motion of shape {motion.shape}, not (frames, {schema.n_channels})")
+    if not (np.isfinite(fps) and fps > 0):
+        raise DataError(f"frame rate {fps}")
     finite = np.isfinite(motion)
     if not finite.all():
         j = int(np.flatnonzero(~finite.all(axis=0))[0])
