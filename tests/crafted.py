@@ -164,6 +164,10 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "phoneme_unknown": lambda r: _animes(r, _set("phoneme", 0, "XYZ")),
     # What query --export puts in file names, divides by, counts or pairs up.
     "phoneme_path": lambda r: _animes(r, _set("phoneme", 0, "x/../../../../PWN")),
+    # Labels read back when clips are added (prepared_from_database), as new clips' are.
+    "clip_id_path": lambda r: _clips(r, _set("clip_id", 0, "../../../../tmp/PWN_CLIP")),
+    "speaker_newline": lambda r: _clips(r, _set("speaker", 0, "a\nb")),
+    "sentence_id_path": lambda r: _clips(r, _set("sentence_id", 0, "../../../etc")),
     "phoneme_nul": lambda r: _animes(r, _set("phoneme", 0, "A\x00A")),
     "start_time_inf": lambda r: _animes(r, _set("start_time", 0, float("inf"))),
     "clip_fps_zero": lambda r: _clips(r, _set("fps", 0, 0.0)),

@@ -133,3 +133,15 @@ def test_flipped_bytes_in_a_c3d_are_rejected_or_plausible(tiny_corpus, tmp_path)
         steps = np.linalg.norm(np.diff(pts, axis=0), axis=2) * clip.fps
         assert not (steps > limits.max_speed_mm_s).any()
     assert outcomes["accepted"] > 0  # most bytes are sample values: flips are absorbed
+
+
+@pytest.mark.parametrize(("mutation", "what"), [("speaker_newline", "speaker"),
+                                                ("sentence_id_path", "sentence id")])
+def test_stored_labels_are_checked_as_new_ones_before_a_refit(tiny_db, tmp_path, mutation,
+                                                             what):
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
+    with pytest.raises(DataError, match=f"is damaged: .*a stored clip's label: {what} "):
+        prepared_from_database(Database.open(path))
