@@ -121,15 +121,21 @@ def check_label(value: str | None, what: str, *, emotion: bool = False) -> None:
         raise DataError(f"{what} {shown} may only hold letters, digits, spaces and _ - . +")
 
 
+def check_labels(clip) -> None:
+    """:func:`check_label` on the labels of a clip, new (a RawClip) or read back from a
+    database (a PreparedClip): corpus, clip id, emotion, speaker, sentence id."""
+    check_label(clip.corpus, "corpus name")
+    check_label(clip.clip_id, "clip id")
+    check_label(clip.emotion, "emotion", emotion=True)
+    check_label(clip.speaker, "speaker")
+    check_label(clip.sentence_id, "sentence id")
+
+
 def check_clip_labels(clip: RawClip) -> None:
     """Check every label and the transcript of ``clip``; DataError naming the first bad one."""
     where = clip.source
     try:
-        check_label(clip.corpus, "corpus name")
-        check_label(clip.clip_id, "clip id")
-        check_label(clip.emotion, "emotion", emotion=True)
-        check_label(clip.speaker, "speaker")
-        check_label(clip.sentence_id, "sentence id")
+        check_labels(clip)
     except DataError as exc:
         raise DataError(f"{where}: {exc}") from None
     if clip.text is not None:

@@ -18,7 +18,7 @@ import pyarrow as pa
 from db.errors import DataError
 from db.store import arrays_to_table
 from ingest.decompose import MotionDecomposer, pcs_of_clips
-from ingest.plausible import Limits, check_label, check_stored_motion
+from ingest.plausible import Limits, check_labels, check_stored_motion
 from ingest.prepare import PreparedClip
 from ingest.speech.features import RastaPlpConfig, slice_frames
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
@@ -243,7 +243,7 @@ def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedCli
     to fit a baseline on it).
 
     Every clip's labels and motion are checked as a new clip's are before anything is
-    fitted to it (:func:`ingest.plausible.check_label`,
+    fitted to it (:func:`ingest.plausible.check_labels`,
     :func:`ingest.plausible.check_stored_motion`): a database is someone else's data; a
     label such as ``../../pwn`` would be carried into the next version, and one clip of
     damaged frames (a marker at 500 m, NaN) would silently ruin the model refitted over
@@ -268,11 +268,7 @@ def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedCli
         raise db.damaged("clips", f"{type(exc).__name__}: {exc}") from None
     for clip in clips:
         try:  # its labels first: they are folder and file names, and named below
-            check_label(clip.corpus, "corpus name")
-            check_label(clip.clip_id, "clip id")
-            check_label(clip.emotion, "emotion", emotion=True)
-            check_label(clip.speaker, "speaker")
-            check_label(clip.sentence_id, "sentence id")
+            check_labels(clip)
         except DataError as exc:
             raise db.damaged("clips", f"a stored clip's label: {exc}") from None
         try:

@@ -208,7 +208,8 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 
         point_cols = point_columns(names)
         labels = tuple(names[i][:-2] for i in point_cols[::3])
-        others = [n for i, n in enumerate(names) if i not in set(point_cols)]
+        in_points = set(point_cols)
+        others = [n for i, n in enumerate(names) if i not in in_points]
         if others:  # e.g. a landmark database's head pose: said, not dropped in silence
             logger.warning("%s holds the %d points; the %d channels that are not a "
                            "point's (%s) are left out: write .csv or .npz to keep them",
