@@ -95,7 +95,7 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
 
 def _dataset(db: Database, name: str) -> ds.Dataset:
     partitioning = "hive" if name in PARTITIONED else None
-    db.check_rows(name)  # footers only: a crafted one is refused before DuckDB scans it
+    db.check_rows(name)  # a crafted file is refused before DuckDB scans it
     try:
         dataset = ds.dataset(db.table_path(name), format="parquet", partitioning=partitioning)
         wide = _without_float16(dataset.schema)

@@ -71,6 +71,14 @@ MAX_ARRAY_DIMS = 8
 #: a 1,411-row ``channels`` file); a crafted footer declaring millions of rows of one
 #: dictionary-encoded value in a small file would be decoded into gigabytes.
 MAX_ROWS_PER_BYTE = 1
+#: Most bytes a Parquet file may take once read, per byte of the file: its pages
+#: uncompressed plus its columns decoded (:meth:`Database.check_rows`). The files this
+#: version writes took 0.6 to 24.5 (FaceGood's frames, many of whose 116 channels are
+#: constant), and Snappy, which they are written with, compresses at most 21-fold (at
+#: most 43 counted twice); a dictionary of one long string that every row repeats, or
+#: pages that compress a thousandfold, take thousands: a small crafted file decoded into
+#: gigabytes.
+MAX_DECODED_PER_BYTE = 64
 #: Uncompressed bytes aimed at in one Parquet row group (row groups of 64-128 MB are
 #: what the Parquet documentation recommends for large sequential reads; 64 MB keeps a
 #: reader's buffers small on a wide table such as 1,400 motion channels).
@@ -373,13 +381,18 @@ class Database:
 
     def check_rows(self, name: str) -> None:
         """DataError unless the footers of table ``name``'s files declare the rows the
-        manifest counts for it (``tables``), and no more than :data:`MAX_ROWS_PER_BYTE`
-        a byte of their file.
+        manifest counts for it (``tables``), no more than :data:`MAX_ROWS_PER_BYTE` a
+        byte of their file, and no more than :data:`MAX_DECODED_PER_BYTE` bytes once
+        read (:func:`_decoded_bytes`).
 
-        Only the footers are read: a small file from someone else whose footer declares
-        a hundred million rows is refused before a reader decodes them into gigabytes.
-        The files are the ones ``pyarrow.dataset`` reads (every file below the table's
-        folder but hidden and ``_`` ones).
+        A small file from someone else whose footer declares a hundred million rows, or
+        whose one dictionary string every row repeats, is refused before a reader decodes
+        it into gigabytes. Only the footers are read, and the dictionaries and indices of
+        dictionary-encoded strings when the footer cannot bound them. The sizes a footer
+        declares are trusted: a Parquet writer's are the pages' own (a forged footer that
+        understates them is beyond this check). The files are the ones
+        ``pyarrow.dataset`` reads (every file below the table's folder but hidden and
+        ``_`` ones).
         """
         path = self.table_path(name)
         if path.is_file():
@@ -390,22 +403,33 @@ class Database:
         else:
             return  # the read says the table is missing
         try:
-            footers = [(f, pq.ParquetFile(f).metadata.num_rows, f.stat().st_size) for f in files]
+            footers = [(f, pq.read_metadata(f), f.stat().st_size) for f in files]
         except (OSError, pa.ArrowException) as exc:
             raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
-        total = sum(rows for _, rows, _ in footers)
+        total = sum(meta.num_rows for _, meta, _ in footers)
         counts = self.manifest.get("tables")
         expected = counts.get(name) if isinstance(counts, dict) else None
         if (isinstance(expected, int) and not isinstance(expected, bool)
                 and total != expected):
             raise self.damaged(name, f"its files' footers declare {total} rows, the manifest "
                                f"{expected} (not read)")
-        for f, rows, size in footers:
-            if rows > MAX_ROWS_PER_BYTE * size:
-                where = f.name if f == path else f.relative_to(path)
-                raise self.damaged(name, f"{where} declares {rows} rows in {size} bytes, "
-                                   f"more than {MAX_ROWS_PER_BYTE} a byte: a crafted footer "
-                                   f"(not read)")
+        for f, meta, size in footers:
+            where = f.name if f == path else f.relative_to(path)
+            if meta.num_rows > MAX_ROWS_PER_BYTE * size:
+                raise self.damaged(name, f"{where} declares {meta.num_rows} rows in {size} "
+                                   f"bytes, more than {MAX_ROWS_PER_BYTE} a byte: a crafted "
+                                   f"footer (not read)")
+            # A partition folder's value (emotion=...) is a column of every row as read.
+            row_bytes = sum(len(part.partition("=")[2].encode())
+                            for part in where.parts[:-1]) if f != path else 0
+            try:
+                decoded = _decoded_bytes(f, meta, row_bytes, MAX_DECODED_PER_BYTE * size)
+            except (OSError, pa.ArrowException) as exc:
+                raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+            if decoded > MAX_DECODED_PER_BYTE * size:
+                raise self.damaged(name, f"{where} decodes to up to {decoded} bytes from "
+                                   f"{size}, more than {MAX_DECODED_PER_BYTE} times its "
+                                   f"size: a crafted file (not read)")
 
     def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:
         """Read a table (optionally some columns, rows matching a pyarrow ``filter``).
@@ -462,6 +486,66 @@ class Database:
             return arrays_from_table(self.table("model_arrays"))
         except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
             raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
+
+
+#: Bytes a value of a Parquet physical type takes once read (BYTE_ARRAY: its offset).
+_WIDTH = {"BOOLEAN": 1, "INT32": 4, "INT64": 8, "INT96": 12, "FLOAT": 4, "DOUBLE": 8,
+          "BYTE_ARRAY": 4}
+_DICTIONARY = {"PLAIN_DICTIONARY", "RLE_DICTIONARY"}
+
+
+def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int) -> int:
+    """Bytes the Parquet file at ``path`` takes once read, at most: every column chunk's
+    pages uncompressed plus its values decoded, and ``row_bytes`` more a row.
+
+    A value takes its type's width; a string also its bytes, which are in its pages
+    unless the pages share them: a dictionary-encoded string (or one delta-encoded
+    against the one before) can be as long as its chunk's pages, in every row. When that
+    bound passes ``limit``, the dictionaries and indices of the dictionary-encoded
+    (top-level) columns are read, without decoding them, to count their bytes exactly.
+
+    Parameters
+    ----------
+    path : Path
+    meta : pyarrow.parquet.FileMetaData
+        Its footer.
+    row_bytes : int
+        Bytes a row takes beyond its columns (its partition values).
+    limit : int
+        Bytes beyond which the exact count may stop.
+    """
+    total = meta.num_rows * row_bytes
+    shared: dict[str, int] = {}  # column -> bound of its strings whose pages share them
+    uncountable = set()  # those delta-encoded or nested: not counted without decoding
+    for g in range(meta.num_row_groups):
+        group = meta.row_group(g)
+        for c in range(meta.num_columns):
+            chunk = group.column(c)
+            kind, values = chunk.physical_type, chunk.num_values
+            width = (meta.schema.column(c).length if kind == "FIXED_LEN_BYTE_ARRAY"
+                     else _WIDTH.get(kind, 16))
+            total += chunk.total_uncompressed_size + values * width
+            encodings = set(chunk.encodings)
+            if kind == "BYTE_ARRAY" and encodings & (_DICTIONARY | {"DELTA_BYTE_ARRAY"}):
+                column = chunk.path_in_schema
+                shared[column] = shared.get(column, 0) + values * chunk.total_uncompressed_size
+                if "DELTA_BYTE_ARRAY" in encodings or "." in column:
+                    uncountable.add(column)
+    countable = [c for c in shared if c not in uncountable]
+    if total + sum(shared.values()) <= limit or not countable:
+        return total + sum(shared.values())
+    total += sum(shared[c] for c in uncountable)
+    reader = pq.ParquetFile(path, read_dictionary=countable)
+    for batch in reader.iter_batches(columns=countable):
+        for column in batch.columns:
+            if not pa.types.is_dictionary(column.type):  # not one pyarrow keeps encoded
+                total += column.nbytes
+                continue
+            lengths = pc.take(pc.binary_length(column.dictionary), column.indices)
+            total += pc.sum(lengths).as_py() or 0
+        if total > limit:
+            break
+    return total
 
 
 def _read_parts(path: Path, columns: list[str] | None, partitioned: bool) -> pa.Table | None:

@@ -125,6 +125,18 @@ def _short_list(t: pa.Table, name: str) -> pa.Array:
     return pa.array(values, t.schema.field(name).type)
 
 
+def _repeated_string(root: Path, name: str = "phoneme", length: int = 1 << 20) -> None:
+    """The first ``animes`` part's column ``name`` one string of ``length`` bytes in every
+    row, dictionary-encoded, as a writer without Arrow's schema stores it (read back as
+    plain strings): a few KB more on disk, ``length`` bytes a row once read."""
+    path = _first_part(_live(root) / "animes")
+    t = pq.read_table(path, partitioning=None)
+    one = pa.DictionaryArray.from_arrays(pa.array(np.zeros(t.num_rows, np.int32)),
+                                         ["A" * length])
+    pq.write_table(t.set_column(t.column_names.index(name), name, one), path,
+                   compression="zstd", store_schema=False)
+
+
 #: name -> mutation of a database folder (the live version is damaged in place).
 DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "current_binary": lambda r: (r / "CURRENT").write_bytes(b"\xff\xfe\x00\x9c" * 8),
@@ -170,6 +182,8 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "sentence_id_path": lambda r: _clips(r, _set("sentence_id", 0, "../../../etc")),
     "phoneme_nul": lambda r: _animes(r, _set("phoneme", 0, "A\x00A")),
     "start_time_inf": lambda r: _animes(r, _set("start_time", 0, float("inf"))),
+    # A small file that decodes into far more (the rows check passes it).
+    "phoneme_dictionary_huge": _repeated_string,
     "clip_fps_zero": lambda r: _clips(r, _set("fps", 0, 0.0)),
     "clip_fps_nan": lambda r: _clips(r, _set("fps", 0, float("nan"))),
     "clip_phones_mismatch": lambda r: _clips(r, _set("phones", 0, "AA B")),

@@ -239,3 +239,57 @@ def test_a_footer_declaring_more_rows_than_the_manifest_is_refused_unread(
         with pytest.raises(DataError, match=r"emotion=happy/part-0.parquet declares 2000000 "
                                              r"rows in \d+ bytes, more than 1 a byte"):
             Database.open(tmp_path / "db").table("animes")
+
+
+def _string_bomb(path, encoding, rows=2, length=4 << 20):
+    """Replace the Parquet file at ``path`` with ``rows`` rows whose ``phoneme`` is one
+    string of ``length`` bytes, as a writer without Arrow's schema stores it: a few KB
+    on disk (zstd), ``rows * length`` bytes once read."""
+    if encoding == "dictionary":  # one value in the dictionary page, every row its index
+        phoneme = pa.DictionaryArray.from_arrays(pa.array([0] * rows, pa.int32()),
+                                                 ["A" * length])
+        options = {"use_dictionary": True}
+    else:
+        phoneme = pa.array(["A" * length] * rows)
+        options = {"use_dictionary": False,
+                   **({"column_encoding": {"phoneme": "DELTA_BYTE_ARRAY"}}
+                      if encoding == "delta" else {})}
+    pq.write_table(pa.table({"phoneme": phoneme}), path, compression="zstd",
+                   store_schema=False, **options)
+    assert path.stat().st_size < length // 100
+
+
+@pytest.mark.parametrize("encoding", ["dictionary", "plain", "delta"])
+def test_a_small_file_decoding_to_far_more_is_refused_unread(tmp_path, encoding):
+    """A string repeated by a dictionary (or by delta encoding, or compressed a
+    thousandfold) passed the rows check: 2,106 rows of one 8 MB string in a 2 MB
+    ``animes`` file made info, sql, query and synth allocate 17 GB."""
+    from db.sql import run
+
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    part = db.version_dir / "animes" / "emotion=happy" / "part-0.parquet"
+    _string_bomb(part, encoding)
+    refused = (r"animes: emotion=happy/part-0.parquet decodes to up to \d+ bytes from "
+               r"\d+, more than 64 times its size: a crafted file \(not read\)")
+    for how in ({}, {"filter": pa.compute.field("phoneme") == "AA"}):
+        with pytest.raises(DataError, match=refused):
+            db.table("animes", **how)
+    with pytest.raises(DataError, match=refused):
+        run(db, "SELECT count(*) FROM clips")
+    assert db.table("clips").num_rows == 2  # the other tables read as before
+
+
+def test_long_distinct_strings_in_a_dictionary_are_read(tmp_path):
+    # Each clip's speech is one long value: the footer's bound (every row as long as the
+    # whole dictionary page) is far too high, the count of the values themselves is not.
+    tables = _tables(n_clips=2)
+    pcm = [np.random.default_rng(i).bytes(1 << 17) for i in range(100)]
+    tables["audio"] = pa.table({"clip_id": [f"a{i}" for i in range(100)], "pcm16": pcm})
+    write_version(tmp_path / "db", tables, {"fps": 30.0})
+    [part] = (tmp_path / "db").glob("v*/audio/part-0.parquet")
+    [chunk] = [pq.read_metadata(part).row_group(0).column(1)]
+    # The bound the footer gives, 100 rows of up to 13 MB each, is above the limit.
+    assert "RLE_DICTIONARY" in chunk.encodings
+    assert 100 * chunk.total_uncompressed_size > 64 * part.stat().st_size
+    assert Database.open(tmp_path / "db").table("audio").column("pcm16").to_pylist() == pcm
