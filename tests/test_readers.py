@@ -43,6 +43,7 @@ from ingest.readers.landmarks import (
     HEAD_RADIUS_MM,
     POSE_CHANNELS,
     STABLE_LANDMARKS,
+    landmark_clip,
     landmark_groups,
 )
 from ingest.readers.sync import audio_envelope, lip_activity
@@ -556,6 +557,13 @@ def test_landmark_clip_failures(tmp_path):
     np.save(folder / "landmarks.npy", np.full_like(raw, np.nan))
     with pytest.raises(DataError, match="no face in any frame"):
         load(source)
+    # Landmarks come from a .npy (checked as it is read) or the video tracker's cache.
+    with pytest.raises(DataError, match=r"landmarks hold complex numbers \(complex64\), not "
+                                        r"real numbers"):
+        landmark_clip(source, raw.astype(np.complex64), fps=25, width=256, height=256,
+                      audio=np.zeros(32000, np.float32), sample_rate=16000, text=None,
+                      phones=None, words=None, fields={}, extra={},
+                      where=folder / "landmarks.npy")
 
 
 # --------------------------------------------------------------------------- real data
@@ -714,6 +722,50 @@ def test_an_array_header_claiming_more_than_its_file_is_refused_unallocated(tmp_
         read_motion(motion)
     with pytest.raises(DataError, match="unpacks to more than"):
         check_npz(motion, max_bytes=100)
+
+
+@pytest.mark.parametrize(("dtype", "holds"), [
+    ("complex128", "complex numbers"), ("bool", "booleans"), ("datetime64[s]", "dates"),
+    ("f8,f8,f8,f8", "records")])
+def test_an_array_of_other_than_real_numbers_is_refused_not_cast(tmp_path, dtype, holds):
+    """A complex .npy was cast to its real part without a word (booleans to 0 and 1,
+    dates to numbers), in a clip and in a motion file."""
+    from animegraph.motion.files import read_motion
+    from ingest.readers.common import check_motion
+
+    stem = _curve_clip(tmp_path / "rig")
+    values = np.load(stem.with_suffix(".npy"))
+    odd = (np.rec.fromarrays(values.T, dtype=dtype) if "," in dtype
+           else (values + 1j * values if dtype.startswith("complex") else values)
+           .astype(dtype))
+    np.save(stem.with_suffix(".npy"), odd)
+    refused = f"holds {holds} .*; refused: only arrays of real numbers or of text are read"
+    with pytest.raises(DataError, match=refused):
+        load(_one([tmp_path / "rig"]))
+    motion = tmp_path / "motion.npz"
+    np.savez(motion, motion=odd, fps=30.0, channels=np.array(["a", "b", "c", "d"]))
+    with pytest.raises(DataError, match=rf"motion.npz:motion.npy {refused}"):
+        read_motion(motion)
+    if "," not in dtype:  # what any reader's motion goes through, from a .npy or not
+        with pytest.raises(DataError, match=f"motion holds {holds} .*, not real numbers"):
+            check_motion(odd, list("abcd"), stem)
+
+
+def test_a_motion_file_holds_numbers_and_names_or_is_refused(tmp_path):
+    from animegraph.motion.files import read_motion
+
+    path = tmp_path / "m.npz"
+    values, names = np.ones((5, 2)), np.array(["jaw", "lip"])
+    for arrays, refused in (
+            ({"motion": values.astype(str)}, r"motion holds text \(<U32\), not real numbers"),
+            ({"channels": np.array([1, 2])}, r"channels holds integers \(int64\), not text"),
+            ({"fps": np.array(["30"])}, r"fps holds text \(<U2\), not real numbers"),
+            ({"fps": np.array([30.0, 25.0])}, r"needs one fps \(got 2\)")):
+        np.savez(path, **{"motion": values, "fps": 30.0, "channels": names, **arrays})
+        with pytest.raises(DataError, match=refused):
+            read_motion(path)
+    np.savez(path, motion=values.astype(np.int16), fps=np.float32(30), channels=names)
+    assert read_motion(path).values.dtype == np.float64
 
 
 def test_a_side_file_linked_to_a_file_outside_the_clip_is_refused(clip_folder, tmp_path):

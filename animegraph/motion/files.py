@@ -86,17 +86,27 @@ def read_motion(path: str | os.PathLike) -> Motion:
             return Motion(values=values, names=names, fps=fps)
         return _read_channel_csv(path)
     if suffix == ".npz":
-        from db.npyfile import check_npz
+        from db.npyfile import REAL_KINDS, TEXT_KINDS, check_npz, holds
 
         check_npz(path)  # sizes its headers declare, before numpy allocates them
         try:
             with np.load(path, allow_pickle=False) as z:
-                values, fps, names = z["motion"], float(z["fps"]), tuple(z["channels"].tolist())
+                values, fps, names = z["motion"], z["fps"], z["channels"]
         except (OSError, ValueError, KeyError) as exc:
             raise DataError(f"cannot read motion {path}: needs arrays motion, fps, channels "
                             f"({exc})") from None
-        return _checked(Motion(values=np.asarray(values, dtype=np.float64), names=names,
-                               fps=fps), path)
+        # numpy would cast text of numbers to them, and numbers to names, without a word
+        for key, array, kinds, what in (("motion", values, REAL_KINDS, "real numbers"),
+                                        ("fps", fps, REAL_KINDS, "real numbers"),
+                                        ("channels", names, TEXT_KINDS, "text")):
+            if array.dtype.kind not in kinds:
+                raise DataError(f"cannot read motion {path}: {key} holds "
+                                f"{holds(array.dtype)}, not {what}")
+        if fps.size != 1 or names.ndim != 1:
+            raise DataError(f"cannot read motion {path}: needs one fps (got {fps.size}) and "
+                            f"a list of channel names (got shape {names.shape})")
+        return _checked(Motion(values=values.astype(np.float64), names=tuple(names.tolist()),
+                               fps=float(fps.item())), path)
     raise DataError(f"motion file {path} must be .c3d, .csv or .npz")
 
 

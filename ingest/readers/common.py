@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from db.errors import DataError
-from db.npyfile import check_npy
+from db.npyfile import REAL_KINDS, check_npy, holds
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
 from ingest.formats.text import read_utf8
@@ -160,13 +160,13 @@ def check_motion(motion: np.ndarray, channel_names, where: Path, what: str = "ch
     Raises
     ------
     DataError
-        If the array is not 2-D numeric with at least one frame, holds infinities, or
+        If the array is not 2-D real numbers with a frame at least, holds infinities, or
         an item is NaN in every frame (the first few are named).
     """
-    try:
-        motion = np.ascontiguousarray(motion, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise DataError(f"{where}: motion is not a numeric array") from None
+    motion = np.asarray(motion)
+    if motion.dtype.kind not in REAL_KINDS:  # complex, booleans, text: not cast silently
+        raise DataError(f"{where}: motion holds {holds(motion.dtype)}, not real numbers")
+    motion = np.ascontiguousarray(motion, dtype=np.float64)
     if motion.ndim != 2 or motion.shape[0] < 1 or motion.shape[1] < 1:
         raise DataError(
             f"{where}: motion must be (n_frames, n_channels) with at least one of each, "

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from db.errors import DataError
+from db.npyfile import REAL_KINDS, holds
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.facemesh import (
     EYE_L,
@@ -337,8 +338,8 @@ def landmark_clip(
             f"{lm_path}: expected landmarks of shape (n_frames, {N_FACE} or {N_WITH_IRISES}, 3), "
             f"got {raw.shape}"
         )
-    if not np.issubdtype(raw.dtype, np.number):
-        raise DataError(f"{lm_path}: landmarks are not numbers (dtype {raw.dtype})")
+    if raw.dtype.kind not in REAL_KINDS:
+        raise DataError(f"{lm_path}: landmarks hold {holds(raw.dtype)}, not real numbers")
     if raw.shape[0] < 2:
         raise DataError(f"{lm_path}: {raw.shape[0]} frame(s); a clip needs at least 2")
     if np.isinf(raw).any():
