@@ -60,7 +60,7 @@ from ingest.prepare import MIN_LAG_CORRECTED_S, PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.readers.sync import MIN_EVIDENCE_S, MIN_PEAK_MARGIN
 from ingest.speech.ctc import kept_on_disk
-from ingest.tables import build_tables, prepared_from_database
+from ingest.tables import build_tables, prepared_from_database, stored_limits
 from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)
@@ -86,7 +86,10 @@ class IngestConfig:
     # Clips whose phones hama recognised keep theirs in any case (prepare_clip): it costs
     # nothing, and ppg-ridge's fit then need not hear them again.
     posteriorgrams: bool = False
-    limits: Limits = field(default_factory=Limits)  # plausibility limits (ingest.plausible)
+    # Plausibility limits of the new clips (ingest.plausible; --max-speed). None: the
+    # database's, those its clips were added with (ingest.tables.stored_limits), else the
+    # defaults. A database keeps the loosest its clips were added with.
+    limits: Limits | None = None
 
 
 @dataclass(frozen=True)
@@ -326,6 +329,12 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
     known: dict[tuple[str, str], str] = {}
     fps = config.fps
     reference = None
+    # A database written before it kept its limits: its clips went in with --max-speed
+    # as given again, else the defaults.
+    stored = stored_limits(existing, config.limits) if existing is not None else Limits()
+    config = replace(config, limits=config.limits or stored)
+    # What the next version keeps: limits its stored clips and the new ones all pass.
+    written = replace(config, limits=config.limits.loosest(stored))
     if existing is not None:
         reference = existing.arrays().get("head_reference")
         clips = existing.table("clips", columns=["corpus", "clip_id", "checksum"]).to_pylist()
@@ -353,7 +362,7 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         kept = []
         if existing is not None:
             replaced = {c.key for c in new}
-            kept = [c for c in prepared_from_database(existing, config.limits)
+            kept = [c for c in prepared_from_database(existing, stored)
                     if c.key not in replaced]
         new = decide_lags(new, kept, correct=config.correct_lag, pooled=config.pool_lag)
         _report_lags(report, new)
@@ -361,12 +370,12 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         new = [_at_fps(c, target_fps) for c in new]
         everything = _consistent(kept, new, report)
         if everything:
-            _write(db_path, everything, config, target_fps, report, reference, based_on,
+            _write(db_path, everything, written, target_fps, report, reference, based_on,
                    say)
     elif existing is not None and not stored_model_current(existing.manifest):
         # Written before emotion models existed, or before this version's classifier:
         # learn it now from the stored clips.
-        _write(db_path, prepared_from_database(existing, config.limits), config, fps, report,
+        _write(db_path, prepared_from_database(existing, stored), written, fps, report,
                reference, based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
@@ -466,7 +475,7 @@ def _has_head(schema) -> bool:
     return schema.kind in ("markers", "landmarks") and head_points(schema.groups) >= 3
 
 
-def _head_reference(found: list[ClipSource], limits: Limits) -> np.ndarray | None:
+def _head_reference(found: list[ClipSource], limits: Limits | None) -> np.ndarray | None:
     """The head frame of a new database: its first plausible clip's mean head pose.
 
     Rest positions from the corpus' ``markers.csv`` would do as well; the mean pose of
@@ -583,6 +592,7 @@ def build_database(
         "variance_target": config.variance, "energy_target": config.energy,
         "ica_converged": bool(model.ica_converged_),
         "emotion": emotion_entry,
+        "limits": (config.limits or Limits()).to_entry(),
     }
     return summary, write_version(db_path, tables, summary, based_on=based_on)
 

@@ -37,7 +37,7 @@ import functools
 import re
 import unicodedata
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
@@ -84,7 +84,11 @@ _SEPARATORS = ("/", "\\")
 
 @dataclass(frozen=True)
 class Limits:
-    """The physical limits of the motion checks (``animegraph ingest --max-speed``)."""
+    """The physical limits of the motion checks (``animegraph ingest --max-speed``).
+
+    A database keeps the limits its clips were added with (its manifest's ``limits``,
+    :meth:`to_entry`): its stored clips are checked with them again before a refit.
+    """
 
     max_speed_mm_s: float = MAX_SPEED_MM_S
     max_coordinate_mm: float = MAX_COORDINATE_MM
@@ -101,6 +105,35 @@ class Limits:
         if not 0 <= self.max_dropout_share < 1:
             raise ParameterError(f"max_dropout_share must be in [0, 1), got "
                                  f"{self.max_dropout_share!r}")
+
+    def loosest(self, other: Limits) -> Limits:
+        """The limits passing what either of ``self`` and ``other`` passes (every limit
+        is a most: the larger of the two)."""
+        return Limits(**{f.name: max(getattr(self, f.name), getattr(other, f.name))
+                         for f in fields(self)})
+
+    def to_entry(self) -> dict[str, float]:
+        """The limits as a manifest keeps them (:meth:`from_entry` reads them back)."""
+        return asdict(self)
+
+    @classmethod
+    def from_entry(cls, entry) -> Limits:
+        """Limits from a manifest's entry (the defaults for the limits it lacks; one this
+        version does not know is left out).
+
+        Raises
+        ------
+        ParameterError
+            If the entry is not an object of numbers in range.
+        """
+        if not isinstance(entry, dict):
+            raise ParameterError(f"limits must be an object, got {type(entry).__name__}")
+        known = {f.name for f in fields(cls)}
+        values = {k: v for k, v in entry.items() if k in known}
+        for name, value in values.items():
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ParameterError(f"{name} must be a number, got {type(value).__name__}")
+        return cls(**values)
 
 
 def check_label(value: str | None, what: str, *, emotion: bool = False) -> None:

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 import pyarrow as pa
 
-from db.errors import DataError
+from db.errors import DataError, ParameterError
 from db.store import arrays_to_table
 from ingest.decompose import MotionDecomposer, pcs_of_clips
 from ingest.plausible import Limits, check_labels, check_stored_motion
@@ -238,22 +238,41 @@ def _components(model: MotionDecomposer, sources: list[np.ndarray],
     })
 
 
+def stored_limits(db, unrecorded: Limits | None = None) -> Limits:
+    """The plausibility limits the clips of database ``db`` were added with: its
+    manifest's ``limits`` or, for a database written before they were kept,
+    ``unrecorded`` (default: the defaults).
+
+    Raises
+    ------
+    DataError
+        If the manifest's entry is not limits.
+    """
+    entry = db.manifest.get("limits")
+    if entry is None:
+        return unrecorded or Limits()
+    try:
+        return Limits.from_entry(entry)
+    except ParameterError as exc:
+        raise db.damaged("manifest.json", f"limits: {exc}") from None
+
+
 def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedClip]:
     """The clips of a database as :class:`PreparedClip` (to refit the model with more, or
     to fit a baseline on it).
 
     Every clip's labels and motion are checked as a new clip's are before anything is
     fitted to it (:func:`ingest.plausible.check_labels`,
-    :func:`ingest.plausible.check_stored_motion`): a database is someone else's data; a
-    label such as ``../../pwn`` would be carried into the next version, and one clip of
-    damaged frames (a marker at 500 m, NaN) would silently ruin the model refitted over
-    all of them.
+    :func:`ingest.plausible.check_stored_motion`, with the limits the clips were added
+    with, :func:`stored_limits`): a database is someone else's data; a label such as
+    ``../../pwn`` would be carried into the next version, and one clip of damaged frames
+    (a marker at 500 m, NaN) would silently ruin the model refitted over all of them.
 
     Parameters
     ----------
     db : db.store.Database
     limits : ingest.plausible.Limits, optional
-        The physical limits of the motion checks (``animegraph ingest --max-speed``).
+        The limits its clips are checked with (default: :func:`stored_limits`).
 
     Raises
     ------
@@ -262,6 +281,7 @@ def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedCli
         length does not fit its frame count, a missing column), or naming the database
         and the clip, when its stored motion is implausible, NaN or infinite.
     """
+    limits = limits or stored_limits(db)
     try:
         clips = _read_prepared(db)
     except (KeyError, IndexError, TypeError, ValueError) as exc:

@@ -153,6 +153,8 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
                                                        if k != "fps"}),
     "manifest_channels_wrong": lambda r: _manifest(r, lambda m: {**m, "n_channels": 3}),
     "manifest_schema": lambda r: _manifest(r, lambda m: {**m, "schema_version": 99}),
+    "manifest_limits_text": lambda r: _manifest(r, lambda m: {**m, "limits": {
+        "max_speed_mm_s": "fast"}}),
     "next_node_huge": lambda r: _animes(r, _set("next_node", 0, 10**9)),
     "next_node_negative": lambda r: _animes(r, _set("next_node", 0, -5)),
     "prev_node_huge": lambda r: _animes(r, _set("prev_node", 1, 2**40)),

@@ -216,3 +216,46 @@ def test_the_speed_limit_is_an_option_and_checked():
     assert (args.max_speed, args.wait) == (800.0, 5.0)
     with pytest.raises(ParameterError, match="max_speed_mm_s"):
         Limits(max_speed_mm_s=-1)
+
+
+def test_a_database_checks_its_clips_with_the_limits_they_went_in_with(tiny_corpus, tmp_path):
+    """A database built with a looser --max-speed was 'damaged' to the next ingest (and
+    to fit) unless the flag was given again: its stored clips were checked with the
+    defaults."""
+    from ingest.pipeline import IngestConfig, ingest
+    from ingest.tables import prepared_from_database, stored_limits
+
+    stems = sorted(p.stem for p in (tiny_corpus / "clips").glob("*.c3d"))
+    fast, more = _folder(tiny_corpus, tmp_path / "fast"), _folder(tiny_corpus, tmp_path / "more")
+    data = read_c3d(_copy(tiny_corpus, stems[0], fast))
+    points = data.points.copy()
+    steps = np.arange(int(data.rate)) % 2 * 2 - 1  # 1 s of +-1 a frame
+    points[10:10 + len(steps), 0, 0] += 8000 / data.rate / 2 * steps  # 8,000 mm/s
+    write_c3d(fast / "clips" / f"{stems[0]}.c3d",
+              MarkerData(points, data.labels, data.rate, data.units))
+    _copy(tiny_corpus, stems[1], more)
+    path = tmp_path / "db"
+
+    loose = Limits(max_speed_mm_s=20_000)
+    ingest([fast], path, IngestConfig(limits=loose))
+    assert stored_limits(Database.open(path)) == loose
+    report = ingest([more], path)  # no flag: the database's limits, for the new clip too
+    assert report.count("added") == 1 and report.written
+    db = Database.open(path)
+    assert db.manifest["limits"]["max_speed_mm_s"] == 20_000
+    assert len(prepared_from_database(db)) == 2  # as fit reads them
+
+    # A stricter flag later is for the new clips: the database keeps what its clips passed.
+    assert Limits(max_speed_mm_s=3000).loosest(loose) == loose
+    # A database written before it kept its limits: its clips are checked with the flag
+    # given again, else the defaults.
+    old = db.version_dir / "manifest.json"
+    old.write_text(json.dumps({k: v for k, v in db.manifest.items() if k != "limits"}))
+    db = Database.open(path)
+    assert stored_limits(db) == Limits() and stored_limits(db, loose) == loose
+    with pytest.raises(DataError, match="is damaged: .*above 5000 mm/s"):
+        prepared_from_database(db)
+    old.write_text(json.dumps({**db.manifest, "limits": {"max_speed_mm_s": "fast"}}))
+    with pytest.raises(DataError, match=r"manifest.json: limits: max_speed_mm_s must be a "
+                                        r"number, got str"):
+        prepared_from_database(Database.open(path))

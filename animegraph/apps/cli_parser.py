@@ -189,8 +189,10 @@ def _add_ingest(sub) -> None:
                      "always kept for clips whose phones hama recognised)")
     _phones_engine_option(ing, "a transcript")
     ing.add_argument("--max-speed", type=_number, default=None, metavar="MM_S",
-                     help="fastest plausible marker motion in mm/s (default 5000); a faster "
-                     "jump is a dropout, or rejects the clip if it lasts")
+                     help="fastest plausible marker motion in mm/s (default: the "
+                     "database's, else 5000); a faster jump is a dropout, or rejects the "
+                     "clip if it lasts. The database keeps the largest its clips went in "
+                     "with, and checks its stored clips with it")
     ing.add_argument("--wait", type=_number, default=None,
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")

@@ -13,7 +13,7 @@ def cmd_ingest(args: argparse.Namespace) -> int:
     from ingest.pipeline import IngestConfig, ingest
     from ingest.plausible import Limits
 
-    limits = Limits() if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
+    limits = None if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction,
                           phones_engine=args.phones_engine, limits=limits,
