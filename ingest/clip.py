@@ -21,6 +21,16 @@ from ingest.formats.words import WordSegment
 KINDS = ("markers", "curves", "landmarks")
 
 
+#: Channels of a removed rigid head pose (group ``"pose"``) and their units, as
+#: :func:`ingest.readers.landmarks.pose_motion` makes them: rotation in hundredths of a
+#: radian (the arc, in mm, of a point 100 mm from the head's centre), position in mm,
+#: scale change in per cent.
+POSE_UNITS: dict[str, str] = {
+    "pose.rx": "0.01 rad", "pose.ry": "0.01 rad", "pose.rz": "0.01 rad",
+    "pose.tx": "mm", "pose.ty": "mm", "pose.tz": "mm", "pose.scale": "%",
+}
+
+
 @dataclass(frozen=True)
 class ChannelSchema:
     """What each motion channel is.
@@ -38,7 +48,8 @@ class ChannelSchema:
         Motion group of each channel (Cao et al. §3.2: ``"head"``, ``"upper_face"``,
         ``"lips"``; ``"pose"`` for a removed rigid head pose; ``"other"`` if unknown).
     units : str
-        ``"mm"`` for markers, ``"unit"`` for curves and normalised landmarks.
+        ``"mm"`` for markers and landmarks, ``"unit"`` for curves; a head pose
+        channel's are its own (:attr:`channel_units`).
     """
 
     kind: str
@@ -57,6 +68,13 @@ class ChannelSchema:
     @property
     def n_channels(self) -> int:
         return len(self.names)
+
+    @property
+    def channel_units(self) -> tuple[str, ...]:
+        """Each channel's units: the schema's, but a head pose channel's its own
+        (:data:`POSE_UNITS`)."""
+        return tuple(POSE_UNITS.get(name, self.units) if group == "pose" else self.units
+                     for name, group in zip(self.names, self.groups, strict=True))
 
     def difference(self, other: ChannelSchema) -> str:
         """What differs from ``other``, in words ("" if nothing), for a rejection."""

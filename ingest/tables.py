@@ -146,7 +146,7 @@ def build_tables(
     channels = pa.table({
         "channel": pa.array(np.arange(schema.n_channels), pa.int32()),
         "name": list(schema.names), "group": list(schema.groups),
-        "kind": [schema.kind] * schema.n_channels, "units": [schema.units] * schema.n_channels,
+        "kind": [schema.kind] * schema.n_channels, "units": list(schema.channel_units),
         # The range of the stored frames: what the model's channel mean is checked
         # against when read (ingest.invariants), without reading a frame.
         "min": np.min([c.motion.min(axis=0) for c in clips], axis=0).astype(np.float64),

@@ -164,6 +164,12 @@ def test_ingest_reports_and_applies_the_pooled_lag(tmp_path):
     assert "not identifiable, r " in text and "not applied to 1 clip (" in text
     assert ("less than 20 s of audio" in text) == (lone.lag_margin >= 0.05)
     assert "lag_basis" in report.to_csv().splitlines()[0]
+    from db.store import Database
+
+    units = {r["name"]: r["units"] for r in Database.open(tmp_path / "db").table(
+        "channels").to_pylist()}
+    assert (units["lm1.x"], units["pose.rx"], units["pose.tz"], units["pose.scale"]) == (
+        "mm", "0.01 rad", "mm", "%")
 
 
 def test_prepared_clips_read_back_from_the_database(tiny_db, tiny_corpus):

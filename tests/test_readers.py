@@ -536,6 +536,8 @@ def test_landmark_clip_failures(tmp_path):
     clip = load(source)
     assert clip.motion.shape == (50, 468 * 3 + 7) and clip.schema.kind == "landmarks"
     assert clip.schema.names[-7:] == POSE_CHANNELS and clip.schema.groups[-1] == "pose"
+    # Rotations are not millimetres (the channels table says each channel's units).
+    assert clip.schema.channel_units[-8:] == ("mm",) + ("0.01 rad",) * 3 + ("mm",) * 3 + ("%",)
     assert clip.extra["procrustes_rms_mm"] < 1e-3
     assert clip.extra["frames_without_face"] == 0
     gaps = raw.copy()

@@ -30,7 +30,7 @@ import numpy as np
 
 from db.errors import DataError
 from db.npyfile import REAL_KINDS, holds
-from ingest.clip import ChannelSchema, RawClip, checksum_files
+from ingest.clip import POSE_UNITS, ChannelSchema, RawClip, checksum_files
 from ingest.facemesh import (
     EYE_L,
     EYE_R,
@@ -68,12 +68,11 @@ STABLE_LANDMARKS: tuple[int, ...] = (
     10, 151, 9, 8, 168, 6, 197, 195, 5, 4, 33, 133, 362, 263, 67, 297, 109, 338, 54, 284,
 )
 #: Channels of the rigid head pose (group "pose"), appended after the landmarks.
-POSE_CHANNELS: tuple[str, ...] = (
-    "pose.rx", "pose.ry", "pose.rz", "pose.tx", "pose.ty", "pose.tz", "pose.scale",
-)
+POSE_CHANNELS: tuple[str, ...] = tuple(POSE_UNITS)
 #: Lever arm (mm) that turns head rotation (rad) and relative scale change into
-#: millimetres, so the pose channels share the landmarks' units and PCA weighs them
-#: like facial motion of a point 10 cm from the head's centre.
+#: millimetres, so that PCA weighs the pose channels like facial motion of a point 10 cm
+#: from the head's centre: rotation in 0.01 rad, scale change in per cent
+#: (:data:`ingest.clip.POSE_UNITS`).
 HEAD_RADIUS_MM = 100.0
 #: Audio file names tried in a clip folder, in order.
 AUDIO_NAMES = ("audio_16k.wav", "audio.wav")
@@ -115,11 +114,11 @@ def pose_motion(pose: np.ndarray) -> np.ndarray:
     Returns
     -------
     np.ndarray, shape (n_frames, 7)
-        Rotation as the arc (mm) a point :data:`HEAD_RADIUS_MM` from the centre travels,
-        translation in mm, scale change as the change (mm) of a :data:`HEAD_RADIUS_MM`
-        length. Where the camera was, how the video was framed and which way the head
-        turned on average differ from clip to clip and say nothing about head motion, so
-        each channel is relative to the clip's median.
+        Rotation as the arc (mm) a point :data:`HEAD_RADIUS_MM` from the centre travels
+        (0.01 rad), translation in mm, scale change as the change (mm) of a
+        :data:`HEAD_RADIUS_MM` length (per cent). Where the camera was, how the video
+        was framed and which way the head turned on average differ from clip to clip and
+        say nothing about head motion, so each channel is relative to the clip's median.
     """
     scale = np.nanmedian(pose[:, 6])
     out = np.empty_like(pose)
