@@ -332,3 +332,28 @@ def sql_escapes(version_dir: Path, root: Path, outside: Path) -> list[str]:
         "UPDATE clips SET emotion = 'x'", "DELETE FROM clips", "CHECKPOINT", "VACUUM",
         "BEGIN TRANSACTION", "USE memory", "SELECT getenv('HOME')",
     ]
+
+
+# --------------------------------------------------------------------------- media files
+
+
+def disguised_playlists(target: Path) -> dict[str, str]:
+    """Text files that make ffmpeg open ``target`` (a local video), by kind.
+
+    Named like a video (``speech.mp4``), each is a playlist or manifest: ffmpeg picks a
+    demuxer by content, and these demuxers open the files they list. ``target`` is named
+    by an absolute ``file://`` URL (DASH, HLS), an absolute path, and a path relative to
+    the playlist (concat: a neighbour of the playlist, or a file a symlink there points to).
+    """
+    uri = Path(target).absolute().as_uri()
+    return {
+        "dash": (
+            '<?xml version="1.0"?>\n<MPD xmlns="urn:mpeg:dash:schema:mpd:2011" '
+            'profiles="urn:mpeg:dash:profile:isoff-on-demand:2011" type="static" '
+            'mediaPresentationDuration="PT2S" minBufferTime="PT1S"><Period>'
+            '<AdaptationSet mimeType="video/mp4"><Representation id="v" bandwidth="1000">'
+            f"<BaseURL>{uri}</BaseURL></Representation></AdaptationSet></Period></MPD>\n"),
+        "hls": f"#EXTM3U\n#EXT-X-TARGETDURATION:2\n#EXTINF:2.0,\n{uri}\n#EXT-X-ENDLIST\n",
+        "concat": f"ffconcat version 1.0\nfile '{Path(target).absolute()}'\n",
+        "concat-relative": f"ffconcat version 1.0\nfile '{Path(target).name}'\n",
+    }

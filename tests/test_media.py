@@ -11,10 +11,11 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 import soundfile
+from crafted import disguised_playlists
 from scipy.signal import resample_poly
 
 from db.errors import DataError
-from ingest.formats.media import read_audio
+from ingest.formats.media import read_audio, read_frames, video_length
 from ingest.formats.wav import read_wav
 
 
@@ -187,3 +188,26 @@ def test_synth_reads_such_speech(tiny_corpus, tiny_db, tmp_path, capsys, caplog)
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "truncated audio file" in err and "cut.mp4" in err
     assert "Traceback" not in err
+
+
+# --------------------------------------------------------------------------- disguised files
+
+
+@pytest.mark.parametrize("kind", ["dash", "hls", "concat", "concat-relative"])
+def test_a_playlist_named_like_a_video_opens_no_other_file(tmp_path, kind):
+    # ffmpeg picks its demuxer by content: a DASH manifest named speech.mp4 used to be read,
+    # and the private video it names decoded as the speech (no other file may be opened)
+    private = tmp_path / "elsewhere" / "private.mp4"
+    private.parent.mkdir()
+    _video(private, seconds=2.0)
+    clip = tmp_path / "clip"
+    clip.mkdir()
+    (clip / "private.mp4").symlink_to(private)
+    disguised = clip / "speech.mp4"
+    disguised.write_text(disguised_playlists(private)[kind])
+    for read in (read_audio, video_length):
+        with pytest.raises(DataError, match=r"speech\.mp4") as info:
+            read(disguised)
+        assert "\n" not in str(info.value)
+    with pytest.raises((OSError, RuntimeError)):
+        next(read_frames(disguised))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from crafted import disguised_playlists
 
 from animegraph.apps.cli import main
 from animegraph.face.animation import animate
@@ -119,12 +120,18 @@ def test_mp4_beside_the_actor_video(take, capsys):
         assert not (take / f"face{suffix}").exists()
 
 
-@pytest.mark.parametrize("what", ["index lost", "no video track"])
+@pytest.mark.parametrize("what", ["index lost", "no video track", "a manifest"])
 def test_failed_beside_keeps_the_previous_output(take, tmp_path, capsys, what):
     # An actor video with no picture to show is refused before anything is rendered, in
-    # one line naming it, and the output from an earlier run is left as it was.
-    bad = (_actor_video(tmp_path / "actor.mp4", keep=0.5) if what == "index lost"
-           else take / "take.wav")
+    # one line naming it, and the output from an earlier run is left as it was. A DASH
+    # manifest named actor.mp4 does not put the video it names (another file) beside.
+    if what == "index lost":
+        bad = _actor_video(tmp_path / "actor.mp4", keep=0.5)
+    elif what == "no video track":
+        bad = take / "take.wav"
+    else:
+        bad = tmp_path / "actor.mp4"
+        bad.write_text(disguised_playlists(_actor_video(tmp_path / "private.mp4"))["dash"])
     out = tmp_path / "out"
     out.mkdir()
     (out / "r.mp4").write_bytes(b"an earlier render")

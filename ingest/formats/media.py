@@ -31,6 +31,16 @@ logger = logging.getLogger(__name__)
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mpg", ".mpeg", ".mkv", ".webm")
 #: Everything read through ffmpeg: videos and audio-only MPEG-4 (``.m4a``).
 MEDIA_SUFFIXES = VIDEO_SUFFIXES + (".m4a",)
+#: The demuxers ffmpeg may use for a file of :data:`MEDIA_SUFFIXES` (``-format_whitelist``):
+#: the containers those suffixes name (QuickTime/MP4, Matroska/WebM, AVI, MPEG program and
+#: transport streams, raw MPEG video). Left to itself ffmpeg picks the demuxer by the
+#: file's content, and some demuxers open other files: a DASH manifest (XML) named
+#: ``speech.mp4`` makes ffmpeg read any local file its ``BaseURL`` names.
+MEDIA_DEMUXERS = ("mov", "matroska", "avi", "mpeg", "mpegts", "mpegvideo")
+#: The demuxers for any other sound file (a WAV, or another format libsndfile reads, as
+#: :func:`ingest.formats.wav.read_wav` does), when ffmpeg reads it (``render`` muxing the
+#: speech in).
+SOUND_DEMUXERS = ("wav", "w64", "aiff", "au", "caf", "flac", "ogg", "mp3")
 #: A line ffmpeg logs at level error or fatal (``-loglevel level+...`` tags each line).
 _ERROR_LEVEL = re.compile(r"\[(error|fatal|panic)\] ")
 #: The container's declared duration, as ffmpeg describes the input.
@@ -84,7 +94,7 @@ def read_audio(path: str | os.PathLike[str],
     # (which sums stereo at -3 dB each and cancels opposite phases). The log, each line
     # tagged with its level, gives the declared duration and any decoding error.
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-nostats",
-           "-loglevel", "level+info", "-i", str(path), "-vn", "-map", "0:a:0",
+           "-loglevel", "level+info", *input_args(path), "-vn", "-map", "0:a:0",
            *(("-ar", str(int(sample_rate))) if sample_rate else ()),
            "-f", "wav", "-acodec", "pcm_f32le", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
@@ -102,6 +112,38 @@ def read_audio(path: str | os.PathLike[str],
     # fault of the file to warn about; clipped quietly (synth warns of flat tops).
     np.clip(audio, -1.0, 1.0, out=audio)
     return speech_samples(audio, int(rate), path)
+
+
+def input_args(path: str | os.PathLike[str]) -> list[str]:
+    """ffmpeg's arguments to read ``path``, a file from others, and nothing else.
+
+    Only the ``file`` protocol, and only the demuxers of what the file's suffix claims
+    (:data:`MEDIA_DEMUXERS`, else :data:`SOUND_DEMUXERS`): a playlist or manifest
+    disguised as a video (HLS, DASH, concat) cannot make ffmpeg open other files or URLs.
+    The path is made absolute, so a name like ``concat:a|b`` is a file's, not a protocol's.
+
+    Parameters
+    ----------
+    path : path
+
+    Returns
+    -------
+    list of str
+        Input options, then ``-i`` and the path (the last two items).
+    """
+    demuxers = (MEDIA_DEMUXERS if Path(path).suffix.lower() in MEDIA_SUFFIXES
+                else SOUND_DEMUXERS)
+    return ["-protocol_whitelist", "file", "-format_whitelist", ",".join(demuxers),
+            "-i", os.path.abspath(path)]
+
+
+def read_frames(path: str | os.PathLike[str], **kwargs):
+    """``imageio_ffmpeg.read_frames`` of a file from others, restricted as
+    :func:`input_args` (its generator: the metadata, then the frames' bytes)."""
+    import imageio_ffmpeg
+
+    *options, _, absolute = input_args(path)
+    return imageio_ffmpeg.read_frames(absolute, input_params=options, **kwargs)
 
 
 def _message(line: str) -> str:
@@ -139,7 +181,7 @@ def video_length(path: str | os.PathLike[str]) -> float:
     # -progress writes key=value lines (the last frame= and out_time_us= are the totals);
     # ffmpeg's human-readable statistics line is not meant to be parsed.
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-nostats",
-           "-i", str(path), "-map", "0:v:0", "-f", "null", "-progress", "pipe:1", "-"]
+           *input_args(path), "-map", "0:v:0", "-f", "null", "-progress", "pipe:1", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     totals = dict(line.partition("=")[::2]
                   for line in proc.stdout.decode(errors="replace").splitlines())

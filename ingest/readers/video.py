@@ -1,7 +1,9 @@
 """Video clips: the face tracked on every frame, the speech from the video's audio track.
 
-A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmpeg of
-``imageio-ffmpeg`` decodes) is read as a landmark clip (:mod:`ingest.readers.landmarks`):
+A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; any codec the ffmpeg of
+``imageio-ffmpeg`` decodes, in the containers of
+:data:`ingest.formats.media.MEDIA_DEMUXERS`) is read as a landmark clip
+(:mod:`ingest.readers.landmarks`):
 
 - **tracking**: mediapipe's face mesh (``refine_landmarks=True``: 478 landmarks, the
   canonical mesh's 468 and 10 iris points, the layout the landmark reader reads), in
@@ -48,7 +50,7 @@ from db.atomic import atomic_write
 from db.errors import DataError
 from ingest.cache import cache_dir
 from ingest.clip import RawClip, checksum_files
-from ingest.formats.media import DECODING_VERSION, read_audio
+from ingest.formats.media import DECODING_VERSION, read_audio, read_frames
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
@@ -127,9 +129,7 @@ def tracker_available() -> bool:
 
 def _frames(path: Path):
     """(meta, frame iterator) of a video, RGB uint8 frames (height, width, 3)."""
-    import imageio_ffmpeg
-
-    reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
+    reader = read_frames(path, pix_fmt="rgb24")
     try:
         meta = next(reader)
     except (RuntimeError, OSError, StopIteration) as exc:
