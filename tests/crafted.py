@@ -357,3 +357,19 @@ def disguised_playlists(target: Path) -> dict[str, str]:
         "concat": f"ffconcat version 1.0\nfile '{Path(target).absolute()}'\n",
         "concat-relative": f"ffconcat version 1.0\nfile '{Path(target).name}'\n",
     }
+
+
+def flac_declaring(path: Path, n_samples: int) -> Path:
+    """A second of FLAC (named as the caller likes: libsndfile reads by content) whose
+    header declares ``n_samples`` (at most 2**36 - 1): the length decoders allocate for."""
+    import soundfile
+
+    soundfile.write(str(path), np.zeros(16000, np.float32), 16000, format="FLAC")
+    data = bytearray(path.read_bytes())
+    # STREAMINFO follows "fLaC" and its 4-byte block header; bytes 10..17 of it hold the
+    # rate (20 bits), channels (3), bits per sample (5) and the total samples (36)
+    fields = int.from_bytes(data[18:26], "big")
+    fields = (fields >> 36 << 36) | n_samples
+    data[18:26] = fields.to_bytes(8, "big")
+    path.write_bytes(data)
+    return path

@@ -22,7 +22,7 @@ import numpy as np
 import soundfile
 
 from db.errors import DataError
-from ingest.formats.wav import read_wav, speech_samples
+from ingest.formats.wav import MAX_SPEECH_SAMPLES, check_speech_size, read_wav, speech_samples
 
 logger = logging.getLogger(__name__)
 
@@ -80,7 +80,8 @@ def read_audio(path: str | os.PathLike[str],
     ------
     DataError
         One line naming the file if it is missing, has no sound track, ffmpeg cannot
-        read it, or it is truncated (:func:`_check_complete`).
+        read it, it is truncated (:func:`_check_complete`), or it holds more than
+        :data:`ingest.formats.wav.MAX_SPEECH_SAMPLES`.
     """
     path = Path(path)
     if path.suffix.lower() not in MEDIA_SUFFIXES:
@@ -92,11 +93,13 @@ def read_audio(path: str | os.PathLike[str],
     # A WAV on the pipe rather than raw samples: its header gives the rate and the channel
     # count, so the channels are mixed here, by the WAV's rule, not by ffmpeg's downmix
     # (which sums stereo at -3 dB each and cancels opposite phases). The log, each line
-    # tagged with its level, gives the declared duration and any decoding error.
+    # tagged with its level, gives the declared duration and any decoding error. -fs stops
+    # the WAV just past MAX_SPEECH_SAMPLES (a header's length is not to be trusted): a few
+    # kilobytes of compressed silence would otherwise decode to gigabytes in memory.
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-nostats",
            "-loglevel", "level+info", *input_args(path), "-vn", "-map", "0:a:0",
            *(("-ar", str(int(sample_rate))) if sample_rate else ()),
-           "-f", "wav", "-acodec", "pcm_f32le", "-"]
+           "-f", "wav", "-acodec", "pcm_f32le", "-fs", str(4 * MAX_SPEECH_SAMPLES + 4096), "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     log = proc.stderr.decode(errors="replace").splitlines()
     errors = [_message(ln) for ln in log if _ERROR_LEVEL.search(ln)]
@@ -106,6 +109,7 @@ def read_audio(path: str | os.PathLike[str],
         audio, rate = soundfile.read(io.BytesIO(proc.stdout), dtype="float32", always_2d=True)
     except (soundfile.SoundFileError, RuntimeError, ValueError) as exc:
         raise DataError(f"cannot read the audio track of {path}: {exc}") from exc
+    check_speech_size(*audio.shape, rate, path)
     if len(audio):  # no samples at all is speech_samples' error
         _check_complete(path, len(audio) / rate, log, errors)
     # Lossy codecs overshoot full scale near loud peaks (GRID's AAC by up to 40 %): not a
