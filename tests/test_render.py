@@ -526,3 +526,32 @@ def test_mesh_without_marker_map_is_said_before_the_motion_is_read(tmp_path, cap
                                    "-o", str(tmp_path / "face.mp4")]), 2)
     assert "--mesh needs --marker-map" in line
     assert not (tmp_path / "face.mp4").exists()
+
+
+def _ply(path, vertices, faces) -> None:
+    """An ASCII PLY written as is (trimesh's export would check the faces)."""
+    head = (f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\nproperty float x\n"
+            f"property float y\nproperty float z\nelement face {len(faces)}\n"
+            "property list uchar int vertex_indices\nend_header\n")
+    path.write_text(head + "".join(f"{x} {y} {z}\n" for x, y, z in vertices)
+                    + "".join(f"3 {a} {b} {c}\n" for a, b, c in faces))
+
+
+@pytest.mark.parametrize("vertex", [10**8, -5])
+def test_a_mesh_whose_faces_name_missing_vertices_is_one_line(take, tmp_path, capsys, vertex):
+    # PLY faces are read as written: a vertex number past the end (or negative, which
+    # numpy would take from the end) is refused by name, not a traceback or a wrong face
+    mesh = canonical_mesh()
+    faces = mesh.faces.copy()
+    faces[7, 2] = vertex
+    _ply(tmp_path / "m.ply", mesh.vertices, faces)
+    markers = default_marker_map([m[0] for m in face.MARKERS])
+    (tmp_path / "map.csv").write_text("label,vertex,region\n" + "".join(
+        f"{lab},{v},{'|'.join(r)}\n" for lab, v, r in zip(markers.labels, markers.vertices,
+                                                           markers.regions, strict=True)))
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--mesh",
+                                   str(tmp_path / "m.ply"), "--marker-map",
+                                   str(tmp_path / "map.csv"), "-o", str(tmp_path / "m.glb")]),
+                     1)
+    assert f"m.ply: face 7 names vertex {vertex}" in line, line
+    assert not (tmp_path / "m.glb").exists()
