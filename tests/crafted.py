@@ -373,3 +373,19 @@ def flac_declaring(path: Path, n_samples: int) -> Path:
     data[18:26] = fields.to_bytes(8, "big")
     path.write_bytes(data)
     return path
+
+
+def gltf_reaching(uri: str) -> dict:
+    """A one-quad glTF whose buffer is the file at ``uri`` (48 bytes of float32
+    positions, 24 of uint32 indices): trimesh before 5.0 read it wherever it was."""
+    return {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"uri": uri, "byteLength": 72}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 6, "type": "SCALAR"}],
+    }
