@@ -43,7 +43,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from db.errors import DataError, ParameterError
 from ingest import facemesh
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.motion import rigid_fit
 
 logger = logging.getLogger(__name__)
@@ -282,7 +282,7 @@ def read_marker_map(path: str | os.PathLike, mesh: Mesh) -> MarkerMap:
         listed twice, or a custom mesh without a ``region`` column.
     """
     path = Path(path)
-    text = read_utf8(path, "marker map")
+    text = read_utf8(path, "marker map", limit=MAX_SIDE_FILE_BYTES)
     reader = csv.DictReader(io.StringIO(text))
     fields = [f.strip().lower() for f in reader.fieldnames or []]
     if "label" not in fields or "vertex" not in fields:
