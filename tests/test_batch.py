@@ -483,3 +483,22 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
     marker = json.loads((folder / DONE).read_text())
     (folder / DONE).write_text(json.dumps({**marker, "guides": {"../../x": None}}))
     assert finished(folder, line_key(line, identity, "none"), stored) is None
+
+
+def test_a_script_reads_no_recording_outside_its_folder(tmp_path):
+    # A line's speech.wav is its recording: a script from others naming ../private.wav,
+    # an absolute path or a symlink out would copy that file into the output folder
+    private = tmp_path / "private.wav"
+    private.write_bytes(b"RIFF")
+    folder = tmp_path / "script"
+    (folder / "rec").mkdir(parents=True)
+    (folder / "rec" / "link.wav").symlink_to(private)
+    script = folder / "lines.csv"
+    for audio in ("../private.wav", str(private), "rec/../../private.wav", "rec/link.wav"):
+        script.write_text(f"id,text,audio\na,Hi,{audio}\n")
+        with pytest.raises(ScriptError, match=rf"lines\.csv line 2: audio '{audio}' is "
+                                              r"outside the script's folder"):
+            read_script(script)
+    script.write_text("id,text,audio\na,Hi,rec/./b.wav\n")
+    assert read_script(script)[0].audio == (folder / "rec" / "b.wav").absolute()
+

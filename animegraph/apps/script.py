@@ -10,7 +10,9 @@ column     required meaning
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
                     transcript for forced alignment when there is
 ``audio``           a recording (WAV, or a video's or ``.m4a``'s sound track, as ``synth``
-                    reads it), relative to the script's folder
+                    reads it), relative to the script's folder and inside it (a line's
+                    ``speech.wav`` is its recording: a script from others must not
+                    copy files from elsewhere into the output)
 ``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
                     from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
                     emotion preference
@@ -282,6 +284,9 @@ def _line(path: Path, line_no: int, row: dict) -> ScriptLine:
     exact = _flag(row.get("exact"), where)
     if window is not None and exact:
         raise ScriptError(f"{where}: window and exact=true exclude each other")
+    if audio and not (path.parent / audio).resolve().is_relative_to(path.parent.resolve()):
+        raise ScriptError(f"{where}: audio {audio!r} is outside the script's folder "
+                          "(recordings are read from it and its subfolders)")
     return ScriptLine(
         id=ident, text=text, line_no=line_no,
         audio=(path.parent / audio).absolute() if audio else None,
