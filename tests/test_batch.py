@@ -24,7 +24,7 @@ from animegraph.apps.batch import (
 )
 from animegraph.apps.cli import main
 from animegraph.apps.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
-from db.errors import DataError
+from db.errors import DataError, ParameterError
 from ingest.corpus.emotions import STYLES
 from ingest.formats.c3d import read_c3d
 from ingest.formats.phones_csv import read_phones_csv
@@ -502,3 +502,14 @@ def test_a_script_reads_no_recording_outside_its_folder(tmp_path):
     script.write_text("id,text,audio\na,Hi,rec/./b.wav\n")
     assert read_script(script)[0].audio == (folder / "rec" / "b.wav").absolute()
 
+
+def test_a_recording_in_a_lines_output_folder_is_refused(tiny_db, tmp_path):
+    # --out the script's folder and a line named like the recordings' folder: the line's
+    # speech.wav would replace the recording rec/speech.wav (of this line or another)
+    (tmp_path / "rec").mkdir()
+    script = tmp_path / "lines.csv"
+    script.write_text("id,text,audio\nrec,Hi,\nb,Hello,rec/speech.wav\n")
+    with pytest.raises(ParameterError, match=r"lines\.csv line 3: its audio .*rec/speech\.wav "
+                                             r"is in the output folder of line 'rec'"):
+        run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path, workers=1))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lines.csv", "rec"]
