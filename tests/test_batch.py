@@ -82,6 +82,8 @@ def test_reads_csv_and_json_lines(tmp_path):
     ("s.jsonl", '{"id": "a", "text": "Hi"}\n{"id": "b", "text": \n', "s.jsonl line 2: not JSON"),
     ("s.jsonl", '{"id": "a", "text": "Hi", "colour": 1}\n', "s.jsonl line 1: unknown column"),
     ("s.jsonl", '["a", "Hi"]\n', "s.jsonl line 1: expected a JSON object"),
+    ("s.jsonl", '{"id": "a", "text": "Hi", "x": ' + "[" * 100_000 + "]" * 100_000 + "}\n",
+     "s.jsonl line 1: JSON nested too deeply"),
     ("s.txt", "id,text\na,Hi\n", "expected a .csv or .jsonl"),
 ])
 def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):

@@ -431,11 +431,12 @@ def test_plot_against_truth(take, tmp_path, capsys):
     height = int.from_bytes(out.read_bytes()[20:24], "big")  # PNG's IHDR height
     assert int.from_bytes(bare.read_bytes()[20:24], "big") < height - 100
     capsys.readouterr()
-    (tmp_path / "bad.json").write_text("{\"nope\": 1}")
-    line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
-                                   str(tmp_path / "bad.json"), "-o", str(tmp_path / "q.png")]),
-                     1)
-    assert "--explain-json" in line
+    for bad in ("{\"nope\": 1}", "{\"phones\": " + "[" * 100_000 + "]" * 100_000 + "}"):
+        (tmp_path / "bad.json").write_text(bad)  # not an explanation; nested too deeply
+        line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
+                                       str(tmp_path / "bad.json"), "-o",
+                                       str(tmp_path / "q.png")]), 1)
+        assert "--explain-json" in line
     line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "-o",
                                    str(tmp_path / "q.jpg")]), 2)
     assert ".png" in line

@@ -238,6 +238,8 @@ def _jsonl_rows(path: Path, raw: str) -> list[tuple[int, dict]]:
         except json.JSONDecodeError as exc:
             raise ScriptError(f"{path.name} line {line_no}: not JSON ({exc.msg} at column "
                               f"{exc.colno})") from None
+        except RecursionError:  # the decoder recurses once per level of nesting
+            raise ScriptError(f"{path.name} line {line_no}: JSON nested too deeply") from None
         if not isinstance(row, dict):
             raise ScriptError(f"{path.name} line {line_no}: expected a JSON object, got "
                               f"{type(row).__name__}")
