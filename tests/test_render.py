@@ -556,3 +556,14 @@ def test_a_mesh_whose_faces_name_missing_vertices_is_one_line(take, tmp_path, ca
                      1)
     assert f"m.ply: face 7 names vertex {vertex}" in line, line
     assert not (tmp_path / "m.glb").exists()
+
+
+@pytest.mark.parametrize("option", ["--beside", "--audio"])
+def test_the_output_is_not_an_input(take, tmp_path, capsys, option):
+    # -o onto the actor's video (or the speech) used to replace it with the render
+    actor = _actor_video(tmp_path / "actor.mp4")
+    before = actor.read_bytes()
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), option, str(actor), "-o",
+                                   str(tmp_path / "." / "actor.mp4"), "--quiet"]), 2)
+    assert f"is also {option}: the render would replace it" in line, line
+    assert actor.read_bytes() == before
