@@ -348,3 +348,60 @@ def sql_escapes(version_dir: Path, root: Path, outside: Path) -> list[str]:
         "UPDATE clips SET emotion = 'x'", "DELETE FROM clips", "CHECKPOINT", "VACUUM",
         "BEGIN TRANSACTION", "USE memory", "SELECT getenv('HOME')",
     ]
+
+
+# --------------------------------------------------------------------------- media files
+
+
+def disguised_playlists(target: Path) -> dict[str, str]:
+    """Text files that make ffmpeg open ``target`` (a local video), by kind.
+
+    Named like a video (``speech.mp4``), each is a playlist or manifest: ffmpeg picks a
+    demuxer by content, and these demuxers open the files they list. ``target`` is named
+    by an absolute ``file://`` URL (DASH, HLS), an absolute path, and a path relative to
+    the playlist (concat: a neighbour of the playlist, or a file a symlink there points to).
+    """
+    uri = Path(target).absolute().as_uri()
+    return {
+        "dash": (
+            '<?xml version="1.0"?>\n<MPD xmlns="urn:mpeg:dash:schema:mpd:2011" '
+            'profiles="urn:mpeg:dash:profile:isoff-on-demand:2011" type="static" '
+            'mediaPresentationDuration="PT2S" minBufferTime="PT1S"><Period>'
+            '<AdaptationSet mimeType="video/mp4"><Representation id="v" bandwidth="1000">'
+            f"<BaseURL>{uri}</BaseURL></Representation></AdaptationSet></Period></MPD>\n"),
+        "hls": f"#EXTM3U\n#EXT-X-TARGETDURATION:2\n#EXTINF:2.0,\n{uri}\n#EXT-X-ENDLIST\n",
+        "concat": f"ffconcat version 1.0\nfile '{Path(target).absolute()}'\n",
+        "concat-relative": f"ffconcat version 1.0\nfile '{Path(target).name}'\n",
+    }
+
+
+def flac_declaring(path: Path, n_samples: int) -> Path:
+    """A second of FLAC (named as the caller likes: libsndfile reads by content) whose
+    header declares ``n_samples`` (at most 2**36 - 1): the length decoders allocate for."""
+    import soundfile
+
+    soundfile.write(str(path), np.zeros(16000, np.float32), 16000, format="FLAC")
+    data = bytearray(path.read_bytes())
+    # STREAMINFO follows "fLaC" and its 4-byte block header; bytes 10..17 of it hold the
+    # rate (20 bits), channels (3), bits per sample (5) and the total samples (36)
+    fields = int.from_bytes(data[18:26], "big")
+    fields = (fields >> 36 << 36) | n_samples
+    data[18:26] = fields.to_bytes(8, "big")
+    path.write_bytes(data)
+    return path
+
+
+def gltf_reaching(uri: str) -> dict:
+    """A one-quad glTF whose buffer is the file at ``uri`` (48 bytes of float32
+    positions, 24 of uint32 indices): trimesh before 5.0 read it wherever it was."""
+    return {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"uri": uri, "byteLength": 72}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 6, "type": "SCALAR"}],
+    }

@@ -24,7 +24,7 @@ from animegraph.apps.batch import (
 )
 from animegraph.apps.cli import main
 from animegraph.apps.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
-from db.errors import DataError
+from db.errors import DataError, ParameterError
 from ingest.corpus.emotions import STYLES
 from ingest.formats.c3d import read_c3d
 from ingest.formats.phones_csv import read_phones_csv
@@ -82,6 +82,8 @@ def test_reads_csv_and_json_lines(tmp_path):
     ("s.jsonl", '{"id": "a", "text": "Hi"}\n{"id": "b", "text": \n', "s.jsonl line 2: not JSON"),
     ("s.jsonl", '{"id": "a", "text": "Hi", "colour": 1}\n', "s.jsonl line 1: unknown column"),
     ("s.jsonl", '["a", "Hi"]\n', "s.jsonl line 1: expected a JSON object"),
+    ("s.jsonl", '{"id": "a", "text": "Hi", "x": ' + "[" * 100_000 + "]" * 100_000 + "}\n",
+     "s.jsonl line 1: JSON nested too deeply"),
     ("s.txt", "id,text\na,Hi\n", "expected a .csv or .jsonl"),
 ])
 def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):
@@ -483,3 +485,33 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
     marker = json.loads((folder / DONE).read_text())
     (folder / DONE).write_text(json.dumps({**marker, "guides": {"../../x": None}}))
     assert finished(folder, line_key(line, identity, "none"), stored) is None
+
+
+def test_a_script_reads_no_recording_outside_its_folder(tmp_path):
+    # A line's speech.wav is its recording: a script from others naming ../private.wav,
+    # an absolute path or a symlink out would copy that file into the output folder
+    private = tmp_path / "private.wav"
+    private.write_bytes(b"RIFF")
+    folder = tmp_path / "script"
+    (folder / "rec").mkdir(parents=True)
+    (folder / "rec" / "link.wav").symlink_to(private)
+    script = folder / "lines.csv"
+    for audio in ("../private.wav", str(private), "rec/../../private.wav", "rec/link.wav"):
+        script.write_text(f"id,text,audio\na,Hi,{audio}\n")
+        with pytest.raises(ScriptError, match=rf"lines\.csv line 2: audio '{audio}' is "
+                                              r"outside the script's folder"):
+            read_script(script)
+    script.write_text("id,text,audio\na,Hi,rec/./b.wav\n")
+    assert read_script(script)[0].audio == (folder / "rec" / "b.wav").absolute()
+
+
+def test_a_recording_in_a_lines_output_folder_is_refused(tiny_db, tmp_path):
+    # --out the script's folder and a line named like the recordings' folder: the line's
+    # speech.wav would replace the recording rec/speech.wav (of this line or another)
+    (tmp_path / "rec").mkdir()
+    script = tmp_path / "lines.csv"
+    script.write_text("id,text,audio\nrec,Hi,\nb,Hello,rec/speech.wav\n")
+    with pytest.raises(ParameterError, match=r"lines\.csv line 3: its audio .*rec/speech\.wav "
+                                             r"is in the output folder of line 'rec'"):
+        run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path, workers=1))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lines.csv", "rec"]

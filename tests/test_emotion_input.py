@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import require_shared
+from crafted import flac_declaring
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import as_float_pcm, prepare_audio, utterances
@@ -168,3 +169,11 @@ def test_opensmile_blocks(rng):
     f = block_features(_voice(rng, 1.0, sr=22050), 22050, "egemaps+compare")
     assert f["egemaps"].shape == (88,) and f["compare"].shape == (6373,)
     assert np.all(np.isfinite(f["compare"]))
+
+
+def test_emodb_files_are_read_as_any_speech(tmp_path):
+    # An EmoDB folder is files from others: a FLAC named 03a01Fa.wav declaring 2**36
+    # samples made soundfile allocate 256 GiB (a MemoryError); read_wav's bound refuses it
+    flac_declaring(tmp_path / "03a01Fa.wav", 2**36 - 1)
+    with pytest.raises(DataError, match=r"03a01Fa\.wav: at least 71583 min of sound"):
+        load_emodb(tmp_path)

@@ -20,7 +20,9 @@ from ingest.formats import (
     write_textgrid,
     write_trc,
 )
+from ingest.formats.phones_csv import read_phones_csv
 from ingest.formats.textgrid import read_tiers
+from ingest.formats.words import read_grid_align
 
 SEGMENTS = [
     Segment("SIL", 0.0, 0.12),
@@ -410,3 +412,21 @@ def test_text_writers_reject_bad_data(tmp_path):
     with pytest.raises(ParameterError, match="CSV column"):
         write_marker_csv(tmp_path / "x.csv", comma)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_side_files_past_the_bound_are_refused_before_they_are_parsed(tmp_path):
+    # Parsed, a label costs ~80 bytes however short it is written (a TextGrid of 17.5 MB of
+    # two-byte values took 1.4 GB and 27 s): side files stop at MAX_SIDE_FILE_BYTES
+    from animegraph.face.mesh import canonical_mesh, read_marker_map
+    from ingest.formats.text import MAX_SIDE_FILE_BYTES
+    from ingest.readers.common import read_transcript
+
+    big = tmp_path / "big"  # not text either: without the bound, refused as such at once
+    big.write_bytes(b"\x80" * (MAX_SIDE_FILE_BYTES + 1))
+    readers = {"x.TextGrid": read_tiers, "x.align": read_grid_align, "x.lab": read_htk_lab,
+               "x.phones.csv": read_phones_csv, "x.txt": read_transcript,
+               "x.csv": lambda p: read_marker_map(p, canonical_mesh())}
+    for name, read in readers.items():
+        (tmp_path / name).hardlink_to(big)
+        with pytest.raises(DataError, match=rf"{name} is larger than 16,777,216 bytes$"):
+            read(tmp_path / name)

@@ -11,10 +11,11 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 import soundfile
+from crafted import disguised_playlists, flac_declaring
 from scipy.signal import resample_poly
 
 from db.errors import DataError
-from ingest.formats.media import read_audio
+from ingest.formats.media import read_audio, read_frames, video_length
 from ingest.formats.wav import read_wav
 
 
@@ -187,3 +188,56 @@ def test_synth_reads_such_speech(tiny_corpus, tiny_db, tmp_path, capsys, caplog)
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "truncated audio file" in err and "cut.mp4" in err
     assert "Traceback" not in err
+
+
+# --------------------------------------------------------------------------- disguised files
+
+
+@pytest.mark.parametrize("kind", ["dash", "hls", "concat", "concat-relative"])
+def test_a_playlist_named_like_a_video_opens_no_other_file(tmp_path, kind):
+    # ffmpeg picks its demuxer by content: a DASH manifest named speech.mp4 used to be read,
+    # and the private video it names decoded as the speech (no other file may be opened)
+    private = tmp_path / "elsewhere" / "private.mp4"
+    private.parent.mkdir()
+    _video(private, seconds=2.0)
+    clip = tmp_path / "clip"
+    clip.mkdir()
+    (clip / "private.mp4").symlink_to(private)
+    disguised = clip / "speech.mp4"
+    disguised.write_text(disguised_playlists(private)[kind])
+    for read in (read_audio, video_length):
+        with pytest.raises(DataError, match=r"speech\.mp4") as info:
+            read(disguised)
+        assert "\n" not in str(info.value)
+    with pytest.raises((OSError, RuntimeError)):
+        next(read_frames(disguised))
+
+
+# --------------------------------------------------------------------------- decompression
+
+
+def test_a_header_declaring_hours_is_refused_before_decoding(tmp_path):
+    # 10 KB of FLAC named .wav declaring 2**36 samples: soundfile would allocate 256 GiB
+    # for them (a MemoryError, not one line); now refused before anything is decoded
+    path = flac_declaring(tmp_path / "speech.wav", 2**36 - 1)
+    for read in (read_wav, read_audio):
+        with pytest.raises(DataError, match=r"speech\.wav: at least 71583 min of sound in 1 "
+                                             r"channel\(s\) at 16000 Hz; speech is read up to"):
+            read(path)
+
+
+@pytest.mark.parametrize("name", ["speech.wav", "speech.mp4", "speech.mkv"])
+def test_compressed_silence_decodes_to_a_bounded_size(tmp_path, monkeypatch, name):
+    # A few bytes a second of FLAC or AAC silence decode to 32 bytes a sample x channels:
+    # the bound holds for the samples decoded (by ffmpeg, whatever a header says), not the
+    # file's size. Lowered to 2 s of 8 kHz mono here so that the file stays small.
+    for module in ("ingest.formats.wav", "ingest.formats.media"):
+        monkeypatch.setattr(f"{module}.MAX_SPEECH_SAMPLES", 16000)
+    short, long = tmp_path / f"short_{name}", tmp_path / name
+    for path, seconds in ((short, 1.9), (long, 2.5)):
+        codec = ["-c:a", "flac", "-f", "flac"] if name.endswith(".wav") else ["-c:a", "aac"]
+        _ffmpeg("-f", "lavfi", "-i", f"anullsrc=r=8000:cl=mono:d={seconds}", *codec, str(path))
+    assert len(read_audio(short)[0]) <= 16000
+    with pytest.raises(DataError, match=rf"{name}: at least 0 min of sound in 1 channel\(s\) "
+                                        r"at 8000 Hz; speech is read up to 16,000 samples"):
+        read_audio(long)

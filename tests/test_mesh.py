@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+from crafted import gltf_reaching
 from scipy.spatial.transform import Rotation
 
 from animegraph.face.mesh import (
@@ -165,3 +168,24 @@ def test_corpus_markers_csv_is_a_map_for_the_canonical_mesh(tmp_path):
     expected = default_marker_map([m[0] for m in face.MARKERS])
     assert mapped.regions == expected.regions
     assert np.array_equal(mapped.vertices, expected.vertices)
+
+
+def test_a_gltf_reads_no_buffer_outside_its_folder(tmp_path):
+    # A shared mesh.gltf whose buffer is another file (../secret.bin, an absolute path, a
+    # symlink beside it) would put that file's bytes in the rendered face: refused, while
+    # a buffer beside the glTF is read
+    quad = (np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 1]], np.float32).tobytes()
+            + np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+    secret = tmp_path / "elsewhere" / "secret.bin"
+    secret.parent.mkdir()
+    secret.write_bytes(quad)
+    folder = tmp_path / "mesh"
+    folder.mkdir()
+    (folder / "quad.bin").write_bytes(quad)
+    (folder / "link.bin").symlink_to(secret)
+    (folder / "ok.gltf").write_text(json.dumps(gltf_reaching("quad.bin")))
+    assert load_mesh(folder / "ok.gltf").vertices.shape == (4, 3)
+    for uri in ("../elsewhere/secret.bin", str(secret), secret.as_uri(), "link.bin"):
+        (folder / "bad.gltf").write_text(json.dumps(gltf_reaching(uri)))
+        with pytest.raises(DataError, match=r"cannot read mesh .*bad\.gltf"):
+            load_mesh(folder / "bad.gltf")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from crafted import disguised_playlists
 
 from animegraph.apps.cli import main
 from animegraph.face.animation import animate
@@ -119,12 +120,18 @@ def test_mp4_beside_the_actor_video(take, capsys):
         assert not (take / f"face{suffix}").exists()
 
 
-@pytest.mark.parametrize("what", ["index lost", "no video track"])
+@pytest.mark.parametrize("what", ["index lost", "no video track", "a manifest"])
 def test_failed_beside_keeps_the_previous_output(take, tmp_path, capsys, what):
     # An actor video with no picture to show is refused before anything is rendered, in
-    # one line naming it, and the output from an earlier run is left as it was.
-    bad = (_actor_video(tmp_path / "actor.mp4", keep=0.5) if what == "index lost"
-           else take / "take.wav")
+    # one line naming it, and the output from an earlier run is left as it was. A DASH
+    # manifest named actor.mp4 does not put the video it names (another file) beside.
+    if what == "index lost":
+        bad = _actor_video(tmp_path / "actor.mp4", keep=0.5)
+    elif what == "no video track":
+        bad = take / "take.wav"
+    else:
+        bad = tmp_path / "actor.mp4"
+        bad.write_text(disguised_playlists(_actor_video(tmp_path / "private.mp4"))["dash"])
     out = tmp_path / "out"
     out.mkdir()
     (out / "r.mp4").write_bytes(b"an earlier render")
@@ -424,11 +431,12 @@ def test_plot_against_truth(take, tmp_path, capsys):
     height = int.from_bytes(out.read_bytes()[20:24], "big")  # PNG's IHDR height
     assert int.from_bytes(bare.read_bytes()[20:24], "big") < height - 100
     capsys.readouterr()
-    (tmp_path / "bad.json").write_text("{\"nope\": 1}")
-    line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
-                                   str(tmp_path / "bad.json"), "-o", str(tmp_path / "q.png")]),
-                     1)
-    assert "--explain-json" in line
+    for bad in ("{\"nope\": 1}", "{\"phones\": " + "[" * 100_000 + "]" * 100_000 + "}"):
+        (tmp_path / "bad.json").write_text(bad)  # not an explanation; nested too deeply
+        line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
+                                       str(tmp_path / "bad.json"), "-o",
+                                       str(tmp_path / "q.png")]), 1)
+        assert "--explain-json" in line
     line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "-o",
                                    str(tmp_path / "q.jpg")]), 2)
     assert ".png" in line
@@ -519,3 +527,43 @@ def test_mesh_without_marker_map_is_said_before_the_motion_is_read(tmp_path, cap
                                    "-o", str(tmp_path / "face.mp4")]), 2)
     assert "--mesh needs --marker-map" in line
     assert not (tmp_path / "face.mp4").exists()
+
+
+def _ply(path, vertices, faces) -> None:
+    """An ASCII PLY written as is (trimesh's export would check the faces)."""
+    head = (f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\nproperty float x\n"
+            f"property float y\nproperty float z\nelement face {len(faces)}\n"
+            "property list uchar int vertex_indices\nend_header\n")
+    path.write_text(head + "".join(f"{x} {y} {z}\n" for x, y, z in vertices)
+                    + "".join(f"3 {a} {b} {c}\n" for a, b, c in faces))
+
+
+@pytest.mark.parametrize("vertex", [10**8, -5])
+def test_a_mesh_whose_faces_name_missing_vertices_is_one_line(take, tmp_path, capsys, vertex):
+    # PLY faces are read as written: a vertex number past the end (or negative, which
+    # numpy would take from the end) is refused by name, not a traceback or a wrong face
+    mesh = canonical_mesh()
+    faces = mesh.faces.copy()
+    faces[7, 2] = vertex
+    _ply(tmp_path / "m.ply", mesh.vertices, faces)
+    markers = default_marker_map([m[0] for m in face.MARKERS])
+    (tmp_path / "map.csv").write_text("label,vertex,region\n" + "".join(
+        f"{lab},{v},{'|'.join(r)}\n" for lab, v, r in zip(markers.labels, markers.vertices,
+                                                           markers.regions, strict=True)))
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), "--mesh",
+                                   str(tmp_path / "m.ply"), "--marker-map",
+                                   str(tmp_path / "map.csv"), "-o", str(tmp_path / "m.glb")]),
+                     1)
+    assert f"m.ply: face 7 names vertex {vertex}" in line, line
+    assert not (tmp_path / "m.glb").exists()
+
+
+@pytest.mark.parametrize("option", ["--beside", "--audio"])
+def test_the_output_is_not_an_input(take, tmp_path, capsys, option):
+    # -o onto the actor's video (or the speech) used to replace it with the render
+    actor = _actor_video(tmp_path / "actor.mp4")
+    before = actor.read_bytes()
+    line = _one_line(capsys, main(["render", str(take / "take.c3d"), option, str(actor), "-o",
+                                   str(tmp_path / "." / "actor.mp4"), "--quiet"]), 2)
+    assert f"is also {option}: the render would replace it" in line, line
+    assert actor.read_bytes() == before

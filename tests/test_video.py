@@ -25,6 +25,7 @@ from ingest.readers.video import (
     cache_path,
     cached_tracking,
     native_log_filtered,
+    track_video,
     tracker_available,
     video_audio,
 )
@@ -228,3 +229,27 @@ def test_native_log_noise_is_dropped_and_errors_kept(capfd):
         raise RuntimeError("boom")
     os.write(2, b"restored\n")
     assert capfd.readouterr().err == "restored\n"
+
+
+def test_a_video_is_bounded_before_and_while_it_is_tracked(tmp_path, monkeypatch):
+    _needs_tracker()
+    monkeypatch.setattr("ingest.readers.video.MAX_VIDEO_FRAMES", 25)
+    # From a pipe, Matroska declares no duration: no frame count was checked at all, and a
+    # static 16 x 16 picture takes ~20 bytes a frame (ten hours, 20 MB, tracked into 15 GB)
+    endless = tmp_path / "endless.mkv"
+    with endless.open("wb") as out:
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-v", "error", "-f",
+                        "lavfi", "-i", "color=c=gray:s=16x16:r=25:d=1.6", "-c:v", "libx264",
+                        "-f", "matroska", "-"], stdout=out, check=True)
+    with pytest.raises(DataError, match=r"endless\.mkv: 26 frames or more; a video clip may "
+                                        r"have at most 25 \("):
+        track_video(endless, progress=False)
+    # a declared length past the bound is refused before tracking; so are huge frames
+    declared = tmp_path / "declared.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=16x16:r=25:d=1.6", "-c:v", "libx264",
+            str(declared))
+    with pytest.raises(DataError, match=r"declared\.mp4: 40 frames or more"):
+        track_video(declared, progress=False)
+    monkeypatch.setattr("ingest.readers.video.MAX_FRAME_PIXELS", 16 * 16 - 1)
+    with pytest.raises(DataError, match=r"declared\.mp4: frames of 16 x 16 pixels"):
+        track_video(declared, progress=False)

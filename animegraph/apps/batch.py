@@ -190,6 +190,14 @@ def run_batch(
     out = Path(options.out).absolute()
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {out} is a file, not a folder")
+    # a line's files would replace a recording kept in a line's output folder
+    written = {(out / line.id).resolve(): line.id for line in lines}
+    for line in lines:
+        if line.audio is not None and line.audio.resolve().parent in written:
+            raise ParameterError(f"{Path(script).name} line {line.line_no}: its audio "
+                                 f"{line.audio} is in the output folder of line "
+                                 f"{written[line.audio.resolve().parent]!r}, which the "
+                                 "batch writes into")
     made = [folder for folder in (out, *out.parents) if not folder.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -10,7 +10,9 @@ column     required meaning
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
                     transcript for forced alignment when there is
 ``audio``           a recording (WAV, or a video's or ``.m4a``'s sound track, as ``synth``
-                    reads it), relative to the script's folder
+                    reads it), relative to the script's folder and inside it (a line's
+                    ``speech.wav`` is its recording: a script from others must not
+                    copy files from elsewhere into the output)
 ``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
                     from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
                     emotion preference
@@ -236,6 +238,8 @@ def _jsonl_rows(path: Path, raw: str) -> list[tuple[int, dict]]:
         except json.JSONDecodeError as exc:
             raise ScriptError(f"{path.name} line {line_no}: not JSON ({exc.msg} at column "
                               f"{exc.colno})") from None
+        except RecursionError:  # the decoder recurses once per level of nesting
+            raise ScriptError(f"{path.name} line {line_no}: JSON nested too deeply") from None
         if not isinstance(row, dict):
             raise ScriptError(f"{path.name} line {line_no}: expected a JSON object, got "
                               f"{type(row).__name__}")
@@ -282,6 +286,9 @@ def _line(path: Path, line_no: int, row: dict) -> ScriptLine:
     exact = _flag(row.get("exact"), where)
     if window is not None and exact:
         raise ScriptError(f"{where}: window and exact=true exclude each other")
+    if audio and not (path.parent / audio).resolve().is_relative_to(path.parent.resolve()):
+        raise ScriptError(f"{where}: audio {audio!r} is outside the script's folder "
+                          "(recordings are read from it and its subfolders)")
     return ScriptLine(
         id=ident, text=text, line_no=line_no,
         audio=(path.parent / audio).absolute() if audio else None,

@@ -43,7 +43,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from db.errors import DataError, ParameterError
 from ingest import facemesh
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.motion import rigid_fit
 
 logger = logging.getLogger(__name__)
@@ -141,7 +141,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     Raises
     ------
     DataError
-        If the file is missing or trimesh cannot read a triangle mesh from it.
+        If the file is missing, trimesh cannot read a triangle mesh from it, a coordinate
+        is not finite or a face names a vertex the mesh does not have.
     """
     import trimesh
 
@@ -158,6 +159,14 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         raise DataError(f"cannot read mesh {path}: no triangles in it")
     if not np.isfinite(vertices).all():
         raise DataError(f"mesh {path} has non-finite vertex coordinates")
+    # PLY faces come as written: a vertex past the end would fail deep in the render, a
+    # negative one would silently take a vertex from the end
+    outside = (faces < 0) | (faces >= len(vertices))
+    if outside.any():
+        row = int(np.flatnonzero(outside.any(axis=1))[0])
+        raise DataError(f"mesh {path}: face {row} names vertex "
+                        f"{int(faces[row][outside[row]][0])}, but it has vertices "
+                        f"0-{len(vertices) - 1}")
     return Mesh(vertices=vertices, faces=faces, mouth=np.empty(0, dtype=np.int64),
                 name=path.name)
 
@@ -273,7 +282,7 @@ def read_marker_map(path: str | os.PathLike, mesh: Mesh) -> MarkerMap:
         listed twice, or a custom mesh without a ``region`` column.
     """
     path = Path(path)
-    text = read_utf8(path, "marker map")
+    text = read_utf8(path, "marker map", limit=MAX_SIDE_FILE_BYTES)
     reader = csv.DictReader(io.StringIO(text))
     fields = [f.strip().lower() for f in reader.fieldnames or []]
     if "label" not in fields or "vertex" not in fields:

@@ -169,6 +169,8 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
     DataError
         If ffmpeg fails (its last message line), or no frame came.
     """
+    from ingest.formats.media import input_args
+
     path = Path(path)
     kind = path.suffix.lower()
     if kind not in (".mp4", ".gif"):
@@ -185,7 +187,7 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
            "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", f"{fps:.6g}", "-i", "-"]
     if kind == ".mp4":
         if audio is not None:
-            cmd += ["-ss", f"{audio_offset:.6f}", "-i", str(audio), "-map", "0:v", "-map", "1:a",
+            cmd += ["-ss", f"{audio_offset:.6f}", *input_args(audio), "-map", "0:v", "-map", "1:a",
                     "-c:a", "aac", "-b:a", "128k"]
         cmd += ["-c:v", "libx264", "-preset", "veryfast", "-crf", "20", "-pix_fmt", "yuv420p",
                 "-movflags", "+faststart", "-f", "mp4", str(tmp)]
@@ -257,7 +259,7 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     DataError
         If ``video`` is missing or ffmpeg cannot read or write either (its last line).
     """
-    import imageio_ffmpeg
+    from ingest.formats.media import input_args, read_frames
 
     path, video = Path(path), Path(video)
     out = path if out is None else Path(out)
@@ -266,7 +268,7 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
             raise ParameterError(f"--beside needs an .mp4 output, got {name.name!r}")
     if not video.is_file():
         raise DataError(f"video not found: {video}")
-    reader = imageio_ffmpeg.read_frames(str(path))
+    reader = read_frames(path)
     try:
         meta = next(reader)
     finally:
@@ -279,8 +281,8 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     # to the longer's end (a frozen actor), and -shortest alone only trims the sound. The
     # actor is brought to the face's frame rate: hstack emits a frame whenever either
     # input has one, so 25 fps beside 30 would make a variable rate of about 52.
-    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", "-i", str(video),
-           "-i", str(path), "-filter_complex",
+    cmd = [ffmpeg_exe(), "-nostdin", "-y", "-loglevel", "error", *input_args(video),
+           *input_args(path), "-filter_complex",
            f"[0:v]scale=-2:{height},setsar=1,fps={float(meta['fps']):.6g}[a];"
            "[1:v]setsar=1[b];[a][b]hstack=inputs=2:shortest=1[v]",
            "-map", "[v]", "-map", sound, "-shortest", "-c:v", "libx264", "-preset",

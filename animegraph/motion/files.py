@@ -178,7 +178,7 @@ def read_phone_track(*, labels: str | os.PathLike | None = None,
                      "emotion": r.get("emotion")} for r in rows]
         except OSError as exc:
             raise DataError(f"cannot read {path}: {exc.strerror or exc}") from None
-        except (ValueError, KeyError, TypeError) as exc:
+        except (ValueError, KeyError, TypeError, RecursionError) as exc:  # nested deeply
             raise DataError(f"{path} is not an explanation written by 'animegraph synth "
                             f"--explain-json' ({exc})") from None
     if labels is not None:

@@ -49,8 +49,14 @@ def load_emodb(root) -> tuple[list[tuple[np.ndarray, int]], np.ndarray, np.ndarr
         English emotion names.
     speakers : np.ndarray of str, shape (n_files,)
         Two-digit speaker codes.
+
+    Raises
+    ------
+    DataError
+        No files, a file name that is not EmoDB's, or a file
+        :func:`ingest.formats.wav.read_wav` refuses (its one line).
     """
-    import soundfile as sf
+    from ingest.formats.wav import read_wav  # the bounds and checks of any speech read
 
     root = Path(root)
     wav = root / "wav" if (root / "wav").is_dir() else root
@@ -62,8 +68,7 @@ def load_emodb(root) -> tuple[list[tuple[np.ndarray, int]], np.ndarray, np.ndarr
         m = _EMODB_NAME.match(f.stem)
         if m is None:
             raise DataError(f"not an EmoDB file name: {f.name}")
-        audio, sr = sf.read(f, dtype="float32", always_2d=True)
-        utterances.append((audio.mean(axis=1), int(sr)))
+        utterances.append(read_wav(f))
         labels.append(EMODB_EMOTIONS[m.group(3)])
         speakers.append(m.group(1))
     return utterances, np.array(labels), np.array(speakers)

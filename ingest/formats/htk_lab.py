@@ -22,6 +22,7 @@ from db.atomic import atomic_write
 from db.errors import DataError
 from ingest.formats.labels import as_segments, decode_text, to_arpabet
 from ingest.formats.phones_csv import Segment
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
 
@@ -53,9 +54,8 @@ def read_htk_lab(path: str | os.PathLike[str]) -> list[Segment]:
         or is out of order or overlaps the line before.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"HTK label file not found: {path}")
-    text = decode_text(path.read_bytes(), path, "HTK label file")
+    text = decode_text(read_bytes(path, "HTK label file", MAX_SIDE_FILE_BYTES), path,
+                       "HTK label file")
     rows: list[tuple[int, str, str, str]] = []
     for number, raw in enumerate(text.splitlines(), 1):
         line = raw.strip()

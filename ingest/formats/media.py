@@ -22,7 +22,7 @@ import numpy as np
 import soundfile
 
 from db.errors import DataError
-from ingest.formats.wav import read_wav, speech_samples
+from ingest.formats.wav import MAX_SPEECH_SAMPLES, check_speech_size, read_wav, speech_samples
 
 logger = logging.getLogger(__name__)
 
@@ -31,6 +31,16 @@ logger = logging.getLogger(__name__)
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mpg", ".mpeg", ".mkv", ".webm")
 #: Everything read through ffmpeg: videos and audio-only MPEG-4 (``.m4a``).
 MEDIA_SUFFIXES = VIDEO_SUFFIXES + (".m4a",)
+#: The demuxers ffmpeg may use for a file of :data:`MEDIA_SUFFIXES` (``-format_whitelist``):
+#: the containers those suffixes name (QuickTime/MP4, Matroska/WebM, AVI, MPEG program and
+#: transport streams, raw MPEG video). Left to itself ffmpeg picks the demuxer by the
+#: file's content, and some demuxers open other files: a DASH manifest (XML) named
+#: ``speech.mp4`` makes ffmpeg read any local file its ``BaseURL`` names.
+MEDIA_DEMUXERS = ("mov", "matroska", "avi", "mpeg", "mpegts", "mpegvideo")
+#: The demuxers for any other sound file (a WAV, or another format libsndfile reads, as
+#: :func:`ingest.formats.wav.read_wav` does), when ffmpeg reads it (``render`` muxing the
+#: speech in).
+SOUND_DEMUXERS = ("wav", "w64", "aiff", "au", "caf", "flac", "ogg", "mp3")
 #: A line ffmpeg logs at level error or fatal (``-loglevel level+...`` tags each line).
 _ERROR_LEVEL = re.compile(r"\[(error|fatal|panic)\] ")
 #: The container's declared duration, as ffmpeg describes the input.
@@ -70,7 +80,8 @@ def read_audio(path: str | os.PathLike[str],
     ------
     DataError
         One line naming the file if it is missing, has no sound track, ffmpeg cannot
-        read it, or it is truncated (:func:`_check_complete`).
+        read it, it is truncated (:func:`_check_complete`), or it holds more than
+        :data:`ingest.formats.wav.MAX_SPEECH_SAMPLES`.
     """
     path = Path(path)
     if path.suffix.lower() not in MEDIA_SUFFIXES:
@@ -82,11 +93,13 @@ def read_audio(path: str | os.PathLike[str],
     # A WAV on the pipe rather than raw samples: its header gives the rate and the channel
     # count, so the channels are mixed here, by the WAV's rule, not by ffmpeg's downmix
     # (which sums stereo at -3 dB each and cancels opposite phases). The log, each line
-    # tagged with its level, gives the declared duration and any decoding error.
+    # tagged with its level, gives the declared duration and any decoding error. -fs stops
+    # the WAV just past MAX_SPEECH_SAMPLES (a header's length is not to be trusted): a few
+    # kilobytes of compressed silence would otherwise decode to gigabytes in memory.
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-nostats",
-           "-loglevel", "level+info", "-i", str(path), "-vn", "-map", "0:a:0",
+           "-loglevel", "level+info", *input_args(path), "-vn", "-map", "0:a:0",
            *(("-ar", str(int(sample_rate))) if sample_rate else ()),
-           "-f", "wav", "-acodec", "pcm_f32le", "-"]
+           "-f", "wav", "-acodec", "pcm_f32le", "-fs", str(4 * MAX_SPEECH_SAMPLES + 4096), "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     log = proc.stderr.decode(errors="replace").splitlines()
     errors = [_message(ln) for ln in log if _ERROR_LEVEL.search(ln)]
@@ -96,12 +109,45 @@ def read_audio(path: str | os.PathLike[str],
         audio, rate = soundfile.read(io.BytesIO(proc.stdout), dtype="float32", always_2d=True)
     except (soundfile.SoundFileError, RuntimeError, ValueError) as exc:
         raise DataError(f"cannot read the audio track of {path}: {exc}") from exc
+    check_speech_size(*audio.shape, rate, path)
     if len(audio):  # no samples at all is speech_samples' error
         _check_complete(path, len(audio) / rate, log, errors)
     # Lossy codecs overshoot full scale near loud peaks (GRID's AAC by up to 40 %): not a
     # fault of the file to warn about; clipped quietly (synth warns of flat tops).
     np.clip(audio, -1.0, 1.0, out=audio)
     return speech_samples(audio, int(rate), path)
+
+
+def input_args(path: str | os.PathLike[str]) -> list[str]:
+    """ffmpeg's arguments to read ``path``, a file from others, and nothing else.
+
+    Only the ``file`` protocol, and only the demuxers of what the file's suffix claims
+    (:data:`MEDIA_DEMUXERS`, else :data:`SOUND_DEMUXERS`): a playlist or manifest
+    disguised as a video (HLS, DASH, concat) cannot make ffmpeg open other files or URLs.
+    The path is made absolute, so a name like ``concat:a|b`` is a file's, not a protocol's.
+
+    Parameters
+    ----------
+    path : path
+
+    Returns
+    -------
+    list of str
+        Input options, then ``-i`` and the path (the last two items).
+    """
+    demuxers = (MEDIA_DEMUXERS if Path(path).suffix.lower() in MEDIA_SUFFIXES
+                else SOUND_DEMUXERS)
+    return ["-protocol_whitelist", "file", "-format_whitelist", ",".join(demuxers),
+            "-i", os.path.abspath(path)]
+
+
+def read_frames(path: str | os.PathLike[str], **kwargs):
+    """``imageio_ffmpeg.read_frames`` of a file from others, restricted as
+    :func:`input_args` (its generator: the metadata, then the frames' bytes)."""
+    import imageio_ffmpeg
+
+    *options, _, absolute = input_args(path)
+    return imageio_ffmpeg.read_frames(absolute, input_params=options, **kwargs)
 
 
 def _message(line: str) -> str:
@@ -139,7 +185,7 @@ def video_length(path: str | os.PathLike[str]) -> float:
     # -progress writes key=value lines (the last frame= and out_time_us= are the totals);
     # ffmpeg's human-readable statistics line is not meant to be parsed.
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-loglevel", "error", "-nostats",
-           "-i", str(path), "-map", "0:v:0", "-f", "null", "-progress", "pipe:1", "-"]
+           *input_args(path), "-map", "0:v:0", "-f", "null", "-progress", "pipe:1", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     totals = dict(line.partition("=")[::2]
                   for line in proc.stdout.decode(errors="replace").splitlines())

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.speech.phones import PHONE_SET
 
 logger = logging.getLogger(__name__)
@@ -177,7 +177,7 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
         ``start >= end``, or is out of order or overlaps the line before.
     """
     path = Path(path)
-    text = read_utf8(path, "phones file")
+    text = read_utf8(path, "phones file", limit=MAX_SIDE_FILE_BYTES)
     lines = csv.reader(io.StringIO(text))
     try:
         header = next(lines, None)

@@ -24,6 +24,7 @@ from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.labels import as_segments, decode_text, format_seconds, to_arpabet
 from ingest.formats.phones_csv import Segment
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
 
@@ -136,9 +137,7 @@ def read_tiers(path: str | os.PathLike[str]) -> list[Tier]:
         message names the line).
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"TextGrid file not found: {path}")
-    data = path.read_bytes()
+    data = read_bytes(path, "TextGrid file", MAX_SIDE_FILE_BYTES)
     if not data.strip():
         raise DataError(f"TextGrid file is empty: {path}")
     if data.startswith(b"ooBinaryFile"):

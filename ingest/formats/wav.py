@@ -32,6 +32,11 @@ _SIZE_PLACEHOLDERS = (0, 0xFFFFFFFF, 0x7FFFFFFF)
 #: spectrum ends far below 24 kHz), so faster recordings are resampled down to 48 kHz;
 #: below 8 kHz even the telephone band (to 3.4 kHz) is cut, so slower ones are refused.
 SPEECH_RATE_RANGE: tuple[int, int] = (8000, 48000)
+#: Most samples (all channels together) a speech file may hold: an hour at 48 kHz, mono
+#: (660 MiB as float32). Compressed sound (FLAC, AAC, Opus) of silence takes a few bytes a
+#: second, so a small file may decode to any size: the bound is checked before decoding
+#: (:func:`check_speech_size`).
+MAX_SPEECH_SAMPLES = 3600 * 48000
 #: Share of the channels' mean energy below which their average has cancelled them:
 #: channels carrying the same speech keep all of it, unrelated ones 1 / n_channels
 #: (half for stereo), an opposite-phase pair (right = -left) almost none.
@@ -59,7 +64,8 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
     ------
     DataError
         If the file is missing, empty (no samples), truncated, corrupt, holds
-        non-finite samples, or is sampled below 8 kHz.
+        non-finite samples, is sampled below 8 kHz, or declares more than
+        :data:`MAX_SPEECH_SAMPLES`.
     """
     path = Path(path)
     if not path.is_file():
@@ -68,6 +74,8 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
         raise DataError(f"empty audio file {path} (0 bytes)")
     try:
         info = soundfile.info(str(path))
+        # the length the header declares, which is what soundfile allocates for
+        check_speech_size(info.frames, info.channels, info.samplerate, path)
         audio, sample_rate = soundfile.read(str(path), dtype="float32", always_2d=True)
     except (soundfile.SoundFileError, RuntimeError, ValueError, TypeError) as exc:
         raise DataError(f"corrupt or unreadable audio file {path}: {exc}") from exc
@@ -83,6 +91,22 @@ def read_wav(path: str | os.PathLike[str], *, mono: bool = True) -> tuple[np.nda
     audio, sample_rate = speech_samples(audio, int(sample_rate), path, mono=mono)
     logger.debug("read %s: %s at %d Hz (%s)", path, audio.shape, sample_rate, info.subtype)
     return audio, sample_rate
+
+
+def check_speech_size(n_frames: int, n_channels: int, sample_rate: float,
+                      where: str | os.PathLike[str]) -> None:
+    """Refuse sound of more than :data:`MAX_SPEECH_SAMPLES` (frames x channels).
+
+    Raises
+    ------
+    DataError
+        One line naming ``where``, its length and the bound.
+    """
+    if n_frames * n_channels > MAX_SPEECH_SAMPLES:
+        minutes = n_frames / max(sample_rate, 1) / 60
+        raise DataError(f"{where}: at least {minutes:.0f} min of sound in {n_channels} "
+                        f"channel(s) at {sample_rate:g} Hz; speech is read up to "
+                        f"{MAX_SPEECH_SAMPLES:,} samples (an hour at 48 kHz, mono)")
 
 
 def speech_samples(audio: np.ndarray, sample_rate: int, where: str | os.PathLike[str], *,

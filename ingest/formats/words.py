@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 from db.errors import DataError
 from ingest.formats.labels import SILENCE_LABELS, decode_text
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 from ingest.formats.textgrid import read_tiers
 
 #: Seconds per time unit of a GRID ``.align`` file.
@@ -81,9 +82,8 @@ def read_grid_align(path: str | os.PathLike[str]) -> list[WordSegment]:
         overlaps the line before.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"word alignment not found: {path}")
-    text = decode_text(path.read_bytes(), path, "word alignment")
+    text = decode_text(read_bytes(path, "word alignment", MAX_SIDE_FILE_BYTES), path,
+                       "word alignment")
     segments: list[WordSegment] = []
     lines: list[int] = []
     for number, raw in enumerate(text.splitlines(), 1):

@@ -29,7 +29,7 @@ from db.errors import DataError
 from db.npyfile import REAL_KINDS, check_npy, holds
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.formats.textgrid import PHONE_TIER_NAMES, read_textgrid, read_tiers
 from ingest.formats.words import WORD_TIER_NAMES, read_grid_align, read_textgrid_words
 
@@ -248,7 +248,7 @@ def read_fps(meta: dict, path: Path) -> float | None:
 
 def read_transcript(path: Path) -> str:
     """Read a transcript file (UTF-8); DataError if it is empty or not text."""
-    text = read_utf8(path, "transcript")
+    text = read_utf8(path, "transcript", limit=MAX_SIDE_FILE_BYTES)
     text = " ".join(text.split())
     if not text:
         raise DataError(f"empty transcript file: {path}")

@@ -1,7 +1,9 @@
 """Video clips: the face tracked on every frame, the speech from the video's audio track.
 
-A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmpeg of
-``imageio-ffmpeg`` decodes) is read as a landmark clip (:mod:`ingest.readers.landmarks`):
+A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; any codec the ffmpeg of
+``imageio-ffmpeg`` decodes, in the containers of
+:data:`ingest.formats.media.MEDIA_DEMUXERS`) is read as a landmark clip
+(:mod:`ingest.readers.landmarks`):
 
 - **tracking**: mediapipe's face mesh (``refine_landmarks=True``: 478 landmarks, the
   canonical mesh's 468 and 10 iris points, the layout the landmark reader reads), in
@@ -17,9 +19,11 @@ A ``<clip>.mp4`` (``.mov``, ``.avi``, ``.mpg``, ``.mkv``, ...; anything the ffmp
   (``<sha256>-audio16000-d2.npy``), so re-ingest neither tracks nor decodes again.
 - **speech**: ``<clip>.wav`` beside the video if there is one, else the video's audio
   track, decoded to 16 kHz mono.
-- **checks** (each a one-line rejection): a file ffmpeg cannot decode; no audio track; a
-  frame count that disagrees with the container's duration at its frame rate by more
-  than :data:`FRAME_COUNT_TOLERANCE` (a variable frame rate, or a damaged file); a face
+- **checks** (each a one-line rejection): a file ffmpeg cannot decode; no audio track;
+  frames of more than :data:`MAX_FRAME_PIXELS` or more than :data:`MAX_VIDEO_FRAMES` of
+  them (declared, or decoded: tracking stops there); a frame count that disagrees with
+  the container's duration at its frame rate by more than :data:`FRAME_COUNT_TOLERANCE`
+  (a variable frame rate, or a damaged file: tracking stops once it is exceeded); a face
   in fewer than :data:`MIN_TRACKED_FRACTION` of the frames; a second face in more than
   :data:`MAX_TWO_FACE_FRACTION` of them. Frames without a face are gaps (NaN), filled at
   ingest like marker dropouts.
@@ -48,7 +52,7 @@ from db.atomic import atomic_write
 from db.errors import DataError
 from ingest.cache import cache_dir
 from ingest.clip import RawClip, checksum_files
-from ingest.formats.media import DECODING_VERSION, read_audio
+from ingest.formats.media import DECODING_VERSION, read_audio, read_frames
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     ClipSource,
@@ -73,6 +77,14 @@ MIN_TRACKED_FRACTION = 0.8
 MAX_TWO_FACE_FRACTION = 0.1
 #: Decoded frames may differ from duration x fps by max(2 frames, this share).
 FRAME_COUNT_TOLERANCE = 0.02
+#: Most frames a video clip may have: an hour at 30 fps. Each costs ~3 ms of tracking and
+#: ~17 KB while tracked, and a static picture takes ~20 bytes a frame in H.264: without a
+#: bound, 20 MB of video (or a container that declares no duration) would track for an
+#: hour into 15 GB. Checked on the declared length before tracking, and on the frames as
+#: they come.
+MAX_VIDEO_FRAMES = 108_000
+#: Most pixels a frame may have: 8K UHD (7680 x 4320; 100 MB as RGB).
+MAX_FRAME_PIXELS = 7680 * 4320
 #: mediapipe's detection and tracking confidences (its defaults).
 MIN_DETECTION_CONFIDENCE = 0.5
 MIN_TRACKING_CONFIDENCE = 0.5
@@ -127,9 +139,7 @@ def tracker_available() -> bool:
 
 def _frames(path: Path):
     """(meta, frame iterator) of a video, RGB uint8 frames (height, width, 3)."""
-    import imageio_ffmpeg
-
-    reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
+    reader = read_frames(path, pix_fmt="rgb24")
     try:
         meta = next(reader)
     except (RuntimeError, OSError, StopIteration) as exc:
@@ -238,6 +248,13 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
     width, height = (int(v) for v in meta["size"])
     if not fps > 0:
         raise DataError(f"{path}: the video has no frame rate")
+    if width * height > MAX_FRAME_PIXELS:
+        raise DataError(f"{path}: frames of {width} x {height} pixels; a video clip's may "
+                        f"have at most {MAX_FRAME_PIXELS:,} (8K UHD)")
+    # a count check_tracking would refuse ends the tracking as soon as it is passed
+    most = min(MAX_VIDEO_FRAMES, _frames_allowed(duration * fps) or MAX_VIDEO_FRAMES)
+    if duration * fps > MAX_VIDEO_FRAMES:
+        raise _too_many(path, duration * fps)
     landmarks, counts = [], []
     previous = None
     started, cpu = time.perf_counter(), _cpu_seconds()
@@ -253,6 +270,10 @@ def track_video(path: str | os.PathLike[str], *, progress: bool = True) -> Track
             min_detection_confidence=MIN_DETECTION_CONFIDENCE,
             min_tracking_confidence=MIN_TRACKING_CONFIDENCE))
         for frame in bar:
+            if len(landmarks) >= most:
+                frames.close()
+                raise (_too_many(path, len(landmarks) + 1) if most == MAX_VIDEO_FRAMES
+                       else _count_error(path, len(landmarks) + 1, duration, fps))
             result = mesh.process(frame)
             quiet.close()  # after the first frame: fd 2 as it was
             faces = result.multi_face_landmarks or []
@@ -344,15 +365,28 @@ def video_audio(path: Path, sample_rate: int = AUDIO_RATE, checksum: str | None 
     return audio
 
 
+def _frames_allowed(expected: float) -> float:
+    """Most frames that fit a declared ``expected`` count (0 when none is declared)."""
+    return expected + max(2.0, FRAME_COUNT_TOLERANCE * expected) if expected > 0 else 0.0
+
+
+def _count_error(where: Path, n: int, duration: float, fps: float) -> DataError:
+    return DataError(f"{where}: {n} frames decoded but {duration:.2f} s at {fps:g} fps make "
+                     f"{duration * fps:.0f} (a variable frame rate, or the file is cut short)")
+
+
+def _too_many(where: Path, n: float) -> DataError:
+    return DataError(f"{where}: {n:.0f} frames or more; a video clip may have at most "
+                     f"{MAX_VIDEO_FRAMES:,} (an hour at 30 fps)")
+
+
 def check_tracking(tracking: Tracking, where: Path) -> None:
     """Reject a video whose face was seldom found, or that shows two faces, or whose frame
     count does not fit its duration (a variable frame rate, or a file cut short)."""
     n = len(tracking.landmarks)
     expected = tracking.duration * tracking.fps
-    if expected > 0 and abs(n - expected) > max(2.0, FRAME_COUNT_TOLERANCE * expected):
-        raise DataError(f"{where}: {n} frames decoded but {tracking.duration:.2f} s at "
-                        f"{tracking.fps:g} fps make {expected:.0f} (a variable frame rate, or "
-                        f"the file is cut short)")
+    if expected > 0 and abs(n - expected) > _frames_allowed(expected) - expected:
+        raise _count_error(where, n, tracking.duration, tracking.fps)
     found = int((tracking.n_faces > 0).sum())
     if found < MIN_TRACKED_FRACTION * n:
         raise DataError(f"{where}: a face in only {found} of {n} frames "

@@ -31,6 +31,14 @@ def cmd_render(args: argparse.Namespace) -> int:
         if given is not None and args.output.suffix.lower() != ".mp4":
             raise UsageError(f"animegraph render: {option} needs an .mp4 output (a GIF, PNG, "
                              "glTF or OBJ frames carry neither sound nor a second picture)")
+    # the render replaces -o: an input there (the actor's video, the speech) would be lost
+    for option, given in (("the motion", args.motion), ("--mesh", args.mesh),
+                          ("--marker-map", args.marker_map), ("--audio", args.audio),
+                          ("--beside", args.beside)):
+        if given is not None and args.output.exists() and Path(given).exists() \
+                and args.output.samefile(given):
+            raise UsageError(f"animegraph render: -o {args.output} is also {option}: the "
+                             "render would replace it")
     phones = _phone_track(args)
     t0 = time.perf_counter()
     motion = read_motion(args.motion)
