@@ -210,7 +210,9 @@ def _add_sql(sub) -> None:
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
     _db_option(sql)
-    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
+    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default=None,
+                     help="default: as -o's name says (.csv, .json, .jsonl, .parquet), "
+                     "else table")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,

@@ -33,11 +33,14 @@ EXPLAIN_COLUMNS = ["explain_key", "explain_value"]
 
 
 def cmd_sql(args: argparse.Namespace) -> int:
-    from animegraph.apps.tabular import format_table
+    from animegraph.apps.tabular import format_for, format_table
     from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
-    if args.format == "parquet" and args.output is None:
+    # -o hits.csv writes CSV: an aligned text table under that name (cut at --max-rows)
+    # would be no CSV at all.
+    fmt = format_for(args.format, args.output)
+    if fmt == "parquet" and args.output is None:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
     if args.limit is not None and args.limit < 1:
         raise UsageError(f"animegraph sql: --limit must be at least 1, got {args.limit}")
@@ -49,13 +52,13 @@ def cmd_sql(args: argparse.Namespace) -> int:
     if args.output is not None and len(results) > 1:
         raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
     for i, result in enumerate(results):
-        if i and args.format == "table":
+        if i and fmt == "table":
             sys.stdout.write("\n")
-        if args.format == "table" and result.table.column_names == EXPLAIN_COLUMNS:
+        if fmt == "table" and result.table.column_names == EXPLAIN_COLUMNS:
             # A plan is a drawing over many lines: a table cell would show its first.
             text = "".join(f"{value}\n" for value in result.table.column(1).to_pylist())
         else:
-            text = format_table(result.table, args.format, max_rows=args.max_rows,
+            text = format_table(result.table, fmt, max_rows=args.max_rows,
                                 output=args.output)
         if text is not None:
             sys.stdout.write(text)
