@@ -389,7 +389,8 @@ def _add_query(sub) -> None:
     qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
     qry.add_argument("--text", default=None, metavar="WORDS",
                      help="the utterance's transcript contains every one of these words")
-    qry.add_argument("--speaker", default=None, help="speaker id")
+    qry.add_argument("--speaker", default=None,
+                     help="speaker, as in the clips table (any case) or a part of it")
     qry.add_argument("--min-dur", type=_number, default=None, metavar="SEC",
                      help="at least this long (the anime, or the clip with --clips)")
     qry.add_argument("--order-by", default=None, metavar="FIELD",

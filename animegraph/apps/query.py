@@ -18,6 +18,7 @@ import io
 import re
 import secrets
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -128,14 +129,45 @@ def run_query(db: Database, spec: QuerySpec) -> pa.Table:
     Raises
     ------
     ParameterError
-        Also for an emotion the database does not have (naming the ones it has).
+        Also for an emotion or a speaker the database does not have (naming the ones it
+        has).
     """
     if spec.emotion is not None:  # in the database's spelling, whatever its case
         if spec.emotion.lower() == AUTO:
             raise ParameterError("query: --emotion takes an emotion's name, not auto")
         known = db.table("clips", columns=["emotion"]).column("emotion").to_pylist()
         spec = replace(spec, emotion=check_names(spec.emotion, None, known))
+    if spec.speaker is not None:
+        known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
+        spec = replace(spec, speaker=find_speaker(spec.speaker, known))
     return run_sql(db, build_sql(spec))
+
+
+def find_speaker(name: str, known: Sequence[str | None]) -> str:
+    """``name`` as the database spells its speaker: the same whatever its case, else the
+    one speaker whose name holds it (``obama`` for ``Barack Obama (as named in file)``:
+    a speaker's label may carry a note).
+
+    Raises
+    ------
+    ParameterError
+        No speaker, or more than one, answers to ``name`` (naming them): a filter that
+        matches nothing would list nothing without saying why.
+    """
+    speakers = sorted({k for k in known if k is not None})
+    for match in (lambda k: k == name, lambda k: k.casefold() == name.casefold(),
+                  lambda k: name.casefold() in k.casefold()):
+        found = [k for k in speakers if match(k)]
+        if len(found) == 1:
+            return found[0]
+        if found:
+            raise ParameterError(f"--speaker {name!r} names {len(found)} speakers: "
+                                 f"{'; '.join(found)}")
+    if not speakers:
+        raise ParameterError(f"--speaker {name!r}: the database's clips name no speaker")
+    shown = "; ".join(speakers[:10]) + (f"; ... ({len(speakers)} in all)"
+                                        if len(speakers) > 10 else "")
+    raise ParameterError(f"unknown speaker {name!r}: the database has {shown}")
 
 
 @dataclass(frozen=True)
