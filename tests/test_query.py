@@ -51,6 +51,17 @@ def test_query_is_the_same_as_its_sql(db, tiny_db, capsys):
     assert capsys.readouterr().out.strip() == sql
 
 
+def test_shown_sql_finds_what_the_query_finds(db, tiny_db, capsys):
+    # --show-sql printed the emotion and speaker as typed ('ANGRY', 'SYNTH'), which the
+    # query matches in the database's spelling and the SQL did not match at all.
+    argv = ["query", "--db", str(tiny_db[0]), "--emotion", "ANGRY", "--speaker", "SYNTH",
+            "--phoneme", "aa", "--limit", "3"]
+    assert main([*argv, "--show-sql"]) == 0
+    sql = capsys.readouterr().out
+    assert "emotion = 'angry'" in sql and "speaker = 'synth01'" in sql
+    assert run_sql(db, sql).num_rows == 3
+
+
 def test_every_filter(db):
     text_hits = run_query(db, QuerySpec(text="the young", limit=None)).to_pylist()
     assert text_hits and all("young" in r["text"].lower().split() for r in text_hits)

@@ -124,13 +124,19 @@ def build_sql(spec: QuerySpec) -> str:
 
 
 def run_query(db: Database, spec: QuerySpec) -> pa.Table:
-    """Run :func:`build_sql` on ``db``.
+    """Run :func:`build_sql` on ``db`` (the spec in the database's spelling,
+    :func:`in_database`)."""
+    return run_sql(db, build_sql(in_database(db, spec)))
+
+
+def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
+    """``spec`` with its emotion and speaker as ``db`` spells them, so that its SQL
+    (``--show-sql``) finds what the query finds.
 
     Raises
     ------
     ParameterError
-        Also for an emotion or a speaker the database does not have (naming the ones it
-        has).
+        For an emotion or a speaker the database does not have (naming the ones it has).
     """
     if spec.emotion is not None:  # in the database's spelling, whatever its case
         if spec.emotion.lower() == AUTO:
@@ -140,7 +146,7 @@ def run_query(db: Database, spec: QuerySpec) -> pa.Table:
     if spec.speaker is not None:
         known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
         spec = replace(spec, speaker=find_speaker(spec.speaker, known))
-    return run_sql(db, build_sql(spec))
+    return spec
 
 
 def find_speaker(name: str, known: Sequence[str | None]) -> str:

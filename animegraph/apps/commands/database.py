@@ -70,7 +70,7 @@ def cmd_sql(args: argparse.Namespace) -> int:
 
 
 def cmd_query(args: argparse.Namespace) -> int:
-    from animegraph.apps.query import QuerySpec, build_sql, export_hits, run_query
+    from animegraph.apps.query import QuerySpec, build_sql, export_hits, in_database, run_query
     from animegraph.apps.tabular import format_table
     from db.store import Database
 
@@ -78,7 +78,10 @@ def cmd_query(args: argparse.Namespace) -> int:
                      speaker=args.speaker, min_dur=args.min_dur, order_by=args.order_by,
                      descending=args.desc, limit=args.limit, clips=args.clips)
     if args.show_sql:
-        print(build_sql(spec))
+        # The database's spelling of the emotion and speaker: the SQL finds what the
+        # query finds.
+        needs_db = spec.emotion is not None or spec.speaker is not None
+        print(build_sql(in_database(Database.open(args.db), spec) if needs_db else spec))
         return 0
     if args.export is not None and args.export.exists() and not args.force:
         from db.errors import DataError
