@@ -231,6 +231,26 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
                     sample_rate=int(sound[0]["sample_rate"]), phones=phones)
 
 
+def check_export(out: Path, *, context: float, force: bool) -> None:
+    """Refuse an export that cannot be written, before the query runs and its table is
+    printed (a bad --context was said after the table, as if the query had failed).
+
+    Raises
+    ------
+    ParameterError
+        A negative ``context``.
+    DataError
+        ``out`` exists (without ``force``) or is a file, or its folder does not exist.
+    """
+    if not context >= 0:
+        raise ParameterError(f"--context must be >= 0 seconds, got {context}")
+    if out.exists() and (not force or not out.is_dir()):
+        raise DataError(f"export folder {out} exists (use --force to replace it)"
+                        if out.is_dir() else f"{out} exists and is not a folder")
+    if not out.parent.is_dir():
+        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+
+
 def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,
                 force: bool = False, progress=None) -> list[dict]:
     """Write every hit as motion + speech + preview, and ``index.csv``, into ``out``.
@@ -259,13 +279,7 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
     from db.atomic import replace_dir
 
     out = Path(out)
-    if not context >= 0:
-        raise ParameterError(f"--context must be >= 0 seconds, got {context}")
-    if out.exists() and (not force or not out.is_dir()):
-        raise DataError(f"export folder {out} exists (use --force to replace it)"
-                        if out.is_dir() else f"{out} exists and is not a folder")
-    if not out.parent.is_dir():
-        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+    check_export(out, context=context, force=force)
     if hits.num_rows == 0:
         raise DataError("nothing matched the query: no export written")
     staging = out.parent / f".{out.name}.partial-{secrets.token_hex(4)}"

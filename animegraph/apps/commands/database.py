@@ -70,7 +70,14 @@ def cmd_sql(args: argparse.Namespace) -> int:
 
 
 def cmd_query(args: argparse.Namespace) -> int:
-    from animegraph.apps.query import QuerySpec, build_sql, export_hits, in_database, run_query
+    from animegraph.apps.query import (
+        QuerySpec,
+        build_sql,
+        check_export,
+        export_hits,
+        in_database,
+        run_query,
+    )
     from animegraph.apps.tabular import format_table
     from db.store import Database
 
@@ -83,10 +90,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         needs_db = spec.emotion is not None or spec.speaker is not None
         print(build_sql(in_database(Database.open(args.db), spec) if needs_db else spec))
         return 0
-    if args.export is not None and args.export.exists() and not args.force:
-        from db.errors import DataError
-
-        raise DataError(f"export folder {args.export} exists (use --force to replace it)")
+    if args.export is not None:
+        check_export(args.export, context=args.context, force=args.force)
     db = Database.open(args.db)
     hits = run_query(db, spec)
     shown = hits.drop_columns([c for c in ("corpus",) if c in hits.column_names]) \
