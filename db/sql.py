@@ -24,6 +24,7 @@ raised. Several statements separated by ``;`` each run, in order.
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 import tempfile
@@ -45,6 +46,9 @@ TIMEOUT_S = 60.0
 BATCH_ROWS = 8192
 
 _ALLOWED = {duckdb.StatementType.SELECT}
+#: DuckDB's words for a table, and for a column, that a query names and no table has.
+_NO_TABLE = re.compile(r"Table with name (\S+) does not exist")
+_NO_COLUMN = re.compile(r'(?:Referenced column|does not have a column named|Column) "([^"]+)"')
 _EXPLAIN = re.compile(r"^\s*EXPLAIN\s+(?:ANALY[SZ]E\s+|\([^)]*\)\s*)?", re.IGNORECASE)
 
 
@@ -203,7 +207,7 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
                                  f"--timeout)") from None
         except duckdb.Error as exc:
-            raise ParameterError(f"query failed: {_first_line(exc)}") from None
+            raise ParameterError(f"query failed: {_failure(con, exc)}") from None
         except OSError as exc:
             raise DataError(f"database {db.root} could not be read: {exc}") from exc
         finally:
@@ -245,6 +249,49 @@ def query(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
         raise ParameterError(f"the query returns more than {row_limit} rows; narrow it or "
                              f"raise the limit")
     return last.table
+
+
+def _failure(con: duckdb.DuckDBPyConnection, exc: duckdb.Error) -> str:
+    """DuckDB's error on one line, saying what exists when a name is misspelt.
+
+    DuckDB's first line names the error; its own suggestion ("Did you mean "avg"?") is on
+    a later line, and for a column it offers only the tables in the query, not the one
+    that has it: a misspelt table gets the list of tables, a misspelt column the columns
+    of every table that are close to it.
+    """
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    if not lines:
+        return type(exc).__name__
+    # DuckDB calls an Arrow scan (each table here) a "values list".
+    first = lines[0].replace("Values list ", "Table ")
+    first += "" if first.endswith(("!", ".", "?")) else "."
+    if _NO_TABLE.search(first):
+        return f"{first} The tables: {', '.join(TABLES)}."
+    column = _NO_COLUMN.search(first)
+    if column is not None:
+        close = _close_columns(con, column.group(1))
+        where = f"Close to it: {'; '.join(close)}" if close else "No column is close to it"
+        return f"{first} {where} (DESCRIBE <table> lists a table's columns)."
+    hint = next((line for line in lines[1:] if line.startswith("Did you mean")), None)
+    return f"{first} {hint}" if hint else first
+
+
+def _close_columns(con: duckdb.DuckDBPyConnection, name: str, n: int = 5) -> list[str]:
+    """Up to ``n`` columns of the database's tables spelt like ``name`` (case is ignored,
+    as DuckDB does), closest first, each with the tables that have it:
+    ``emotion (clips, animes)``, ``"lid_low_r.y" (frames)``."""
+    tables: dict[str, list[str]] = {}
+    for table in TABLES:
+        for column in con.sql(f"SELECT * FROM {table} LIMIT 0").columns:
+            tables.setdefault(column, []).append(table)
+    by_key = {column.lower(): column for column in tables}
+    close = difflib.get_close_matches(name.lower(), by_key, n=n, cutoff=0.7)
+    # Named as SQL takes them: a channel such as lid_low_r.y needs double quotes.
+    return [f"{_identifier(by_key[key])} ({', '.join(tables[by_key[key]])})" for key in close]
+
+
+def _identifier(name: str) -> str:
+    return name if name.isidentifier() else '"' + name.replace('"', '""') + '"'
 
 
 def _first_line(exc: Exception) -> str:

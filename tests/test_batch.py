@@ -356,8 +356,13 @@ def test_batch_on_a_two_worker_cluster(tiny_db, dialogue, tmp_path, capsys):
     assert (folder / DONE).stat().st_mtime_ns == before
 
     # --force redoes a finished line (here on a one-worker cluster).
-    again = run_batch(done_only, BatchOptions(db=db, out=out, workers=1, force=True))
+    said = []
+    again = run_batch(done_only, BatchOptions(db=db, out=out, workers=1, force=True),
+                      say=said.append)
     assert [r["status"] for r in again.rows] == ["done", "done"]
+    # The kernels compiled by the first run are only loaded now (it said "compiling").
+    assert "loading the search in this process before the workers start ..." in said
+    assert not any("compiling" in line for line in said), said
     assert again.n_workers == 1 and (folder / DONE).stat().st_mtime_ns > before
     assert [str(r["jumps"]) for r in again.rows] == [rows["hello"]["jumps"],
                                                 rows["recorded"]["jumps"]]

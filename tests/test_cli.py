@@ -54,6 +54,26 @@ def test_user_errors(capsys, tmp_path, monkeypatch, argv, code, needle):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize("argv, said", [
+    (["synth", "x.wav", "-o", "y.c3d", "--emotin", "happy"],
+     "synth: unrecognized arguments: --emotin happy; did you mean --emotion? "
+     "(see 'animegraph synth --help')"),
+    (["classify", "a.wav", "b.wav"],
+     "classify: unrecognized arguments: b.wav (see 'animegraph classify --help')"),
+    (["corpus", "synth", "--out", "x", "--sentense", "3"],
+     "corpus synth: unrecognized arguments: --sentense 3; did you mean --sentences? "
+     "(see 'animegraph corpus synth --help')"),
+    (["batch", "s.csv", "--out", "x", "--format", "csv"],  # nothing close: no guess
+     "batch: unrecognized arguments: --format csv (see 'animegraph batch --help')"),
+    (["--bogus", "info"], "unrecognized arguments: --bogus (see 'animegraph --help')"),
+])
+def test_an_unknown_option_names_its_command(capsys, tmp_path, monkeypatch, argv, said):
+    # The top parser said it, "(see 'animegraph --help')", whose page lists no option of
+    # the command.
+    monkeypatch.chdir(tmp_path)
+    assert _one_line_error(capsys, main(argv), 2) == f"animegraph: error: {said}"
+
+
 def test_unwritable_output_folder(capsys, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")

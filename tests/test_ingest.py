@@ -259,6 +259,24 @@ def test_cli_sql_info_and_formats(tiny_db, capsys, tmp_path):
     assert pq.read_table(out).num_rows == 3
 
 
+def test_cli_sql_writes_the_format_its_output_is_named(tiny_db, tmp_path):
+    # `-o phones.csv` wrote the aligned text table (cut at 50 rows) under a CSV's name.
+    path, _ = tiny_db
+    sql = "SELECT phoneme, count(*) AS n FROM animes GROUP BY 1 ORDER BY 1"
+    for name in ("phones.csv", "phones.parquet", "phones.jsonl", "phones.txt"):
+        assert main(["sql", "--db", str(path), sql, "--max-rows", "2",
+                     "-o", str(tmp_path / name)]) == 0
+    csv_lines = (tmp_path / "phones.csv").read_text().splitlines()
+    assert csv_lines[0] == '"phoneme","n"' and len(csv_lines) > 3
+    assert pq.read_table(tmp_path / "phones.parquet").num_rows == len(csv_lines) - 1
+    assert json.loads((tmp_path / "phones.jsonl").read_text().splitlines()[0])["n"] > 0
+    assert "more rows" in (tmp_path / "phones.txt").read_text()  # no format named: a table
+    # --format still wins over the name
+    assert main(["sql", "--db", str(path), sql, "--format", "json",
+                 "-o", str(tmp_path / "as.csv")]) == 0
+    assert (tmp_path / "as.csv").read_text().startswith("{")
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["sql", "--db", "{db}", "DELETE FROM animes"], "only SELECT"),
     (["sql", "--db", "{db}", "SELECT nope FROM animes"], "query failed"),

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from animegraph.apps.cli import main
-from animegraph.apps.query import ClipData, QuerySpec, _write_snippet, build_sql, run_query
+from animegraph.apps.query import (
+    ClipData,
+    QuerySpec,
+    _write_snippet,
+    build_sql,
+    find_speaker,
+    run_query,
+)
 from db.errors import ParameterError
 from db.sql import query as run_sql
 from db.store import Database
@@ -44,6 +51,17 @@ def test_query_is_the_same_as_its_sql(db, tiny_db, capsys):
     assert capsys.readouterr().out.strip() == sql
 
 
+def test_shown_sql_finds_what_the_query_finds(db, tiny_db, capsys):
+    # --show-sql printed the emotion and speaker as typed ('ANGRY', 'SYNTH'), which the
+    # query matches in the database's spelling and the SQL did not match at all.
+    argv = ["query", "--db", str(tiny_db[0]), "--emotion", "ANGRY", "--speaker", "SYNTH",
+            "--phoneme", "aa", "--limit", "3"]
+    assert main([*argv, "--show-sql"]) == 0
+    sql = capsys.readouterr().out
+    assert "emotion = 'angry'" in sql and "speaker = 'synth01'" in sql
+    assert run_sql(db, sql).num_rows == 3
+
+
 def test_every_filter(db):
     text_hits = run_query(db, QuerySpec(text="the young", limit=None)).to_pylist()
     assert text_hits and all("young" in r["text"].lower().split() for r in text_hits)
@@ -51,7 +69,9 @@ def test_every_filter(db):
     assert long and all(r["duration"] >= 0.15 - 1e-4 for r in long)
     speaker = run_query(db, QuerySpec(speaker="synth01", limit=3))
     assert speaker.num_rows == 3
-    assert run_query(db, QuerySpec(speaker="nobody")).num_rows == 0
+    # any case, or a part of the name: a label may carry a note ("Barack Obama (as named
+    # in file)" in talkingface)
+    assert run_query(db, QuerySpec(speaker="SYNTH", limit=3)).equals(speaker)
     clips = run_query(db, QuerySpec(clips=True, phoneme="ZH", min_dur=2.0, emotion="sad",
                                     order_by="duration", limit=None)).to_pylist()
     for row in clips:
@@ -69,6 +89,8 @@ def test_every_filter(db):
     (QuerySpec(text="drop; table"), "--text"),
     (QuerySpec(min_dur=-1), "--min-dur"),
     (QuerySpec(emotion="bored"), "not in the database"),
+    # an unknown speaker listed nothing, without a word
+    (QuerySpec(speaker="synth02"), "unknown speaker 'synth02': the database has synth01"),
 ])
 def test_bad_queries(db, spec, needle):
     with pytest.raises(ParameterError, match=needle):
@@ -76,7 +98,19 @@ def test_bad_queries(db, spec, needle):
 
 
 def test_quotes_cannot_escape_the_sql(db):
-    assert run_query(db, QuerySpec(speaker="x' OR '1'='1")).num_rows == 0
+    assert run_sql(db, build_sql(QuerySpec(speaker="x' OR '1'='1"))).num_rows == 0
+
+
+def test_a_speaker_is_found_by_a_part_of_its_name():
+    known = ["Barack Obama (as named in file)", "US senator (not named)",
+             "US congressman (not named)", None, "us"]
+    assert find_speaker("obama", known) == "Barack Obama (as named in file)"
+    assert find_speaker("US", known) == "us"  # its own name before a part of another's
+    with pytest.raises(ParameterError, match="'senat' names 2 speakers") as err:
+        find_speaker("senat", known[:3] + ["Senator Two"])
+    assert "Senator Two; US senator (not named)" in str(err.value)
+    with pytest.raises(ParameterError, match="clips name no speaker"):
+        find_speaker("x", [None])
 
 
 def test_export(db, tiny_db, tiny_corpus, tmp_path, capsys):
@@ -136,10 +170,26 @@ def test_export_of_clips_and_nothing_matched(tiny_db, tmp_path, capsys):
     index = list(csv.DictReader((out / "index.csv").open()))
     assert len(index) == 1 and index[0]["snippet_start"] == "0.0"
     assert f"exported 1 hit to {out} (index.csv)" in capsys.readouterr().err  # not "1 hits"
-    assert main(["query", "--db", str(tiny_db[0]), "--speaker", "nobody", "--export",
-                 str(tmp_path / "none")]) == 1
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "ZH", "--min-dur", "9",
+                 "--export", str(tmp_path / "none")]) == 1
     assert "nothing matched" in capsys.readouterr().err
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.parametrize("extra, said", [
+    (["--context", "-1"], "--context must be >= 0 seconds"),
+    (["--force"], "exists and is not a folder"),
+])
+def test_an_export_that_cannot_be_written_is_refused_before_the_query(tiny_db, tmp_path,
+                                                                     capsys, extra, said):
+    # The table was printed first, then the error: as if the query had run and failed.
+    (tmp_path / "afile").write_text("mine")
+    out = tmp_path / ("afile" if "--force" in extra else "hits")
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "1",
+                 "--export", str(out), *extra]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and said in captured.err
+    assert (tmp_path / "afile").read_text() == "mine" and not (tmp_path / "hits").exists()
 
 
 def test_curve_snippets_are_csv(tmp_path):

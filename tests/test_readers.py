@@ -117,6 +117,24 @@ def test_one_file_says_nothing_of_the_other_clips_around_it(corpus, tmp_path, ca
     assert f"{other.name}: using {other.name}.c3d, ignoring {other.name}.csv" in caplog.text
 
 
+def test_a_facegood_file_is_its_clip_without_a_word(tmp_path, caplog):
+    """A FACEGOOD speech file named alone was also read as a plain folder's (wav/):
+    "1114_2_01.wav: no motion beside it; not a clip", and then ingested."""
+    import logging
+
+    root = tmp_path / "fg"
+    (root / "bs_value").mkdir(parents=True)
+    (root / "wav").mkdir()
+    (root / "bsname.txt").write_text("2\njaw\nbrow_raise_c\n")
+    for clip in ("c1", "c2"):
+        write_wav(root / "wav" / f"{clip}.wav", np.zeros(3200, np.float32), 16000)
+        np.save(root / "bs_value" / f"bs_value_{clip}.npy", np.zeros((6, 2)))
+    with caplog.at_level(logging.WARNING, logger="ingest.readers.discovery"):
+        found = discover([root / "wav" / "c1.wav", root / "bs_value" / "bs_value_c2.npy"])
+    assert [(s.layout, s.clip_id) for s in found] == [("facegood", "c1"), ("facegood", "c2")]
+    assert caplog.text == ""
+
+
 def test_speech_without_its_motion_is_said(corpus, tmp_path, caplog):
     import logging
 

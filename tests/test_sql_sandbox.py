@@ -133,3 +133,23 @@ def test_a_result_repeating_a_column_name_prints(db, tmp_path):
     assert format_table(result.table, "csv").splitlines()[:2] == ["\"node_id\",\"node_id\"",
                                                                   "0,0"]
     assert "node_id  node_id" in format_table(result.table, "table")
+
+
+def test_a_misspelt_name_is_told_what_exists(db):
+    # DuckDB's suggestion sits on its error's second line, and for a column names only
+    # the query's own tables: a data person's typo got neither.
+    cases = {
+        "SELECT * FROM clip": "The tables: clips, animes, frames, audio, channels, "
+                              "model_arrays, components.",
+        "SELECT emotoin FROM clips": "Close to it: emotion (clips, animes, frames)",
+        # the column is in another table than the one queried
+        "SELECT node_idd FROM clips": "Close to it: node_id (animes)",
+        "SELECT c.jawz FROM clips c": 'Table "c" does not have a column named "jawz". '
+                                      "Close to it: jaw (frames)",
+        "SELECT xyzzy FROM clips": "No column is close to it",
+        "SELECT avgg(1)": 'Did you mean "avg"?',
+    }
+    for sql, said in cases.items():
+        with pytest.raises(ParameterError) as err:
+            run(db, sql)
+        assert said in str(err.value) and "\n" not in str(err.value), (sql, str(err.value))

@@ -259,7 +259,16 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
     try:
         if tasks:
             def prepare() -> None:
-                say("compiling the search kernels in this process before the workers start ...")
+                from animegraph.search.kernels import compile_notice
+
+                # Compiling is the one-off minute; once cached, the kernels only load (a
+                # batch said "compiling" every time).
+                methods = {t.line.method for t in tasks}
+                notice = next(filter(None, map(compile_notice, sorted(methods))), None)
+                say(f"{notice.removesuffix(' ...')}, in this process before the workers "
+                    "start ..."
+                    if notice else "loading the search in this process before the workers "
+                    "start ...")
                 try:
                     warm_up(db, {(t.line.method, t.line.window) for t in tasks},
                             align=any(t.line.audio is not None for t in tasks))

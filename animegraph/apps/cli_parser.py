@@ -6,6 +6,7 @@ left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`.""
 from __future__ import annotations
 
 import argparse
+import difflib
 from pathlib import Path
 
 from animegraph import __version__
@@ -45,6 +46,23 @@ class _Parser(argparse.ArgumentParser):
     # argparse prints the whole usage block and exits; one line says it better.
     def error(self, message: str) -> None:  # type: ignore[override]
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        # A command's parser hands what it does not know up to the top parser, which
+        # told it without the command's name and sent the user to the top-level help
+        # (which lists no command's options): the command's parser says it, with the
+        # option it may be a misspelling of.
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras and self._subparsers is None:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(extras)}")
+        return namespace, extras
+
+    def _did_you_mean(self, extras: list[str]) -> str:
+        known = [option for action in self._actions for option in action.option_strings]
+        close = [match for extra in extras if extra.startswith("--")
+                 for match in difflib.get_close_matches(extra.split("=")[0], known, n=1,
+                                                         cutoff=0.75)]
+        return f"; did you mean {' or '.join(dict.fromkeys(close))}?" if close else ""
 
 
 def _whole_number(text: str) -> int:
@@ -212,7 +230,9 @@ def _add_sql(sub) -> None:
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
     _db_option(sql)
-    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default="table")
+    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default=None,
+                     help="default: as -o's name says (.csv, .json, .jsonl, .parquet), "
+                     "else table")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
@@ -371,7 +391,8 @@ def _add_query(sub) -> None:
     qry.add_argument("--emotion", default=None, help="emotion label, e.g. angry")
     qry.add_argument("--text", default=None, metavar="WORDS",
                      help="the utterance's transcript contains every one of these words")
-    qry.add_argument("--speaker", default=None, help="speaker id")
+    qry.add_argument("--speaker", default=None,
+                     help="speaker, as in the clips table (any case) or a part of it")
     qry.add_argument("--min-dur", type=_number, default=None, metavar="SEC",
                      help="at least this long (the anime, or the clip with --clips)")
     qry.add_argument("--order-by", default=None, metavar="FIELD",

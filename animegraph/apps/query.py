@@ -18,6 +18,7 @@ import io
 import re
 import secrets
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -123,19 +124,56 @@ def build_sql(spec: QuerySpec) -> str:
 
 
 def run_query(db: Database, spec: QuerySpec) -> pa.Table:
-    """Run :func:`build_sql` on ``db``.
+    """Run :func:`build_sql` on ``db`` (the spec in the database's spelling,
+    :func:`in_database`)."""
+    return run_sql(db, build_sql(in_database(db, spec)))
+
+
+def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
+    """``spec`` with its emotion and speaker as ``db`` spells them, so that its SQL
+    (``--show-sql``) finds what the query finds.
 
     Raises
     ------
     ParameterError
-        Also for an emotion the database does not have (naming the ones it has).
+        For an emotion or a speaker the database does not have (naming the ones it has).
     """
     if spec.emotion is not None:  # in the database's spelling, whatever its case
         if spec.emotion.lower() == AUTO:
             raise ParameterError("query: --emotion takes an emotion's name, not auto")
         known = db.table("clips", columns=["emotion"]).column("emotion").to_pylist()
         spec = replace(spec, emotion=check_names(spec.emotion, None, known))
-    return run_sql(db, build_sql(spec))
+    if spec.speaker is not None:
+        known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
+        spec = replace(spec, speaker=find_speaker(spec.speaker, known))
+    return spec
+
+
+def find_speaker(name: str, known: Sequence[str | None]) -> str:
+    """``name`` as the database spells its speaker: the same whatever its case, else the
+    one speaker whose name holds it (``obama`` for ``Barack Obama (as named in file)``:
+    a speaker's label may carry a note).
+
+    Raises
+    ------
+    ParameterError
+        No speaker, or more than one, answers to ``name`` (naming them): a filter that
+        matches nothing would list nothing without saying why.
+    """
+    speakers = sorted({k for k in known if k is not None})
+    for match in (lambda k: k == name, lambda k: k.casefold() == name.casefold(),
+                  lambda k: name.casefold() in k.casefold()):
+        found = [k for k in speakers if match(k)]
+        if len(found) == 1:
+            return found[0]
+        if found:
+            raise ParameterError(f"--speaker {name!r} names {len(found)} speakers: "
+                                 f"{'; '.join(found)}")
+    if not speakers:
+        raise ParameterError(f"--speaker {name!r}: the database's clips name no speaker")
+    shown = "; ".join(speakers[:10]) + (f"; ... ({len(speakers)} in all)"
+                                        if len(speakers) > 10 else "")
+    raise ParameterError(f"unknown speaker {name!r}: the database has {shown}")
 
 
 @dataclass(frozen=True)
@@ -193,6 +231,26 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
                     sample_rate=int(sound[0]["sample_rate"]), phones=phones)
 
 
+def check_export(out: Path, *, context: float, force: bool) -> None:
+    """Refuse an export that cannot be written, before the query runs and its table is
+    printed (a bad --context was said after the table, as if the query had failed).
+
+    Raises
+    ------
+    ParameterError
+        A negative ``context``.
+    DataError
+        ``out`` exists (without ``force``) or is a file, or its folder does not exist.
+    """
+    if not context >= 0:
+        raise ParameterError(f"--context must be >= 0 seconds, got {context}")
+    if out.exists() and (not force or not out.is_dir()):
+        raise DataError(f"export folder {out} exists (use --force to replace it)"
+                        if out.is_dir() else f"{out} exists and is not a folder")
+    if not out.parent.is_dir():
+        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+
+
 def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,
                 force: bool = False, progress=None) -> list[dict]:
     """Write every hit as motion + speech + preview, and ``index.csv``, into ``out``.
@@ -221,13 +279,7 @@ def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.2
     from db.atomic import replace_dir
 
     out = Path(out)
-    if not context >= 0:
-        raise ParameterError(f"--context must be >= 0 seconds, got {context}")
-    if out.exists() and (not force or not out.is_dir()):
-        raise DataError(f"export folder {out} exists (use --force to replace it)"
-                        if out.is_dir() else f"{out} exists and is not a folder")
-    if not out.parent.is_dir():
-        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+    check_export(out, context=context, force=force)
     if hits.num_rows == 0:
         raise DataError("nothing matched the query: no export written")
     staging = out.parent / f".{out.name}.partial-{secrets.token_hex(4)}"

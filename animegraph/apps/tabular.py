@@ -23,6 +23,18 @@ def _shorten(value) -> str:
     return "NULL" if value is None else str(value)
 
 
+#: The format an output file's name asks for (``sql -o hits.csv``).
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "json", ".parquet": "parquet"}
+
+
+def format_for(fmt: str | None, output: Path | None) -> str:
+    """The format to write: ``fmt`` if given, else the one ``output``'s suffix names, else
+    the readable table."""
+    if fmt is not None:
+        return fmt
+    return FORMAT_BY_SUFFIX.get(output.suffix.lower(), "table") if output else "table"
+
+
 def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
                  output: Path | None = None) -> str | None:
     """Render ``table`` as ``fmt`` (table, csv, json, parquet).

@@ -272,13 +272,16 @@ def discover(paths: Sequence[str | os.PathLike[str]]) -> list[ClipSource]:
         if path.is_dir():
             candidates = list(_scan(path))
         else:
-            # The clip may be described by the file's folder or, for FACEGOOD's wav/ and
-            # bs_value/, by the folder above; of the clips named by their files' stem,
-            # only this file's stem is read (nothing is said of the others).
+            # The clip is described by the file's folder or, for FACEGOOD's wav/ and
+            # bs_value/, by the folder above alone (read as a plain folder, wav/ said
+            # of each FACEGOOD speech file it then ingested that it had no motion); of
+            # the clips named by their files' stem, only this file's stem is read
+            # (nothing is said of the others).
             wanted = path.resolve()
             stems = {split_name(path.name)[0]}
             above = path.parent.parent
-            folders = [path.parent] + ([above] if _is_facegood(above) else [])
+            in_facegood = path.parent.name in ("wav", "bs_value") and _is_facegood(above)
+            folders = [above] if in_facegood else [path.parent]
             nearby = [c for f in folders for c in _scan(f, False, stems)]
             candidates = [s for s in nearby if wanted in {p.resolve() for p in s.paths}]
             if not candidates:

@@ -33,11 +33,14 @@ EXPLAIN_COLUMNS = ["explain_key", "explain_value"]
 
 
 def cmd_sql(args: argparse.Namespace) -> int:
-    from animegraph.apps.tabular import format_table
+    from animegraph.apps.tabular import format_for, format_table
     from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
-    if args.format == "parquet" and args.output is None:
+    # -o hits.csv writes CSV: an aligned text table under that name (cut at --max-rows)
+    # would be no CSV at all.
+    fmt = format_for(args.format, args.output)
+    if fmt == "parquet" and args.output is None:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
     if args.limit is not None and args.limit < 1:
         raise UsageError(f"animegraph sql: --limit must be at least 1, got {args.limit}")
@@ -49,13 +52,13 @@ def cmd_sql(args: argparse.Namespace) -> int:
     if args.output is not None and len(results) > 1:
         raise UsageError(f"animegraph sql: --output takes one statement, got {len(results)}")
     for i, result in enumerate(results):
-        if i and args.format == "table":
+        if i and fmt == "table":
             sys.stdout.write("\n")
-        if args.format == "table" and result.table.column_names == EXPLAIN_COLUMNS:
+        if fmt == "table" and result.table.column_names == EXPLAIN_COLUMNS:
             # A plan is a drawing over many lines: a table cell would show its first.
             text = "".join(f"{value}\n" for value in result.table.column(1).to_pylist())
         else:
-            text = format_table(result.table, args.format, max_rows=args.max_rows,
+            text = format_table(result.table, fmt, max_rows=args.max_rows,
                                 output=args.output)
         if text is not None:
             sys.stdout.write(text)
@@ -67,7 +70,14 @@ def cmd_sql(args: argparse.Namespace) -> int:
 
 
 def cmd_query(args: argparse.Namespace) -> int:
-    from animegraph.apps.query import QuerySpec, build_sql, export_hits, run_query
+    from animegraph.apps.query import (
+        QuerySpec,
+        build_sql,
+        check_export,
+        export_hits,
+        in_database,
+        run_query,
+    )
     from animegraph.apps.tabular import format_table
     from db.store import Database
 
@@ -75,12 +85,13 @@ def cmd_query(args: argparse.Namespace) -> int:
                      speaker=args.speaker, min_dur=args.min_dur, order_by=args.order_by,
                      descending=args.desc, limit=args.limit, clips=args.clips)
     if args.show_sql:
-        print(build_sql(spec))
+        # The database's spelling of the emotion and speaker: the SQL finds what the
+        # query finds.
+        needs_db = spec.emotion is not None or spec.speaker is not None
+        print(build_sql(in_database(Database.open(args.db), spec) if needs_db else spec))
         return 0
-    if args.export is not None and args.export.exists() and not args.force:
-        from db.errors import DataError
-
-        raise DataError(f"export folder {args.export} exists (use --force to replace it)")
+    if args.export is not None:
+        check_export(args.export, context=args.context, force=args.force)
     db = Database.open(args.db)
     hits = run_query(db, spec)
     shown = hits.drop_columns([c for c in ("corpus",) if c in hits.column_names]) \
