@@ -14,10 +14,10 @@ Prints each run's phase timings and real-time factor (synthesis time / audio dur
 the process's CPU time (less sensitive to the machine's load than the wall time). With
 ``--guide`` the database's stored guide (fitted and stored first if absent, reported
 apart) guides the animes' choice, as ``synth --guide``. Last, hama's model call alone on
-the same audio: the single-threaded floor under the ``segment`` phase when phones are
-recognised or a transcript is checked.
-``--audio`` times a recording instead (a WAV or a video's sound track; phones recognised):
-hama hears one longer than ``ingest.speech.ctc.CHUNK_SECONDS`` in pieces, on every core.
+the same audio: the floor under the ``segment`` phase when phones are recognised or a
+transcript is checked (hama hears a recording of ``ingest.speech.ctc.SPLIT_SECONDS`` or
+more in pieces, on every core).
+``--audio`` times a recording instead (a WAV or a video's sound track; phones recognised).
 DB defaults to the default database (built on first use, as by ``animegraph demo``).
 """
 
@@ -116,7 +116,7 @@ def main() -> int:
               f"{cpu:.2f} s ({cpu / seconds:.3f} x real time) "
               f"({phases}; {len(out.phones)} phones, {out.result.n_jumps} jumps)")
     if hasattr(ctc, "forget") and args.segmentation != "labels":
-        # The floor under "segment": hama's one call, single-threaded, on the same audio.
+        # The floor under "segment": hama's call (its pieces on every core), same audio.
         ctc.forget()
         t = time.perf_counter()
         ctc.posteriors(utt.audio, utt.sample_rate)

@@ -82,6 +82,8 @@ def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch, 
     with ctc.kept_on_disk():
         ctc.posteriors(u.audio, u.sample_rate)
     (kept,) = (tmp_path / "phones").iterdir()
+    # the piece layout is in the name: posteriors heard in other pieces are not read
+    assert kept.name.endswith(f"-pieces{ctc.PIECE_LAYOUT}.npy")
     ctc.forget()
 
     def no_model(samples):
@@ -137,13 +139,44 @@ def test_threads_each_take_a_session_and_get_what_one_thread_gets(spoken):
 
 
 
-def test_long_audio_is_heard_in_pieces_on_every_core_as_on_one(spoken, monkeypatch):
-    """Pieces of a long recording run on threads of their own, with the one-thread
-    result bit for bit (the same pieces, each on a session of its own)."""
-    u = spoken[1]
-    gap = np.zeros(u.sample_rate // 2, dtype=np.float32)
-    long = np.concatenate([np.concatenate([u.audio, gap])] * 14)  # about 60 s: 3 pieces
-    assert len(long) / u.sample_rate > 2 * ctc.CHUNK_SECONDS
+def test_audio_is_cut_at_its_quietest_near_even_places():
+    """The pieces (ctc._pieces): one below SPLIT_SECONDS, two from it, one per started
+    CHUNK_SECONDS beyond; each cut in the quietest 100 ms within CUT_WINDOW of its even
+    place (here a 0.2 s gap off the middle; a longer one further away is out of reach)."""
+    rng = np.random.default_rng(0)
+    rate, frame = ctc.SAMPLE_RATE, ctc.SAMPLE_RATE // ctc.FRAME_RATE
+
+    def noise(seconds, gaps=()):
+        audio = rng.normal(0, 0.1, int(seconds * rate)).astype(np.float32)
+        for start, length in gaps:
+            audio[int(start * rate): int((start + length) * rate)] = 0.0
+        return audio
+
+    short = ctc.SPLIT_SECONDS - 0.5
+    assert ctc._pieces(noise(short)).tolist() == [0, short * ctc.FRAME_RATE]
+    seconds = ctc.SPLIT_SECONDS + 2  # even cut at seconds / 2; the 0.2 s gap within reach
+    gap = seconds / 2 + 0.5
+    assert 0.5 + 0.2 < ctc.CUT_WINDOW
+    bounds = ctc._pieces(noise(seconds, [(1.0, 0.5), (gap, 0.2)]))
+    # the quietest 100 ms (5 frames) lie wholly in the gap: its frames 2-7 of 10; the
+    # first of those is the nearest to the even place
+    assert bounds.tolist() == [0, round(gap * ctc.FRAME_RATE) + 2, seconds * ctc.FRAME_RATE]
+    # beyond CHUNK_SECONDS: a piece per started CHUNK_SECONDS, cuts near even places
+    seconds = 2 * ctc.CHUNK_SECONDS + 5
+    bounds = ctc._pieces(noise(seconds))
+    assert len(bounds) == 4 and bounds[-1] == seconds * ctc.FRAME_RATE
+    even = np.arange(4) * seconds * ctc.FRAME_RATE / 3
+    assert np.abs(bounds - even).max() <= ctc.CUT_WINDOW * ctc.FRAME_RATE
+    assert np.diff(bounds).max() * frame <= (ctc.CHUNK_SECONDS + 2 * ctc.CUT_WINDOW) * rate
+
+
+def test_audio_is_heard_in_pieces_on_every_core_as_on_one(spoken, monkeypatch):
+    """A recording of SPLIT_SECONDS or more is heard in pieces, on threads of their own,
+    with the one-thread result bit for bit (the pieces depend on the audio alone)."""
+    gap = np.zeros(spoken[0].sample_rate // 4, dtype=np.float32)
+    audio = np.concatenate([spoken[1].audio, gap, spoken[0].audio, gap, spoken[1].audio])
+    rate = spoken[0].sample_rate
+    assert ctc.SPLIT_SECONDS <= len(audio) / rate < ctc.CHUNK_SECONDS
     results, threads = [], []
     real_pool = __import__("concurrent.futures").futures.ThreadPoolExecutor
 
@@ -155,10 +188,12 @@ def test_long_audio_is_heard_in_pieces_on_every_core_as_on_one(spoken, monkeypat
     for budget in (1, 2):
         monkeypatch.setattr(ctc, "thread_budget", lambda budget=budget: budget)
         ctc.forget()
-        results.append(ctc.posteriors(long, u.sample_rate))
+        results.append(ctc.posteriors(audio, rate))
     ctc.forget()
     np.testing.assert_array_equal(results[0], results[1])
+    assert len(results[0]) == ctc._pieces(ctc._resample(audio, rate))[-1]
     assert threads == ([2] if ctc._model().limit >= 2 else [])
+
 
 def test_recognize_is_roughly_right(spoken):
     for u in spoken:
