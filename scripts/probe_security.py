@@ -30,6 +30,12 @@ present), then prints, section by section:
 6. **Real data** (``--shared``, default ``../shared/data``): the synthetic corpus, the
    FACEGOOD and talking-face clips through the plausibility checks: passed, passed with
    samples filled, rejected, and the fastest point.
+7. **Crafted media** (``tests/crafted.py``: ``disguised_playlists``, ``flac_declaring``,
+   ``gltf_reaching``): playlists named ``speech.mp4`` (DASH, HLS, ffconcat) that name a
+   private recording elsewhere, and a FLAC named ``.wav`` declaring 2**36 samples, each
+   the speech of ``animegraph synth`` (a real process: held = exit 1 with one line, and
+   the private recording not read); glTFs whose buffer is outside their folder through
+   ``load_mesh`` (held = refused in one line).
 5. **Kills**: ``--kills`` times, an ingest into the database killed with SIGKILL at a
    seeded moment: survived = the database still opens at a complete version and the next
    writer gets the lock at once.
@@ -56,6 +62,9 @@ from crafted import (  # noqa: E402
     DATABASE_MUTATIONS,
     PicklePayload,
     crafted_database,
+    disguised_playlists,
+    flac_declaring,
+    gltf_reaching,
     sql_escapes,
 )
 
@@ -410,6 +419,54 @@ def probe_real(shared: Path, corpus: Path) -> dict:
     return out
 
 
+def probe_media(corpus: Path, db: Path, work: Path) -> dict:
+    """Crafted speech through ``synth`` and crafted glTFs through ``load_mesh``."""
+    from animegraph.face.mesh import load_mesh
+
+    folder = work / "media"
+    shutil.rmtree(folder, ignore_errors=True)
+    (folder / "private").mkdir(parents=True)
+    private = folder / "private" / "private.mp4"
+    wav = next((corpus / "clips").glob("*.wav"))
+    subprocess.run(CLI[:1] + ["-c", "import imageio_ffmpeg, subprocess, sys; subprocess.run("
+                              "[imageio_ffmpeg.get_ffmpeg_exe(), '-v', 'error', '-y', "
+                              "'-f', 'lavfi', '-i', 'color=s=64x48:d=4', '-i', sys.argv[1], "
+                              "'-shortest', '-c:v', 'libx264', '-c:a', 'aac', sys.argv[2]], "
+                              "check=True)", str(wav), str(private)], check=True)
+    (folder / "private.mp4").symlink_to(private)  # a neighbour, for the relative concat
+    speech = {f"playlist:{kind}": text for kind, text in disguised_playlists(private).items()}
+    tried = held = 0
+    for name, text in speech.items():
+        path = folder / f"speech_{name.split(':')[1]}.mp4"
+        path.write_text(text)
+        speech[name] = path
+    speech["flac declaring 2**36 samples"] = flac_declaring(folder / "declared.wav", 2**36 - 1)
+    for name, path in speech.items():
+        proc = _run(["synth", str(path), "--db", str(db), "-o", str(folder / "out.csv")])
+        tried += 1
+        ok = _held(proc) and proc.returncode == 1
+        held += ok
+        last = (proc.stderr.strip().splitlines() or [""])[-1]
+        print(f"  {name}: {'held' if ok else 'NOT HELD'}: exit {proc.returncode}: {last}")
+    quad = (np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 1]], np.float32).tobytes()
+            + np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+    secret = folder / "private" / "secret.bin"
+    secret.write_bytes(quad)
+    (folder / "mesh").mkdir()
+    (folder / "mesh" / "link.bin").symlink_to(secret)
+    for uri in ("../private/secret.bin", str(secret), secret.as_uri(), "link.bin"):
+        path = folder / "mesh" / "bad.gltf"
+        path.write_text(json.dumps(gltf_reaching(uri)))
+        tried += 1
+        try:
+            load_mesh(path)
+            print(f"  glTF buffer {uri}: NOT HELD: read")
+        except AnimeGraphError as exc:
+            held += "\n" not in str(exc)
+            print(f"  glTF buffer {uri}: held: {exc}")
+    return {"media_cases_tried": tried, "media_cases_held": held}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=None)
@@ -420,7 +477,8 @@ def main(argv=None) -> int:
     parser.add_argument("--shared", type=Path,
                         default=Path(__file__).resolve().parents[2] / "shared" / "data")
     parser.add_argument("--skip", nargs="*", default=[],
-                        choices=["sql", "databases", "clips", "writers", "kills", "real"])
+                        choices=["sql", "databases", "clips", "writers", "kills", "real",
+                                 "media"])
     args = parser.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="probe-security-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -431,7 +489,8 @@ def main(argv=None) -> int:
              ("writers", lambda: probe_writers(corpus, work, args.trials)),
              ("kills", lambda: probe_kills(corpus, db, work, args.kills, args.seed)),
              ("databases", lambda: probe_databases(corpus, db, work)),
-             ("real", lambda: probe_real(args.shared, corpus))]
+             ("real", lambda: probe_real(args.shared, corpus)),
+             ("media", lambda: probe_media(corpus, db, work))]
     for name, step in steps:
         if name in args.skip:
             continue

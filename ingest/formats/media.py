@@ -206,6 +206,9 @@ def _read_error(path: Path, track: str, errors: list[str], returncode: int) -> D
     # "Stream map '' matches no streams." need not be the last line (ffmpeg 7 adds more)
     if any("matches no streams" in ln for ln in errors):
         return DataError(f"{path}: no {track} track")
+    if any("not on whitelist" in ln for ln in errors):  # input_args' demuxers
+        return DataError(f"cannot read the {track} track of {path}: not a container its "
+                         f"suffix names (a playlist or manifest named like a video?)")
     return DataError(f"cannot read the {track} track of {path}: "
                      f"{errors[-1] if errors else returncode}")
 
