@@ -214,15 +214,17 @@ def rows_per_group(table: pa.Table) -> int:
 
 
 def dictionary_columns(table: pa.Table) -> list[str]:
-    """The columns worth dictionary-encoding in Parquet: all but floating-point ones and
-    lists (motion, prosody and posteriors, whose values hardly repeat). A dictionary tried
-    on them is given up page by page, after the work: the 800 GRID clips' frames took
-    7.3 s to write as 461 MB with it, 2.1 s as 325 MB without (``docs/results.md``,
-    session 15)."""
+    """The columns worth dictionary-encoding in Parquet: all but floating-point ones,
+    lists (motion, prosody and posteriors, whose values hardly repeat) and binary ones (a
+    clip's speech). A dictionary tried on them is given up page by page, after the work:
+    the 800 GRID clips' frames took 7.3 s to write as 461 MB with it, 2.1 s as 325 MB
+    without (``docs/results.md``, session 15). The speech of every clip in one dictionary
+    page made a reader read all of it to bound its size (:meth:`Database.check_rows`)."""
     return [f.name for f in table.schema
             if not (pa.types.is_floating(f.type) or pa.types.is_list(f.type)
                     or pa.types.is_large_list(f.type)
-                    or pa.types.is_fixed_size_list(f.type))]
+                    or pa.types.is_fixed_size_list(f.type) or pa.types.is_binary(f.type)
+                    or pa.types.is_large_binary(f.type))]
 
 
 def _write_table(folder: Path, name: str, table: pa.Table) -> None:
@@ -387,8 +389,8 @@ class Database:
 
         A small file from someone else whose footer declares a hundred million rows, or
         whose one dictionary string every row repeats, is refused before a reader decodes
-        it into gigabytes. Only the footers are read, and the dictionaries and indices of
-        dictionary-encoded strings when the footer cannot bound them. The sizes a footer
+        it into gigabytes. Only the footers are read, and dictionary-encoded strings a few
+        rows at a time when the footer cannot bound them. The sizes a footer
         declares are trusted: a Parquet writer's are the pages' own (a forged footer that
         understates them is beyond this check). The files are the ones
         ``pyarrow.dataset`` reads (every file below the table's folder but hidden and
@@ -492,6 +494,8 @@ class Database:
 _WIDTH = {"BOOLEAN": 1, "INT32": 4, "INT64": 8, "INT96": 12, "FLOAT": 4, "DOUBLE": 8,
           "BYTE_ARRAY": 4}
 _DICTIONARY = {"PLAIN_DICTIONARY", "RLE_DICTIONARY"}
+#: Most bytes of strings :func:`_decoded_bytes` decodes at once to count them.
+_COUNT_BYTES = 16 << 20
 
 
 def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int) -> int:
@@ -501,8 +505,9 @@ def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int
     A value takes its type's width; a string also its bytes, which are in its pages
     unless the pages share them: a dictionary-encoded string (or one delta-encoded
     against the one before) can be as long as its chunk's pages, in every row. When that
-    bound passes ``limit``, the dictionaries and indices of the dictionary-encoded
-    (top-level) columns are read, without decoding them, to count their bytes exactly.
+    bound passes ``limit``, the dictionary-encoded (top-level) columns are decoded a few
+    rows at a time (at most :data:`_COUNT_BYTES` at once) to count their bytes, until the
+    count passes ``limit``.
 
     Parameters
     ----------
@@ -516,6 +521,7 @@ def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int
     """
     total = meta.num_rows * row_bytes
     shared: dict[str, int] = {}  # column -> bound of its strings whose pages share them
+    longest: dict[str, int] = {}  # ... and the most bytes one of them can take
     uncountable = set()  # those delta-encoded or nested: not counted without decoding
     for g in range(meta.num_row_groups):
         group = meta.row_group(g)
@@ -527,24 +533,24 @@ def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int
             total += chunk.total_uncompressed_size + values * width
             encodings = set(chunk.encodings)
             if kind == "BYTE_ARRAY" and encodings & (_DICTIONARY | {"DELTA_BYTE_ARRAY"}):
-                column = chunk.path_in_schema
-                shared[column] = shared.get(column, 0) + values * chunk.total_uncompressed_size
+                column, most = chunk.path_in_schema, chunk.total_uncompressed_size
+                shared[column] = shared.get(column, 0) + values * most
+                longest[column] = max(longest.get(column, 0), most)
                 if "DELTA_BYTE_ARRAY" in encodings or "." in column:
                     uncountable.add(column)
     countable = [c for c in shared if c not in uncountable]
-    if total + sum(shared.values()) <= limit or not countable:
+    if total + sum(shared.values()) <= limit or total > limit or not countable:
         return total + sum(shared.values())
     total += sum(shared[c] for c in uncountable)
-    reader = pq.ParquetFile(path, read_dictionary=countable)
-    for batch in reader.iter_batches(columns=countable):
-        for column in batch.columns:
-            if not pa.types.is_dictionary(column.type):  # not one pyarrow keeps encoded
-                total += column.nbytes
-                continue
-            lengths = pc.take(pc.binary_length(column.dictionary), column.indices)
-            total += pc.sum(lengths).as_py() or 0
-        if total > limit:
-            break
+    reader = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)  # page by page
+    for column in countable:
+        # Decoded a few rows at a time, as few as their longest value allows, until the
+        # count passes the limit: never more than _COUNT_BYTES of them at once.
+        rows = max(1, min(MAX_GROUP_ROWS, _COUNT_BYTES // max(longest[column], 1)))
+        for batch in reader.iter_batches(batch_size=rows, columns=[column]):
+            total += pc.sum(pc.binary_length(batch.column(0))).as_py() or 0
+            if total > limit:
+                return total
     return total
 
 

@@ -261,6 +261,12 @@ def test_hier_pca_bad_parameters(split, params):
 def test_too_little_data_and_missing_neutral(clips):
     with pytest.raises(DataError, match="too little data"):
         MuMlp().fit(clips[:2])
+    # In plain words, with the paper's term, and the seconds of speech it needs.
+    with pytest.raises(DataError, match=r"too little data for mu-mlp's speech-to-face network "
+                                        r"\(the paper's pooled audio-to-UMUP MLP\) on the "
+                                        r"'neutral' clips: \d+ frames for \d+ parameters, "
+                                        r"[\d.]+ s where it needs [\d.]+ s$"):
+        MuMlp().fit(clips)
     with pytest.raises(DataError, match="too little data"):
         HierPca().fit([_shortened(clips[0], 5)])
     with pytest.raises(DataError, match="too little data for the ppg-ridge"):

@@ -520,3 +520,19 @@ def test_a_recording_in_a_lines_output_folder_is_refused(tiny_db, tmp_path):
                                              r"is in the output folder of line 'rec'"):
         run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path, workers=1))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lines.csv", "rec"]
+
+
+def test_a_guide_that_could_not_be_fitted_says_why_in_a_batch(tiny_db, tmp_path):
+    """A batch said 'not fitted: animegraph fit ...' of the guide synth had found cannot
+    be fitted on the database (a fit that fails again): it says why, as synth does."""
+    from animegraph.apps.batch import worker_guide
+    from animegraph.baselines.stored import record_unfit
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db, ignore=shutil.ignore_patterns("baselines"))
+    record_unfit(db, "mu-mlp", "too little data for mu-mlp's speech-to-face network")
+    version, _ = database_identity(db)
+    guide, lacking, _ = worker_guide(str(db), version, "mu-mlp+ppg-ridge")
+    assert guide is None and lacking == [
+        "mu-mlp (could not be fitted: too little data for mu-mlp's speech-to-face network)",
+        f"ppg-ridge (not fitted: animegraph fit --method ppg-ridge --db {db})"]

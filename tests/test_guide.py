@@ -263,7 +263,13 @@ def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corp
     assert main([*base, "-o", str(tmp_path / "a.npz")]) == 0
     err = capsys.readouterr().err
     assert "warning: no mu-mlp guide (too little data" in err
-    assert "but without its mu-mlp guide, which could not be fitted" in err
+    # The path line says why too (the Live Link database's said only "could not be fitted").
+    [path] = [line for line in err.splitlines() if line.startswith("animegraph: path: ")]
+    assert path.endswith("but without its mu-mlp guide, which could not be fitted (too little "
+                         "data for mu-mlp's speech-to-face network (the paper's pooled "
+                         "audio-to-UMUP MLP) on the 'neutral' clips: "
+                         + path.split("'neutral' clips: ")[-1])
+    assert "s where it needs" in path and "animes alone" not in err.split("path: ")[0]
     assert "fitting ppg-ridge" in err
     # The failure is kept with this version of the database: the next run does not fit
     # again (no "fitting" line), and says why.
@@ -271,7 +277,7 @@ def test_cli_default_guide_that_cannot_be_fitted_is_a_warning(tiny_db, tiny_corp
     err = capsys.readouterr().err
     assert "fitting" not in err
     assert "no mu-mlp guide (too little data" in err and "kept from an earlier run" in err
-    assert "but without its mu-mlp guide" in err
+    assert "but without its mu-mlp guide, which could not be fitted (too little data" in err
     with np.load(tmp_path / "a2.npz") as a, np.load(tmp_path / "a.npz") as b:
         np.testing.assert_array_equal(a["motion"], b["motion"])  # ppg-ridge stored, reused
     assert main([*base, "-o", str(tmp_path / "b.npz"), "--guide", "mu-mlp"]) == 1

@@ -281,15 +281,17 @@ def test_a_small_file_decoding_to_far_more_is_refused_unread(tmp_path, encoding)
 
 
 def test_long_distinct_strings_in_a_dictionary_are_read(tmp_path):
-    # Each clip's speech is one long value: the footer's bound (every row as long as the
-    # whole dictionary page) is far too high, the count of the values themselves is not.
+    # Each clip's speech is one long value, which this version writes without a
+    # dictionary; in one (as earlier versions wrote it) the footer's bound, every row as
+    # long as the whole dictionary page, is far too high: the values are counted.
     tables = _tables(n_clips=2)
     pcm = [np.random.default_rng(i).bytes(1 << 17) for i in range(100)]
     tables["audio"] = pa.table({"clip_id": [f"a{i}" for i in range(100)], "pcm16": pcm})
     write_version(tmp_path / "db", tables, {"fps": 30.0})
     [part] = (tmp_path / "db").glob("v*/audio/part-0.parquet")
-    [chunk] = [pq.read_metadata(part).row_group(0).column(1)]
-    # The bound the footer gives, 100 rows of up to 13 MB each, is above the limit.
+    assert "RLE_DICTIONARY" not in pq.read_metadata(part).row_group(0).column(1).encodings
+    pq.write_table(tables["audio"], part, use_dictionary=True)
+    chunk = pq.read_metadata(part).row_group(0).column(1)
     assert "RLE_DICTIONARY" in chunk.encodings
     assert 100 * chunk.total_uncompressed_size > 64 * part.stat().st_size
     assert Database.open(tmp_path / "db").table("audio").column("pcm16").to_pylist() == pcm

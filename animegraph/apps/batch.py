@@ -624,7 +624,7 @@ def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str], d
     once per process and kept: (the guide, a tuple of its parts, or None; the parts not
     to be had, each with why; :func:`guide_state` of the parts as they were read). A
     worker does not fit a guide: that writes the database, and the batch only reads it."""
-    from animegraph.baselines.stored import load_forward
+    from animegraph.baselines.stored import load_forward, unfit_reason
 
     key = (str(Path(db).resolve()), version, name)
     with _MODEL_LOCK:
@@ -636,8 +636,10 @@ def worker_guide(db: str, version: str, name: str) -> tuple[object, list[str], d
                     model = load_forward(db, part)
                 except AnimeGraphError as exc:  # unreadable: the line goes on without it
                     model, why = None, str(exc)
-                else:
-                    why = f"not fitted: animegraph fit --method {part} --db {db}"
+                else:  # synth's first use may have found it cannot be fitted
+                    reason = unfit_reason(db, part)
+                    why = (f"could not be fitted: {reason}" if reason else
+                           f"not fitted: animegraph fit --method {part} --db {db}")
                 if model is None:
                     lacking.append(f"{part} ({why})")
                 else:

@@ -100,11 +100,15 @@ class BaselineModel(Predicting, BaseEstimator):
         return model
 
 
-def check_enough(n_samples: int, n_params: int, what: str) -> None:
-    """Raise DataError if ``n_samples`` is fewer than ``n_params``."""
+def check_enough(n_samples: int, n_params: int, what: str, rate: float | None = None,
+                 ) -> None:
+    """Raise DataError if ``n_samples`` is fewer than ``n_params``; with the ``rate`` of
+    the frames (a second), the message says the seconds needed too."""
     if n_samples < n_params:
+        seconds = ("" if rate is None else f", {n_samples / rate:.1f} s where it needs "
+                   f"{n_params / rate:.1f} s")
         raise DataError(f"too little data for {what}: {n_samples} frames for {n_params} "
-                        "parameters")
+                        f"parameters{seconds}")
 
 
 def sample_times(clips, rate: float):

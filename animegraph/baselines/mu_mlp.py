@@ -178,7 +178,9 @@ class MuMlp(MuMlpForward, BaselineModel):
         self.subset_frames_ = np.bincount(subset, minlength=len(self.gmms_))
         u0n = (u0 - self.u_mean_) / self.u_std_
         lo, hi = self.subset_hidden
-        check_enough(len(z0), mlp_params(z0.shape[1], lo, a0), "the pooled audio-to-UMUP MLP")
+        check_enough(len(z0), mlp_params(z0.shape[1], lo, a0),
+                     f"mu-mlp's speech-to-face network (the paper's pooled audio-to-UMUP "
+                     f"MLP) on the {neutral!r} clips", rate=self.frame_rate)
         self.pooled_mlp_ = self._fit_mlp(z0, u0n, lo, rng)
         sizes = self.subset_frames_
         span = np.log(max(sizes.max(), 2)) - np.log(MIN_SUBSET_FRAMES)

@@ -109,7 +109,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     t_guide = time.perf_counter()
     guide = load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
-    path += guide_shortfall(guide_name, guide_names(guide))
+    path += guide_shortfall(args.db, guide_name, guide_names(guide))
     print(f"animegraph: loaded {model.graph.n_nodes} anime{'s' * (model.graph.n_nodes != 1)} in "
           f"{time.perf_counter() - t0:.2f} s; synthesizing {len(audio) / sample_rate:.1f} s "
           f"of speech ...", file=sys.stderr)
@@ -143,7 +143,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         # The check passed, the alignment failed: what ran is the speech-alone path.
         alone = argparse.Namespace(**{**vars(args), "text": None})
         path, name, _, _ = synth_plan(alone, synth_path(alone)[1])
-        path += guide_shortfall(name, out.guided)
+        path += guide_shortfall(args.db, name, out.guided)
         path += " (transcript alignment failed: synthesized from the speech alone)"
     if out.context_ranked and CONTEXT_PHRASE not in path:
         path += f"; k-best{CONTEXT_PHRASE}"

@@ -82,7 +82,8 @@ def load_guide(db, name: str | None, *, asked: bool = True):
     for a mean of several (``mu-mlp+ppg-ridge``), the tuple of those that could be had.
 
     A default guide (not ``asked``) that cannot be fitted or stored is left out with a
-    warning line: the path falls back to k-best alone (or the other guides)."""
+    warning line, and why is kept with the database (the path line says it again,
+    :func:`guide_shortfall`): the path falls back to the other guides, or k-best alone."""
     if name is None:
         return None
     if "+" in name:
@@ -97,8 +98,7 @@ def load_guide(db, name: str | None, *, asked: bool = True):
     reason = None if asked else unfit_reason(db, name)
     if reason is not None:  # a default guide already failed on this version: not again
         print(f"animegraph: warning: no {name} guide ({reason}; kept from an earlier run, "
-              f"--guide {name} to try again); each phone the mean of its best animes alone",
-              file=sys.stderr)
+              f"--guide {name} to try again)", file=sys.stderr)
         return None
     from animegraph.baselines.base import fitted_model, load_model
 
@@ -110,18 +110,24 @@ def load_guide(db, name: str | None, *, asked: bool = True):
     try:
         return fitted_model(db, name)
     except (AnimeGraphError, OSError) as exc:
-        print(f"animegraph: warning: no {name} guide ({exc}); each phone the mean of its "
-              f"best animes alone", file=sys.stderr)
+        print(f"animegraph: warning: no {name} guide ({exc})", file=sys.stderr)
         record_unfit(db, name, str(exc))
         return None
 
 
-def guide_shortfall(name: str | None, got: tuple[str, ...]) -> str:
-    """What the path line adds when parts of the guide ``name`` could not be had."""
+def guide_shortfall(db, name: str | None, got: tuple[str, ...]) -> str:
+    """What the path line adds when parts of the guide ``name`` could not be had on the
+    database ``db``, with why (as :func:`load_guide` kept it)."""
+    from animegraph.baselines.stored import unfit_reason
+
     missing = [part for part in (name or "").split("+") if part and part not in got]
     if not missing:
         return ""
-    return f"; but without its {' and '.join(missing)} guide, which could not be fitted"
+    why = [unfit_reason(db, part) or "said above" for part in missing]
+    if len(missing) > 1:
+        why = [f"{part}: {reason}" for part, reason in zip(missing, why, strict=True)]
+    return (f"; but without its {' and '.join(missing)} guide, which could not be fitted "
+            f"({'; '.join(why)})")
 
 
 def recognized_guide(args: argparse.Namespace):
