@@ -178,6 +178,7 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
 @pytest.mark.parametrize("extra, needle", [
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),
+    (["-o", "{tmp}/out.glb"], "'animegraph render' makes .mp4, .gif, .png or .glb"),
     # a missing folder was found when writing, after the synthesis and its lines
     (["-o", "{tmp}/no/o.c3d"], "folder {tmp}/no does not exist"),
     (["--method", "mu-mlp", "-o", "{tmp}/no/o.c3d"], "folder {tmp}/no does not exist"),
