@@ -20,6 +20,14 @@ from db.errors import DataError
 logger = logging.getLogger(__name__)
 
 
+def check_folder(path: str | os.PathLike[str]) -> None:
+    """DataError unless ``path``'s folder exists: an output that cannot be written, said
+    before the work that makes it rather than after."""
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise DataError(f"cannot write {target}: folder {target.parent} does not exist")
+
+
 @contextmanager
 def atomic_write(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
     """Open a temporary file beside ``path`` for binary writing, then move it onto ``path``.
@@ -46,8 +54,7 @@ def atomic_write(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
     """
     target = Path(path)
     folder = target.parent
-    if not folder.is_dir():
-        raise DataError(f"cannot write {target}: folder {folder} does not exist")
+    check_folder(target)
     tmp = folder / f".{target.name}.{secrets.token_hex(6)}.tmp"
     try:
         # os.open with mode 0o666 honours the umask, as a plain open() of the target would.

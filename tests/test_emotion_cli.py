@@ -133,7 +133,7 @@ def test_map_emotion_changes_emotion_keeps_speech(tiny_db, tiny_corpus, tmp_path
     (["--to", "bored"], "unknown emotion 'bored'"),
     (["--to", "happy", "--from", "bored"], "unknown emotion 'bored'"),
     (["--to", "auto"], "not auto"),
-    (["--to", "happy", "-o", "{tmp}/x.mp4"], "must end in"),
+    (["--to", "happy", "-o", "{tmp}/x.mp4"], "'animegraph render' makes .mp4, .gif"),
 ])
 def test_map_emotion_bad_input(tiny_db, tiny_corpus, tmp_path, capsys, args, needle):
     argv = ["map-emotion", str(_clip(tiny_corpus).with_suffix(".c3d")), "--db",

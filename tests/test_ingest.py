@@ -259,6 +259,19 @@ def test_cli_sql_info_and_formats(tiny_db, capsys, tmp_path):
     assert pq.read_table(out).num_rows == 3
 
 
+def test_sql_help_lists_every_table_and_real_columns(tiny_db):
+    # `sql --help` named the tables, no column: a data person had to guess them.
+    from animegraph.apps.cli_parser import SQL_TABLES_HELP
+    from db.store import TABLES
+
+    listed = dict(re.findall(r"(\w+): [^;(]*\(([^)]*)\)", SQL_TABLES_HELP))
+    assert set(listed) == set(TABLES)
+    for table, columns in listed.items():
+        names = [c for c in columns.split(", ") if re.fullmatch(r"\w+", c)]
+        have = query(Database.open(tiny_db[0]), f"SELECT * FROM {table} LIMIT 0").column_names
+        assert names and set(names) <= set(have), (table, set(names) - set(have))
+
+
 def test_cli_sql_writes_the_format_its_output_is_named(tiny_db, tmp_path):
     # `-o phones.csv` wrote the aligned text table (cut at 50 rows) under a CSV's name.
     path, _ = tiny_db

@@ -106,7 +106,7 @@ def test_cli_prints_each_statement_and_one_line_errors(db, tmp_path):
     assert not (tmp_path / "x").exists()
     capped = subprocess.run(cmd + ["--limit", "5", "--max-rows", "10", "SELECT * FROM range(9)"],
                             capture_output=True, text=True)
-    assert capped.returncode == 0 and "(5 rows)" in capped.stdout
+    assert capped.returncode == 0 and "(5 rows read; --limit stopped the rest)" in capped.stdout
     assert "first 5 rows" in capped.stderr
 
 
@@ -153,3 +153,16 @@ def test_a_misspelt_name_is_told_what_exists(db):
         with pytest.raises(ParameterError) as err:
             run(db, sql)
         assert said in str(err.value) and "\n" not in str(err.value), (sql, str(err.value))
+
+
+def test_a_table_cut_by_the_row_cap_does_not_call_its_rows_all(db):
+    # "... 3 more rows (5 in all)" of a result that had more rows than the 5 read.
+    from animegraph.apps.tabular import format_table
+
+    [cut] = run(db, "SELECT * FROM range(100)", row_limit=5)
+    assert format_table(cut.table, "table", max_rows=2, truncated=cut.truncated
+                        ).endswith("... 3 more rows (5 rows read; --limit stopped the rest)\n")
+    assert format_table(cut.table, "table", truncated=True).endswith(
+        "(5 rows read; --limit stopped the rest)\n")
+    [whole] = run(db, "SELECT * FROM range(3)")
+    assert format_table(whole.table, "table", max_rows=2).endswith("... 1 more row (3 in all)\n")

@@ -178,6 +178,10 @@ def test_cli_synth_picks_its_path_by_what_it_has(tiny_db, held_out, tmp_path, ca
 @pytest.mark.parametrize("extra, needle", [
     (["--emotion", "bored"], "not in the database"),
     (["-o", "{tmp}/out.mp3"], "must end in"),
+    (["-o", "{tmp}/out.glb"], "'animegraph render' makes .mp4, .gif, .png or .glb"),
+    # a missing folder was found when writing, after the synthesis and its lines
+    (["-o", "{tmp}/no/o.c3d"], "folder {tmp}/no does not exist"),
+    (["--method", "mu-mlp", "-o", "{tmp}/no/o.c3d"], "folder {tmp}/no does not exist"),
     (["--search", "window"], "--window"),
     (["--method", "mu-mlp", "--window", "3"], "--window only applies"),
     (["--method", "hmm"], "invalid choice"),
@@ -200,7 +204,7 @@ def test_cli_synth_errors(tiny_db, held_out, tmp_path, capsys, extra, needle):
             str(tmp_path / "o.c3d"), *[e.format(tmp=tmp_path) for e in extra]]
     assert main(argv) in (1, 2)
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and needle in err[0]
+    assert len(err) == 1 and needle.format(tmp=tmp_path) in err[0]
 
 
 def test_a_minute_long_utterance_at_any_rate_in_stereo(model, tmp_path):

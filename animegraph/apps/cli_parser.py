@@ -36,6 +36,21 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 #: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
 SYNTH_GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
 
+#: ``sql --help``'s list of the tables and their main columns (tests/test_ingest.py checks
+#: that each column is in a database).
+SQL_TABLES_HELP = (
+    "Each table, what a row is and its main columns. "
+    "clips: utterance (clip_id, corpus, speaker, emotion, text, fps, duration, phones, ...); "
+    "animes: phoneme instance, times in s (node_id, clip_id, position, phoneme, emotion, "
+    "start_time, end_time, start_frame, end_frame, prosody, motion, ...); "
+    "frames: motion frame (clip_id, frame, time, and a column per channel, "
+    "e.g. \"lip_corner_r.x\" in double quotes); "
+    "audio: utterance (clip_id, sample_rate, pcm16); "
+    "channels: motion channel (name, group, kind, units, min, max); "
+    "components: independent component (component, cutoff_hz, motion_share, label, ...); "
+    "model_arrays: learned array (name, shape, values). "
+    "'DESCRIBE animes' lists a table's columns and their types.")
+
 #: What a speech argument accepts: anything libsndfile (through soundfile) decodes.
 SPEECH_FORMATS = ("speech: WAV, FLAC, OGG/Vorbis or MP3 (anything libsndfile reads), or a "
                   "video's sound track (.mp4, .mov, .mkv ...), any sample rate, channels "
@@ -226,6 +241,7 @@ def _add_sql(sub) -> None:
         "audio, channels, model_arrays, components. Only SELECT queries run, in DuckDB's "
         "sandbox (no file outside the database, no network, no extensions); several "
         "statements separated by ';' each print their result.",
+        epilog=SQL_TABLES_HELP,
     )
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")

@@ -242,13 +242,14 @@ def check_export(out: Path, *, context: float, force: bool) -> None:
     DataError
         ``out`` exists (without ``force``) or is a file, or its folder does not exist.
     """
+    from db.atomic import check_folder
+
     if not context >= 0:
         raise ParameterError(f"--context must be >= 0 seconds, got {context}")
     if out.exists() and (not force or not out.is_dir()):
         raise DataError(f"export folder {out} exists (use --force to replace it)"
                         if out.is_dir() else f"{out} exists and is not a folder")
-    if not out.parent.is_dir():
-        raise DataError(f"cannot write {out}: folder {out.parent} does not exist")
+    check_folder(out)
 
 
 def export_hits(db: Database, hits: pa.Table, out: Path, *, context: float = 0.25,

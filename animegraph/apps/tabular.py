@@ -36,8 +36,11 @@ def format_for(fmt: str | None, output: Path | None) -> str:
 
 
 def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
-                 output: Path | None = None) -> str | None:
+                 output: Path | None = None, truncated: bool = False) -> str | None:
     """Render ``table`` as ``fmt`` (table, csv, json, parquet).
+
+    ``truncated``: ``table`` is the first rows of a longer result (a row cap stopped the
+    rest), so the table's last line does not call its rows all.
 
     Returns the text, or None when it was written to ``output``.
     """
@@ -58,7 +61,7 @@ def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
 
         text = "".join(json.dumps(row, default=_json) + "\n" for row in table.to_pylist())
     else:
-        text = _pretty(table, max_rows)
+        text = _pretty(table, max_rows, truncated)
     if output is not None:
         with atomic_write(output) as handle:
             handle.write(text.encode())
@@ -84,7 +87,7 @@ def _json(value):
     return str(value)
 
 
-def _pretty(table: pa.Table, max_rows: int) -> str:
+def _pretty(table: pa.Table, max_rows: int, truncated: bool = False) -> str:
     names = table.column_names
     shown = table.slice(0, max_rows)
     columns = [shown.column(i).to_pylist() for i in range(shown.num_columns)]
@@ -101,8 +104,12 @@ def _pretty(table: pa.Table, max_rows: int) -> str:
 
     out = [line(names), line(["-" * w for w in widths])]
     out += [line(c) for c in cells]
-    if table.num_rows > max_rows:
-        out.append(f"... {table.num_rows - max_rows} more rows ({table.num_rows} in all)")
+    n = table.num_rows
+    rows = f"{n} row{'s' * (n != 1)}"
+    whole = f"{rows} read; --limit stopped the rest" if truncated else None
+    if n > max_rows:
+        more = n - max_rows
+        out.append(f"... {more} more row{'s' * (more != 1)} ({whole or f'{n} in all'})")
     else:
-        out.append(f"({table.num_rows} row{'s' if table.num_rows != 1 else ''})")
+        out.append(f"({whole or rows})")
     return "\n".join(out) + "\n"

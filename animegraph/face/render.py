@@ -32,6 +32,7 @@ from animegraph.face.animation import FaceAnimation, animate, animation_bounds
 from animegraph.face.arkit import arkit_animation, arkit_weights
 from animegraph.face.mesh import Deformer, MarkerMap, Mesh
 from animegraph.motion.files import Motion
+from db.atomic import check_folder
 from db.errors import DataError, ParameterError
 from ingest.formats.livelink import is_arkit
 
@@ -175,7 +176,7 @@ def encode(frames: Iterable[np.ndarray], path: Path, fps: float, *,
     kind = path.suffix.lower()
     if kind not in (".mp4", ".gif"):
         raise ParameterError(f"video output must end in .mp4 or .gif, got {path.name!r}")
-    _check_folder(path)
+    check_folder(path)
     frames = iter(frames)
     try:
         first = next(frames)
@@ -230,11 +231,6 @@ def _temporary(path: Path, suffix: str = "") -> Path:
     return path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp{suffix}"
 
 
-def _check_folder(path: Path) -> None:
-    if not path.parent.is_dir():
-        raise DataError(f"cannot write {path}: folder {path.parent} does not exist")
-
-
 def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
     """Put ``video`` (the actor) left of the rendered MP4 ``path``, at its height; atomic.
 
@@ -275,7 +271,7 @@ def place_beside(path: Path, video: Path, *, out: Path | None = None) -> Path:
         reader.close()
     height = int(meta["size"][1])
     sound = "1:a" if meta.get("audio_codec") else "0:a?"
-    _check_folder(out)
+    check_folder(out)
     tmp = _temporary(out, ".mp4")
     # hstack's shortest=1: by default it would repeat the shorter input's last picture up
     # to the longer's end (a frozen actor), and -shortest alone only trims the sound. The
@@ -309,8 +305,7 @@ def write_obj_frames(animation: FaceAnimation, folder: Path, *, force: bool = Fa
     folder = Path(folder)
     if folder.exists() and not force:
         raise DataError(f"{folder} exists (use --force to replace it)")
-    if not folder.parent.is_dir():
-        raise DataError(f"cannot write {folder}: folder {folder.parent} does not exist")
+    check_folder(folder)
     staging = folder.parent / f".{folder.name}.partial-{secrets.token_hex(4)}"
     staging.mkdir()
     try:
@@ -489,7 +484,7 @@ def _video(frames: Iterable[np.ndarray], out: Path, fps: float, *, audio: Path |
     step leaves ``out`` as it was."""
     if beside is None:
         return encode(frames, out, fps, audio=audio)
-    _check_folder(out)
+    check_folder(out)
     staging = _temporary(out)
     staging.mkdir()
     try:

@@ -242,8 +242,9 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 
 
 def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -> None:
-    """ParameterError unless :func:`write_channels` can write motion of these channels to
-    ``path``: what it would refuse after the work, said before it.
+    """ParameterError (DataError for a missing folder) unless :func:`write_channels` can
+    write motion of these channels to ``path``: what it would refuse after the work, said
+    before it.
 
     Parameters
     ----------
@@ -257,8 +258,10 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
     timecode : str, optional
         Goes only into Live Link CSV.
     """
+    from db.atomic import check_folder
     from ingest.formats.livelink import is_arkit
 
+    check_folder(path)  # synth -o in a missing folder failed after the synthesis
     name = Path(path).name
     if name.lower().endswith(LIVELINK_SUFFIX):
         if not is_arkit(names):

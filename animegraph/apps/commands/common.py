@@ -50,3 +50,16 @@ def check_output(command: str, output: Path, names, kind: str) -> None:
         check_motion_output(output, names, kind)
     except ParameterError as exc:
         raise UsageError(f"animegraph {command}: -o {output.name}: {exc}") from None
+
+
+#: What ``synth`` and ``map-emotion`` write with ``-o`` (``.livelink.csv`` is a ``.csv``).
+MOTION_SUFFIXES = (".c3d", ".csv", ".npz")
+
+
+def check_motion_suffix(command: str, output: Path) -> None:
+    """``-o`` of a motion-writing command names a motion file; an animator who asks for
+    a video or a glTF is told which command makes one."""
+    if output.suffix.lower() not in MOTION_SUFFIXES:
+        raise UsageError(f"animegraph {command}: -o must end in .c3d, .csv or .npz, got "
+                         f"{output.name!r} ('animegraph render' makes .mp4, .gif, .png or "
+                         ".glb of the motion)")

@@ -59,7 +59,7 @@ def cmd_sql(args: argparse.Namespace) -> int:
             text = "".join(f"{value}\n" for value in result.table.column(1).to_pylist())
         else:
             text = format_table(result.table, fmt, max_rows=args.max_rows,
-                                output=args.output)
+                                output=args.output, truncated=result.truncated)
         if text is not None:
             sys.stdout.write(text)
         if result.truncated:

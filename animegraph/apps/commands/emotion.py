@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from animegraph.apps.commands.common import UsageError, check_output
+from animegraph.apps.commands.common import UsageError, check_motion_suffix, check_output
 
 
 def cmd_classify(args: argparse.Namespace) -> int:
@@ -37,9 +37,7 @@ def cmd_map_emotion(args: argparse.Namespace) -> int:
     from animegraph.synthesis import Model, read_database_motion
     from ingest.formats.media import read_audio
 
-    if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
-        raise UsageError(f"animegraph map-emotion: -o must end in .c3d, .csv or .npz, got "
-                         f"{args.output.name!r}")
+    check_motion_suffix("map-emotion", args.output)
     target = parse_emotion(args.to)
     if target == "auto":
         raise UsageError("animegraph map-emotion: --to needs an emotion (or a mix), not auto")

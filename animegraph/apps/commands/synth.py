@@ -10,6 +10,7 @@ import sys
 
 from animegraph.apps.commands.common import (
     UsageError,
+    check_motion_suffix,
     check_output,
     progress,
     sidecar_labels,
@@ -42,9 +43,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from ingest.formats.media import read_audio
     from ingest.readers.common import read_labels
 
-    if args.output.suffix.lower() not in (".c3d", ".csv", ".npz"):
-        raise UsageError(f"animegraph synth: -o must end in .c3d, .csv or .npz, got "
-                         f"{args.output.name!r}")
+    check_motion_suffix("synth", args.output)
     _check_timecode(args)
     if args.method != "anime-graph":
         return _synth_baseline(args)
