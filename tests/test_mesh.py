@@ -21,6 +21,7 @@ from animegraph.face.mesh import (
 )
 from db.errors import DataError
 from ingest.corpus import face
+from ingest.facemesh import canonical_mesh_path
 
 
 @pytest.fixture(scope="module")
@@ -130,10 +131,28 @@ def test_custom_mesh_needs_regions(tmp_path):
     import trimesh
 
     mesh = canonical_mesh()
-    trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(tmp_path / "m.obj")
+    trimesh.Trimesh(mesh.vertices, mesh.faces[:-1], process=False).export(tmp_path / "m.obj")
     (tmp_path / "map.csv").write_text("label,vertex\na,1\nb,2\n")
     with pytest.raises(DataError, match="no 'region' column"):
         read_marker_map(tmp_path / "map.csv", load_mesh(tmp_path / "m.obj"))
+
+
+def test_a_mesh_file_of_the_canonical_triangles_is_known_as_canonical(tmp_path):
+    # The shipped canonical mesh given as --mesh (or a face sculpted on its triangles)
+    # was refused a marker map without regions, and drew its mouth closed
+    import trimesh
+
+    mesh = canonical_mesh()
+    sculpt = tmp_path / "sculpt.obj"
+    trimesh.Trimesh(mesh.vertices * 1.1, mesh.faces, process=False).export(sculpt)
+    (tmp_path / "map.csv").write_text("label,vertex\na,13\nb,14\nc,6\n")
+    expected = read_marker_map(tmp_path / "map.csv", mesh)
+    for path in (canonical_mesh_path(), sculpt):
+        loaded = load_mesh(path)
+        assert loaded.canonical_topology
+        np.testing.assert_array_equal(loaded.mouth, mesh.mouth)
+        np.testing.assert_array_equal(loaded.eyes, mesh.eyes)
+        assert read_marker_map(tmp_path / "map.csv", loaded).regions == expected.regions
 
 
 def test_unreadable_mesh(tmp_path):

@@ -78,6 +78,9 @@ class Mesh:
     eyes : np.ndarray, shape (n_eyes,)
         Indices into ``faces`` of the triangles that fill the eye openings (drawn dark,
         so lids opening and closing show). Empty if unknown.
+    canonical_topology : bool
+        Whether its triangles are the canonical mesh's (vertex ``i`` is the canonical
+        vertex ``i``): its mouth, eyes and markers' regions are then known.
     """
 
     vertices: np.ndarray
@@ -85,6 +88,7 @@ class Mesh:
     mouth: np.ndarray
     name: str
     eyes: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+    canonical_topology: bool = False
 
     @property
     def n_vertices(self) -> int:
@@ -128,7 +132,7 @@ def canonical_mesh() -> Mesh:
                      if any(set(tri.tolist()) <= ring for ring in lids)], dtype=np.int64)
     return Mesh(vertices=np.asarray(face.vertices, dtype=np.float64),
                 faces=np.asarray(face.faces, dtype=np.int64), mouth=mouth,
-                name="canonical face mesh", eyes=eyes)
+                name="canonical face mesh", eyes=eyes, canonical_topology=True)
 
 
 def load_mesh(path: str | os.PathLike) -> Mesh:
@@ -167,6 +171,12 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         raise DataError(f"mesh {path}: face {row} names vertex "
                         f"{int(faces[row][outside[row]][0])}, but it has vertices "
                         f"0-{len(vertices) - 1}")
+    canonical = canonical_mesh()
+    if np.array_equal(faces, canonical.faces):
+        # The canonical mesh's triangles (the shipped file itself, or a face sculpted on
+        # it): its closing mouth triangles, eyelids and marker regions are known.
+        return Mesh(vertices=vertices, faces=faces, mouth=canonical.mouth,
+                    name=path.name, eyes=canonical.eyes, canonical_topology=True)
     return Mesh(vertices=vertices, faces=faces, mouth=np.empty(0, dtype=np.int64),
                 name=path.name)
 
@@ -323,11 +333,12 @@ def read_marker_map(path: str | os.PathLike, mesh: Mesh) -> MarkerMap:
         raise DataError(f"marker map {path} lists no markers")
     vertices = np.asarray(vertices, dtype=np.int64)
     if "region" not in fields:
-        if mesh.name != canonical_mesh().name:
+        if not mesh.canonical_topology:
             raise DataError(f"marker map {path} has no 'region' column: for a mesh other than "
                             f"the canonical one, name each marker's region "
                             f"({', '.join(REGIONS)} or {ANCHOR})")
-        regions = list(canonical_regions(mesh.vertices[vertices], groups))
+        # regions by where each vertex sits on the canonical face, in any sculpt of it
+        regions = list(canonical_regions(canonical_mesh().vertices[vertices], groups))
     return MarkerMap(labels=tuple(labels), vertices=vertices, regions=tuple(regions))
 
 
