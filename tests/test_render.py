@@ -395,6 +395,9 @@ def test_bad_inputs_are_one_line_and_write_nothing(take, tmp_path, capsys):
     assert "does not exist" in line
     line = _one_line(capsys, main(["render", motion, "-o", str(out / "x.avi")]), 1)
     assert ".mp4" in line
+    # a missing folder is said before the frames are drawn (it came after a progress bar)
+    line = _one_line(capsys, main(["render", motion, "-o", str(out / "no" / "x.mp4")]), 1)
+    assert "folder" in line and "does not exist" in line, line
     assert list(out.iterdir()) == []
 
 

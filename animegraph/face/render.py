@@ -424,6 +424,7 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         raise DataError(f"{out} exists (use --force to replace it)")
     if kind != "" and out.is_dir():
         raise DataError(f"{out} is a folder")
+    check_folder(out)  # before the frames are drawn, not when they are written
     video_fps = fps or (20.0 if kind == ".gif" else 30.0)
     for option, given in (("--beside", beside), ("--audio", audio)):
         if given is not None and kind != ".mp4":
