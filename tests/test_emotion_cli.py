@@ -403,3 +403,14 @@ def test_classify_with_a_damaged_stored_classifier(tiny_db, tiny_corpus, tmp_pat
                     and err[0].startswith("animegraph: error:"), (name, err)
     code, err = classify(arrays)  # the database as it was
     assert code == 0 and err == []
+
+
+def test_info_of_a_single_emotion_database_reads_as_words(neutral_db):
+    # It said "emotion components none" and "(clips per emotion: none)"
+    from animegraph.apps.info import database_info, info_lines
+    from db.store import Database
+
+    lines = info_lines(database_info(Database.open(neutral_db)))
+    (emotion,) = [line for line in lines if line.startswith("emotion:")]
+    assert "no emotion components" in emotion and "components none" not in emotion
+    assert not any(line.rstrip(")").endswith(": none") for line in lines if "note:" in line)

@@ -88,8 +88,8 @@ def info_lines(info: dict) -> list[str]:
         lines.append(line)
     emotion = info.get("emotion")
     if emotion:
-        lines.append(f"emotion:    emotion components {_ids(emotion['emotion_components'])}, "
-                     f"speech components {_ids(emotion['speech_components'])} (Cao et al. "
+        lines.append(f"emotion:    {_ids('emotion', emotion['emotion_components'])}, "
+                     f"{_ids('speech', emotion['speech_components'])} (Cao et al. "
                      "§5.1.3: emotion = differs between emotions after DTW alignment; "
                      "speech = its Eq. 9 reconstruction captures mouth motion)")
         lines.append(f"mappings:   {len(emotion['mappings'])} (F_ij, §5.2)"
@@ -130,5 +130,7 @@ def _num(value, digits: int) -> str:
     return f"{value:.{digits}f}"
 
 
-def _ids(ids) -> str:
-    return " ".join(str(i) for i in ids) if ids else "none"
+def _ids(kind: str, ids) -> str:
+    """"emotion components 0 2 3", or "no emotion components"."""
+    return f"{kind} components " + " ".join(str(i) for i in ids) if ids else \
+        f"no {kind} components"

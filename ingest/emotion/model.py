@@ -555,9 +555,10 @@ def _fit_classifier(audio, emotions, speakers, notes,
     names, counts = np.unique(labels.astype(str), return_counts=True)
     usable = set(names[counts >= MIN_CLASSIFIER_CLIPS])
     if len(usable) < 2:
-        have = ", ".join(f"{n} {c}" for n, c in zip(names, counts, strict=True)) or "none"
+        have = ", ".join(f"{n} {c}" for n, c in zip(names, counts, strict=True))
         notes.append(f"no emotion classifier: it needs two emotions with at least "
-                     f"{MIN_CLASSIFIER_CLIPS} usable clips each (clips per emotion: {have})")
+                     f"{MIN_CLASSIFIER_CLIPS} usable clips each ("
+                     + (f"clips per emotion: {have})" if have else "it has no usable clip)"))
         return None
     keep = [k for k, lab in enumerate(labels) if lab in usable]
     if len(usable) < names.size:
