@@ -446,6 +446,21 @@ def test_plot_against_truth(take, tmp_path, capsys):
     assert not (tmp_path / "q.png").exists()
 
 
+def test_plot_names_the_motion_by_its_file(take, tmp_path, monkeypatch):
+    # A recorded snippet (query --export) was labelled "synthesized"
+    import matplotlib.axes
+
+    shown = []
+    legend = matplotlib.axes.Axes.legend
+
+    def seen(ax, *args, **kwargs):
+        shown.extend(t.get_text() for t in legend(ax, *args, **kwargs).get_texts())
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "legend", seen)
+    assert main(["plot", str(take / "take.c3d"), "-o", str(tmp_path / "p.png")]) == 0
+    assert shown and set(shown) == {"take.c3d"}
+
+
 def test_plot_refuses_a_truth_of_other_channels(take, tmp_path, capsys):
     # A truth with none of the motion's channels used to draw no truth at all (exit 0).
     from animegraph.motion.files import write_channel_csv

@@ -207,7 +207,8 @@ def _plot_mouth(clip, predictions: dict[str, np.ndarray], names: Sequence[str], 
 
 def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
                 phones: Sequence[dict] = (), audio: tuple[np.ndarray, int] | None = None,
-                title: str = "", say: Callable[[str], object] | None = None) -> Path:
+                title: str = "", say: Callable[[str], object] | None = None,
+                label: str = "synthesized") -> Path:
     """Plot synthesized ``motion`` (against ``truth``) with speech, phones and jumps.
 
     Parameters
@@ -222,6 +223,9 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
     audio : (samples, sample_rate), optional
     say : callable, optional
         Receives a line of news (the truth drawn in only some panels).
+    label : str
+        The motion's name in the legends (``animegraph plot``: its file's, since it may
+        be a recorded snippet as well as a synthesized line).
 
     Raises
     ------
@@ -260,12 +264,12 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
             top.set_ylabel("phones")
         _timeline(top, phones)
     t = np.arange(motion.n_frames) / motion.fps
-    for ax, (label, values) in zip(axes, rows, strict=True):
-        if label in truth_rows:
+    for ax, (measure, values) in zip(axes, rows, strict=True):
+        if measure in truth_rows:
             tt = np.arange(truth.n_frames) / truth.fps
-            ax.plot(tt, truth_rows[label], color="k", lw=1.6, label="ground truth")
-        ax.plot(t, values, color="C3", lw=1.1, label="synthesized")
-        ax.set_ylabel(label, fontsize=8)
+            ax.plot(tt, truth_rows[measure], color="k", lw=1.6, label="ground truth")
+        ax.plot(t, values, color="C3", lw=1.1, label=label)
+        ax.set_ylabel(measure, fontsize=8)
         for p in phones:
             if p.get("jump"):
                 ax.axvline(p["start"], color="C0", lw=0.8, ls="--", alpha=0.7)

@@ -123,7 +123,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     truth = read_motion(args.truth) if args.truth is not None else None
     audio = read_audio(args.audio) if args.audio is not None else None
     plot_motion(motion, args.output, truth=truth, phones=phones, audio=audio,
-                title=args.title or args.motion.name,
+                title=args.title or args.motion.name, label=args.motion.name,
                 say=lambda line: print(f"animegraph: {line}", file=sys.stderr))
     print(f"animegraph: wrote {args.output}", file=sys.stderr)
     return 0
