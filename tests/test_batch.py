@@ -536,3 +536,15 @@ def test_a_guide_that_could_not_be_fitted_says_why_in_a_batch(tiny_db, tmp_path)
     assert guide is None and lacking == [
         "mu-mlp (could not be fitted: too little data for mu-mlp's speech-to-face network)",
         f"ppg-ridge (not fitted: animegraph fit --method ppg-ridge --db {db})"]
+
+
+def test_emotion_auto_needs_the_lines_recording(tiny_db, tmp_path):
+    # A line spoken by eSpeak NG was classified (its neutral voice came out "frustrated")
+    # and synthesized with that emotion without a word
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\na,auto,Hello there.\n")
+    result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out"))
+    assert result.n_workers == 0
+    assert [r["error"] for r in result.rows] == [
+        "emotion auto is heard in the line's recording, and it has none (eSpeak NG speaks "
+        "it): name the emotion, or give audio"]

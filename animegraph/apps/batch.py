@@ -245,7 +245,8 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
             rows[line.id] = {**saved, "status": "skipped"}
             continue
         try:
-            check_emotion(line.emotion)  # here, not in each worker after its start-up
+            # here, not in each worker after its start-up
+            check_emotion(line.emotion, recorded=line.audio is not None)
         except LineError as exc:
             rows[line.id] = _row(line, status="failed", error=str(exc))
             continue
@@ -458,16 +459,18 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
 
 
 class EmotionCheck:
-    """``check(spec)``: a line's emotion checked against the database as synthesis will
-    check it (names, a mix's mappings, a classifier for ``auto``), before any worker
-    starts. Raises :class:`LineError` with synthesis' own message. The database's emotion
-    model is read on the first line that has an emotion."""
+    """``check(spec, recorded)``: a line's emotion checked against the database as
+    synthesis will check it (names, a mix's mappings, a classifier for ``auto``), before
+    any worker starts. Raises :class:`LineError` with synthesis' own message, or when
+    ``auto`` has no recording to hear (eSpeak NG's voice carries no emotion, so the
+    classifier's guess would be used silently). The database's emotion model is read on
+    the first line that has an emotion."""
 
     def __init__(self, db: Path):
         self.db = db
         self._loaded: tuple | None = None
 
-    def __call__(self, spec: EmotionSpec) -> None:
+    def __call__(self, spec: EmotionSpec, recorded: bool = True) -> None:
         from animegraph.emotion.control import AUTO, no_classifier, resolve_emotion
         from ingest.emotion.model import EmotionModel, NoEmotionModel
 
@@ -487,6 +490,10 @@ class EmotionCheck:
             if spec.argument == AUTO:
                 if model is None or model.classifier is None:
                     raise DataError(no_classifier(model))
+                if not recorded:
+                    raise DataError("emotion auto is heard in the line's recording, and it "
+                                    "has none (eSpeak NG speaks it): name the emotion, or "
+                                    "give audio")
             else:
                 resolve_emotion(spec.argument, model, graph_emotions)
         except AnimeGraphError as exc:

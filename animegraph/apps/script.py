@@ -14,8 +14,8 @@ column     required meaning
                     ``speech.wav`` is its recording: a script from others must not
                     copy files from elsewhere into the output)
 ``emotion``         a name as the database spells it (``happy``), ``auto`` (detected
-                    from the speech), or a mix ``happy=0.7,neutral=0.3``; empty: no
-                    emotion preference
+                    from the line's recording: a line with ``audio``), or a mix
+                    ``happy=0.7,neutral=0.3``; empty: no emotion preference
 ``speaker``         who says it (kept in the report)
 ``voice``           eSpeak NG voice for lines without audio, e.g. ``en-us+f3``
 ``window``          the paper's bounded look-ahead of K phonemes (one anime a phoneme)
