@@ -155,12 +155,14 @@ CHUNK_SECONDS = 20.0
 CHUNK_CONTEXT = 1.0
 #: Audio at least this many seconds long is heard in two pieces at least, so that two
 #: cores hear it at once (the same pieces on one core: the output depends on the audio
-#: alone). The model hears better with more of the utterance, at the seam and away from
-#: it alike: on the 66 recordings above, cut in two, the phone error rate of recognition
-#: rose from 0.253 to 0.265 (paired 95 % interval +0.006 to +0.018; errors within 1 s of a
-#: cut 0.260, elsewhere 0.258), alignment's did not change (its phones are the
-#: transcript's). Below it (EmoDB's 2 s, GRID's 3 s, single synthetic sentences of
-#: 2.4-5.9 s) nothing changes.
+#: alone). ``scripts/bench_e2e.py``'s 9.3 s sentence on an idle 2-core machine: hama's
+#: call 0.80 -> 0.56 s, the ``segment`` phase 1.18 -> 0.78 s (medians of 3 interleaved
+#: runs of each; no gain while another process keeps the second core busy). The model
+#: hears better with more of the utterance, at the seam and away from it alike: on the 66
+#: recordings above, cut in two, the phone error rate of recognition rose from 0.253 to
+#: 0.265 (paired 95 % interval +0.006 to +0.018; errors within 1 s of a cut 0.260,
+#: elsewhere 0.258); alignment's did not change (its phones are the transcript's). Below
+#: it (EmoDB's 2 s, GRID's 3 s, single synthetic sentences of 2.4-5.9 s) nothing changes.
 SPLIT_SECONDS = 6.0
 #: Each cut lies at the quietest 100 ms (:data:`PAUSE_SMOOTH` frames) within this many
 #: seconds of its even place: in a pause if there is one, not in a phone (measured as
