@@ -32,11 +32,11 @@ _SIZE_PLACEHOLDERS = (0, 0xFFFFFFFF, 0x7FFFFFFF)
 #: spectrum ends far below 24 kHz), so faster recordings are resampled down to 48 kHz;
 #: below 8 kHz even the telephone band (to 3.4 kHz) is cut, so slower ones are refused.
 SPEECH_RATE_RANGE: tuple[int, int] = (8000, 48000)
-#: Most samples (all channels together) a speech file may hold: an hour at 48 kHz, mono
-#: (660 MiB as float32). Compressed sound (FLAC, AAC, Opus) of silence takes a few bytes a
+#: Most samples (all channels together) a speech file may hold: an hour of stereo at
+#: 48 kHz (1.3 GiB as float32; a lecture recorded by a camera is stereo). Compressed sound (FLAC, AAC, Opus) of silence takes a few bytes a
 #: second, so a small file may decode to any size: the bound is checked before decoding
 #: (:func:`check_speech_size`).
-MAX_SPEECH_SAMPLES = 3600 * 48000
+MAX_SPEECH_SAMPLES = 2 * 3600 * 48000
 #: Share of the channels' mean energy below which their average has cancelled them:
 #: channels carrying the same speech keep all of it, unrelated ones 1 / n_channels
 #: (half for stereo), an opposite-phase pair (right = -left) almost none.
@@ -106,7 +106,7 @@ def check_speech_size(n_frames: int, n_channels: int, sample_rate: float,
         minutes = n_frames / max(sample_rate, 1) / 60
         raise DataError(f"{where}: at least {minutes:.0f} min of sound in {n_channels} "
                         f"channel(s) at {sample_rate:g} Hz; speech is read up to "
-                        f"{MAX_SPEECH_SAMPLES:,} samples (an hour at 48 kHz, mono)")
+                        f"{MAX_SPEECH_SAMPLES:,} samples (an hour of stereo at 48 kHz)")
 
 
 def speech_samples(audio: np.ndarray, sample_rate: int, where: str | os.PathLike[str], *,
