@@ -31,6 +31,7 @@ from animegraph.emotion.control import AUTO, check_names
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
+from ingest.speech.phones import PHONE_SET
 
 _WORD = re.compile(r"^[A-Za-z0-9']+$")
 
@@ -315,6 +316,10 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
             if not (np.isfinite(a0) and np.isfinite(a1)):
                 raise DataError(f"database {db.root} is damaged: anime {hit['node_id']} of "
                                 f"{hit['clip_id']!r} has times {a0} to {a1}")
+            if hit["phoneme"] not in PHONE_SET:  # it goes into a name, a CSV and a title
+                raise DataError(f"database {db.root} is damaged: anime {hit['node_id']} of "
+                                f"{hit['clip_id']!r} has phoneme {hit['phoneme']!r}, not a "
+                                "phone")
             stem = (f"{n:03d}_{_safe(hit['clip_id'])}_{_safe(str(hit['phoneme']))}_"
                     f"{int(hit['node_id'])}")
         else:

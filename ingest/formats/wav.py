@@ -33,9 +33,9 @@ _SIZE_PLACEHOLDERS = (0, 0xFFFFFFFF, 0x7FFFFFFF)
 #: below 8 kHz even the telephone band (to 3.4 kHz) is cut, so slower ones are refused.
 SPEECH_RATE_RANGE: tuple[int, int] = (8000, 48000)
 #: Most samples (all channels together) a speech file may hold: an hour of stereo at
-#: 48 kHz (1.3 GiB as float32; a lecture recorded by a camera is stereo). Compressed sound (FLAC, AAC, Opus) of silence takes a few bytes a
-#: second, so a small file may decode to any size: the bound is checked before decoding
-#: (:func:`check_speech_size`).
+#: 48 kHz (1.3 GiB as float32; a lecture recorded by a camera is stereo). Compressed
+#: sound (FLAC, AAC, Opus) of silence takes a few bytes a second, so a small file may
+#: decode to any size: the bound is checked before decoding (:func:`check_speech_size`).
 MAX_SPEECH_SAMPLES = 2 * 3600 * 48000
 #: Share of the channels' mean energy below which their average has cancelled them:
 #: channels carrying the same speech keep all of it, unrelated ones 1 / n_channels
