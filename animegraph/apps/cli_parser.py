@@ -69,9 +69,17 @@ class _Parser(argparse.ArgumentParser):
         # (which lists no command's options): the command's parser says it, with the
         # option it may be a misspelling of.
         namespace, extras = super().parse_known_args(args, namespace)
-        if extras and self._subparsers is None:
+        if extras and not self._has_commands:
             self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(extras)}")
         return namespace, extras
+
+    # Whether this parser hands its words on to a command's parser (the top parser, and
+    # ``corpus``): set here rather than read from argparse's private ``_subparsers``.
+    _has_commands = False
+
+    def add_subparsers(self, **kwargs):
+        self._has_commands = True
+        return super().add_subparsers(**kwargs)
 
     def _did_you_mean(self, extras: list[str]) -> str:
         known = [option for action in self._actions for option in action.option_strings]
