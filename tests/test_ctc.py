@@ -106,6 +106,16 @@ def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch, 
         assert np.load(kept, allow_pickle=False).shape == (len(fresh[1]), len(PHONES))
         if damage is not None and len(damage) > 100:  # refused unread, by its size
             assert "bytes, more than this audio's" in caplog.text
+    # what an older hama or piece layout kept of this audio goes when the model runs
+    # again (it would never be read); another audio's posteriors stay
+    stale = kept.with_name(f"{kept.name.split('-')[0]}-hama0.1-pieces1.npy")
+    other = kept.with_name("0123abcd-hama0.1-pieces1.npy")
+    kept.rename(stale)
+    other.write_bytes(b"another audio's")
+    ctc.forget()
+    with ctc.kept_on_disk():
+        ctc.posteriors(u.audio, u.sample_rate)
+    assert sorted((tmp_path / "phones").iterdir()) == sorted([kept, other])
     ctc.forget()
 
 

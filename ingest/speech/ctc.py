@@ -490,6 +490,10 @@ def _to_disk(path: Path, probs: np.ndarray) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_write(path) as handle:
             handle.write(buffer.getvalue())
+        # the same audio's posteriors of another hama or piece layout are never read again
+        for stale in path.parent.glob(f"{path.name.split('-', 1)[0]}-*.npy"):
+            if stale != path:
+                stale.unlink(missing_ok=True)
     except OSError as exc:  # a cache that cannot be written costs time, not the result
         logger.warning("%s: cannot keep the phone posteriors (%s)", path, exc)
 
