@@ -21,7 +21,7 @@ from pathlib import Path
 from db.atomic import atomic_write
 from db.errors import DataError
 from ingest.formats.labels import as_segments, decode_text, to_arpabet
-from ingest.formats.phones_csv import Segment
+from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, order_error
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
@@ -30,7 +30,6 @@ logger = logging.getLogger(__name__)
 HTK_UNIT = 1e-7
 _INTEGER = re.compile(r"[-+]?\d+")
 _FULL_CONTEXT = re.compile(r"^[^-]*\^[^-]*-([^+]+)\+")
-_EPS = 1e-9
 
 
 def read_htk_lab(path: str | os.PathLike[str]) -> list[Segment]:
@@ -99,13 +98,12 @@ def read_htk_lab(path: str | os.PathLike[str]) -> list[Segment]:
             phone = to_arpabet(label)
         except DataError as exc:
             raise DataError(f"{path}:{number}: {exc}") from None
-        if not start < end:
-            raise DataError(f"{path}:{number}: start {start} is not before end {end}")
-        if segments and start < segments[-1].end - _EPS:
-            raise DataError(
-                f"{path}:{number}: start {start} overlaps the segment ending {segments[-1].end}"
-            )
-        segments.append(Segment(phone, round(start, 7), round(end, 7)))
+        segment = Segment(phone, round(start, 7), round(end, 7))
+        problem = order_error(segment, segments[-1] if segments else None,
+                              tolerance=ORDER_TOLERANCE)
+        if problem is not None:
+            raise DataError(f"{path}:{number}: {problem}")
+        segments.append(segment)
     return segments
 
 

@@ -78,14 +78,32 @@ def _as_segment(item: object, index: int) -> Segment:
     return Segment(phone, times[0], times[1])
 
 
-def _order_error(segment: Segment, previous: Segment | None) -> str | None:
-    """Describe why ``segment`` cannot follow ``previous``, or return None."""
+#: Overlap forgiven between neighbours read from other tools' files (rounding of times
+#: written as decimals or as 100 ns units).
+ORDER_TOLERANCE = 1e-9
+
+
+def order_error(segment, previous, *, tolerance: float = 0.0) -> str | None:
+    """Why ``segment`` cannot follow ``previous`` (None if it can).
+
+    Parameters
+    ----------
+    segment, previous : objects with ``.start`` and ``.end`` in seconds
+        A phone or word segment and the one before it (``previous`` None for the first).
+    tolerance : float, optional
+        Overlap in seconds forgiven (:data:`ORDER_TOLERANCE` for other tools' files).
+
+    Returns
+    -------
+    str or None
+        The problem in a few words, for the caller to prefix with where it is.
+    """
     if not segment.start < segment.end:
         return f"start {segment.start} is not before end {segment.end}"
     if previous is not None:
-        if segment.start < previous.start:
+        if segment.start < previous.start - tolerance:
             return f"start {segment.start} is before the previous start {previous.start}"
-        if segment.start < previous.end:
+        if segment.start < previous.end - tolerance:
             return f"start {segment.start} overlaps the previous segment ending {previous.end}"
     return None
 
@@ -115,7 +133,7 @@ def as_segments(segments: Iterable[object]) -> list[Segment]:
     rows: list[Segment] = []
     for index, item in enumerate(segments):
         segment = _as_segment(item, index)
-        problem = _order_error(segment, rows[-1] if rows else None)
+        problem = order_error(segment, rows[-1] if rows else None)
         if problem is not None:
             raise ParameterError(f"segments[{index}]: {problem}")
         rows.append(segment)
@@ -204,7 +222,7 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
             if not (math.isfinite(start) and math.isfinite(end)) or start < 0:
                 raise DataError(f"{path}:{line}: times must be finite and >= 0, got {row!r}")
             segment = Segment(phone, start, end)
-            problem = _order_error(segment, segments[-1] if segments else None)
+            problem = order_error(segment, segments[-1] if segments else None)
             if problem is not None:
                 raise DataError(f"{path}:{line}: {problem}")
             segments.append(segment)

@@ -23,7 +23,7 @@ from pathlib import Path
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.labels import as_segments, decode_text, format_seconds, to_arpabet
-from ingest.formats.phones_csv import Segment
+from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, order_error
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
@@ -31,7 +31,6 @@ logger = logging.getLogger(__name__)
 #: Tier names taken as the phone tier, compared case-insensitively.
 PHONE_TIER_NAMES = ("phones", "phone", "segments")
 #: Slack for interval boundaries written with rounding (seconds).
-_EPS = 1e-9
 
 _TOKEN = re.compile(
     r"""
@@ -230,14 +229,12 @@ def read_textgrid(path: str | os.PathLike[str], *, tier: str | None = None) -> l
             phone = to_arpabet(text)
         except DataError as exc:
             raise DataError(f"{path}:{line}: {exc} in tier {chosen.name!r}") from None
-        if not start < end:
-            raise DataError(f"{path}:{line}: interval xmin {start} is not before xmax {end}")
-        if segments and start < segments[-1].end - _EPS:
-            raise DataError(
-                f"{path}:{line}: interval starting {start} overlaps the one ending "
-                f"{segments[-1].end}"
-            )
-        segments.append(Segment(phone, start, end))
+        segment = Segment(phone, start, end)
+        problem = order_error(segment, segments[-1] if segments else None,
+                              tolerance=ORDER_TOLERANCE)
+        if problem is not None:
+            raise DataError(f"{path}:{line}: interval {problem} (tier {chosen.name!r})")
+        segments.append(segment)
     return segments
 
 

@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 from db.errors import DataError
 from ingest.formats.labels import SILENCE_LABELS, decode_text
+from ingest.formats.phones_csv import ORDER_TOLERANCE, order_error
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 from ingest.formats.textgrid import read_tiers
 
@@ -31,7 +32,6 @@ from ingest.formats.textgrid import read_tiers
 GRID_UNIT = 1.0 / 25000.0
 #: Tier names taken as the word tier of a TextGrid, compared case-insensitively.
 WORD_TIER_NAMES = ("words", "word")
-_EPS = 1e-9
 
 
 class WordSegment(NamedTuple):
@@ -46,11 +46,9 @@ def _checked(segments: list[WordSegment], where: str, lines: list[int]) -> list[
     for k, seg in enumerate(segments):
         if not (math.isfinite(seg.start) and math.isfinite(seg.end)) or seg.start < 0:
             raise DataError(f"{where}:{lines[k]}: bad times {seg.start}, {seg.end}")
-        if not seg.start < seg.end:
-            raise DataError(f"{where}:{lines[k]}: start {seg.start} is not before end {seg.end}")
-        if k and seg.start < segments[k - 1].end - _EPS:
-            raise DataError(f"{where}:{lines[k]}: word starting {seg.start:.4f} s overlaps "
-                            f"the one ending {segments[k - 1].end:.4f} s")
+        problem = order_error(seg, segments[k - 1] if k else None, tolerance=ORDER_TOLERANCE)
+        if problem is not None:
+            raise DataError(f"{where}:{lines[k]}: word {problem}")
     if not any(seg.word for seg in segments):
         raise DataError(f"{where}: no words (only silence)")
     return segments
