@@ -47,34 +47,11 @@ def cmd_synth(args: argparse.Namespace) -> int:
     _check_timecode(args)
     if args.method != "anime-graph":
         return _synth_baseline(args)
-    method = args.search or ("window" if args.window is not None else "exact")
-    if args.window is not None and args.window < 1:
-        raise UsageError(f"animegraph synth: --window must be at least 1, got {args.window}")
-    if method == "window" and args.window is None:
-        raise UsageError("animegraph synth: --search window needs --window K")
-    if args.tolerance is not None:
-        if not 0.0 <= args.tolerance < 1.0:
-            raise UsageError(f"animegraph synth: --tolerance must be a number in [0, 1), got "
-                             f"{args.tolerance}")
-        if method != "exact":
-            raise UsageError(f"animegraph synth: --tolerance is only used by method='exact' "
-                             f"(the exact search), not {method}")
-    if args.k_best is not None and args.k_best < 1:
-        raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
+    method = _search_method(args)
     sidecar = sidecar_labels(args.audio) if args.labels is None and args.text is None else None
     args.labels = sidecar or args.labels
     k_best, path = synth_path(args)
-    if args.context_ranking is not None and not k_best:
-        raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
-                         "averages; the paper's search (--exact, --window, --search) takes "
-                         "one anime a phone")
-    if args.helper is not None and k_best:
-        raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
-                         "phone) at its jumps; --k-best averages animes instead: give one")
-    if args.recentre is not None and not k_best:
-        raise UsageError("animegraph synth: --recentre changes how k-best averages "
-                         "animes; the paper's search (--exact, --window, --search) takes one "
-                         "anime a phone")
+    _check_k_best_options(args, k_best)
     audio_cost = args.audio_cost or "plp"
     path, guide_name, guide_blend, guide_rank = synth_plan(args, path)
     t0 = time.perf_counter()
@@ -155,27 +132,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for warning in out.warnings:
         print(f"animegraph: warning: {warning}", file=sys.stderr)
     write_motion(out, model, args.output, timecode=args.timecode)
-    if isinstance(out.emotion.target, dict):
-        print(f"animegraph: emotion mix {out.emotion.describe()}: animes preferred from "
-              f"{out.emotion.search}, emotion components blended from their mappings",
-              file=sys.stderr)
-    elif out.emotion.target is not None and out.emotion.search != out.emotion.target:
-        print(f"animegraph: the database has no {out.emotion.target} animes: preferred "
-              f"{out.emotion.search}, mapped into {out.emotion.target}", file=sys.stderr)
-    for note in out.notes:
-        print(f"animegraph: {note}", file=sys.stderr)
-    r = out.result
-    t = out.timings
-    print(f"animegraph: {len(out.phones)} phone{'s' * (len(out.phones) != 1)} "
-          f"({out.segmentation}), {r.n_jumps} jump match{'es' * (r.n_jumps != 1)}, cost "
-          f"{r.cost:.3f} ({r.method}, {r.n_expanded} expansion{'s' * (r.n_expanded != 1)}); "
-          f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
-          f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}"
-          + (f" (k-best {k_best}: each phone the mean of up to {k_best} "
-             f"anime{'s' * (k_best != 1)}, "
-             + ("cross-faded into its neighbours through the recorded transitions"
-                if out.cross_faded else "cut at its boundaries") + ")"
-             if k_best else "") + f"; wrote {args.output}", file=sys.stderr)
+    for line in _emotion_lines(out.emotion) + list(out.notes):
+        print(f"animegraph: {line}", file=sys.stderr)
+    print(f"animegraph: {_summary(out, k_best)}; wrote {args.output}", file=sys.stderr)
     missing = backoffs(out)
     if missing:
         print(f"animegraph: phones missing from the database, backed off: "
@@ -193,6 +152,67 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if args.explain_json:
         write_explain(out, args.explain_json)
     return 0
+
+
+def _search_method(args: argparse.Namespace) -> str:
+    """The search ``synth`` runs (``exact`` unless asked), its options checked."""
+    method = args.search or ("window" if args.window is not None else "exact")
+    if args.window is not None and args.window < 1:
+        raise UsageError(f"animegraph synth: --window must be at least 1, got {args.window}")
+    if method == "window" and args.window is None:
+        raise UsageError("animegraph synth: --search window needs --window K")
+    if args.tolerance is not None:
+        if not 0.0 <= args.tolerance < 1.0:
+            raise UsageError(f"animegraph synth: --tolerance must be a number in [0, 1), got "
+                             f"{args.tolerance}")
+        if method != "exact":
+            raise UsageError(f"animegraph synth: --tolerance is only used by method='exact' "
+                             f"(the exact search), not {method}")
+    if args.k_best is not None and args.k_best < 1:
+        raise UsageError(f"animegraph synth: --k-best must be at least 1, got {args.k_best}")
+    return method
+
+
+def _check_k_best_options(args: argparse.Namespace, k_best: int | None) -> None:
+    """The options of k-best only with k-best, ``--helper`` only without it."""
+    if args.context_ranking is not None and not k_best:
+        raise UsageError("animegraph synth: --context-ranking ranks the animes k-best "
+                         "averages; the paper's search (--exact, --window, --search) takes "
+                         "one anime a phone")
+    if args.helper is not None and k_best:
+        raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
+                         "phone) at its jumps; --k-best averages animes instead: give one")
+    if args.recentre is not None and not k_best:
+        raise UsageError("animegraph synth: --recentre changes how k-best averages "
+                         "animes; the paper's search (--exact, --window, --search) takes one "
+                         "anime a phone")
+
+
+def _emotion_lines(emotion) -> list[str]:
+    """What the user is told of the emotion synthesized (a mix, or one mapped into)."""
+    if isinstance(emotion.target, dict):
+        return [f"emotion mix {emotion.describe()}: animes preferred from "
+                f"{emotion.search}, emotion components blended from their mappings"]
+    if emotion.target is not None and emotion.search != emotion.target:
+        return [f"the database has no {emotion.target} animes: preferred "
+                f"{emotion.search}, mapped into {emotion.target}"]
+    return []
+
+
+def _summary(out, k_best: int | None) -> str:
+    """The line of phones, jumps, cost and time that ends a synthesis."""
+    r, t = out.result, out.timings
+    line = (f"{len(out.phones)} phone{'s' * (len(out.phones) != 1)} "
+            f"({out.segmentation}), {r.n_jumps} jump match{'es' * (r.n_jumps != 1)}, cost "
+            f"{r.cost:.3f} ({r.method}, {r.n_expanded} expansion{'s' * (r.n_expanded != 1)}); "
+            f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
+            f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}")
+    if k_best:
+        joined = ("cross-faded into its neighbours through the recorded transitions"
+                  if out.cross_faded else "cut at its boundaries")
+        line += (f" (k-best {k_best}: each phone the mean of up to {k_best} "
+                 f"anime{'s' * (k_best != 1)}, {joined})")
+    return line
 
 
 def _check_timecode(args: argparse.Namespace) -> None:
