@@ -19,10 +19,12 @@ MAX_SIDE_FILE_BYTES = 16 << 20
 
 def read_bytes(path, what: str, limit: int | None = None) -> bytes:
     """The bytes of ``path``; DataError naming ``what`` and the file if it is absent,
-    unreadable or larger than ``limit`` bytes (checked before reading more)."""
+    unreadable or larger than ``limit`` bytes (checked before reading more), or not a file
+    (a FIFO or a device would block the read, or never end it)."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{what} not found: {path}")
+        raise DataError(f"{what} {path} is not a file" if path.exists() else
+                        f"{what} not found: {path}")
     try:
         with path.open("rb") as handle:
             data = handle.read(-1 if limit is None else limit + 1)
