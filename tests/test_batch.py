@@ -95,6 +95,25 @@ def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):
         read_script(path)
 
 
+def test_a_script_beyond_its_bounds_is_refused_at_once(tmp_path):
+    """A script is read whole and parsed at ~50 times its size (64 MB of short lines took
+    3.4 GB and 44 s, to fail on line 3), and a line's text went to eSpeak NG whatever its
+    length."""
+    from ingest.formats.text import MAX_SIDE_FILE_BYTES
+
+    big = tmp_path / "big.csv"
+    with open(big, "w") as handle:  # a hole after the header: no disk, no time
+        handle.write("id,text\na,Hi\n")
+        handle.truncate(MAX_SIDE_FILE_BYTES + 1)
+    with pytest.raises(ScriptError, match=r"big\.csv is larger than 16,777,216 bytes"):
+        read_script(big)
+    long = tmp_path / "long.jsonl"
+    long.write_text(json.dumps({"id": "a", "text": "word " * 2001}) + "\n")
+    with pytest.raises(ScriptError, match=r"long\.jsonl line 1: text of 10,004 characters "
+                                          r"\(at most 10,000"):
+        read_script(long)
+
+
 def test_the_shipped_example_is_a_valid_script():
     lines = read_script(EXAMPLE_SCRIPT)
     assert len(lines) >= 5 and {x.speaker for x in lines} == {"tutor", "student"}
