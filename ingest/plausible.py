@@ -78,6 +78,24 @@ MAX_DROPOUT_SHARE = 0.05
 #: Smallest range (mm, or curve units) of a moving track.
 MIN_RANGE = 1e-6
 
+# Ceilings of the limits above: the loosest a user (``--max-speed``) or a database's
+# manifest (``limits``, someone else's data) may set them. Beyond them a check passes
+# what no recording of a face holds, and a database could wave its own damaged clips
+# (a marker 1 km away) into the model every clip shares.
+#: Fastest any limit may allow, mm/s: no part of a body moves at 100 m/s (a pitcher's
+#: hand reaches 40 m/s; a face's markers measure at most 0.5 m/s here).
+MAX_SPEED_CEILING_MM_S = 100_000.0
+#: Farthest any limit may allow, mm: 100 m, beyond the largest capture stage.
+MAX_COORDINATE_CEILING_MM = 100_000.0
+#: Largest curve value any limit may allow: ten times the default's 1000 (blendshape
+#: weights are 0-1 or 0-100, angles within a turn, 360 degrees).
+MAX_CURVE_CEILING = 10_000.0
+#: Longest dropout any limit may fill, s: a second of speech is 12-15 phones, whose
+#: motion a filled gap would invent and the database offer as recorded.
+MAX_DROPOUT_CEILING_S = 1.0
+#: Largest share of a track any limit may fill: past half it is invented, not recorded.
+MAX_DROPOUT_SHARE_CEILING = 0.5
+
 _EMOTION = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+ -]*$")
 _SEPARATORS = ("/", "\\")
 
@@ -88,6 +106,9 @@ class Limits:
 
     A database keeps the limits its clips were added with (its manifest's ``limits``,
     :meth:`to_entry`): its stored clips are checked with them again before a refit.
+    Each is above 0 (the dropout share may be 0) and at most its ceiling
+    (:data:`MAX_SPEED_CEILING_MM_S` ...), whoever sets it: a limit beyond is
+    ParameterError.
     """
 
     max_speed_mm_s: float = MAX_SPEED_MM_S
@@ -97,14 +118,14 @@ class Limits:
     max_dropout_share: float = MAX_DROPOUT_SHARE
 
     def __post_init__(self):
-        for name in ("max_speed_mm_s", "max_coordinate_mm", "max_curve_value",
-                     "max_dropout_s"):
+        for name, ceiling in _CEILINGS.items():
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-                raise ParameterError(f"{name} must be a number > 0, got {value!r}")
-        if not 0 <= self.max_dropout_share < 1:
-            raise ParameterError(f"max_dropout_share must be in [0, 1), got "
-                                 f"{self.max_dropout_share!r}")
+            share = name == "max_dropout_share"  # the only one that may be 0
+            if not (isinstance(value, int | float) and (0 <= value if share else 0 < value)
+                    and value <= ceiling):
+                raise ParameterError(f"{name} must be a number {'>=' if share else '>'} 0 "
+                                     f"and at most {ceiling:g} (no face recording needs "
+                                     f"more), got {value!r}")
 
     def loosest(self, other: Limits) -> Limits:
         """The limits passing what either of ``self`` and ``other`` passes (every limit
@@ -134,6 +155,14 @@ class Limits:
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ParameterError(f"{name} must be a number, got {type(value).__name__}")
         return cls(**values)
+
+
+#: Each limit's ceiling (:class:`Limits`, in its fields' order).
+_CEILINGS = {"max_speed_mm_s": MAX_SPEED_CEILING_MM_S,
+             "max_coordinate_mm": MAX_COORDINATE_CEILING_MM,
+             "max_curve_value": MAX_CURVE_CEILING,
+             "max_dropout_s": MAX_DROPOUT_CEILING_S,
+             "max_dropout_share": MAX_DROPOUT_SHARE_CEILING}
 
 
 def check_label(value: str | None, what: str, *, emotion: bool = False) -> None:

@@ -14,7 +14,8 @@ present), then prints, section by section:
    tried, refused by ``animegraph sql`` in one line, refused by DuckDB's own sandbox
    alone (the bare connection, without the statement filter), and whether any file in
    or outside the database changed.
-2. **Crafted databases** (``tests/crafted.py: DATABASE_MUTATIONS``) x ``info``, ``sql``
+2. **Crafted databases** (``tests/crafted.py: DATABASE_MUTATIONS``, a manifest's
+   ``limits`` beyond their ceilings among them) x ``info``, ``sql``
    (the command line's ``main`` in this process: held = no exception escapes it) and
    ``synth`` (a real process: held = exit 0, or exit 1 with one line on stderr; a
    traceback or a signal such as a segfault is a failure).
@@ -28,8 +29,8 @@ present), then prints, section by section:
    different clips into one new database at once: clips lost = clips reported added but
    missing from the final database.
 6. **Real data** (``--shared``, default ``../shared/data``): the synthetic corpus, the
-   FACEGOOD and talking-face clips through the plausibility checks: passed, passed with
-   samples filled, rejected, and the fastest point.
+   FACEGOOD, talking-face and Live Link clips through the plausibility checks: passed,
+   passed with samples filled, rejected, and the fastest point.
 7. **Crafted media** (``tests/crafted.py``: ``disguised_playlists``, ``flac_declaring``,
    ``gltf_reaching``): playlists named ``speech.mp4`` (DASH, HLS, ffconcat) that name a
    private recording elsewhere, and a FLAC named ``.wav`` declaring 2**36 samples, each
@@ -385,8 +386,11 @@ def probe_real(shared: Path, corpus: Path) -> dict:
     from ingest.readers import discover, load
 
     out = {}
+    # livelink: its rotations must still read as radians (head yaw/roll within pi, pitch
+    # and the eyes within pi/2)
     for name, folder in (("synthetic", corpus), ("facegood", shared / "facegood"),
-                         ("talkingface", shared / "talkingface")):
+                         ("talkingface", shared / "talkingface"),
+                         ("livelink", shared / "livelink")):
         if not folder.exists():
             print(f"  {folder} absent: skipped")
             continue

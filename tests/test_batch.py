@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
 
 import numpy as np
@@ -94,6 +95,25 @@ def test_a_bad_script_is_refused_with_its_line(tmp_path, name, body, message):
         read_script(path)
 
 
+def test_a_script_beyond_its_bounds_is_refused_at_once(tmp_path):
+    """A script is read whole and parsed at ~50 times its size (64 MB of short lines took
+    3.4 GB and 44 s, to fail on line 3), and a line's text went to eSpeak NG whatever its
+    length."""
+    from ingest.formats.text import MAX_SIDE_FILE_BYTES
+
+    big = tmp_path / "big.csv"
+    with open(big, "w") as handle:  # a hole after the header: no disk, no time
+        handle.write("id,text\na,Hi\n")
+        handle.truncate(MAX_SIDE_FILE_BYTES + 1)
+    with pytest.raises(ScriptError, match=r"big\.csv is larger than 16,777,216 bytes"):
+        read_script(big)
+    long = tmp_path / "long.jsonl"
+    long.write_text(json.dumps({"id": "a", "text": "word " * 2001}) + "\n")
+    with pytest.raises(ScriptError, match=r"long\.jsonl line 1: text of 10,004 characters "
+                                          r"\(at most 10,000"):
+        read_script(long)
+
+
 def test_the_shipped_example_is_a_valid_script():
     lines = read_script(EXAMPLE_SCRIPT)
     assert len(lines) >= 5 and {x.speaker for x in lines} == {"tutor", "student"}
@@ -164,6 +184,60 @@ def test_finished_needs_the_same_key_and_every_output(tmp_path):
     assert finished(folder, "k1") is None
     (folder / DONE).write_text(json.dumps({**marker, "outputs": ["speech.wav", "motion.c3d"]}))
     assert finished(folder, "k1") is None  # an output went missing
+
+
+def _deep(p):
+    p.write_text('{"key": ' + "[" * 100_000 + "]" * 100_000 + "}")
+
+
+@pytest.mark.parametrize("make", [
+    _deep,  # a RecursionError
+    lambda p: p.write_bytes(b'{"key": "k1", "x": "' + b" " * (2 << 20) + b'"}'),  # 2 MB
+    lambda p: os.mkfifo(p),  # the read blocked forever
+    lambda p: p.symlink_to(p.parent.parent / "elsewhere.json"),  # read outside OUT
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": 5})),  # TypeError
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": [1]})),  # TypeError
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": "speech.wav"})),
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": ["../elsewhere.json"]})),
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": [str(p.parent.parent / "x")]})),
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": ["a\x00b"]})),
+    lambda p: p.write_text(json.dumps(_MARKER | {"outputs": ["link.wav"]})),  # a link out
+], ids=["deep", "huge", "fifo", "symlink", "outputs-int", "outputs-ints", "outputs-str",
+        "outputs-up", "outputs-absolute", "outputs-nul", "outputs-symlink"])
+def test_a_crafted_marker_is_not_a_finished_line(tmp_path, make):
+    """An output folder from someone else: each marker was a traceback, a hang, or a
+    read (or a look) outside the output folder; now the line is just not finished."""
+    folder = tmp_path / "out" / "a"
+    folder.mkdir(parents=True)
+    (folder / "speech.wav").write_bytes(b"x")
+    for name in ("elsewhere.json", "x"):  # finished markers and outputs outside the folder
+        (tmp_path / "out" / name).write_text(json.dumps(_MARKER | {"outputs": []}))
+    (folder / "link.wav").symlink_to(tmp_path / "out" / "x")
+    make(folder / DONE)
+    assert finished(folder, "k1") is None
+
+
+_MARKER = {"key": "k1", "outputs": ["speech.wav"], "row": {"id": "a", "status": "done"}}
+
+
+def test_a_line_folder_linking_out_of_the_output_folder_is_that_lines_error(tiny_db,
+                                                                            tmp_path):
+    # its files were written where the link points; a marker's row named another line
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    script = tmp_path / "lines.csv"
+    script.write_text("id,text\na,Hi\nb,Hello\n")
+    (tmp_path / "out" / "b").mkdir(parents=True)
+    (tmp_path / "out" / "a").symlink_to(outside)
+    # b finished, by its marker, but the marker's row names another line
+    key = line_key(read_script(script)[1], database_identity(tiny_db[0])[1], "none")
+    (tmp_path / "out" / "b" / DONE).write_text(json.dumps(
+        {"key": key, "outputs": [], "row": {"id": "a", "status": "done"}}))
+    result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
+    assert [(r["id"], r["status"]) for r in result.rows] == [("a", "failed"), ("b", "skipped")]
+    assert "output folder" in result.rows[0]["error"] and "is a symbolic link" in \
+        result.rows[0]["error"]
+    assert not list(outside.iterdir())
 
 
 def test_the_key_follows_inputs_recording_and_database(tmp_path):

@@ -183,6 +183,11 @@ def test_dropped_frames_are_reported_and_filled(tmp_path):
     ("backwards", "timecode goes back"),
     ("nan", "NaN"),
     ("percent", "an ARKit weight lies in"),
+    # rotations in degrees that were within the old bound of a full turn (2 pi)
+    ("eye_degrees", r"LeftEyeYaw is 5; its angles are radians, within ±1.571"),
+    ("head_degrees", r"HeadYaw is 4; its angles are radians, within ±3.142"),
+    ("pitch_degrees", r"HeadPitch is -2; its angles are radians, within ±1.571"),
+    ("huge_angle", r"HeadRoll is 1e\+09; its angles are radians"),
     ("short_audio", "but audio"),
     ("two_takes", "more than one take"),
     ("no_audio", "no take.wav"),
@@ -207,6 +212,11 @@ def test_bad_takes_fail_with_one_reason(tmp_path, case, needle):
         _set_cell(_write_take(tmp_path), 5, 20, "nan")
     elif case == "percent":
         _set_cell(_write_take(tmp_path), 7, 2, "35.0")
+    elif case.endswith(("_degrees", "_angle")):
+        column, value = {"eye": ("leftEyeYaw", "5.0"), "head": ("headYaw", "4.0"),
+                         "pitch": ("headPitch", "-2.0"), "huge": ("headRoll", "1e9")}[
+                             case.split("_")[0]]
+        _set_cell(_write_take(tmp_path), 9, 2 + ARKIT_CHANNELS.index(column), value)
     elif case == "short_audio":
         _write_take(tmp_path, n=600, audio_s=4.0)
     elif case == "two_takes":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -218,6 +219,30 @@ def test_the_speed_limit_is_an_option_and_checked():
         Limits(max_speed_mm_s=-1)
 
 
+@pytest.mark.parametrize("name", [f.name for f in fields(Limits)])
+def test_every_limit_has_a_ceiling(name):
+    """A limit was any finite number above 0: a manifest (someone else's data) could set
+    1e30 and wave its own damaged clips, and the next ones, into the model."""
+    from db.errors import ParameterError
+    from ingest.plausible import _CEILINGS
+
+    ceiling = _CEILINGS[name]
+    assert getattr(Limits(**{name: ceiling}), name) == ceiling  # the ceiling itself is fine
+    for value in (ceiling * 1.01, 1e30):
+        with pytest.raises(ParameterError, match=f"{name} must be .* at most {ceiling:g}"):
+            Limits(**{name: value})
+
+
+def test_max_speed_beyond_its_ceiling_is_one_line(capsys, tmp_path):
+    from animegraph.apps.cli import main
+
+    assert main(["ingest", str(tmp_path), "--db", str(tmp_path / "db"), "--max-speed",
+                 "1e30"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-speed must be above 0 and at most 100000" in err
+    assert not (tmp_path / "db").exists()
+
+
 def test_a_database_checks_its_clips_with_the_limits_they_went_in_with(tiny_corpus, tmp_path):
     """A database built with a looser --max-speed was 'damaged' to the next ingest (and
     to fit) unless the flag was given again: its stored clips were checked with the
@@ -259,3 +284,10 @@ def test_a_database_checks_its_clips_with_the_limits_they_went_in_with(tiny_corp
     with pytest.raises(DataError, match=r"manifest.json: limits: max_speed_mm_s must be a "
                                         r"number, got str"):
         prepared_from_database(Database.open(path))
+    # A crafted manifest loosening the checks beyond any face (a marker 1 km away, moving
+    # at 1e30 mm/s) is damage too, not limits.
+    for name in ("max_speed_mm_s", "max_coordinate_mm"):
+        old.write_text(json.dumps({**db.manifest, "limits": {name: 1e30}}))
+        with pytest.raises(DataError, match=f"manifest.json: limits: {name} must be .* at "
+                                            "most 100000 .*, got 1e[+]30$"):
+            ingest([more], path)

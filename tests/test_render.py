@@ -446,6 +446,37 @@ def test_plot_against_truth(take, tmp_path, capsys):
     assert not (tmp_path / "q.png").exists()
 
 
+def _sparse(path, head: str, size: int):
+    """A file of ``size`` bytes starting ``head`` (the rest a hole: no disk, no time)."""
+    with open(path, "w") as handle:
+        handle.write(head)
+        handle.truncate(size)
+    return path
+
+
+def test_motion_files_and_explanations_beyond_their_bound_are_one_line(take, tmp_path,
+                                                                        capsys):
+    """Read whole and parsed at ~5-50 times their size: a large crafted file was a memory
+    bomb for plot, render, synth and map-emotion."""
+    from animegraph.motion.files import write_channel_csv
+    from ingest.formats.livelink import ARKIT_CHANNELS, livelink_column
+    from ingest.formats.text import MAX_MOTION_TABLE_BYTES, MAX_SIDE_FILE_BYTES
+
+    big = MAX_MOTION_TABLE_BYTES + 1
+    livelink = "Timecode,BlendshapeCount," + ",".join(map(livelink_column, ARKIT_CHANNELS))
+    for name, head in (("channels.csv", "frame,time,a\n0,0,1\n"),
+                       ("take.csv", livelink + "\n")):
+        motion = _sparse(tmp_path / name, head, big)
+        line = _one_line(capsys, main(["plot", str(motion), "-o", str(tmp_path / "p.png")]), 1)
+        assert f"is larger than {MAX_MOTION_TABLE_BYTES:,} bytes" in line
+    write_channel_csv(tmp_path / "syn.csv", np.zeros((3, 1)), ["a"], 30.0)
+    explain = _sparse(tmp_path / "e.json", '{"phones": [', MAX_SIDE_FILE_BYTES + 1)
+    line = _one_line(capsys, main(["plot", str(tmp_path / "syn.csv"), "--explain",
+                                   str(explain), "-o", str(tmp_path / "p.png")]), 1)
+    assert f"is larger than {MAX_SIDE_FILE_BYTES:,} bytes" in line
+    assert not (tmp_path / "p.png").exists()
+
+
 def test_plot_names_the_motion_by_its_file(take, tmp_path, monkeypatch):
     # A recorded snippet (query --export) was labelled "synthesized"
     import matplotlib.axes

@@ -38,6 +38,7 @@ import json
 import logging
 import multiprocessing
 import os
+import stat
 import threading
 import time
 from collections import Counter
@@ -52,6 +53,7 @@ from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.lock import lock_path, writer_lock
 from db.store import Database, current_version
+from ingest.readers.common import read_json_object
 from ingest.workers import sigint_ignored_by_children
 
 #: Longest wait for a local cluster's workers to start (a bound against a hang).
@@ -236,13 +238,16 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
     for line in lines:
         folder = out / line.id
         try:
+            if folder.is_symlink():  # from someone else: its files would go where it points
+                raise LineError(f"its output folder {folder} is a symbolic link (a batch "
+                                "writes only inside --out)")
             key = line_key(line, identity, options.render)
         except LineError as exc:
             rows[line.id] = _row(line, status="failed", error=str(exc))
             continue
         saved = None if options.force else finished(folder, key, guides)
         if saved is not None:
-            rows[line.id] = {**saved, "status": "skipped"}
+            rows[line.id] = {**saved, "id": line.id, "status": "skipped"}
             continue
         try:
             # here, not in each worker after its start-up
@@ -554,15 +559,23 @@ def finished(folder: Path, key: str,
     ``guides(parts)`` gives the stored state of guide parts now (:func:`guide_state`):
     a line that went as speech alone is finished only if the guide it had (or lacked)
     is still what is stored, so fitting the guide after a batch remakes its lines.
+
+    The output folder may come from someone else: a marker or an output that is not a
+    regular file in ``folder`` (a symbolic link out, a FIFO, a name with a path in it), a
+    marker larger or deeper than a JSON side file may be
+    (:func:`ingest.readers.common.read_json_object`) or of the wrong types is not a
+    finished line: the line is made again, and its files replace these.
     """
-    try:
-        marker = json.loads((folder / DONE).read_text())
-    except (OSError, ValueError):
+    if not _regular_file(folder / DONE):
         return None
-    if not isinstance(marker, dict) or marker.get("key") != key:
+    try:
+        marker = read_json_object(folder / DONE)
+    except DataError:
         return None
     outputs = marker.get("outputs", [])
-    if not all((folder / name).is_file() for name in outputs):
+    if marker.get("key") != key or not isinstance(outputs, list) or not all(
+            isinstance(name, str) and Path(name).name == name and name not in ("", ".", "..")
+            and _regular_file(folder / name) for name in outputs):
         return None
     used = marker.get("guides")
     if guides is not None and used is not None:
@@ -574,6 +587,14 @@ def finished(folder: Path, key: str,
             return None
     row = marker.get("row")
     return row if isinstance(row, dict) else None
+
+
+def _regular_file(path: Path) -> bool:
+    """True if ``path`` is a regular file itself (not a symbolic link to one)."""
+    try:
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except (OSError, ValueError):  # absent, or a name with a NUL
+        return False
 
 
 # --------------------------------------------------------------------------------------

@@ -8,7 +8,8 @@ column     required meaning
 ``id``     yes      the line's name: letters, digits, ``.``, ``_``, ``-`` (its output
                     folder is ``OUT/<id>/``); unique, ignoring case
 ``text``   yes      what is said: spoken by eSpeak NG when there is no ``audio``, the
-                    transcript for forced alignment when there is
+                    transcript for forced alignment when there is; at most 10,000
+                    characters (a transcript's bound)
 ``audio``           a recording (WAV, or a video's or ``.m4a``'s sound track, as ``synth``
                     reads it), relative to the script's folder and inside it (a line's
                     ``speech.wav`` is its recording: a script from others must not
@@ -24,7 +25,8 @@ column     required meaning
                     search's sequence (:mod:`animegraph.synthesis.path`)
 ========== ======== ===================================================================
 
-The whole script is checked before any work: a malformed row (with its line number), a
+A script is at most :data:`ingest.formats.text.MAX_SIDE_FILE_BYTES` (16 MB). The whole
+script is checked before any work: a malformed row (with its line number), a
 duplicate id or an unknown column raises :class:`ScriptError`. Problems that depend on
 the database or on files (an emotion the database lacks, a missing recording, text eSpeak
 cannot speak) are left to the line itself (``animegraph.apps.batch`` fails a line with a
@@ -39,7 +41,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from db.errors import AnimeGraphError, ParameterError
+from db.errors import AnimeGraphError, DataError, ParameterError
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
+from ingest.plausible import MAX_TEXT_CHARS
 
 #: Every column a script may have.
 COLUMNS = ("id", "text", "audio", "emotion", "speaker", "voice", "window", "exact")
@@ -163,15 +167,15 @@ def read_script(path: str | Path) -> list[ScriptLine]:
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".jsonl", ".ndjson", ".json"):
         raise ScriptError(f"script {path}: expected a .csv or .jsonl file")
-    try:
-        raw = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise ScriptError(f"script {path} does not exist") from None
+    if not path.exists():
+        raise ScriptError(f"script {path} does not exist")
+    try:  # bounded: parsed, a short line costs ~50 times its bytes
+        raw = read_bytes(path, "script", MAX_SIDE_FILE_BYTES).decode("utf-8-sig")
+    except DataError as exc:  # not a file, unreadable, too large
+        raise ScriptError(str(exc)) from None
     except UnicodeDecodeError as exc:
         raise ScriptError(f"script {path} is not UTF-8 text ({exc.reason} at byte "
                           f"{exc.start})") from None
-    except OSError as exc:
-        raise ScriptError(f"cannot read script {path}: {exc.strerror or exc}") from None
     rows = _csv_rows(path, raw) if suffix == ".csv" else _jsonl_rows(path, raw)
     lines: list[ScriptLine] = []
     seen: dict[str, int] = {}
@@ -276,6 +280,9 @@ def _line(path: Path, line_no: int, row: dict) -> ScriptLine:
     text = text_of("text")
     if not text:
         raise ScriptError(f"{where}: empty text (line {ident!r})")
+    if len(text) > MAX_TEXT_CHARS:  # eSpeak NG would speak it for hours
+        raise ScriptError(f"{where}: text of {len(text):,} characters (at most "
+                          f"{MAX_TEXT_CHARS:,}: a transcript's bound)")
     audio = text_of("audio")
     try:
         emotion = parse_emotion(text_of("emotion"))

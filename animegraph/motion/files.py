@@ -8,6 +8,7 @@ frame rate — the layout of the database's ``frames`` table and of what
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import os
@@ -19,6 +20,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
+from ingest.formats.text import MAX_MOTION_TABLE_BYTES, MAX_SIDE_FILE_BYTES, read_utf8
 
 logger = logging.getLogger(__name__)
 
@@ -111,11 +113,11 @@ def read_motion(path: str | os.PathLike) -> Motion:
 
 
 def _read_channel_csv(path: Path) -> Motion:
+    handle = io.StringIO(read_utf8(path, "motion CSV", limit=MAX_MOTION_TABLE_BYTES))
+    header = handle.readline().strip().split(",")
     try:
-        with open(path, encoding="utf-8-sig") as handle:
-            header = handle.readline().strip().split(",")
-            values = np.loadtxt(handle, delimiter=",", ndmin=2)
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        values = np.loadtxt(handle, delimiter=",", ndmin=2)
+    except ValueError as exc:
         raise DataError(f"cannot read motion {path}: {exc}") from None
     if header[:2] != ["frame", "time"] or len(header) < 3:
         raise DataError(f"{path}:1: motion CSV must start 'frame,time,' then channel names")
@@ -170,7 +172,8 @@ def read_phone_track(*, labels: str | os.PathLike | None = None,
     if explain is not None:
         path = Path(explain)
         try:
-            record = json.loads(path.read_text())
+            # bounded: a phone's entry is ~300 bytes, parsed ~17 times that
+            record = json.loads(read_utf8(path, "explanation", limit=MAX_SIDE_FILE_BYTES))
             rows = record["phones"]
             return [{"phone": str(r["phone"]), "start": float(r["start"]),
                      "end": float(r["end"]), "clip_id": r.get("clip_id"),

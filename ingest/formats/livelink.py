@@ -13,7 +13,8 @@ Epic Games' Live Link Face app records ARKit's face tracking and exports it as C
 - the 52 blendshapes are ARKit's (``ARFaceAnchor.BlendShapeLocation``), weights in
   [0, 1]; the app capitalises ARKit's names (``eyeBlinkLeft`` -> ``EyeBlinkLeft``).
   "Left"/"Right" are the subject's own left and right (ARKit's convention);
-- the rotations are angles in radians (as the app exports them; not clamped).
+- the rotations are angles in radians (as the app exports them; not clamped): a
+  reader refuses a column in another unit (:func:`rotation_limit`).
 
 Inside the project a take's channels carry ARKit's own names (:data:`ARKIT_BLENDSHAPES`,
 lower camel case) followed by :data:`ROTATIONS`; :func:`livelink_column` gives the CSV's
@@ -69,6 +70,15 @@ LIVELINK_FPS = 60.0
 DECIMALS = 10
 #: How far outside [0, 1] a blendshape weight may stray before the file is refused.
 WEIGHT_SLACK = 0.05
+#: Largest head yaw or roll, radians: an angle of a rotation in radians lies within a
+#: half turn either way; beyond it, the column is in another unit (degrees, say).
+MAX_HEAD_ANGLE_RAD = math.pi
+#: Largest head pitch, radians: Euler pitch lies within a quarter turn either way.
+MAX_HEAD_PITCH_RAD = math.pi / 2
+#: Largest eye yaw, pitch or roll, radians: no eye turns a quarter turn in its socket
+#: (its range is about 50 degrees; a real take's eyes reach 38). Eyes in degrees are
+#: refused as soon as they move more than 1.6 degrees, as a speaker's always do.
+MAX_EYE_ANGLE_RAD = math.pi / 2
 
 _TIMECODE = re.compile(r"^(\d{1,2}):(\d{2}):(\d{2})[:;](\d{2}(?:\.\d+)?)$")
 
@@ -182,16 +192,26 @@ def _timecode_rate(parts: list[tuple[int, int, int, float]]) -> float:
 
 def _check_ranges(values: np.ndarray, names, lines: list[int], path: Path) -> None:
     """Plausibility: blendshape weights in [0, 1] (within :data:`WEIGHT_SLACK`), rotations
-    within a turn (radians); DataError at the first value outside."""
+    in radians (:func:`rotation_limit`); DataError at the first value outside."""
     shapes = np.array([n in ARKIT_BLENDSHAPES for n in names])
-    limit = np.where(shapes, 1.0 + WEIGHT_SLACK, 2 * math.pi)
-    low = np.where(shapes, -WEIGHT_SLACK, -2 * math.pi)
+    limit = np.array([1.0 + WEIGHT_SLACK if shape else rotation_limit(n)
+                      for n, shape in zip(names, shapes, strict=True)])
+    low = np.where(shapes, -WEIGHT_SLACK, -limit)
     bad = (values > limit) | (values < low)
     if bad.any():
         i, j = (int(k[0]) for k in np.nonzero(bad))
-        what = "an ARKit weight lies in [0, 1]" if shapes[j] else "angles are in radians"
+        what = ("an ARKit weight lies in [0, 1]" if shapes[j] else
+                f"its angles are radians, within ±{limit[j]:.4g}")
         raise DataError(f"{path}:{lines[i]}: {livelink_column(names[j])} is {values[i, j]:g}; "
                         f"{what} (another unit, or not Live Link Face's data?)")
+
+
+def rotation_limit(name: str) -> float:
+    """The largest plausible magnitude of rotation ``name`` (:data:`ROTATIONS`), radians:
+    :data:`MAX_EYE_ANGLE_RAD`, :data:`MAX_HEAD_PITCH_RAD` or :data:`MAX_HEAD_ANGLE_RAD`."""
+    if "Eye" in name:
+        return MAX_EYE_ANGLE_RAD
+    return MAX_HEAD_PITCH_RAD if name == "headPitch" else MAX_HEAD_ANGLE_RAD
 
 
 def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
@@ -213,8 +233,9 @@ def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
         app's columns), lacks ARKit columns, has a ``BlendshapeCount`` that does not match
         its columns, a bad timecode, a value that is not a number or is NaN/infinite, a
         blendshape weight outside [0, 1] (by more than :data:`WEIGHT_SLACK`) or a rotation
-        beyond a full turn (radians), or no rows. Timecode order (repeats, steps back) is
-        checked by the reader of a clip (:func:`ingest.readers.livelink.frame_steps`).
+        beyond :func:`rotation_limit` (radians: a column in degrees), or no rows.
+        Timecode order (repeats, steps back) is checked by the reader of a clip
+        (:func:`ingest.readers.livelink.frame_steps`).
     """
     path = Path(path)
     rows = read_csv_rows(path, "Live Link Face CSV")

@@ -22,7 +22,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.c3d import MarkerData
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_MOTION_TABLE_BYTES, read_utf8
 
 logger = logging.getLogger(__name__)
 
@@ -117,7 +117,7 @@ def read_marker_csv(path: str | os.PathLike[str]) -> MarkerData:
         not increase, or the times are irregular or give no rate.
     """
     path = Path(path)
-    text = read_utf8(path, "marker CSV file")
+    text = read_utf8(path, "marker CSV file", limit=MAX_MOTION_TABLE_BYTES)
     reader = csv.reader(io.StringIO(text))
     try:
         header = next(reader, None)

@@ -1,5 +1,7 @@
 """Reading a text file the one way every reader does: UTF-8, a byte-order mark dropped;
-side files (labels, transcripts, marker maps) up to :data:`MAX_SIDE_FILE_BYTES`."""
+side files (labels, transcripts, marker maps) up to :data:`MAX_SIDE_FILE_BYTES`, motion
+tables (marker CSV, TRC, curves and Live Link Face CSV) up to
+:data:`MAX_MOTION_TABLE_BYTES`: every read has a bound."""
 
 from __future__ import annotations
 
@@ -15,25 +17,36 @@ from db.errors import DataError
 #: TextGrid of 17.5 MB of two-byte values took 1.4 GB): a larger file is a memory bomb,
 #: not a clip's labels.
 MAX_SIDE_FILE_BYTES = 16 << 20
+#: Largest motion table read (marker CSV, TRC, curves CSV, Live Link Face CSV; the
+#: ``frame,time,...`` CSV that synth, render and plot read). Live Link Face writes ~50 KB
+#: a second (85 minutes fit), a landmark database's 1,434 channels as CSV ~400 KB a second
+#: at 30 fps (11 minutes). Parsed, the text costs up to ~12 times its size (a 64 MB Live
+#: Link CSV of one-digit cells peaked at 741 MB, as a channel CSV at 334 MB): a larger
+#: file is a memory bomb, not a take.
+MAX_MOTION_TABLE_BYTES = 256 << 20
 
 
-def read_bytes(path, what: str, limit: int | None = None) -> bytes:
+def read_bytes(path, what: str, limit: int) -> bytes:
     """The bytes of ``path``; DataError naming ``what`` and the file if it is absent,
-    unreadable or larger than ``limit`` bytes (checked before reading more)."""
+    unreadable or larger than ``limit`` bytes (checked before reading more), or not a file
+    (a FIFO or a device would block the read, or never end it)."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{what} not found: {path}")
+        raise DataError(f"{what} {path} is not a file" if path.exists() else
+                        f"{what} not found: {path}")
     try:
+        if path.stat().st_size > limit:  # said without reading it (and the read is bounded)
+            raise DataError(f"{what} {path} is larger than {limit:,} bytes")
         with path.open("rb") as handle:
-            data = handle.read(-1 if limit is None else limit + 1)
+            data = handle.read(limit + 1)
     except OSError as exc:
         raise DataError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
-    if limit is not None and len(data) > limit:
+    if len(data) > limit:
         raise DataError(f"{what} {path} is larger than {limit:,} bytes")
     return data
 
 
-def read_utf8(path, what: str, *, limit: int | None = None) -> str:
+def read_utf8(path, what: str, *, limit: int) -> str:
     """The text of ``path``; DataError naming ``what`` and the file if it is absent,
     unreadable, larger than ``limit`` bytes (:func:`read_bytes`) or not UTF-8
     (``utf-8-sig``: a leading BOM, as spreadsheets write, is dropped)."""
@@ -44,10 +57,12 @@ def read_utf8(path, what: str, *, limit: int | None = None) -> str:
         raise DataError(f"{what} is not UTF-8 text: {path}") from None
 
 
-def read_csv_rows(path, what: str) -> list[tuple[int, list[str]]]:
-    """The non-blank rows of a CSV file as ``(line number, cells)``; DataError naming the
-    file (and line) if it is unreadable (:func:`read_utf8`) or malformed."""
-    reader = csv.reader(io.StringIO(read_utf8(path, what)))
+def read_csv_rows(path, what: str, *, limit: int = MAX_MOTION_TABLE_BYTES
+                  ) -> list[tuple[int, list[str]]]:
+    """The non-blank rows of a CSV file (a motion table, unless ``limit`` says otherwise)
+    as ``(line number, cells)``; DataError naming the file (and line) if it is unreadable
+    or too large (:func:`read_utf8`) or malformed."""
+    reader = csv.reader(io.StringIO(read_utf8(path, what, limit=limit)))
     try:
         return [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
     except csv.Error as exc:

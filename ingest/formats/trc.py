@@ -27,7 +27,7 @@ import numpy as np
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.c3d import MarkerData
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_MOTION_TABLE_BYTES, read_utf8
 
 logger = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         or non-numeric cells; the message names the line).
     """
     path = Path(path)
-    text = read_utf8(path, "TRC file")
+    text = read_utf8(path, "TRC file", limit=MAX_MOTION_TABLE_BYTES)
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise DataError(f"TRC file is empty: {path}")

@@ -29,7 +29,7 @@ from db.errors import DataError
 from db.npyfile import REAL_KINDS, check_npy, holds
 from ingest.formats.htk_lab import read_htk_lab
 from ingest.formats.phones_csv import Segment, read_phones_csv
-from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes, read_utf8
 from ingest.formats.textgrid import PHONE_TIER_NAMES, read_textgrid, read_tiers
 from ingest.formats.words import WORD_TIER_NAMES, read_grid_align, read_textgrid_words
 
@@ -188,14 +188,14 @@ def read_json_object(path: Path) -> dict:
     """Read a JSON file holding an object; DataError naming the file otherwise.
 
     A side file larger than :data:`MAX_JSON_BYTES` or nested deeper than
-    :data:`MAX_JSON_DEPTH` is refused (one clip rejected, not a ``RecursionError``).
+    :data:`MAX_JSON_DEPTH` is refused (one clip rejected, not a ``RecursionError``), and
+    so is anything but a file (a FIFO named ``clip.json`` would block the read forever).
     """
+    # read_bytes: a file only, and no more than the bound read (a size checked first
+    # could grow before the read)
+    data = read_bytes(path, "metadata file", MAX_JSON_BYTES)
     try:
-        if path.stat().st_size > MAX_JSON_BYTES:
-            raise DataError(f"{path}: JSON side file larger than {MAX_JSON_BYTES} bytes")
-        value = json.loads(path.read_bytes().decode("utf-8-sig"))
-    except FileNotFoundError:
-        raise DataError(f"metadata file not found: {path}") from None
+        value = json.loads(data.decode("utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"corrupt JSON in {path}: {exc}") from None
     except RecursionError:

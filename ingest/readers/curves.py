@@ -27,7 +27,7 @@ import numpy as np
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats.marker_csv import infer_rate
-from ingest.formats.text import read_csv_rows, read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_csv_rows, read_utf8
 from ingest.readers.common import (
     ClipSource,
     check_motion,
@@ -65,7 +65,7 @@ def curve_group(name: str) -> str:
 
 
 def _read_lines(path: Path) -> list[str]:
-    text = read_utf8(path, "channel list")
+    text = read_utf8(path, "channel list", limit=MAX_SIDE_FILE_BYTES)
     return [line.strip() for line in text.splitlines() if line.strip()]
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats import MOTION_READERS
-from ingest.formats.text import read_utf8
+from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     GROUPS,
@@ -49,7 +49,7 @@ def read_marker_table(path: Path) -> dict[str, str]:
         If the file is not UTF-8 CSV with ``label`` and ``group`` columns, a group is not
         one of :data:`ingest.readers.common.GROUPS`, or a label repeats.
     """
-    text = read_utf8(path, "marker table")
+    text = read_utf8(path, "marker table", limit=MAX_SIDE_FILE_BYTES)
     rows = csv.DictReader(io.StringIO(text))
     fields = [f.strip().lower() for f in rows.fieldnames or []]
     if "label" not in fields or "group" not in fields:

@@ -10,10 +10,16 @@ from animegraph.apps.commands.common import UsageError, progress, say
 
 
 def cmd_ingest(args: argparse.Namespace) -> int:
+    from db.errors import ParameterError
     from ingest.pipeline import IngestConfig, ingest
-    from ingest.plausible import Limits
+    from ingest.plausible import MAX_SPEED_CEILING_MM_S, Limits
 
-    limits = None if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
+    try:  # Limits bounds it (above 0, at most its ceiling): said as the option
+        limits = None if args.max_speed is None else Limits(max_speed_mm_s=args.max_speed)
+    except ParameterError:
+        raise UsageError(f"animegraph ingest: --max-speed must be above 0 and at most "
+                         f"{MAX_SPEED_CEILING_MM_S:g} mm/s (no part of a face moves faster), "
+                         f"got {args.max_speed:g}") from None
     config = IngestConfig(variance=args.variance, fps=args.fps,
                           correct_lag=not args.no_lag_correction,
                           phones_engine=args.phones_engine, limits=limits,
