@@ -409,6 +409,17 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
         == ARKIT_CHANNELS
 
 
+def test_labels_beside_a_livelink_take_are_found(tmp_path):
+    # 'query --export' writes hit.livelink.csv with hit.phones.csv; render and plot looked
+    # for hit.livelink.phones.csv and drew no phones.
+    from animegraph.apps.commands.common import sidecar_labels
+
+    (tmp_path / "hit.phones.csv").write_text("start,end,phone\n0.0,0.1,AA\n")
+    assert sidecar_labels(tmp_path / "hit.livelink.csv") == tmp_path / "hit.phones.csv"
+    assert sidecar_labels(tmp_path / "hit.csv") == tmp_path / "hit.phones.csv"
+    assert sidecar_labels(tmp_path / "other.livelink.csv") is None
+
+
 def test_output_formats_are_checked_before_the_work():
     from animegraph.motion.files import check_output
 
