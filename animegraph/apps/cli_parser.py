@@ -247,9 +247,10 @@ def _add_sql(sub) -> None:
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
     _db_option(sql)
-    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default=None,
-                     help="default: as -o's name says (.csv, .json, .jsonl, .parquet), "
-                     "else table")
+    sql.add_argument("--format", choices=("table", "csv", "json", "jsonl", "parquet"),
+                     default=None, help="json: one array of row objects; jsonl: JSON "
+                     "Lines, an object a line (default: as -o's name says: .csv, .json, "
+                     ".jsonl, .parquet; else table)")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
@@ -418,7 +419,9 @@ def _add_query(sub) -> None:
     qry.add_argument("--desc", action="store_true", help="descending order")
     qry.add_argument("--limit", type=_whole_number, default=20, help="most hits (default 20)")
     qry.add_argument("--clips", action="store_true", help="whole utterances, not animes")
-    qry.add_argument("--format", choices=("table", "csv", "json"), default="table")
+    qry.add_argument("--format", choices=("table", "csv", "json", "jsonl"), default="table",
+                     help="json: one array of hit objects; jsonl: JSON Lines, an object a "
+                     "line (default table)")
     qry.add_argument("--show-sql", action="store_true",
                      help="print the SQL instead of running it")
     qry.add_argument("--export", type=Path, default=None, metavar="DIR",
