@@ -203,3 +203,20 @@ def test_curve_snippets_are_csv(tmp_path):
     motion = read_motion(tmp_path / name)
     assert motion.names == ("jawOpen", "smile") and motion.fps == 30.0
     assert np.array_equal(motion.values, clip.motion[2:6])
+
+
+def test_words_in_a_database_without_transcripts_are_an_error(tiny_db, tmp_path, capsys):
+    # FACEGOOD, talkingface, an iPhone take: recognised phones, no words. `--text hello`
+    # listed no hit and exit 0, as if the words were not said.
+    from dataclasses import replace
+
+    from ingest.pipeline import build_database
+    from ingest.tables import prepared_from_database
+
+    clips = [replace(c, text=None) for c in prepared_from_database(Database.open(tiny_db[0]))
+             if c.sentence_id == "s0001"]
+    build_database(tmp_path / "db", clips)
+    assert main(["query", "--db", str(tmp_path / "db"), "--clips", "--text", "hello"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--text 'hello': the database's clips carry no transcript"), err
+    assert main(["query", "--db", str(tmp_path / "db"), "--clips", "--limit", "1"]) == 0

@@ -137,7 +137,8 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     Raises
     ------
     ParameterError
-        For an emotion or a speaker the database does not have (naming the ones it has).
+        For an emotion or a speaker the database does not have (naming the ones it has),
+        or words to find in a database whose clips carry no transcript.
     """
     if spec.emotion is not None:  # in the database's spelling, whatever its case
         if spec.emotion.lower() == AUTO:
@@ -147,6 +148,12 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     if spec.speaker is not None:
         known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
         spec = replace(spec, speaker=find_speaker(spec.speaker, known))
+    if spec.text is not None and spec.text.split():
+        # Recognised phones leave a clip without words: no hit would not mean no match.
+        texts = db.table("clips", columns=["text"]).column("text")
+        if texts.null_count == len(texts):
+            raise ParameterError(f"--text {spec.text!r}: the database's clips carry no "
+                                 "transcript")
     return spec
 
 
