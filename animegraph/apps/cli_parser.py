@@ -294,7 +294,8 @@ def _add_synth(sub) -> None:
                      help="refit a baseline even if the database has it stored")
     mode = syn.add_mutually_exclusive_group()
     mode.add_argument("--exact", action="store_true",
-                      help="the global optimum (default)")
+                      help="the paper's synthesis, one anime a phone: the global optimum "
+                      "(the search the default k-best runs on, too)")
     mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
                       help="the paper's bounded look-ahead of K phonemes (K >= 1; the "
                       "paper uses 3-6)")
@@ -334,7 +335,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
     audio cost, the candidates and the guiding baseline."""
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
-                     "phone (20 suits real data with recognized phones)")
+                     "phone (default 20, which suits real data; --exact, --window or "
+                     "--search alone: the paper's one anime a phone)")
     syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: k-best averages each anime relative to its "
                      "recording's mean pose, the utterance taking the mean pose of the "
@@ -348,7 +350,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
     syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
                      help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
                      "default), or beyond the paper posteriorgram (DTW of hama phone "
-                     "posteriors; the database must have been ingested with hama) or both")
+                     "posteriors: a database ingested with --posteriorgrams, or whose "
+                     "phones hama recognised) or both")
     syn.add_argument("--candidates", choices=("label", "likely"), default=None,
                      help="candidate animes of a phone: label (the paper: its own phone's, "
                      "default), or likely (beyond the paper: also those of the 3 phones its "
