@@ -308,6 +308,9 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
     from ingest.formats.wav import write_wav
 
     cache: dict[tuple[str, str], ClipData] = {}
+    # One deformer for every hit: building it (RBF systems per face region) took most of
+    # each landmark hit's export.
+    deformers: dict[tuple[str, ...], object] = {}
     index = []
     anime_mode = "node_id" in hits.column_names
     rows = hits.to_pylist()
@@ -348,7 +351,7 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
                          [(p["phone"], p["start"], p["end"]) for p in phones])
         _preview(clip, f0, f1, (a0 - f0 / clip.fps, a1 - f0 / clip.fps), phones,
                  folder / f"{stem}.png", title=f"{hit['clip_id']} ({hit['emotion']})"
-                 + (f": {hit['phoneme']}" if anime_mode else ""))
+                 + (f": {hit['phoneme']}" if anime_mode else ""), deformers=deformers)
         index.append({
             "n": n, "node_id": hit.get("node_id"), "corpus": hit["corpus"],
             "clip_id": hit["clip_id"], "phoneme": hit.get("phoneme"), "emotion": hit["emotion"],
@@ -400,9 +403,9 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
 
 
 def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones, path: Path,
-             *, title: str) -> None:
+             *, title: str, deformers: dict | None = None) -> None:
     """PNG: the face at the anime's middle (point and ARKit databases) and its main
-    measure."""
+    measure. ``deformers`` keeps the face's deformer by channel names between calls."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -412,7 +415,8 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
 
     part = clip.motion[f0:f1]
     t = np.arange(len(part)) / clip.fps
-    face = _face_image(clip, part, int(round(0.5 * (span[0] + span[1]) * clip.fps)))
+    face = _face_image(clip, part, int(round(0.5 * (span[0] + span[1]) * clip.fps)),
+                       {} if deformers is None else deformers)
     fig = plt.figure(figsize=(9, 3.2))
     if face is not None:
         ax_img = fig.add_axes((0.0, 0.0, 0.28, 1.0))
@@ -440,7 +444,8 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
     plt.close(fig)
 
 
-def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
+def _face_image(clip: ClipData, part: np.ndarray, frame: int,
+                deformers: dict) -> np.ndarray | None:
     from animegraph.face.animation import animate, animation_bounds
     from animegraph.face.arkit import arkit_animation
     from animegraph.face.render import FaceRenderer, deformer_for
@@ -448,10 +453,12 @@ def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | No
     from ingest.formats.livelink import is_arkit
 
     motion = Motion(values=part, names=clip.names, fps=clip.fps)
-    try:
-        deformer = deformer_for(clip.names)
-    except DataError:
-        return None
+    if clip.names not in deformers:
+        try:
+            deformers[clip.names] = deformer_for(clip.names)
+        except DataError:  # markers the canonical mesh lacks: no face, only the measure
+            deformers[clip.names] = None
+    deformer = deformers[clip.names]
     if deformer is None and not is_arkit(clip.names):
         return None
     animation = (arkit_animation(motion) if deformer is None else animate(motion, deformer))
