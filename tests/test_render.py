@@ -286,6 +286,32 @@ def test_gif_and_png(take):
     assert (take / "face.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_size_is_the_frame_size_of_every_picture(take, capsys):
+    # --size was taken for an MP4 and a PNG of a face and silently ignored for a GIF (always
+    # 240x270), for curves and for a glTF.
+    from PIL import Image
+
+    for name, size in (("sized.gif", (160, 180)), ("default.gif", (240, 270)),
+                       ("sized.png", (160, 180))):
+        extra = [] if name.startswith("default") else ["--size", "160x180"]
+        assert main(["render", str(take / "take.c3d"), "-o", str(take / name), "--quiet",
+                     *extra]) == 0
+        assert Image.open(take / name).size == size, name
+    curves = Motion(values=np.random.default_rng(0).random((30, 2)), names=("jaw", "smile"),
+                    fps=30.0)
+    from animegraph.motion.files import write_channel_csv
+
+    write_channel_csv(take / "curves.csv", curves.values, curves.names, curves.fps)
+    assert main(["render", str(take / "curves.csv"), "-o", str(take / "curves.gif"),
+                 "--size", "320x180", "--quiet"]) == 0
+    assert Image.open(take / "curves.gif").size == (320, 180)
+    capsys.readouterr()
+    assert main(["render", str(take / "take.c3d"), "-o", str(take / "sized.glb"), "--size",
+                 "160x180"]) == 2
+    assert "--size needs an .mp4, .gif or .png output" in capsys.readouterr().err
+    assert not (take / "sized.glb").exists()
+
+
 def test_glb_round_trip(take):
     import pygltflib
     import trimesh

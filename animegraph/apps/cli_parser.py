@@ -469,7 +469,9 @@ def _add_render(sub) -> None:
                      help="'synth --explain-json' record, for phone captions")
     ren.add_argument("--fps", type=_number, default=None,
                      help="frame rate (video: 30, GIF: 20; glb/OBJ: the motion's)")
-    ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
+    ren.add_argument("--size", default=None,
+                     help="frame size WxH of an MP4, GIF or PNG (default: a face 480x540, "
+                     "240x270 in a GIF; curves 960x540, 640x360 in a GIF)")
     ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
     ren.add_argument("--quiet", action="store_true", help="no progress bar")
     ren.set_defaults(func=cmd_render)
