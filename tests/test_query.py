@@ -235,3 +235,12 @@ def test_export_builds_the_face_once(tiny_db, tmp_path, monkeypatch, capsys):
                  "--export", str(tmp_path / "hits")]) == 0
     assert len(calls) == 1
     assert len(list((tmp_path / "hits").glob("*.png"))) == 3
+
+
+def test_export_quiet_has_no_progress_bar(tiny_db, tmp_path, capsys):
+    # Every other command with a progress bar (ingest, render, batch, demo) takes --quiet;
+    # query --export had none, and a script's log filled with bars.
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "2",
+                 "--export", str(tmp_path / "hits"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "exporting" not in err and "exported 2 hits" in err

@@ -432,6 +432,7 @@ def _add_query(sub) -> None:
     qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
                      help="seconds of motion and speech kept around each anime (0.25)")
     qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
+    qry.add_argument("--quiet", action="store_true", help="no progress bar (--export)")
     qry.set_defaults(func=cmd_query)
 
 
