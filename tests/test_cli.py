@@ -125,3 +125,6 @@ def test_synth_help_says_what_the_options_do():
     assert "(default)" not in helps["exact"] and "one anime a phone" in helps["exact"]
     assert "--posteriorgrams" in helps["audio_cost"]
     assert "default 20" in helps["k_best"]
+    # plot --audio said "(WAV)"; it reads a video's sound track as render does.
+    plot = {a.dest: a.help for a in sub.choices["plot"]._actions}
+    assert "video" in plot["audio"]

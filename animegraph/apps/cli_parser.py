@@ -493,7 +493,8 @@ def _add_plot(sub) -> None:
     plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
     plo.add_argument("--labels", type=Path, default=None,
                      help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
-    plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
+    plo.add_argument("--audio", type=Path, default=None,
+                     help="the speech (a WAV, or a video: its audio track)")
     plo.add_argument("--title", default="", help="title")
     plo.set_defaults(func=cmd_plot)
 
