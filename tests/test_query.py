@@ -244,3 +244,16 @@ def test_export_quiet_has_no_progress_bar(tiny_db, tmp_path, capsys):
                  "--export", str(tmp_path / "hits"), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "exporting" not in err and "exported 2 hits" in err
+
+
+def test_min_dur_keeps_what_the_table_shows_at_that_length(db):
+    # A hit shown as 0.46 s was left out by --min-dur 0.46 when end - start came to
+    # 0.45999999999 (FACEGOOD: 91.39 - 90.93); another shown as 0.46 was kept.
+    rows = run_sql(db, "SELECT node_id, phoneme, end_time - start_time AS d FROM animes "
+                       "WHERE round(end_time - start_time, 4) > end_time - start_time").to_pylist()
+    assert rows, "no anime whose duration rounds up in the tiny database"
+    hit = rows[0]
+    shown = round(hit["d"], 4)
+    hits = run_query(db, QuerySpec(phoneme=hit["phoneme"], min_dur=shown, limit=100000))
+    assert hit["node_id"] in hits.column("node_id").to_pylist()
+    assert min(hits.column("duration").to_pylist()) >= shown
