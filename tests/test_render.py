@@ -611,3 +611,18 @@ def test_the_output_is_not_an_input(take, tmp_path, capsys, option):
                                    str(tmp_path / "." / "actor.mp4"), "--quiet"]), 2)
     assert f"is also {option}: the render would replace it" in line, line
     assert actor.read_bytes() == before
+
+
+def test_plot_title_counts_jumps_of_a_synthesis_only(tmp_path):
+    # A recorded snippet plotted with its phone labels was titled "11 phones, 0 jump
+    # matches (dashed)": a recording has no jump matches to count.
+    from animegraph.apps.plots import phones_subtitle
+    from animegraph.motion.files import read_phone_track
+
+    (tmp_path / "hit.phones.csv").write_text("start,end,phone\n0,0.1,SIL\n0.1,0.3,AA\n")
+    labels = read_phone_track(labels=tmp_path / "hit.phones.csv")
+    assert phones_subtitle(labels) == "2 phones"
+    explained = [{"phone": "AA", "start": 0.0, "end": 0.1, "clip_id": "a", "jump": False},
+                 {"phone": "B", "start": 0.1, "end": 0.2, "clip_id": "b", "jump": True}]
+    assert phones_subtitle(explained) == "2 phones, 1 jump match (dashed)"  # not "matches"
+    assert phones_subtitle([]) == ""
