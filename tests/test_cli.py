@@ -128,3 +128,5 @@ def test_synth_help_says_what_the_options_do():
     # plot --audio said "(WAV)"; it reads a video's sound track as render does.
     plot = {a.dest: a.help for a in sub.choices["plot"]._actions}
     assert "video" in plot["audio"]
+    # classify's description left out the bag of audio words, half of its features.
+    assert "bag of audio words" in sub.choices["classify"].description

@@ -505,9 +505,10 @@ def _add_classify(sub) -> None:
         "classify", help="the emotion of speech, by the database's classifier",
         description="Print the probability of each of the database's emotions for the "
         "speech (any rate, mono or stereo), by the classifier trained on the database's "
-        "clips at ingest: prosodic and spectral features with 50 frame-averaged cepstrum "
-        "coefficients, normalised per speaker (an unknown speaker by the training "
-        "population), and a linear SVM (Cao et al. 2005 §6 uses an SVM on the signal's "
+        "clips at ingest: prosodic and spectral features, 50 frame-averaged cepstrum "
+        "coefficients and a bag of audio words (five pairs of 500-word codebooks), normalised per "
+        "speaker (an unknown speaker by the training population), a linear SVM and "
+        "probabilities by Platt scaling (Cao et al. 2005 §6 uses an SVM on the signal's "
         "mean, variance, RMS and first 500 real-cepstrum coefficients).",
     )
     cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
