@@ -130,3 +130,5 @@ def test_synth_help_says_what_the_options_do():
     assert "video" in plot["audio"]
     # classify's description left out the bag of audio words, half of its features.
     assert "bag of audio words" in sub.choices["classify"].description
+    # ingest's description named neither the iPhone's Live Link CSV nor videos.
+    assert "Live Link" in sub.choices["ingest"].description

@@ -200,8 +200,9 @@ def _add_ingest(sub) -> None:
     """``ingest``: clips and their speech into a database."""
     ing = sub.add_parser(
         "ingest", help="add mocap clips + speech to a motion database",
-        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; landmarks "
-        "tracked from video) with their speech, segment them into phonemes and store them as "
+        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; iPhone "
+        "captures: Live Link Face CSV; landmarks tracked from video: NPY, or the video "
+        "itself) with their speech, segment them into phonemes and store them as "
         "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
         "a bad clip is rejected with its reason while the others go in.",
     )
