@@ -114,7 +114,7 @@ def test_a_bug_gives_the_caller_its_ctrl_c_handler_back(monkeypatch):
     assert signal.getsignal(signal.SIGINT) is before
 
 
-def test_synth_help_says_what_the_options_do():
+def test_help_says_what_the_commands_do():
     # --exact was "the global optimum (default)" (the default is k-best 20, and --exact
     # turns it off); --audio-cost posteriorgram "needs a database ingested with hama" (the
     # error asks for --posteriorgrams); --k-best gave no default.
