@@ -156,6 +156,9 @@ def test_clip_from_fixture(tmp_path):
     assert groups["browInnerUp"] == groups["cheekSquintLeft"] == groups["eyeBlinkLeft"] \
         == "upper_face"
     assert groups["headYaw"] == groups["leftEyePitch"] == "head"
+    # The channels table said "unit" of the head and eye angles, which are radians.
+    units = dict(zip(clip.schema.names, clip.schema.channel_units, strict=True))
+    assert units["headYaw"] == units["rightEyeRoll"] == "rad" and units["jawOpen"] == "unit"
     assert clip.fps == pytest.approx(60 / 1.0017, abs=0.01)
     assert clip.extra["dropped_frames"] == 0
     assert clip.extra["timecode_start"] == "10:00:00:00.000"
