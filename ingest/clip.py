@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from db.errors import DataError
+from ingest.formats.livelink import ROTATIONS
 from ingest.formats.phones_csv import Segment
 from ingest.formats.words import WordSegment
 
@@ -29,6 +30,10 @@ POSE_UNITS: dict[str, str] = {
     "pose.rx": "0.01 rad", "pose.ry": "0.01 rad", "pose.rz": "0.01 rad",
     "pose.tx": "mm", "pose.ty": "mm", "pose.tz": "mm", "pose.scale": "%",
 }
+
+#: An iPhone capture's head and eye rotations among its blendshape weights: angles in
+#: radians, as Live Link Face exports them (:data:`ingest.formats.livelink.ROTATIONS`).
+ROTATION_UNITS: dict[str, str] = {name: "rad" for name in ROTATIONS}
 
 
 @dataclass(frozen=True)
@@ -72,8 +77,11 @@ class ChannelSchema:
     @property
     def channel_units(self) -> tuple[str, ...]:
         """Each channel's units: the schema's, but a head pose channel's its own
-        (:data:`POSE_UNITS`)."""
-        return tuple(POSE_UNITS.get(name, self.units) if group == "pose" else self.units
+        (:data:`POSE_UNITS`), and an ARKit rotation's among curves radians
+        (:data:`ROTATION_UNITS`: the channels table said "unit" of headYaw)."""
+        own = ROTATION_UNITS if self.kind == "curves" else {}
+        return tuple(POSE_UNITS.get(name, self.units) if group == "pose"
+                     else own.get(name, self.units)
                      for name, group in zip(self.names, self.groups, strict=True))
 
     def difference(self, other: ChannelSchema) -> str:

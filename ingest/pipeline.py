@@ -146,8 +146,9 @@ class IngestReport:
             e = s.get("emotion")
             if e:
                 clf = e["classifier"]
-                ids = " ".join(map(str, e["emotion_components"])) or "none"
-                out.append(f"emotion: emotion components {ids}, "
+                ids = " ".join(map(str, e["emotion_components"]))
+                which = f"emotion components {ids}" if ids else "no emotion components"
+                out.append(f"emotion: {which}, "
                            f"{len(e['mappings'])} emotion mappings, "
                            + (f"classifier over {len(clf['classes'])} emotions" if clf
                               else "no classifier"))

@@ -112,3 +112,23 @@ def test_a_bug_gives_the_caller_its_ctrl_c_handler_back(monkeypatch):
     with pytest.raises(RuntimeError, match="a bug"):
         cli.main(["info"])
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_help_says_what_the_commands_do():
+    # --exact was "the global optimum (default)" (the default is k-best 20, and --exact
+    # turns it off); --audio-cost posteriorgram "needs a database ingested with hama" (the
+    # error asks for --posteriorgrams); --k-best gave no default.
+    from animegraph.apps.cli_parser import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    helps = {a.dest: a.help for a in sub.choices["synth"]._actions}
+    assert "(default)" not in helps["exact"] and "one anime a phone" in helps["exact"]
+    assert "--posteriorgrams" in helps["audio_cost"]
+    assert "default 20" in helps["k_best"]
+    # plot --audio said "(WAV)"; it reads a video's sound track as render does.
+    plot = {a.dest: a.help for a in sub.choices["plot"]._actions}
+    assert "video" in plot["audio"]
+    # classify's description left out the bag of audio words, half of its features.
+    assert "bag of audio words" in sub.choices["classify"].description
+    # ingest's description named neither the iPhone's Live Link CSV nor videos.
+    assert "Live Link" in sub.choices["ingest"].description

@@ -304,3 +304,17 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     # the first pair of the ensemble is the single model's (the same seed)
     one = EmotionClassifier(C=1.0, n_codebooks=1).fit(described, y, speakers=spk)
     np.testing.assert_array_equal(model.bag_.codebooks_[1], one.bag_.codebooks_[1])
+
+
+def test_clips_without_emotion_labels_are_told_so(rng):
+    # FACEGOOD's and talkingface's ingest said "(it has no usable clip)" of clips that
+    # were all usable, only unlabelled.
+    from ingest.emotion.model import _fit_classifier
+
+    audio = [(_voice(rng, f0=110.0, seconds=0.5), SR)] * 3
+    notes: list[str] = []
+    assert _fit_classifier(audio, ["unknown"] * 3, None, notes) is None
+    assert notes[0].endswith("(its clips carry no emotion labels)"), notes
+    notes = []
+    assert _fit_classifier([(np.zeros(10), SR)], ["sad"], None, notes) is None
+    assert notes[-1].endswith("(it has no usable clip)"), notes

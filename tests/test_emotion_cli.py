@@ -414,3 +414,17 @@ def test_info_of_a_single_emotion_database_reads_as_words(neutral_db):
     (emotion,) = [line for line in lines if line.startswith("emotion:")]
     assert "no emotion components" in emotion and "components none" not in emotion
     assert not any(line.rstrip(")").endswith(": none") for line in lines if "note:" in line)
+
+
+def test_ingest_summary_of_a_database_without_emotion_components_reads_as_words():
+    # ingest said "emotion: emotion components none" where info says "no emotion
+    # components".
+    from pathlib import Path
+
+    from ingest.pipeline import IngestReport
+
+    report = IngestReport(db=Path("x.db"), written=True, version="v000001", summary={
+        "n_clips": 1, "n_animes": 9, "duration_s": 60.0, "n_pcs": 3, "variance_kept": 0.95,
+        "emotion": {"classifier": None, "emotion_components": [], "mappings": []}})
+    (line,) = [line for line in report.lines() if line.startswith("emotion:")]
+    assert line == "emotion: no emotion components, 0 emotion mappings, no classifier"

@@ -252,8 +252,10 @@ def test_cli_sql_info_and_formats(tiny_db, capsys, tmp_path):
     assert "phoneme" in capsys.readouterr().out
     assert main(["sql", "--db", str(path), sql, "--format", "csv"]) == 0
     assert capsys.readouterr().out.splitlines()[0] == '"phoneme","n"'
-    assert main(["sql", "--db", str(path), sql, "--format", "json"]) == 0
+    assert main(["sql", "--db", str(path), sql, "--format", "jsonl"]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 3
+    assert main(["sql", "--db", str(path), sql, "--format", "json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 3  # one document
     out = tmp_path / "top.parquet"
     assert main(["sql", "--db", str(path), sql, "--format", "parquet", "-o", str(out)]) == 0
     assert pq.read_table(out).num_rows == 3
@@ -285,9 +287,30 @@ def test_cli_sql_writes_the_format_its_output_is_named(tiny_db, tmp_path):
     assert json.loads((tmp_path / "phones.jsonl").read_text().splitlines()[0])["n"] > 0
     assert "more rows" in (tmp_path / "phones.txt").read_text()  # no format named: a table
     # --format still wins over the name
-    assert main(["sql", "--db", str(path), sql, "--format", "json",
+    assert main(["sql", "--db", str(path), sql, "--format", "jsonl",
                  "-o", str(tmp_path / "as.csv")]) == 0
     assert (tmp_path / "as.csv").read_text().startswith("{")
+
+
+def test_cli_sql_json_is_a_document_strict_readers_open(tiny_db, tmp_path, capsys):
+    # `-o x.json` wrote JSON Lines (json.load and pandas.read_json refused the file), and a
+    # NaN (a database without emotions has NaN emotion scores) as the bare word NaN.
+    path, _ = tiny_db
+    sql = ("SELECT phoneme, count(*) AS n, 'nan'::DOUBLE AS x, [1.0, 'inf'::DOUBLE] AS l "
+           "FROM animes GROUP BY 1 ORDER BY 1 LIMIT 3")
+    assert main(["sql", "--db", str(path), sql, "-o", str(tmp_path / "p.json")]) == 0
+
+    def strict(word):
+        raise ValueError(f"not JSON: {word}")
+
+    rows = json.loads((tmp_path / "p.json").read_text(), parse_constant=strict)
+    assert len(rows) == 3 and rows[0]["x"] is None and rows[0]["l"] == [1.0, None]
+    import pandas as pd
+
+    assert pd.read_json(tmp_path / "p.json").shape == (3, 4)
+    capsys.readouterr()
+    assert main(["query", "--db", str(path), "--limit", "2", "--format", "json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 2
 
 
 @pytest.mark.parametrize("argv, needle", [

@@ -156,6 +156,9 @@ def test_clip_from_fixture(tmp_path):
     assert groups["browInnerUp"] == groups["cheekSquintLeft"] == groups["eyeBlinkLeft"] \
         == "upper_face"
     assert groups["headYaw"] == groups["leftEyePitch"] == "head"
+    # The channels table said "unit" of the head and eye angles, which are radians.
+    units = dict(zip(clip.schema.names, clip.schema.channel_units, strict=True))
+    assert units["headYaw"] == units["rightEyeRoll"] == "rad" and units["jawOpen"] == "unit"
     assert clip.fps == pytest.approx(60 / 1.0017, abs=0.01)
     assert clip.extra["dropped_frames"] == 0
     assert clip.extra["timecode_start"] == "10:00:00:00.000"
@@ -417,6 +420,17 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
                  str(tmp_path / "batch"), "--workers", "1", "--quiet"]) == 0
     assert read_livelink(tmp_path / "batch" / "hello" / "motion.livelink.csv").names \
         == ARKIT_CHANNELS
+
+
+def test_labels_beside_a_livelink_take_are_found(tmp_path):
+    # 'query --export' writes hit.livelink.csv with hit.phones.csv; render and plot looked
+    # for hit.livelink.phones.csv and drew no phones.
+    from animegraph.apps.commands.common import sidecar_labels
+
+    (tmp_path / "hit.phones.csv").write_text("start,end,phone\n0.0,0.1,AA\n")
+    assert sidecar_labels(tmp_path / "hit.livelink.csv") == tmp_path / "hit.phones.csv"
+    assert sidecar_labels(tmp_path / "hit.csv") == tmp_path / "hit.phones.csv"
+    assert sidecar_labels(tmp_path / "other.livelink.csv") is None
 
 
 def test_output_formats_are_checked_before_the_work():

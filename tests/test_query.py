@@ -203,3 +203,57 @@ def test_curve_snippets_are_csv(tmp_path):
     motion = read_motion(tmp_path / name)
     assert motion.names == ("jawOpen", "smile") and motion.fps == 30.0
     assert np.array_equal(motion.values, clip.motion[2:6])
+
+
+def test_words_in_a_database_without_transcripts_are_an_error(tiny_db, tmp_path, capsys):
+    # FACEGOOD, talkingface, an iPhone take: recognised phones, no words. `--text hello`
+    # listed no hit and exit 0, as if the words were not said.
+    from dataclasses import replace
+
+    from ingest.pipeline import build_database
+    from ingest.tables import prepared_from_database
+
+    clips = [replace(c, text=None) for c in prepared_from_database(Database.open(tiny_db[0]))
+             if c.sentence_id == "s0001"]
+    build_database(tmp_path / "db", clips)
+    assert main(["query", "--db", str(tmp_path / "db"), "--clips", "--text", "hello"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--text 'hello': the database's clips carry no transcript"), err
+    assert main(["query", "--db", str(tmp_path / "db"), "--clips", "--limit", "1"]) == 0
+
+
+def test_export_builds_the_face_once(tiny_db, tmp_path, monkeypatch, capsys):
+    # Each hit's preview built the face's deformer anew (RBF systems per region): half of
+    # a landmark database's export time (talkingface, 20 hits: 14.5 s, now 7.3 s).
+    from animegraph.face import render
+
+    calls = []
+    real = render.deformer_for
+    monkeypatch.setattr(render, "deformer_for", lambda names, **kw: calls.append(1)
+                        or real(names, **kw))
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "3",
+                 "--export", str(tmp_path / "hits")]) == 0
+    assert len(calls) == 1
+    assert len(list((tmp_path / "hits").glob("*.png"))) == 3
+
+
+def test_export_quiet_has_no_progress_bar(tiny_db, tmp_path, capsys):
+    # Every other command with a progress bar (ingest, render, batch, demo) takes --quiet;
+    # query --export had none, and a script's log filled with bars.
+    assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "2",
+                 "--export", str(tmp_path / "hits"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "exporting" not in err and "exported 2 hits" in err
+
+
+def test_min_dur_keeps_what_the_table_shows_at_that_length(db):
+    # A hit shown as 0.46 s was left out by --min-dur 0.46 when end - start came to
+    # 0.45999999999 (FACEGOOD: 91.39 - 90.93); another shown as 0.46 was kept.
+    rows = run_sql(db, "SELECT node_id, phoneme, end_time - start_time AS d FROM animes "
+                       "WHERE round(end_time - start_time, 4) > end_time - start_time").to_pylist()
+    assert rows, "no anime whose duration rounds up in the tiny database"
+    hit = rows[0]
+    shown = round(hit["d"], 4)
+    hits = run_query(db, QuerySpec(phoneme=hit["phoneme"], min_dur=shown, limit=100000))
+    assert hit["node_id"] in hits.column("node_id").to_pylist()
+    assert min(hits.column("duration").to_pylist()) >= shown

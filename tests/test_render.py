@@ -286,6 +286,32 @@ def test_gif_and_png(take):
     assert (take / "face.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_size_is_the_frame_size_of_every_picture(take, capsys):
+    # --size was taken for an MP4 and a PNG of a face and silently ignored for a GIF (always
+    # 240x270), for curves and for a glTF.
+    from PIL import Image
+
+    for name, size in (("sized.gif", (160, 180)), ("default.gif", (240, 270)),
+                       ("sized.png", (160, 180))):
+        extra = [] if name.startswith("default") else ["--size", "160x180"]
+        assert main(["render", str(take / "take.c3d"), "-o", str(take / name), "--quiet",
+                     *extra]) == 0
+        assert Image.open(take / name).size == size, name
+    curves = Motion(values=np.random.default_rng(0).random((30, 2)), names=("jaw", "smile"),
+                    fps=30.0)
+    from animegraph.motion.files import write_channel_csv
+
+    write_channel_csv(take / "curves.csv", curves.values, curves.names, curves.fps)
+    assert main(["render", str(take / "curves.csv"), "-o", str(take / "curves.gif"),
+                 "--size", "320x180", "--quiet"]) == 0
+    assert Image.open(take / "curves.gif").size == (320, 180)
+    capsys.readouterr()
+    assert main(["render", str(take / "take.c3d"), "-o", str(take / "sized.glb"), "--size",
+                 "160x180"]) == 2
+    assert "--size needs an .mp4, .gif or .png output" in capsys.readouterr().err
+    assert not (take / "sized.glb").exists()
+
+
 def test_glb_round_trip(take):
     import pygltflib
     import trimesh
@@ -616,3 +642,18 @@ def test_the_output_is_not_an_input(take, tmp_path, capsys, option):
                                    str(tmp_path / "." / "actor.mp4"), "--quiet"]), 2)
     assert f"is also {option}: the render would replace it" in line, line
     assert actor.read_bytes() == before
+
+
+def test_plot_title_counts_jumps_of_a_synthesis_only(tmp_path):
+    # A recorded snippet plotted with its phone labels was titled "11 phones, 0 jump
+    # matches (dashed)": a recording has no jump matches to count.
+    from animegraph.apps.plots import phones_subtitle
+    from animegraph.motion.files import read_phone_track
+
+    (tmp_path / "hit.phones.csv").write_text("start,end,phone\n0,0.1,SIL\n0.1,0.3,AA\n")
+    labels = read_phone_track(labels=tmp_path / "hit.phones.csv")
+    assert phones_subtitle(labels) == "2 phones"
+    explained = [{"phone": "AA", "start": 0.0, "end": 0.1, "clip_id": "a", "jump": False},
+                 {"phone": "B", "start": 0.1, "end": 0.2, "clip_id": "b", "jump": True}]
+    assert phones_subtitle(explained) == "2 phones, 1 jump match (dashed)"  # not "matches"
+    assert phones_subtitle([]) == ""

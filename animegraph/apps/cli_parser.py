@@ -208,8 +208,9 @@ def _add_ingest(sub) -> None:
     """``ingest``: clips and their speech into a database."""
     ing = sub.add_parser(
         "ingest", help="add mocap clips + speech to a motion database",
-        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; landmarks "
-        "tracked from video) with their speech, segment them into phonemes and store them as "
+        description="Read clips (markers: C3D/TRC/CSV; animation curves: NPY/CSV; iPhone "
+        "captures: Live Link Face CSV; landmarks tracked from video: NPY, or the video "
+        "itself) with their speech, segment them into phonemes and store them as "
         "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
         "a bad clip is rejected with its reason while the others go in.",
     )
@@ -255,9 +256,10 @@ def _add_sql(sub) -> None:
     sql.add_argument("query", help="the SQL, e.g. \"SELECT phoneme, count(*) FROM animes "
                      "GROUP BY 1\"")
     _db_option(sql)
-    sql.add_argument("--format", choices=("table", "csv", "json", "parquet"), default=None,
-                     help="default: as -o's name says (.csv, .json, .jsonl, .parquet), "
-                     "else table")
+    sql.add_argument("--format", choices=("table", "csv", "json", "jsonl", "parquet"),
+                     default=None, help="json: one array of row objects; jsonl: JSON "
+                     "Lines, an object a line (default: as -o's name says: .csv, .json, "
+                     ".jsonl, .parquet; else table)")
     sql.add_argument("-o", "--output", type=Path, default=None,
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
@@ -301,7 +303,8 @@ def _add_synth(sub) -> None:
                      help="refit a baseline even if the database has it stored")
     mode = syn.add_mutually_exclusive_group()
     mode.add_argument("--exact", action="store_true",
-                      help="the global optimum (default)")
+                      help="the paper's synthesis, one anime a phone: the global optimum "
+                      "(the search the default k-best runs on, too)")
     mode.add_argument("--window", type=_whole_number, default=None, metavar="K",
                       help="the paper's bounded look-ahead of K phonemes (K >= 1; the "
                       "paper uses 3-6)")
@@ -341,7 +344,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
     audio cost, the candidates and the guiding baseline."""
     syn.add_argument("--k-best", type=_whole_number, default=None, metavar="K",
                      help="beyond the paper: average the K best-matching animes of each "
-                     "phone (20 suits real data with recognized phones)")
+                     "phone (default 20, which suits real data; --exact, --window or "
+                     "--search alone: the paper's one anime a phone)")
     syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: k-best averages each anime relative to its "
                      "recording's mean pose, the utterance taking the mean pose of the "
@@ -355,7 +359,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
     syn.add_argument("--audio-cost", choices=SYNTH_AUDIO_COSTS, default=None,
                      help="the audio cost of Eq. 5: plp (the paper's RASTA-PLP DTW, "
                      "default), or beyond the paper posteriorgram (DTW of hama phone "
-                     "posteriors; the database must have been ingested with hama) or both")
+                     "posteriors: a database ingested with --posteriorgrams, or whose "
+                     "phones hama recognised) or both")
     syn.add_argument("--candidates", choices=("label", "likely"), default=None,
                      help="candidate animes of a phone: label (the paper: its own phone's, "
                      "default), or likely (beyond the paper: also those of the 3 phones its "
@@ -426,7 +431,9 @@ def _add_query(sub) -> None:
     qry.add_argument("--desc", action="store_true", help="descending order")
     qry.add_argument("--limit", type=_whole_number, default=20, help="most hits (default 20)")
     qry.add_argument("--clips", action="store_true", help="whole utterances, not animes")
-    qry.add_argument("--format", choices=("table", "csv", "json"), default="table")
+    qry.add_argument("--format", choices=("table", "csv", "json", "jsonl"), default="table",
+                     help="json: one array of hit objects; jsonl: JSON Lines, an object a "
+                     "line (default table)")
     qry.add_argument("--show-sql", action="store_true",
                      help="print the SQL instead of running it")
     qry.add_argument("--export", type=Path, default=None, metavar="DIR",
@@ -434,6 +441,7 @@ def _add_query(sub) -> None:
     qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
                      help="seconds of motion and speech kept around each anime (0.25)")
     qry.add_argument("--force", action="store_true", help="replace an existing --export folder")
+    qry.add_argument("--quiet", action="store_true", help="no progress bar (--export)")
     qry.set_defaults(func=cmd_query)
 
 
@@ -471,7 +479,9 @@ def _add_render(sub) -> None:
                      help="'synth --explain-json' record, for phone captions")
     ren.add_argument("--fps", type=_number, default=None,
                      help="frame rate (video: 30, GIF: 20; glb/OBJ: the motion's)")
-    ren.add_argument("--size", default="480x540", help="video frame size WxH (480x540)")
+    ren.add_argument("--size", default=None,
+                     help="frame size WxH of an MP4, GIF or PNG (default: a face 480x540, "
+                     "240x270 in a GIF; curves 960x540, 640x360 in a GIF)")
     ren.add_argument("--force", action="store_true", help="replace an existing OBJ folder")
     ren.add_argument("--quiet", action="store_true", help="no progress bar")
     ren.set_defaults(func=cmd_render)
@@ -492,7 +502,8 @@ def _add_plot(sub) -> None:
     plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
     plo.add_argument("--labels", type=Path, default=None,
                      help="phone labels instead (default MOTION's <stem>.phones.csv if any)")
-    plo.add_argument("--audio", type=Path, default=None, help="the speech (WAV)")
+    plo.add_argument("--audio", type=Path, default=None,
+                     help="the speech (a WAV, or a video: its audio track)")
     plo.add_argument("--title", default="", help="title")
     plo.set_defaults(func=cmd_plot)
 
@@ -503,9 +514,10 @@ def _add_classify(sub) -> None:
         "classify", help="the emotion of speech, by the database's classifier",
         description="Print the probability of each of the database's emotions for the "
         "speech (any rate, mono or stereo), by the classifier trained on the database's "
-        "clips at ingest: prosodic and spectral features with 50 frame-averaged cepstrum "
-        "coefficients, normalised per speaker (an unknown speaker by the training "
-        "population), and a linear SVM (Cao et al. 2005 §6 uses an SVM on the signal's "
+        "clips at ingest: prosodic and spectral features, 50 frame-averaged cepstrum "
+        "coefficients and a bag of audio words (five pairs of 500-word codebooks), normalised per "
+        "speaker (an unknown speaker by the training population), a linear SVM and "
+        "probabilities by Platt scaling (Cao et al. 2005 §6 uses an SVM on the signal's "
         "mean, variance, RMS and first 500 real-cepstrum coefficients).",
     )
     cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)

@@ -279,14 +279,23 @@ def plot_motion(motion: Motion, path: Path, *, truth: Motion | None = None,
     end = max(motion.duration, truth.duration if truth else 0.0,
               max((p["end"] for p in phones), default=0.0))
     axes[-1].set_xlim(0, end)
-    n_jumps = sum(1 for p in phones if p.get("jump"))
-    subtitle = (f"{len(phones)} phones, {n_jumps} jump matches (dashed)" if phones else "")
-    fig.suptitle(" - ".join(s for s in (title, subtitle) if s), fontsize=10)
+    fig.suptitle(" - ".join(s for s in (title, phones_subtitle(phones)) if s), fontsize=10)
     fig.tight_layout()
     with atomic_write(path) as handle:
         fig.savefig(handle, format="png", dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def phones_subtitle(phones: Sequence[dict]) -> str:
+    """"16 phones, 6 jump matches (dashed)" for a synthesis' explanation (it names each
+    phone's recording); "11 phones" for a recording's labels, which have no jump to count."""
+    if not phones:
+        return ""
+    if not any(p.get("clip_id") for p in phones):
+        return f"{len(phones)} phones"
+    n_jumps = sum(1 for p in phones if p.get("jump"))
+    return f"{len(phones)} phones, {n_jumps} jump match{'es' * (n_jumps != 1)} (dashed)"
 
 
 def _truth_overlap(motion: Motion, truth: Motion, labels: Sequence[str],

@@ -96,22 +96,24 @@ def build_sql(spec: QuerySpec) -> str:
         if spec.phoneme is not None:
             where.append("EXISTS (SELECT 1 FROM animes AS a WHERE a.corpus = c.corpus AND "
                          f"a.clip_id = c.clip_id AND a.phoneme = {_literal(phone)})")
-        if spec.min_dur is not None:
-            where.append(f"c.duration >= {spec.min_dur:g}")
+        duration = "round(c.duration, 3)"
         select = ("SELECT c.corpus, c.clip_id, c.emotion, c.speaker, "
-                  "round(c.duration, 3) AS duration, c.n_animes, c.text\nFROM clips AS c")
+                  f"{duration} AS duration, c.n_animes, c.text\nFROM clips AS c")
         ties = ["c.corpus", "c.clip_id"]
     else:
         if spec.phoneme is not None:
             where.append(f"a.phoneme = {_literal(phone)}")
-        if spec.min_dur is not None:
-            where.append(f"a.end_time - a.start_time >= {spec.min_dur:g}")
+        duration = "round(a.end_time - a.start_time, 4)"
         select = ("SELECT a.node_id, a.corpus, a.clip_id, a.phoneme, a.emotion, a.speaker, "
                   "round(a.start_time, 4) AS start_time, round(a.end_time, 4) AS end_time, "
-                  "round(a.end_time - a.start_time, 4) AS duration, a.position, c.text\n"
+                  f"{duration} AS duration, a.position, c.text\n"
                   "FROM animes AS a JOIN clips AS c ON c.corpus = a.corpus "
                   "AND c.clip_id = a.clip_id")
         ties = ["a.node_id"]
+    if spec.min_dur is not None:
+        # On the duration as shown: a hit listed as 0.46 s is at least 0.46 s long (the raw
+        # 0.4599999999 of 91.39 - 90.93 was not).
+        where.append(f"{duration} >= {spec.min_dur!r}")
     sql = select
     if where:
         sql += "\nWHERE " + "\n  AND ".join(where)
@@ -137,7 +139,8 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     Raises
     ------
     ParameterError
-        For an emotion or a speaker the database does not have (naming the ones it has).
+        For an emotion or a speaker the database does not have (naming the ones it has),
+        or words to find in a database whose clips carry no transcript.
     """
     if spec.emotion is not None:  # in the database's spelling, whatever its case
         if spec.emotion.lower() == AUTO:
@@ -147,6 +150,12 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     if spec.speaker is not None:
         known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
         spec = replace(spec, speaker=find_speaker(spec.speaker, known))
+    if spec.text is not None and spec.text.split():
+        # Recognised phones leave a clip without words: no hit would not mean no match.
+        texts = db.table("clips", columns=["text"]).column("text")
+        if texts.null_count == len(texts):
+            raise ParameterError(f"--text {spec.text!r}: the database's clips carry no "
+                                 "transcript")
     return spec
 
 
@@ -301,6 +310,9 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
     from ingest.formats.wav import write_wav
 
     cache: dict[tuple[str, str], ClipData] = {}
+    # One deformer for every hit: building it (RBF systems per face region) took most of
+    # each landmark hit's export.
+    deformers: dict[tuple[str, ...], object] = {}
     index = []
     anime_mode = "node_id" in hits.column_names
     rows = hits.to_pylist()
@@ -341,7 +353,7 @@ def _export_into(db: Database, hits: pa.Table, folder: Path, context: float,
                          [(p["phone"], p["start"], p["end"]) for p in phones])
         _preview(clip, f0, f1, (a0 - f0 / clip.fps, a1 - f0 / clip.fps), phones,
                  folder / f"{stem}.png", title=f"{hit['clip_id']} ({hit['emotion']})"
-                 + (f": {hit['phoneme']}" if anime_mode else ""))
+                 + (f": {hit['phoneme']}" if anime_mode else ""), deformers=deformers)
         index.append({
             "n": n, "node_id": hit.get("node_id"), "corpus": hit["corpus"],
             "clip_id": hit["clip_id"], "phoneme": hit.get("phoneme"), "emotion": hit["emotion"],
@@ -393,9 +405,9 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
 
 
 def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones, path: Path,
-             *, title: str) -> None:
+             *, title: str, deformers: dict | None = None) -> None:
     """PNG: the face at the anime's middle (point and ARKit databases) and its main
-    measure."""
+    measure. ``deformers`` keeps the face's deformer by channel names between calls."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -405,7 +417,8 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
 
     part = clip.motion[f0:f1]
     t = np.arange(len(part)) / clip.fps
-    face = _face_image(clip, part, int(round(0.5 * (span[0] + span[1]) * clip.fps)))
+    face = _face_image(clip, part, int(round(0.5 * (span[0] + span[1]) * clip.fps)),
+                       {} if deformers is None else deformers)
     fig = plt.figure(figsize=(9, 3.2))
     if face is not None:
         ax_img = fig.add_axes((0.0, 0.0, 0.28, 1.0))
@@ -433,7 +446,8 @@ def _preview(clip: ClipData, f0: int, f1: int, span: tuple[float, float], phones
     plt.close(fig)
 
 
-def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | None:
+def _face_image(clip: ClipData, part: np.ndarray, frame: int,
+                deformers: dict) -> np.ndarray | None:
     from animegraph.face.animation import animate, animation_bounds
     from animegraph.face.arkit import arkit_animation
     from animegraph.face.render import FaceRenderer, deformer_for
@@ -441,10 +455,12 @@ def _face_image(clip: ClipData, part: np.ndarray, frame: int) -> np.ndarray | No
     from ingest.formats.livelink import is_arkit
 
     motion = Motion(values=part, names=clip.names, fps=clip.fps)
-    try:
-        deformer = deformer_for(clip.names)
-    except DataError:
-        return None
+    if clip.names not in deformers:
+        try:
+            deformers[clip.names] = deformer_for(clip.names)
+        except DataError:  # markers the canonical mesh lacks: no face, only the measure
+            deformers[clip.names] = None
+    deformer = deformers[clip.names]
     if deformer is None and not is_arkit(clip.names):
         return None
     animation = (arkit_animation(motion) if deformer is None else animate(motion, deformer))

@@ -1,8 +1,9 @@
-"""Printing query results: a readable table, or CSV, JSON lines, Parquet."""
+"""Printing query results: a readable table, or CSV, JSON, JSON Lines, Parquet."""
 
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 
 import pyarrow as pa
@@ -24,7 +25,7 @@ def _shorten(value) -> str:
 
 
 #: The format an output file's name asks for (``sql -o hits.csv``).
-FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "json", ".parquet": "parquet"}
+FORMAT_BY_SUFFIX = {".csv": "csv", ".json": "json", ".jsonl": "jsonl", ".parquet": "parquet"}
 
 
 def format_for(fmt: str | None, output: Path | None) -> str:
@@ -37,7 +38,9 @@ def format_for(fmt: str | None, output: Path | None) -> str:
 
 def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
                  output: Path | None = None, truncated: bool = False) -> str | None:
-    """Render ``table`` as ``fmt`` (table, csv, json, parquet).
+    """Render ``table`` as ``fmt``: table, csv, json (one array of row objects: a JSON
+    document, which ``json.load`` and ``pandas.read_json`` open), jsonl (JSON Lines, an
+    object a line) or parquet.
 
     ``truncated``: ``table`` is the first rows of a longer result (a row cap stopped the
     rest), so the table's last line does not call its rows all.
@@ -56,10 +59,13 @@ def format_table(table: pa.Table, fmt: str, *, max_rows: int = 50,
                                     names=table.column_names)
         pacsv.write_csv(flat, buffer)
         text = buffer.getvalue().decode()
-    elif fmt == "json":
+    elif fmt in ("json", "jsonl"):
         import json
 
-        text = "".join(json.dumps(row, default=_json) + "\n" for row in table.to_pylist())
+        rows = [json.dumps(_strict(row), default=_json, allow_nan=False)
+                for row in table.to_pylist()]
+        text = ("".join(f"{row}\n" for row in rows) if fmt == "jsonl"
+                else "[" + ",\n ".join(rows) + "]\n")
     else:
         text = _pretty(table, max_rows, truncated)
     if output is not None:
@@ -79,6 +85,18 @@ def _csv_safe(column: pa.ChunkedArray) -> pa.ChunkedArray:
         return pa.chunked_array([pa.array([None if v is None else v.hex()
                                            for v in column.to_pylist()], pa.string())])
     return column
+
+
+def _strict(value):
+    """JSON has no NaN or infinity (Python writes them, strict readers refuse the file):
+    null, as SQL's missing value."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, list):
+        return [_strict(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    return value
 
 
 def _json(value):

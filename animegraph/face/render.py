@@ -384,7 +384,8 @@ def curve_image(motion: Motion, phones: Sequence[dict], *, size=(960, 540),
 
 def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None,
                   audio: Path | None = None, fps: float | None = None,
-                  phones: Sequence[dict] = (), size=(480, 540), force: bool = False,
+                  phones: Sequence[dict] = (), size: tuple[int, int] | None = None,
+                  force: bool = False,
                   progress: Callable[[int], Callable] | None = None,
                   beside: Path | None = None) -> Path:
     """Render ``motion`` to ``out`` by its extension (see :data:`FORMATS`).
@@ -401,6 +402,9 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
         (default the motion's).
     phones : sequence of dict
         ``phone``, ``start``, ``end``: captions, or labels on a curve plot.
+    size : (width, height), optional
+        Frame size of an MP4, GIF or PNG (default 480 x 540 for a face, 240 x 270 for
+        its GIF; curves 960 x 540, their GIF 640 x 360); not for glTF or OBJ frames.
     beside : Path, optional
         The actor's video, put left of the face (MP4 only, :func:`place_beside`); checked
         before anything is rendered. The result ends with the shorter of the two; a
@@ -409,8 +413,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     Raises
     ------
     ParameterError
-        If ``out``'s extension is not one of :data:`FORMATS`, or ``audio`` or ``beside``
-        is given for another output than an MP4.
+        If ``out``'s extension is not one of :data:`FORMATS`, ``audio`` or ``beside``
+        is given for another output than an MP4, or ``size`` for a glTF or OBJ frames.
     DataError
         If ``audio`` or ``beside`` cannot be read, or writing fails; ``out`` is then left
         as it was.
@@ -429,6 +433,8 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
     for option, given in (("--beside", beside), ("--audio", audio)):
         if given is not None and kind != ".mp4":
             raise ParameterError(f"{option} needs an .mp4 output, got {out.name!r}")
+    if size is not None and kind in (".glb", ""):
+        raise ParameterError(f"--size needs an .mp4, .gif or .png output, got {out.name!r}")
     if audio is not None:
         from ingest.formats.media import read_audio
 
@@ -443,17 +449,17 @@ def render_motion(motion: Motion, out: Path, *, deformer: Deformer | None = None
             raise ParameterError("curve motion (no marker geometry) cannot become a mesh "
                                  "animation: render .mp4, .gif or .png")
         if kind == ".png":
-            curve_image(motion, phones, path=out)
+            curve_image(motion, phones, path=out, size=size or (960, 540))
             return out
         frames = curve_frames(motion, phones, fps=video_fps,
-                              size=(960, 540) if kind == ".mp4" else (640, 360))
+                              size=size or ((640, 360) if kind == ".gif" else (960, 540)))
         return _video(frames, out, video_fps, audio=audio, beside=beside)
     if kind in (".mp4", ".gif", ".png"):
         animation = _animation(motion, deformer, video_fps)
+        size = size or ((240, 270) if kind == ".gif" else (480, 540))
         if kind == ".png":
             return _still(animation, out, phones, size)
-        gif_size = (240, 270) if kind == ".gif" else size
-        frames = face_frames(animation, size=gif_size, phones=phones)
+        frames = face_frames(animation, size=size, phones=phones)
         if progress is not None:
             frames = progress(animation.n_frames)(frames)
         return _video(frames, out, video_fps, audio=audio, beside=beside)

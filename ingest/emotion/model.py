@@ -558,7 +558,9 @@ def _fit_classifier(audio, emotions, speakers, notes,
         have = ", ".join(f"{n} {c}" for n, c in zip(names, counts, strict=True))
         notes.append(f"no emotion classifier: it needs two emotions with at least "
                      f"{MIN_CLASSIFIER_CLIPS} usable clips each ("
-                     + (f"clips per emotion: {have})" if have else "it has no usable clip)"))
+                     + (f"clips per emotion: {have})" if have
+                        else "it has no usable clip)" if dropped
+                        else "its clips carry no emotion labels)"))
         return None
     keep = [k for k, lab in enumerate(labels) if lab in usable]
     if len(usable) < names.size:

@@ -65,7 +65,10 @@ def to_arpabet(label: str) -> str:
         return base
     if base in ALIASES:
         return ALIASES[base]
-    raise DataError(f"unknown phone label {label!r}")
+    # An aligner's other phone sets (MFA's english_mfa model writes IPA, WebMAUS SAMPA)
+    # are common: say what is read.
+    raise DataError(f"unknown phone label {label!r} (phone labels are ARPAbet: CMU's 39 "
+                    "phones, stress digits allowed; not IPA or SAMPA)")
 
 
 def format_seconds(value: float) -> str:

@@ -32,9 +32,16 @@ SIDECAR_LABELS = (".phones.csv", ".TextGrid", ".lab")
 
 def sidecar_labels(path: Path) -> Path | None:
     """``<stem>.phones.csv`` (or ``.TextGrid``, ``.lab``) beside ``path`` (speech for
-    ``synth``, motion for ``render`` and ``plot``), if there is one."""
+    ``synth``, motion for ``render`` and ``plot``), if there is one. The stem of a Live
+    Link take ``hit.livelink.csv`` is ``hit``: 'query --export' writes ``hit.phones.csv``
+    beside it."""
+    from animegraph.motion.files import LIVELINK_SUFFIX
+
+    name = path.name
+    stem = (name[:-len(LIVELINK_SUFFIX)] if name.lower().endswith(LIVELINK_SUFFIX)
+            else path.stem)
     for suffix in SIDECAR_LABELS:
-        beside = path.with_name(path.stem + suffix)
+        beside = path.with_name(stem + suffix)
         if beside.is_file():
             return beside
     return None

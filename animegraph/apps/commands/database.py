@@ -105,7 +105,7 @@ def cmd_query(args: argparse.Namespace) -> int:
     sys.stdout.write(format_table(shown, args.format, max_rows=max(1, hits.num_rows)))
     if args.export is not None:
         rows = export_hits(db, hits, args.export, context=args.context, force=args.force,
-                           progress=lambda total: progress(total, False, "hit",
+                           progress=lambda total: progress(total, args.quiet, "hit",
                                                            "exporting"))
         print(f"animegraph: exported {len(rows)} hit{'s' * (len(rows) != 1)} to "
               f"{args.export} (index.csv)",

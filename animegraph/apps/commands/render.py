@@ -17,7 +17,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     from animegraph.motion.files import read_motion
     from ingest.formats.livelink import is_arkit
 
-    size = _size(args.size)
+    size = None if args.size is None else _size(args.size)
+    if size is not None and args.output.suffix.lower() not in (".mp4", ".gif", ".png"):
+        raise UsageError("animegraph render: --size needs an .mp4, .gif or .png output (a "
+                         "glTF or OBJ frames are a mesh, not pictures)")
     if args.fps is not None and not args.fps > 0:
         raise UsageError(f"animegraph render: --fps must be > 0, got {args.fps}")
     if args.mesh is not None and args.marker_map is None:
