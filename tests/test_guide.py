@@ -432,3 +432,25 @@ def test_a_transcript_that_does_not_fit_is_synthesized_as_speech_alone(model, ml
     said = json.loads(wav.with_suffix(".json").read_text())["text"]
     fits = synthesize(model, audio, rate, text=said, k_best=5, recognized_guide=load)
     assert fits.segmentation == "aligned" and fits.guided == () and asked == [1]
+
+
+def test_a_kept_reason_from_someone_else_is_read_within_its_bound(tiny_db, tmp_path):
+    """Why a guide could not be fitted is read from the database folder: a FIFO in its
+    place (the read would block), or a file of gigabytes, is no reason rather than a hang
+    or a memory bomb; a kept reason gives its first printable line."""
+    import os
+
+    from animegraph.baselines.stored import _unfit_path, record_unfit, unfit_reason
+
+    db = tmp_path / "db"
+    copy_unfitted(tiny_db[0], db)
+    record_unfit(db, "mu-mlp", "too little data\x1b[31m\nsecond line")
+    assert unfit_reason(db, "mu-mlp") == "too little data[31m"
+    path = _unfit_path(db, "mu-mlp")
+    path.unlink()
+    os.mkfifo(path)
+    assert unfit_reason(db, "mu-mlp") is None
+    path.unlink()
+    with open(path, "wb") as handle:  # sparse: no disk taken
+        handle.truncate(4 << 30)
+    assert unfit_reason(db, "mu-mlp") is None

@@ -59,6 +59,11 @@ def model_path(db_root, method: str) -> Path:
 
 
 
+#: Largest reason file read (what :func:`record_unfit` writes is one line of a few hundred
+#: bytes).
+_MAX_REASON_BYTES = 64 << 10
+
+
 def _unfit_path(db_root, method: str) -> Path:
     return model_path(db_root, method).with_suffix(".unfit")
 
@@ -67,10 +72,14 @@ def unfit_reason(db_root, method: str) -> str | None:
     """Why ``method`` could not be fitted on the live version of ``db_root``, as
     :func:`record_unfit` kept it, or None. The text comes from a database folder (someone
     else's): only its first line, printable characters, at most 300 of them."""
-    try:
-        text = _unfit_path(db_root, method).read_text(encoding="utf-8", errors="replace")
-    except OSError:
+    from db.errors import DataError
+    from ingest.formats.text import read_bytes
+
+    try:  # a file only (a FIFO would block), and no more than a reason's worth of it
+        data = read_bytes(_unfit_path(db_root, method), "reason", _MAX_REASON_BYTES)
+    except DataError:
         return None
+    text = data.decode("utf-8", errors="replace")
     line = "".join(c for c in (text.splitlines() or [""])[0] if c.isprintable())[:300]
     return line or "no reason kept"
 
