@@ -293,7 +293,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if args.scheduler is None and args.workers < 1:
         raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
     options = BatchOptions(db=args.db, out=args.out, workers=args.workers,
-                           scheduler=args.scheduler, render=args.render, force=args.force)
+                           scheduler=args.scheduler, render=args.render, force=args.force,
+                           motion_formats=args.motion_format)
 
     def say(line: str) -> None:
         if not args.quiet:
