@@ -213,10 +213,9 @@ def run_batch(
     database = Database.open(db)  # a clear error now rather than one per line
     names = database.table("channels").column("name").to_pylist()
     files = motion_files(options.motion_formats, names, database.manifest["kind"])
-    for name in files:
-        left_out = channels_left_out(name, names)
-        if left_out:  # e.g. a landmark database's head pose in motion.c3d: said once
-            logger.warning("%s", left_out)
+    if all(channels_left_out(name, names) for name in files):
+        # e.g. a landmark database's head pose not in motion.c3d: said once, here
+        logger.warning("%s", channels_left_out(files[0], names))
     version, identity = database_identity(db)
     out = Path(options.out).absolute()
     if out.exists() and not out.is_dir():

@@ -198,16 +198,17 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
                    extra: dict | None = None, timecode: str | None = None) -> Path:
     """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
 
-    A name ending in :data:`LIVELINK_SUFFIX` (``take.livelink.csv``) writes Live Link
-    Face CSV (:func:`ingest.formats.livelink.write_livelink`: ARKit channels only,
-    blendshapes clamped to [0, 1], the timecode running from ``timecode``, default
-    ``00:00:00:00``). ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and
-    ``channels``.
+    C3D holds the points only (:func:`channels_left_out`; :func:`check_output` says so
+    before the work). A name ending in :data:`LIVELINK_SUFFIX` (``take.livelink.csv``)
+    writes Live Link Face CSV (:func:`ingest.formats.livelink.write_livelink`: ARKit
+    channels only, blendshapes clamped to [0, 1], the timecode running from ``timecode``,
+    default ``00:00:00:00``). ``extra`` arrays go into an NPZ beside ``motion``, ``fps``
+    and ``channels``.
     """
     path = Path(path)
     motion = np.asarray(motion, dtype=np.float64)
     names = tuple(names)
-    check_output(path, names, kind, timecode=timecode)
+    check_format(path.name, names, kind, timecode=timecode)
     suffix = path.suffix.lower()
     if path.name.lower().endswith(LIVELINK_SUFFIX):
         from ingest.formats.livelink import write_livelink
@@ -218,9 +219,6 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 
         point_cols = point_columns(names)
         labels = tuple(names[i][:-2] for i in point_cols[::3])
-        left_out = channels_left_out(path.name, names)
-        if left_out:  # e.g. a landmark database's head pose: said, not dropped in silence
-            logger.warning("%s", left_out)
         points = motion[:, point_cols].reshape(len(motion), -1, 3)
         write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
@@ -240,7 +238,8 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -> None:
     """ParameterError (DataError for a missing folder) unless :func:`write_channels` can
     write motion of these channels to ``path``: what it would refuse after the work, said
-    before it.
+    before it, with a warning of the channels it would leave out (a landmark database's
+    head pose in C3D: said, not dropped in silence).
 
     Parameters
     ----------
@@ -258,6 +257,9 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
 
     check_folder(path)  # synth -o in a missing folder failed after the synthesis
     check_format(Path(path).name, names, kind, timecode=timecode)
+    left_out = channels_left_out(Path(path).name, names)
+    if left_out:
+        logger.warning("%s", left_out)
 
 
 def check_format(name: str, names, kind: str, *, timecode: str | None = None) -> None:
