@@ -12,6 +12,7 @@ import pytest
 from animegraph.apps.batch import (
     DONE,
     EXAMPLE_SCRIPT,
+    BatchInterrupted,
     BatchOptions,
     LineTask,
     database_identity,
@@ -465,6 +466,22 @@ def test_changing_the_render_renders_the_stored_motion(tiny_db, tmp_path):
         again = run_batch(script, BatchOptions(db=db, out=out, workers=1, render=render))
         assert [r["status"] for r in again.rows] == ["skipped", "skipped"], render
         assert again.n_workers == 0 and preview.stat().st_mtime_ns == rendered_at
+
+    # A Ctrl-C (here as the workers are up) leaves the report of what was done.
+    with script.open("a") as handle:
+        handle.write("c,,Pam sang a tune.\n")
+
+    def interrupt(news: str) -> None:
+        if "to make" in news:
+            raise KeyboardInterrupt
+
+    with pytest.raises(BatchInterrupted) as stop:
+        run_batch(script, BatchOptions(db=db, out=out, workers=1, render="mp4"), say=interrupt)
+    assert [r["status"] for r in stop.value.result.rows] == ["skipped", "skipped", "not run"]
+    assert [r["status"] for r in read_report(out / "report.csv")] == [
+        "skipped", "skipped", "not run"]
+    assert "0 made, 2 skipped (finished before), 0 failed, 1 not run" in \
+        stop.value.result.summary()[0]
 
     # A render interrupted after its old record was dropped: rendered again, alone.
     marker = json.loads((out / "a" / DONE).read_text())

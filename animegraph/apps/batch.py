@@ -92,6 +92,14 @@ class LineError(AnimeGraphError):
     """One line cannot be made; the batch goes on."""
 
 
+class BatchInterrupted(KeyboardInterrupt):
+    """A Ctrl-C stopped the batch: ``result`` is what it had done (its report written)."""
+
+    def __init__(self, result: BatchResult):
+        super().__init__()
+        self.result = result
+
+
 class NotStarted(DataError):
     """The cluster could not be had: no line ran, and the batch leaves nothing behind."""
 
@@ -194,6 +202,9 @@ def run_batch(
 
     Raises
     ------
+    BatchInterrupted
+        A Ctrl-C (a KeyboardInterrupt) once the batch had its output folder: with the
+        result so far, its report written (lines not reached are ``not run``).
     ScriptError
         The script is malformed (nothing runs).
     AnimeGraphError
@@ -289,6 +300,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
     result = BatchResult(rows=[], report=report)
     t0 = time.perf_counter()
     written = True
+    interrupted = False
     try:
         if tasks:
             making = [t for t in tasks if t.synthesize]
@@ -330,11 +342,15 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
                     raise
                 written = False  # no cluster: no line ran, nothing to report
                 raise NotStarted(str(exc)) from None
+    except KeyboardInterrupt:
+        interrupted = True  # the report says what was done
     finally:
         result.elapsed_s = time.perf_counter() - t0
         result.rows = [rows.get(line.id) or _row(line, status="not run") for line in lines]
         if written:
             write_report(report, result.rows)
+    if interrupted:
+        raise BatchInterrupted(result) from None
     return result
 
 

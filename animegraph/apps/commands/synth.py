@@ -288,7 +288,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
-    from animegraph.apps.batch import BatchOptions, run_batch
+    from animegraph.apps.batch import BatchInterrupted, BatchOptions, run_batch
 
     if args.scheduler is None and args.workers < 1:
         raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
@@ -300,9 +300,18 @@ def cmd_batch(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"animegraph: {line}", file=sys.stderr)
 
-    result = run_batch(args.script, options, say=say,
-                       progress=lambda total: progress(total, args.quiet, "line",
-                                                       "batch: lines"))
+    try:
+        result = run_batch(args.script, options, say=say,
+                           progress=lambda total: progress(total, args.quiet, "line",
+                                                           "batch: lines"))
+    except BatchInterrupted as stop:  # what was done, and how to go on
+        for line in stop.result.summary():
+            print(line)
+        print("animegraph: interrupted: " + (
+            "the lines not run keep what they had (--force again remakes every line)"
+            if args.force else "the lines made are kept; the same command makes the rest"),
+            file=sys.stderr)
+        return 130
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1
