@@ -157,6 +157,15 @@ def test_summary_counts_in_the_singular_too(tmp_path):
         "batch: 1.5 s of speech animated in 3.0 s on 1 worker (20.0 lines/min)"]
     result.rows = [row, {**row, "id": "b"}]
     assert result.summary()[0].startswith("batch: 2 lines: 2 made")
+    # A line made otherwise than asked is said, not only in the report (a transcript
+    # that did not fit its recording: '4 made, 0 failed' and nothing more).
+    warned = [{**row, "id": f"w{i}", "warnings": "transcript alignment failed: ..."}
+              for i in range(12)]
+    result.rows = [row, *warned, {**warned[0], "id": "s", "status": "skipped"}]
+    lines = result.summary()
+    assert lines[2] == "batch: warning w0: transcript alignment failed: ..."
+    assert lines[-2] == "batch: 2 more lines with warnings (the report's warnings column)"
+    assert not any(" s:" in line for line in lines)  # said when it was made
 
 
 def test_finished_needs_the_same_key_and_every_output(tmp_path):

@@ -82,6 +82,8 @@ LINE_FILES = ("speech.wav", "phones.csv", "explain.json", PREVIEW,
 REPORT_COLUMNS = ("id", "status", "speaker", "speech", "path", "duration_s", "emotion",
                   "emotion_source", "motion_emotions", "jumps", "cost", "seconds",
                   "cpu_seconds", "warnings", "error")
+#: Lines made with warnings that the summary names (the report has them all).
+WARNINGS_SHOWN = 10
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
 CONNECT_TIMEOUT_S = 5.0
 #: The worked example shipped with the package: a tutor and a student, six lines.
@@ -174,6 +176,15 @@ class BatchResult:
         for r in self.rows:
             if r["status"] == "failed":
                 lines.append(f"batch: failed {r['id']}: {r['error']}")
+        # A transcript that does not fit its recording is a line made otherwise than
+        # asked: said here, not only in the report's warnings column.
+        warned = [r for r in self.rows if r["status"] == "done" and r.get("warnings")]
+        lines += [f"batch: warning {r['id']}: {r['warnings']}"
+                  for r in warned[:WARNINGS_SHOWN]]
+        if len(warned) > WARNINGS_SHOWN:
+            more = len(warned) - WARNINGS_SHOWN
+            lines.append(f"batch: {more} more line{'s' * (more != 1)} with warnings (the "
+                         "report's warnings column)")
         lines.append(f"batch: report {self.report}")
         return lines
 
