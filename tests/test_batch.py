@@ -260,16 +260,18 @@ def test_emotions_are_checked_before_any_worker_starts(tiny_db, tmp_path):
     # An emotion the database lacks failed its line only on a worker, after the
     # cluster's start-up; a script of such lines started a cluster for nothing.
     script = tmp_path / "s.csv"
-    script.write_text("id,emotion,text\n"
-                      "a,bored,Hello there.\n"
-                      "b,\"bored=0.5,happy=0.5\",Hello there.\n")
+    script.write_text("id,emotion,voice,text\n"
+                      "a,bored,,Hello there.\n"
+                      "b,\"bored=0.5,happy=0.5\",,Hello there.\n"
+                      "c,happy,en-xx,Hello there.\n")  # and a voice eSpeak NG lacks
     result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
     assert result.n_workers == 0  # no cluster
-    assert [r["status"] for r in result.rows] == ["failed", "failed"]
-    for row in result.rows:
+    assert [r["status"] for r in result.rows] == ["failed", "failed", "failed"]
+    for row in result.rows[:2]:
         assert row["error"].startswith("unknown emotion 'bored': it is not in the database "
                                        "(it has angry, frustrated, happy, neutral, sad)")
-    assert [r["status"] for r in read_report(result.report)] == ["failed", "failed"]
+    assert result.rows[2]["error"] == "voice name 'en-xx' is not an eSpeak NG voice"
+    assert [r["status"] for r in read_report(result.report)] == ["failed"] * 3
 
 
 def test_a_database_without_emotion_labels_fails_emotion_lines_at_once(unlabelled_db,

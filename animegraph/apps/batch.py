@@ -285,6 +285,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
         return {p: stored[p] for p in parts}
 
     check_emotion = EmotionCheck(db)
+    check_voice = VoiceCheck()
     for line in lines:
         folder = out / line.id
         try:
@@ -300,6 +301,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
             try:
                 # here, not in each worker after its start-up
                 check_emotion(line.emotion, recorded=line.audio is not None)
+                check_voice(line)
             except LineError as exc:
                 rows[line.id] = _row(line, status="failed", error=str(exc))
                 continue
@@ -569,6 +571,30 @@ class EmotionCheck:
                 resolve_emotion(spec.argument, model, graph_emotions)
         except AnimeGraphError as exc:
             raise LineError(str(exc)) from None
+
+
+class VoiceCheck:
+    """``check(line)``: the eSpeak NG voice of a line without a recording is one eSpeak
+    knows, before any worker starts (a misspelt voice failed its line on a worker, after
+    the cluster's start-up). Raises :class:`LineError` with eSpeak's message; each voice
+    is tried once, on a word."""
+
+    def __init__(self):
+        self._why: dict[str, str] = {}
+
+    def __call__(self, line: ScriptLine) -> None:
+        from ingest.speech.espeak import Voice, speak
+
+        if line.audio is not None or not line.voice:
+            return
+        if line.voice not in self._why:
+            try:
+                speak("a", Voice(name=line.voice))
+                self._why[line.voice] = ""
+            except AnimeGraphError as exc:
+                self._why[line.voice] = str(exc)
+        if self._why[line.voice]:
+            raise LineError(self._why[line.voice])
 
 
 def database_identity(db: Path) -> tuple[str, str]:
