@@ -382,7 +382,8 @@ def _add_batch(sub) -> None:
         "by eSpeak NG with their emotion's prosody, phone timing from the synthesizer; lines "
         "with one are force-aligned to their text. Each line gets OUT/<id>/ (speech.wav, "
         "motion, phones.csv, explain.json[, preview.mp4]); OUT/report.csv lists them all. "
-        "Finished lines are skipped on a re-run unless --force.",
+        "A re-run makes only the lines whose inputs changed (all with --force); a changed "
+        "--render renders the stored motion, without synthesizing it again.",
     )
     bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
     _db_option(bat)
@@ -393,8 +394,7 @@ def _add_batch(sub) -> None:
     bat.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="run on an existing Dask cluster, e.g. tcp://host:8786")
     bat.add_argument("--render", choices=("none", "mp4"), default="none",
-                     help="also render an MP4 preview of each line (default none); "
-                     "changing it renders from the stored motion, without synthesizing again")
+                     help="also render an MP4 preview of each line (default none)")
     bat.add_argument("--motion-format", type=_formats, default=(), metavar="FORMATS",
                      help="motion files to write, comma-separated: c3d, csv, npz, livelink "
                      "(Live Link Face CSV), as synth -o writes them; default the "
