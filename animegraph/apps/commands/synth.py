@@ -307,11 +307,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
     except BatchInterrupted as stop:  # what was done, and how to go on
         for line in stop.result.summary():
             print(line)
-        print("animegraph: interrupted: " + (
+        print("batch: interrupted: " + (
             "the lines not run keep what they had (--force again remakes every line)"
-            if args.force else "the lines made are kept; the same command makes the rest"),
-            file=sys.stderr)
-        return 130
+            if args.force else "the lines made are kept; the same command makes the rest"))
+        raise  # the command line's "interrupted", status 130
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1
