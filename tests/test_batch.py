@@ -535,8 +535,8 @@ def test_a_batch_writes_the_motion_formats_synth_writes(tiny_db, tmp_path):
     db = tiny_db[0]
     names = Database.open(db).table("channels").column("name").to_pylist()
     assert motion_files((), names, "markers") == FILES
-    files = motion_files(("npz", "c3d", "csv", "npz"), names, "markers")
-    assert files == ("motion.npz", "motion.c3d", "motion.csv")
+    files = motion_files(("npz", "csv", "c3d", "npz"), names, "markers")
+    assert files == ("motion.c3d", "motion.csv", "motion.npz")  # one order: one key
     points = [f"lm{i}.{a}" for i in range(3) for a in "xyz"]
     landmarks = points + ["pose.rx", "pose.ry", "pose.rz", "pose.tx", "pose.ty", "pose.tz",
                           "pose.scale"]

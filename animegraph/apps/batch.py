@@ -610,7 +610,7 @@ def database_identity(db: Path) -> tuple[str, str]:
 
 def motion_files(formats: Iterable[str], names, kind: str) -> tuple[str, ...]:
     """The motion files of a line: ``motion`` with the ending of each of ``formats``
-    (:data:`MOTION_FORMATS`), or, for none, of the database's own format
+    (:data:`MOTION_FORMATS`, in its order), or, for none, of the database's own format
     (:func:`animegraph.motion.files.motion_suffix`).
 
     Raises
@@ -621,17 +621,18 @@ def motion_files(formats: Iterable[str], names, kind: str) -> tuple[str, ...]:
     """
     from animegraph.motion.files import check_format, motion_suffix
 
-    files = []
-    for name in dict.fromkeys(formats):  # once each, in the order given
-        if name not in MOTION_FORMATS:
-            raise ParameterError(f"motion format must be one of {', '.join(MOTION_FORMATS)}, "
-                                 f"got {name!r}")
-        file = f"motion{MOTION_FORMATS[name]}"
+    unknown = [name for name in formats if name not in MOTION_FORMATS]
+    if unknown:
+        raise ParameterError(f"motion format must be one of {', '.join(MOTION_FORMATS)}, "
+                             f"got {unknown[0]!r}")
+    # in one order, whatever the order given: c3d,csv and csv,c3d make the same lines
+    chosen = [name for name in MOTION_FORMATS if name in formats]
+    for name in chosen:
         try:
-            check_format(file, names, kind)
+            check_format(f"motion{MOTION_FORMATS[name]}", names, kind)
         except ParameterError as exc:
             raise ParameterError(f"--motion-format {name}: {exc}") from None
-        files.append(file)
+    files = [f"motion{MOTION_FORMATS[name]}" for name in chosen]
     return tuple(files) or (f"motion{motion_suffix(names, kind)}",)
 
 
