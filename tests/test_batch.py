@@ -468,7 +468,7 @@ def test_changing_the_render_renders_the_stored_motion(tiny_db, tmp_path):
     assert with_preview.loads == {}  # no worker loaded the Anime Graph: nothing synthesized
     assert {p: p.stat().st_mtime_ns for p in made} == made
     assert [r["jumps"] for r in with_preview.rows] == [r["jumps"] for r in first.rows]
-    assert "0 made, 2 rendered from their stored motion" in with_preview.summary()[0]
+    assert "0 made, 2 rendered from stored motion" in with_preview.summary()[0]
     preview = out / "a" / "preview.mp4"
     rendered_at = preview.stat().st_mtime_ns
 

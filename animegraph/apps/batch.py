@@ -162,7 +162,7 @@ class BatchResult:
         speech = sum(float(r["duration_s"] or 0) for r in self.rows if r["status"] == "done")
         n = len(self.rows)
         lines = [f"batch: {n} line{'s' * (n != 1)}: {done} made, "
-                 + (f"{rendered} rendered from their stored motion, " if rendered else "")
+                 + (f"{rendered} rendered from stored motion, " if rendered else "")
                  + f"{skipped} skipped (finished before), {failed} failed"
                  + (f", {self.count('not run')} not run" if self.count("not run") else "")]
         on = f"on {self.n_workers} worker{'s' * (self.n_workers != 1)}"
@@ -368,11 +368,11 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
 
 
 def _plan(n_make: int, n_render: int) -> str:
-    """``3 lines to make, 2 to render from their stored motion``."""
+    """``3 lines to make, 2 to render from stored motion``."""
     parts = [f"{n_make} line{'s' * (n_make != 1)} to make"] if n_make else []
     if n_render:
         parts.append(f"{n_render}{'' if n_make else ' line' + 's' * (n_render != 1)} to "
-                     "render from their stored motion")
+                     "render from stored motion")
     return ", ".join(parts)
 
 
