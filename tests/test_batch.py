@@ -526,6 +526,29 @@ def test_a_line_made_again_keeps_no_file_of_the_earlier_run(tiny_db, tmp_path):
         DONE, "explain.json", "motion.c3d", "phones.csv", "speech.wav"]
 
 
+def test_a_failed_render_keeps_the_motion_for_the_next_run(tiny_db, tmp_path):
+    # A line whose render failed lost its motion too: the next run synthesized it again.
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2)
+    key = line_key(line, identity, FILES)
+
+    def task(synthesize: bool) -> LineTask:
+        return LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                        render="mp4", key=key, motion_files=FILES, synthesize=synthesize)
+
+    assert run_line(task(True))["status"] == "done"
+    (folder / "preview.mp4").unlink()
+    (folder / "preview.mp4").mkdir()  # the render cannot be put in its place
+    row = run_line(task(False))
+    assert row["status"] == "failed" and row["error"].startswith(
+        "rendering preview.mp4 failed (the motion is made: the next run only renders): "), row
+    assert finished(folder, key) is not None and not rendered(folder, key, "mp4")
+    (folder / "preview.mp4").rmdir()
+    assert run_line(task(False))["status"] == "rendered" and rendered(folder, key, "mp4")
+
+
 def test_a_batch_writes_the_motion_formats_synth_writes(tiny_db, tmp_path):
     # A batch wrote one format per kind of database (C3D of markers, CSV of landmarks):
     # no C3D of a landmark database's points, no NPZ, where synth -o writes them.
