@@ -232,9 +232,11 @@ def run_batch(
         raise ParameterError(f"workers must be at least 1, got {options.workers}")
     lines = read_script(script)
     db = Path(options.db).absolute()
-    database = Database.open(db)  # a clear error now rather than one per line
-    names = database.table("channels").column("name").to_pylist()
-    files = motion_files(options.motion_formats, names, database.manifest["kind"])
+    from animegraph.synthesis.model import read_channels
+
+    # a clear error now rather than one per line
+    _, names, _, kind = read_channels(Database.open(db))
+    files = motion_files(options.motion_formats, names, kind)
     if all(channels_left_out(name, names) for name in files):
         # e.g. a landmark database's head pose not in motion.c3d: said once, here
         logger.warning("%s", channels_left_out(files[0], names))

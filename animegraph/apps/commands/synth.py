@@ -238,6 +238,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     from animegraph.emotion.control import AUTO, check_names, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
+    from animegraph.synthesis.model import read_channels
     from db.store import Database
     from ingest.formats.media import read_audio
 
@@ -267,8 +268,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
-    check_output("synth", args.output, db.table("channels").column("name").to_pylist(),
-                  db.manifest["kind"])
+    _, names, _, kind = read_channels(db)  # the kind from the channels, as synthesis reads it
+    check_output("synth", args.output, names, kind)
     emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
                           .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
