@@ -472,11 +472,14 @@ def test_changing_the_render_renders_the_stored_motion(tiny_db, tmp_path):
     preview = out / "a" / "preview.mp4"
     rendered_at = preview.stat().st_mtime_ns
 
-    # Off, and on again: nothing to do, no cluster; the preview stays.
+    # Off, and on again: nothing to do, no cluster; the preview stays, and what a render
+    # cut short left goes.
+    (out / "b" / ".preview.0123.tmp.mp4").write_bytes(b"half")
     for render in ("none", "mp4"):
         again = run_batch(script, BatchOptions(db=db, out=out, workers=1, render=render))
         assert [r["status"] for r in again.rows] == ["skipped", "skipped"], render
         assert again.n_workers == 0 and preview.stat().st_mtime_ns == rendered_at
+        assert not list((out / "b").glob(".*"))
 
     # A Ctrl-C (here as the workers are up) leaves the report of what was done.
     with script.open("a") as handle:

@@ -298,6 +298,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
         saved = None if options.force else finished(folder, key, guides)
         if saved is not None and rendered(folder, key, options.render):
             rows[line.id] = {**saved, "status": "skipped"}
+            _remove_temporaries(folder)  # of a render cut short, now turned off
             continue
         if saved is None:
             try:
