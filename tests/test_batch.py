@@ -13,12 +13,15 @@ import pytest
 from animegraph.apps.batch import (
     DONE,
     EXAMPLE_SCRIPT,
+    BatchInterrupted,
     BatchOptions,
     LineTask,
     database_identity,
     finished,
     line_key,
     read_report,
+    render_key,
+    rendered,
     run_batch,
     run_line,
     voice_for,
@@ -26,11 +29,15 @@ from animegraph.apps.batch import (
 from animegraph.apps.cli import main
 from animegraph.apps.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
 from db.errors import DataError, ParameterError
+from db.store import Database
 from ingest.corpus.emotions import STYLES
 from ingest.formats.c3d import read_c3d
 from ingest.formats.phones_csv import read_phones_csv
 from ingest.formats.wav import read_wav
 from ingest.speech.espeak import Voice, speak
+
+#: A marker database's motion file in a batch (its default).
+FILES = ("motion.c3d",)
 
 # --------------------------------------------------------------------------- the script
 
@@ -170,6 +177,15 @@ def test_summary_counts_in_the_singular_too(tmp_path):
         "batch: 1.5 s of speech animated in 3.0 s on 1 worker (20.0 lines/min)"]
     result.rows = [row, {**row, "id": "b"}]
     assert result.summary()[0].startswith("batch: 2 lines: 2 made")
+    # A line made otherwise than asked is said, not only in the report (a transcript
+    # that did not fit its recording: '4 made, 0 failed' and nothing more).
+    warned = [{**row, "id": f"w{i}", "warnings": "transcript alignment failed: ..."}
+              for i in range(12)]
+    result.rows = [row, *warned, {**warned[0], "id": "s", "status": "skipped"}]
+    lines = result.summary()
+    assert lines[2] == "batch: warning w0: transcript alignment failed: ..."
+    assert lines[-2] == "batch: 2 more lines with warnings (the report's warnings column)"
+    assert not any(" s:" in line for line in lines)  # said when it was made
 
 
 def test_finished_needs_the_same_key_and_every_output(tmp_path):
@@ -244,14 +260,17 @@ def test_the_key_follows_inputs_recording_and_database(tmp_path):
     rec = tmp_path / "a.wav"
     rec.write_bytes(b"one")
     line = ScriptLine(id="a", text="Hi", line_no=2, audio=rec)
-    key = line_key(line, "v000001:abc", "none")
-    assert key == line_key(line, "v000001:abc", "none")
-    assert key != line_key(line, "v000002:def", "none")
-    assert key != line_key(line, "v000001:abc", "mp4")
+    key = line_key(line, "v000001:abc", FILES)
+    assert key == line_key(line, "v000001:abc", FILES)
+    assert key != line_key(line, "v000002:def", FILES)
+    assert key != line_key(line, "v000001:abc", ("motion.c3d", "motion.npz"))
     assert key != line_key(ScriptLine(id="a", text="Hi!", line_no=2, audio=rec),
-                           "v000001:abc", "none")
+                           "v000001:abc", FILES)
+    # the render is not the motion's: it has a key of its own, on the motion's
+    assert render_key(key, "mp4") != render_key(key, "none")
     rec.write_bytes(b"two")
-    assert key != line_key(line, "v000001:abc", "none")
+    assert key != line_key(line, "v000001:abc", FILES)
+    assert render_key(line_key(line, "v000001:abc", FILES), "mp4") != render_key(key, "mp4")
 
 
 def test_run_line_in_process(tiny_db, tmp_path):
@@ -270,7 +289,7 @@ def test_run_line_in_process(tiny_db, tmp_path):
         line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2,
                           emotion=parse_emotion(emotion))
         return LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
-                        render="none", key=line_key(line, identity, "none"))
+                        render="none", key=line_key(line, identity, FILES))
 
     bad = run_line(task("bored"))
     assert bad["status"] == "failed"
@@ -304,7 +323,7 @@ def test_run_line_reads_a_videos_sound_track(tiny_db, tiny_corpus, tmp_path):
     line = ScriptLine(id="v", text=json.loads(clip.read_text())["text"], line_no=2,
                       audio=video)
     row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
-                            render="none", key=line_key(line, identity, "none")))
+                            render="none", key=line_key(line, identity, FILES)))
     assert row["status"] == "done", row
     audio, rate = read_wav(folder / "speech.wav")
     wav, wav_rate = read_wav(clip.with_suffix(".wav"))
@@ -315,16 +334,18 @@ def test_emotions_are_checked_before_any_worker_starts(tiny_db, tmp_path):
     # An emotion the database lacks failed its line only on a worker, after the
     # cluster's start-up; a script of such lines started a cluster for nothing.
     script = tmp_path / "s.csv"
-    script.write_text("id,emotion,text\n"
-                      "a,bored,Hello there.\n"
-                      "b,\"bored=0.5,happy=0.5\",Hello there.\n")
+    script.write_text("id,emotion,voice,text\n"
+                      "a,bored,,Hello there.\n"
+                      "b,\"bored=0.5,happy=0.5\",,Hello there.\n"
+                      "c,happy,en-xx,Hello there.\n")  # and a voice eSpeak NG lacks
     result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
     assert result.n_workers == 0  # no cluster
-    assert [r["status"] for r in result.rows] == ["failed", "failed"]
-    for row in result.rows:
+    assert [r["status"] for r in result.rows] == ["failed", "failed", "failed"]
+    for row in result.rows[:2]:
         assert row["error"].startswith("unknown emotion 'bored': it is not in the database "
                                        "(it has angry, frustrated, happy, neutral, sad)")
-    assert [r["status"] for r in read_report(result.report)] == ["failed", "failed"]
+    assert result.rows[2]["error"] == "voice name 'en-xx' is not an eSpeak NG voice"
+    assert [r["status"] for r in read_report(result.report)] == ["failed"] * 3
 
 
 def test_a_database_without_emotion_labels_fails_emotion_lines_at_once(unlabelled_db,
@@ -495,13 +516,163 @@ def test_run_line_renders_an_mp4_preview(tiny_db, tmp_path):
     line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2,
                       emotion=parse_emotion("happy"))
     row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
-                            render="mp4", key=line_key(line, identity, "mp4")))
+                            render="mp4", key=line_key(line, identity, FILES)))
     assert row["status"] == "done", row
     preview = folder / "preview.mp4"
-    assert "preview.mp4" in json.loads((folder / DONE).read_text())["outputs"]
+    assert rendered(folder, line_key(line, identity, FILES), "mp4")
     n_frames, seconds = imageio_ffmpeg.count_frames_and_secs(str(preview))
     assert n_frames > 10 and abs(seconds - row["duration_s"]) < 0.5
     assert not list(folder.glob(".*.tmp*"))
+
+
+def test_changing_the_render_renders_the_stored_motion(tiny_db, tmp_path):
+    """--render was part of each line's key: turning it on (or off) synthesized every line
+    again. Now the motion's key leaves the render out, and the render has its own."""
+    db = tiny_db[0]
+    script = tmp_path / "s.csv"
+    script.write_text("id,emotion,text\na,happy,Bob moved the vase.\nb,sad,Pam sang.\n")
+    out = tmp_path / "out"
+    first = run_batch(script, BatchOptions(db=db, out=out, workers=1))
+    assert [r["status"] for r in first.rows] == ["done", "done"]
+    made = {p: p.stat().st_mtime_ns for p in out.glob("[ab]/*") if p.name != DONE}
+    assert len(made) == 8
+
+    with_preview = run_batch(script, BatchOptions(db=db, out=out, workers=1, render="mp4"))
+    assert [r["status"] for r in with_preview.rows] == ["rendered", "rendered"]
+    assert with_preview.loads == {}  # no worker loaded the Anime Graph: nothing synthesized
+    assert {p: p.stat().st_mtime_ns for p in made} == made
+    assert [r["jumps"] for r in with_preview.rows] == [r["jumps"] for r in first.rows]
+    assert "0 made, 2 rendered from stored motion" in with_preview.summary()[0]
+    preview = out / "a" / "preview.mp4"
+    rendered_at = preview.stat().st_mtime_ns
+
+    # Off, and on again: nothing to do, no cluster; the preview stays, and what a render
+    # cut short left goes.
+    (out / "b" / ".preview.0123.tmp.mp4").write_bytes(b"half")
+    for render in ("none", "mp4"):
+        again = run_batch(script, BatchOptions(db=db, out=out, workers=1, render=render))
+        assert [r["status"] for r in again.rows] == ["skipped", "skipped"], render
+        assert again.n_workers == 0 and preview.stat().st_mtime_ns == rendered_at
+        assert not list((out / "b").glob(".*"))
+
+    # A Ctrl-C (here as the workers are up) leaves the report of what was done.
+    with script.open("a") as handle:
+        handle.write("c,,Pam sang a tune.\n")
+
+    def interrupt(news: str) -> None:
+        if "to make" in news:
+            raise KeyboardInterrupt
+
+    with pytest.raises(BatchInterrupted) as stop:
+        run_batch(script, BatchOptions(db=db, out=out, workers=1, render="mp4"), say=interrupt)
+    assert [r["status"] for r in stop.value.result.rows] == ["skipped", "skipped", "not run"]
+    assert [r["status"] for r in read_report(out / "report.csv")] == [
+        "skipped", "skipped", "not run"]
+    assert "0 made, 2 skipped (finished before), 0 failed, 1 not run" in \
+        stop.value.result.summary()[0]
+
+    # A render interrupted after its old record was dropped: rendered again, alone.
+    marker = json.loads((out / "a" / DONE).read_text())
+    key = marker.pop("render") and marker["key"]
+    (out / "a" / DONE).write_text(json.dumps(marker))
+    assert finished(out / "a", key) is not None and not rendered(out / "a", key, "mp4")
+    line = read_script(script)[0]
+    row = run_line(LineTask(line=line, db=str(db), db_version=database_identity(db)[0],
+                            folder=str(out / "a"), render="mp4", key=key,
+                            motion_files=FILES, synthesize=False))
+    assert row["status"] == "rendered" and "_loads" not in row, row
+    assert rendered(out / "a", key, "mp4") and preview.stat().st_mtime_ns > rendered_at
+    assert {p: p.stat().st_mtime_ns for p in made} == made
+
+
+def test_a_line_made_again_keeps_no_file_of_the_earlier_run(tiny_db, tmp_path):
+    # A preview (or another motion format) of the earlier motion stayed beside the new
+    # motion, taken for this run's.
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    folder.mkdir(parents=True)
+    for name in ("preview.mp4", "motion.csv", "motion.npz"):
+        (folder / name).write_bytes(b"old")
+    line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2)
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="none", key=line_key(line, identity, FILES),
+                            motion_files=FILES))
+    assert row["status"] == "done", row
+    assert sorted(p.name for p in folder.iterdir()) == [
+        DONE, "explain.json", "motion.c3d", "phones.csv", "speech.wav"]
+
+
+def test_a_failed_render_keeps_the_motion_for_the_next_run(tiny_db, tmp_path):
+    # A line whose render failed lost its motion too: the next run synthesized it again.
+    db = tiny_db[0]
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2)
+    key = line_key(line, identity, FILES)
+
+    def task(synthesize: bool) -> LineTask:
+        return LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                        render="mp4", key=key, motion_files=FILES, synthesize=synthesize)
+
+    assert run_line(task(True))["status"] == "done"
+    (folder / "preview.mp4").unlink()
+    (folder / "preview.mp4").mkdir()  # the render cannot be put in its place
+    row = run_line(task(False))
+    assert row["status"] == "failed" and row["error"].startswith(
+        "rendering preview.mp4 failed (the motion is made: the next run only renders): "), row
+    assert finished(folder, key) is not None and not rendered(folder, key, "mp4")
+    (folder / "preview.mp4").rmdir()
+    assert run_line(task(False))["status"] == "rendered" and rendered(folder, key, "mp4")
+
+
+def test_a_batch_writes_the_motion_formats_synth_writes(tiny_db, tmp_path):
+    # A batch wrote one format per kind of database (C3D of markers, CSV of landmarks):
+    # no C3D of a landmark database's points, no NPZ, where synth -o writes them.
+    from animegraph.apps.batch import motion_files
+    from animegraph.motion.files import read_motion
+
+    db = tiny_db[0]
+    names = Database.open(db).table("channels").column("name").to_pylist()
+    assert motion_files((), names, "markers") == FILES
+    files = motion_files(("npz", "csv", "c3d", "npz"), names, "markers")
+    assert files == ("motion.c3d", "motion.csv", "motion.npz")  # one order: one key
+    points = [f"lm{i}.{a}" for i in range(3) for a in "xyz"]
+    landmarks = points + ["pose.rx", "pose.ry", "pose.rz", "pose.tx", "pose.ty", "pose.tz",
+                          "pose.scale"]
+    assert motion_files((), landmarks, "landmarks") == ("motion.csv",)  # keeps the pose
+    assert motion_files(("c3d",), landmarks, "landmarks") == ("motion.c3d",)
+    with pytest.raises(ParameterError, match=r"^--motion-format c3d: C3D holds 3D points; "
+                                             r"this database has curves"):
+        motion_files(("c3d",), ["jaw_open", "mouth_oh"], "curves")
+
+    version, identity = database_identity(db)
+    folder = tmp_path / "out" / "a"
+    line = ScriptLine(id="a", text="Bob moved the vase.", line_no=2)
+    row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
+                            render="mp4", key=line_key(line, identity, files),
+                            motion_files=files))
+    assert row["status"] == "done", row
+    motions = [read_motion(folder / name) for name in files]
+    for motion in motions[1:]:
+        assert motion.names == motions[0].names
+        np.testing.assert_allclose(motion.values, motions[0].values, rtol=1e-4, atol=1e-3)
+    assert rendered(folder, line_key(line, identity, files), "mp4")
+
+
+def test_a_format_the_database_cannot_hold_is_one_line_before_any_work(tiny_db, tmp_path,
+                                                                       capsys):
+    script = tmp_path / "s.csv"
+    script.write_text("id,text\na,Hello there.\n")
+    for formats, message in (
+            ("c3d,livelink", "--motion-format livelink: Live Link Face CSV needs a database "
+                             "of ARKit blendshapes"),
+            ("fbx", "motion format must be one of c3d, csv, npz, livelink, got 'fbx'")):
+        code = main(["batch", str(script), "--db", str(tiny_db[0]), "-o",
+                     str(tmp_path / "out"), "--motion-format", formats])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 1 and len(err) == 1 and message in err[0], err
+        assert not (tmp_path / "out").exists()
 
 
 def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db, tiny_corpus,
@@ -529,7 +700,7 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
     line = ScriptLine(id="r", text="Nothing like what is said in it at all.", line_no=2,
                       audio=wav)
     row = run_line(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
-                            render="none", key=line_key(line, identity, "none")))
+                            render="none", key=line_key(line, identity, FILES)))
     assert row["status"] == "done", row
     assert row["warnings"].startswith("transcript alignment failed: "), row["warnings"]
     assert "without the speech-alone guide ppg-ridge (not fitted: animegraph fit --method " \
@@ -549,21 +720,21 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
     def stored(parts):
         return guide_state(db, parts)
 
-    assert finished(folder, line_key(line, identity, "none"), stored) is not None
+    assert finished(folder, line_key(line, identity, FILES), stored) is not None
     save_model(make_estimator("ppg-ridge").fit(prepared_from_database(Database.open(db))), db)
-    assert finished(folder, line_key(line, identity, "none"), stored) is None
+    assert finished(folder, line_key(line, identity, FILES), stored) is None
     # A line whose transcript fits records no guide: fitting one does not remake it.
     fits = ScriptLine(id="f", text=json.loads(wav.with_suffix(".json").read_text())["text"],
                       line_no=3, audio=wav)
     row = run_line(LineTask(line=fits, db=str(db), db_version=version,
                             folder=str(tmp_path / "out" / "f"), render="none",
-                            key=line_key(fits, identity, "none")))
+                            key=line_key(fits, identity, FILES)))
     assert row["status"] == "done" and row["warnings"] == "", row
     assert "guides" not in json.loads((tmp_path / "out" / "f" / DONE).read_text())
     # Guide names from the output folder are only those of stored guides.
     marker = json.loads((folder / DONE).read_text())
     (folder / DONE).write_text(json.dumps({**marker, "guides": {"../../x": None}}))
-    assert finished(folder, line_key(line, identity, "none"), stored) is None
+    assert finished(folder, line_key(line, identity, FILES), stored) is None
 
 
 def test_a_script_reads_no_recording_outside_its_folder(tmp_path):

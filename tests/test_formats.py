@@ -462,7 +462,12 @@ def test_a_motion_goes_to_the_file_type_that_keeps_every_channel(tmp_path, caplo
     --export); ``-o x.c3d`` asked for all the same says what it leaves out."""
     import logging
 
-    from animegraph.motion.files import LIVELINK_SUFFIX, motion_suffix, write_channels
+    from animegraph.motion.files import (
+        LIVELINK_SUFFIX,
+        check_output,
+        motion_suffix,
+        write_channels,
+    )
     from ingest.formats.livelink import ARKIT_BLENDSHAPES
 
     points = [f"m{i}.{a}" for i in range(3) for a in "xyz"]
@@ -474,13 +479,19 @@ def test_a_motion_goes_to_the_file_type_that_keeps_every_channel(tmp_path, caplo
     assert motion_suffix(list(ARKIT_BLENDSHAPES), "curves") == LIVELINK_SUFFIX
     motion = np.random.default_rng(0).normal(size=(5, len(points) + len(pose)))
     with caplog.at_level(logging.WARNING, logger="animegraph.motion.files"):
-        write_channels(motion, 30.0, points + pose, "landmarks", tmp_path / "face.c3d")
+        check_output(tmp_path / "face.c3d", points + pose, "landmarks")  # before the work
     assert "the 7 channels that are not a point's (pose.rx, pose.ry, pose.rz, pose.tx ...)" \
         " are left out" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="animegraph.motion.files"):
+        # not again as it is written (batch's workers wrote it amid the progress bar)
+        write_channels(motion, 30.0, points + pose, "landmarks", tmp_path / "face.c3d")
+    assert caplog.text == ""
     back = read_c3d(tmp_path / "face.c3d")
     assert back.labels == ("m0", "m1", "m2")
     np.testing.assert_allclose(back.points.reshape(5, -1), motion[:, :9], rtol=1e-5)
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="animegraph.motion.files"):
+        check_output(tmp_path / "markers.c3d", points, "markers")
         write_channels(motion[:, :9], 30.0, points, "markers", tmp_path / "markers.c3d")
     assert caplog.text == ""

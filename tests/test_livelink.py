@@ -463,6 +463,28 @@ def test_synth_livelink_needs_an_arkit_database(capsys, tiny_db, tmp_path):
     assert not (tmp_path / "a.livelink.csv").exists()
 
 
+def test_a_baseline_reads_the_kind_from_the_channels_not_the_manifest(capsys, tiny_db,
+                                                                     tmp_path):
+    # synth --method mu-mlp read the kind from the manifest's summary: a database whose
+    # manifest lacks it (shared, older or edited) was a KeyError traceback.
+    import json
+    import shutil
+
+    from animegraph.apps.cli import main
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db, ignore=shutil.ignore_patterns("baselines"))
+    manifest = sorted(db.glob("v*/manifest.json"))[-1]
+    info = json.loads(manifest.read_text())
+    del info["kind"]
+    manifest.write_text(json.dumps(info))
+    write_wav(tmp_path / "a.wav", np.zeros(1600, dtype=np.float32), 16000)
+    code = main(["synth", str(tmp_path / "a.wav"), "--db", str(db), "--method", "mu-mlp",
+                 "-o", str(tmp_path / "a.livelink.csv")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "needs a database of ARKit blendshapes" in err[0]
+
+
 def test_synth_timecode_needs_a_livelink_output(capsys, tmp_path):
     from animegraph.apps.cli import main
 

@@ -3,14 +3,16 @@
 Every line of the script (:mod:`animegraph.apps.script`) becomes a folder ``OUT/<id>/``:
 
 - ``speech.wav``: the speech used (the recording, or eSpeak NG's speech);
-- ``motion.c3d`` (marker databases), ``motion.livelink.csv`` (ARKit databases: Live Link
+- the motion, in each of ``motion_formats`` (``motion.c3d``, ``motion.csv``, ``motion.npz``,
+  ``motion.livelink.csv``: what ``synth -o`` writes, by the same function), by default
+  ``motion.c3d`` (marker databases), ``motion.livelink.csv`` (ARKit databases: Live Link
   Face CSV) or ``motion.csv`` (landmark databases, whose head pose C3D has no place for;
   other curves): :func:`animegraph.motion.files.motion_suffix`;
 - ``phones.csv``: the phone timing the motion was made for;
 - ``explain.json``: where every phone's motion came from and what it cost (the record of
   ``synth --explain-json``), with the line's inputs;
-- ``preview.mp4`` with ``--render mp4``;
-- ``done.json``, written last: the line's report row and the key of its inputs.
+- ``preview.mp4`` with ``--render mp4``, rendered from the motion file;
+- ``done.json``: the line's report row, the key of its inputs and the key of its render.
 
 Lines without a recording are spoken by eSpeak NG with the emotion's prosody preset and
 the phone timing comes straight from the synthesizer's events (no alignment); lines with
@@ -18,13 +20,18 @@ a recording are force-aligned to their text. The lines run in parallel on Dask
 distributed: a local cluster of ``workers`` processes by default, or an existing cluster
 at ``scheduler``. Each worker process loads the Anime Graph once (:func:`worker_model`).
 
-A line whose ``done.json`` holds the same key (a hash of its inputs, the recording's
-bytes, the database version and the options that change its outputs) is skipped on a
-re-run unless ``force``; a recording that went as speech alone (its transcript did not
-fit) is remade also when the stored guide it had (or lacked) has changed since. Every
-file is written to a temporary name and renamed; the old ``done.json`` is removed before
-a line is redone, so an interrupted batch never leaves a line that looks finished but is
-not. A failing line records its reason in
+A line is made in two steps, each with its own key in ``done.json``. Its motion (and
+speech, phones, explanation) depends on the line's inputs, the recording's bytes, the
+database version and the motion formats (:func:`line_key`); its preview on that motion and
+the render options (:func:`render_key`). A line whose motion key matches is not
+synthesized again unless ``force``: if its preview is missing or was rendered otherwise,
+it is only rendered again from the stored motion (status ``rendered``), and turning
+``render`` off keeps a preview there is. A recording that went as speech alone (its
+transcript did not fit) is remade also when the stored guide it had (or lacked) has
+changed since. Every file is written to a temporary name and renamed; ``done.json`` and
+the files of the earlier run are removed before a line is synthesized again, and its
+render key before it is rendered again, so an interrupted batch never leaves a line
+whose files look finished but are not. A failing line records its reason in
 ``OUT/report.csv`` and the others go on. One batch at a time writes into an output
 folder (an OS lock, :func:`db.lock.writer_lock`); a second one fails with one line.
 """
@@ -49,6 +56,7 @@ from pathlib import Path
 
 from animegraph import __version__
 from animegraph.apps.script import EmotionSpec, ScriptLine, read_script
+from animegraph.motion.files import LIVELINK_SUFFIX, channels_left_out
 from db.atomic import atomic_write
 from db.errors import AnimeGraphError, DataError, ParameterError
 from db.lock import lock_path, writer_lock
@@ -62,13 +70,22 @@ WORKER_START_TIMEOUT_S = 300.0
 logger = logging.getLogger(__name__)
 
 #: Version of the per-line layout and key; a change redoes every line.
-FORMAT = 1
+FORMAT = 2
 DONE = "done.json"
 RENDER_MODES = ("none", "mp4")
+PREVIEW = "preview.mp4"
+#: ``motion_formats`` a batch writes, and the ending of their files (``synth -o``'s).
+MOTION_FORMATS = {"c3d": ".c3d", "csv": ".csv", "npz": ".npz", "livelink": LIVELINK_SUFFIX}
+#: Every file a line's folder holds from a run: removed before it is made again, so that
+#: no file of an earlier run (another motion format, a preview) is taken for this one's.
+LINE_FILES = ("speech.wav", "phones.csv", "explain.json", PREVIEW,
+              *(f"motion{suffix}" for suffix in MOTION_FORMATS.values()))
 #: Columns of ``OUT/report.csv``.
 REPORT_COLUMNS = ("id", "status", "speaker", "speech", "path", "duration_s", "emotion",
                   "emotion_source", "motion_emotions", "jumps", "cost", "seconds",
                   "cpu_seconds", "warnings", "error")
+#: Lines made with warnings that the summary names (the report has them all).
+WARNINGS_SHOWN = 10
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
 CONNECT_TIMEOUT_S = 5.0
 #: The worked example shipped with the package: a tutor and a student, six lines.
@@ -77,6 +94,14 @@ EXAMPLE_SCRIPT = Path(__file__).resolve().parent / "examples" / "dialogue.csv"
 
 class LineError(AnimeGraphError):
     """One line cannot be made; the batch goes on."""
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """A Ctrl-C stopped the batch: ``result`` is what it had done (its report written)."""
+
+    def __init__(self, result: BatchResult):
+        super().__init__()
+        self.result = result
 
 
 class NotStarted(DataError):
@@ -94,6 +119,8 @@ class BatchOptions:
     render: str = "none"
     force: bool = False
     connect_timeout: float = CONNECT_TIMEOUT_S
+    #: Names in :data:`MOTION_FORMATS`; empty: the database's own (:func:`motion_files`).
+    motion_formats: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -106,6 +133,8 @@ class LineTask:
     folder: str
     render: str
     key: str
+    motion_files: tuple[str, ...] = ("motion.c3d",)  # the first is rendered
+    synthesize: bool = True  # False: the motion is there (its key matches); render only
 
 
 @dataclass
@@ -119,7 +148,8 @@ class BatchResult:
     loads: dict = field(default_factory=dict)  # worker process id -> model loads
 
     def count(self, status: str) -> int:
-        """Rows with this status (``done``, ``skipped``, ``failed``, ``not run``)."""
+        """Rows with this status (``done``, ``rendered``, ``skipped``, ``failed``,
+        ``not run``)."""
         return sum(r["status"] == status for r in self.rows)
 
     @property
@@ -130,19 +160,33 @@ class BatchResult:
     def summary(self) -> list[str]:
         """A few lines for the user."""
         done, skipped, failed = self.count("done"), self.count("skipped"), self.count("failed")
+        rendered = self.count("rendered")
         speech = sum(float(r["duration_s"] or 0) for r in self.rows if r["status"] == "done")
         n = len(self.rows)
-        lines = [f"batch: {n} line{'s' * (n != 1)}: {done} made, {skipped} skipped (finished "
-                 f"before), {failed} failed" + (f", {self.count('not run')} not run"
-                                                 if self.count("not run") else "")]
+        lines = [f"batch: {n} line{'s' * (n != 1)}: {done} made, "
+                 + (f"{rendered} rendered from stored motion, " if rendered else "")
+                 + f"{skipped} skipped (finished before), {failed} failed"
+                 + (f", {self.count('not run')} not run" if self.count("not run") else "")]
+        on = f"on {self.n_workers} worker{'s' * (self.n_workers != 1)}"
         if done:
             rate = done / self.elapsed_s * 60 if self.elapsed_s > 0 else float("nan")
             lines.append(f"batch: {speech:.1f} s of speech animated in {self.elapsed_s:.1f} s "
-                         f"on {self.n_workers} worker{'s' * (self.n_workers != 1)} "
-                         f"({rate:.1f} lines/min)")
+                         f"{on} ({rate:.1f} lines/min)")
+        elif rendered:
+            lines.append(f"batch: {rendered} preview{'s' * (rendered != 1)} rendered in "
+                         f"{self.elapsed_s:.1f} s {on}")
         for r in self.rows:
             if r["status"] == "failed":
                 lines.append(f"batch: failed {r['id']}: {r['error']}")
+        # A transcript that does not fit its recording is a line made otherwise than
+        # asked: said here, not only in the report's warnings column.
+        warned = [r for r in self.rows if r["status"] == "done" and r.get("warnings")]
+        lines += [f"batch: warning {r['id']}: {r['warnings']}"
+                  for r in warned[:WARNINGS_SHOWN]]
+        if len(warned) > WARNINGS_SHOWN:
+            more = len(warned) - WARNINGS_SHOWN
+            lines.append(f"batch: {more} more line{'s' * (more != 1)} with warnings (the "
+                         "report's warnings column)")
         lines.append(f"batch: report {self.report}")
         return lines
 
@@ -171,6 +215,9 @@ def run_batch(
 
     Raises
     ------
+    BatchInterrupted
+        A Ctrl-C (a KeyboardInterrupt) once the batch had its output folder: with the
+        result so far, its report written (lines not reached are ``not run``).
     ScriptError
         The script is malformed (nothing runs).
     AnimeGraphError
@@ -187,7 +234,14 @@ def run_batch(
         raise ParameterError(f"workers must be at least 1, got {options.workers}")
     lines = read_script(script)
     db = Path(options.db).absolute()
-    Database.open(db)  # a clear error now rather than one per line
+    from animegraph.synthesis.model import read_channels
+
+    # a clear error now rather than one per line
+    _, names, _, kind = read_channels(Database.open(db))
+    files = motion_files(options.motion_formats, names, kind)
+    if all(channels_left_out(name, names) for name in files):
+        # e.g. a landmark database's head pose not in motion.c3d: said once, here
+        logger.warning("%s", channels_left_out(files[0], names))
     version, identity = database_identity(db)
     out = Path(options.out).absolute()
     if out.exists() and not out.is_dir():
@@ -209,8 +263,8 @@ def run_batch(
         # One batch per output folder: a second one would delete the first's temporaries.
         with writer_lock(out, wait=0, what="batch output folder"):
             try:
-                return _run_locked(lines, options, db, version, identity, out, progress,
-                                   say)
+                return _run_locked(lines, options, db, version, identity, files, out,
+                                   progress, say)
             except NotStarted:
                 if made:  # the folder is this batch's: its lock goes with it
                     lock_path(out).unlink(missing_ok=True)
@@ -224,8 +278,8 @@ def run_batch(
         raise
 
 
-def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: Path,
-                progress, say) -> BatchResult:
+def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files,
+                out: Path, progress, say) -> BatchResult:
     rows: dict[str, dict] = {}
     tasks: list[LineTask] = []
     stored: dict[str, str | None] = {}
@@ -235,49 +289,59 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
         return {p: stored[p] for p in parts}
 
     check_emotion = EmotionCheck(db)
+    check_voice = VoiceCheck()
     for line in lines:
         folder = out / line.id
         try:
             if folder.is_symlink():  # from someone else: its files would go where it points
                 raise LineError(f"its output folder {folder} is a symbolic link (a batch "
                                 "writes only inside --out)")
-            key = line_key(line, identity, options.render)
+            key = line_key(line, identity, files)
         except LineError as exc:
             rows[line.id] = _row(line, status="failed", error=str(exc))
             continue
         saved = None if options.force else finished(folder, key, guides)
-        if saved is not None:
+        if saved is not None and rendered(folder, key, options.render):
             rows[line.id] = {**saved, "id": line.id, "status": "skipped"}
+            _remove_temporaries(folder)  # of a render cut short, now turned off
             continue
-        try:
-            # here, not in each worker after its start-up
-            check_emotion(line.emotion, recorded=line.audio is not None)
-        except LineError as exc:
-            rows[line.id] = _row(line, status="failed", error=str(exc))
-            continue
+        if saved is None:
+            try:
+                # here, not in each worker after its start-up
+                check_emotion(line.emotion, recorded=line.audio is not None)
+                check_voice(line)
+            except LineError as exc:
+                rows[line.id] = _row(line, status="failed", error=str(exc))
+                continue
         tasks.append(LineTask(line=line, db=str(db), db_version=version, folder=str(folder),
-                              render=options.render, key=key))
+                              render=options.render, key=key, motion_files=files,
+                              synthesize=saved is None))
 
     report = out / "report.csv"
     result = BatchResult(rows=[], report=report)
     t0 = time.perf_counter()
     written = True
+    interrupted = False
     try:
         if tasks:
+            making = [t for t in tasks if t.synthesize]
+
             def prepare() -> None:
                 from animegraph.search.kernels import compile_notice
 
+                if not making:  # renders only: no search runs
+                    return
                 # Compiling is the one-off minute; once cached, the kernels only load (a
                 # batch said "compiling" every time).
-                methods = {t.line.method for t in tasks}
+                methods = {t.line.method for t in making}
                 notice = next(filter(None, map(compile_notice, sorted(methods))), None)
                 say(f"{notice.removesuffix(' ...')}, in this process before the workers "
                     "start ..."
                     if notice else "loading the search in this process before the workers "
                     "start ...")
                 try:
-                    warm_up(db, {(t.line.method, t.line.window) for t in tasks},
-                            align=any(t.line.audio is not None for t in tasks))
+                    warm_up(db, {(t.line.method, t.line.window) for t in making},
+                            align=any(t.line.audio is not None for t in making))
                 except AnimeGraphError as exc:  # the lines will meet it and say so
                     logger.warning("warming up the search kernels failed: %s", exc)
 
@@ -286,10 +350,9 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
                 with dask_client(options, prepare=prepare) as (client, n_workers):
                     entered = True
                     result.n_workers = n_workers
-                    say(f"{len(tasks)} line{'s' * (len(tasks) != 1)} to make on "
-                        f"{n_workers} Dask worker"
-                        f"{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} skipped or "
-                        f"failed before starting)")
+                    say(f"{_plan(len(making), len(tasks) - len(making))} on {n_workers} "
+                        f"Dask worker{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} "
+                        "skipped or failed before starting)")
                     for task, row in _run_tasks(client, tasks, progress):
                         pid, loads = row.pop("_pid", None), row.pop("_loads", None)
                         if pid is not None:
@@ -300,12 +363,25 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, out: 
                     raise
                 written = False  # no cluster: no line ran, nothing to report
                 raise NotStarted(str(exc)) from None
+    except KeyboardInterrupt:
+        interrupted = True  # the report says what was done
     finally:
         result.elapsed_s = time.perf_counter() - t0
         result.rows = [rows.get(line.id) or _row(line, status="not run") for line in lines]
         if written:
             write_report(report, result.rows)
+    if interrupted:
+        raise BatchInterrupted(result) from None
     return result
+
+
+def _plan(n_make: int, n_render: int) -> str:
+    """``3 lines to make, 2 to render from stored motion``."""
+    parts = [f"{n_make} line{'s' * (n_make != 1)} to make"] if n_make else []
+    if n_render:
+        parts.append(f"{n_render}{'' if n_make else ' line' + 's' * (n_render != 1)} to "
+                     "render from stored motion")
+    return ", ".join(parts)
 
 
 def _run_tasks(client, tasks: list[LineTask], progress) -> Iterator[tuple[LineTask, dict]]:
@@ -505,6 +581,30 @@ class EmotionCheck:
             raise LineError(str(exc)) from None
 
 
+class VoiceCheck:
+    """``check(line)``: the eSpeak NG voice of a line without a recording is one eSpeak
+    knows, before any worker starts (a misspelt voice failed its line on a worker, after
+    the cluster's start-up). Raises :class:`LineError` with eSpeak's message; each voice
+    is tried once, on a word."""
+
+    def __init__(self):
+        self._why: dict[str, str] = {}
+
+    def __call__(self, line: ScriptLine) -> None:
+        from ingest.speech.espeak import Voice, speak
+
+        if line.audio is not None or not line.voice:
+            return
+        if line.voice not in self._why:
+            try:
+                speak("a", Voice(name=line.voice))
+                self._why[line.voice] = ""
+            except AnimeGraphError as exc:
+                self._why[line.voice] = str(exc)
+        if self._why[line.voice]:
+            raise LineError(self._why[line.voice])
+
+
 def database_identity(db: Path) -> tuple[str, str]:
     """(live version name, a digest of that version's manifest): a rebuilt database in
     the same folder, even with the same version name, has another digest."""
@@ -516,8 +616,38 @@ def database_identity(db: Path) -> tuple[str, str]:
     return version, f"{version}:{hashlib.sha256(manifest).hexdigest()[:16]}"
 
 
-def line_key(line: ScriptLine, db_identity: str, render: str) -> str:
-    """Hash of everything a line's outputs depend on.
+def motion_files(formats: Iterable[str], names, kind: str) -> tuple[str, ...]:
+    """The motion files of a line: ``motion`` with the ending of each of ``formats``
+    (:data:`MOTION_FORMATS`, in its order), or, for none, of the database's own format
+    (:func:`animegraph.motion.files.motion_suffix`).
+
+    Raises
+    ------
+    ParameterError
+        A format is unknown, or cannot hold this database's motion (C3D of curves, Live
+        Link CSV of other than ARKit blendshapes), as ``synth -o`` says it.
+    """
+    from animegraph.motion.files import check_format, motion_suffix
+
+    unknown = [name for name in formats if name not in MOTION_FORMATS]
+    if unknown:
+        raise ParameterError(f"motion format must be one of {', '.join(MOTION_FORMATS)}, "
+                             f"got {unknown[0]!r}")
+    # in one order, whatever the order given: c3d,csv and csv,c3d make the same lines
+    chosen = [name for name in MOTION_FORMATS if name in formats]
+    for name in chosen:
+        try:
+            check_format(f"motion{MOTION_FORMATS[name]}", names, kind)
+        except ParameterError as exc:
+            raise ParameterError(f"--motion-format {name}: {exc}") from None
+    files = [f"motion{MOTION_FORMATS[name]}" for name in chosen]
+    return tuple(files) or (f"motion{motion_suffix(names, kind)}",)
+
+
+def line_key(line: ScriptLine, db_identity: str, files: tuple[str, ...]) -> str:
+    """Hash of everything a line's motion and its other synthesized files depend on:
+    its inputs, the recording's bytes, the database and the motion ``files`` written
+    (not the render: :func:`render_key`).
 
     Raises
     ------
@@ -528,11 +658,18 @@ def line_key(line: ScriptLine, db_identity: str, render: str) -> str:
     if line.audio is not None:
         audio = _file_digest(line.audio)
     inputs = {
-        "format": FORMAT, "animegraph": __version__, "db": db_identity, "render": render,
+        "format": FORMAT, "animegraph": __version__, "db": db_identity, "files": list(files),
         "id": line.id, "text": line.text, "audio_sha256": audio,
         "emotion": line.emotion.text, "voice": line.voice, "speaker": line.speaker,
         "method": line.method, "window": line.window, "k_best": line.synthesis_path()[0],
     }
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+
+
+def render_key(key: str, render: str) -> str:
+    """Hash of what a line's render depends on: its motion (the :func:`line_key` it was
+    made with) and the render options."""
+    inputs = {"motion": key, "render": render}
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
 
@@ -566,11 +703,8 @@ def finished(folder: Path, key: str,
     (:func:`ingest.readers.common.read_json_object`) or of the wrong types is not a
     finished line: the line is made again, and its files replace these.
     """
-    if not _regular_file(folder / DONE):
-        return None
-    try:
-        marker = read_json_object(folder / DONE)
-    except DataError:
+    marker = read_marker(folder)
+    if marker is None:
         return None
     outputs = marker.get("outputs", [])
     if marker.get("key") != key or not isinstance(outputs, list) or not all(
@@ -595,6 +729,34 @@ def _regular_file(path: Path) -> bool:
         return stat.S_ISREG(os.lstat(path).st_mode)
     except (OSError, ValueError):  # absent, or a name with a NUL
         return False
+
+
+def rendered(folder: Path, key: str, render: str) -> bool:
+    """True if ``folder`` holds the render ``render`` asks for (nothing for ``none``:
+    turning the render off keeps a preview), made from the motion of ``key``."""
+    if render == "none":
+        return True
+    marker = read_marker(folder) or {}
+    return (marker.get("render") == render_key(key, render)
+            and _regular_file(folder / PREVIEW))
+
+
+def read_marker(folder: Path) -> dict | None:
+    """The line's ``done.json``, or None if there is none that reads as one: a marker that
+    is not a regular file in ``folder`` (a symbolic link out, a FIFO), or larger or deeper
+    than a JSON side file may be (:func:`ingest.readers.common.read_json_object`), is
+    none (the output folder may come from someone else)."""
+    if not _regular_file(folder / DONE):
+        return None
+    try:
+        return read_json_object(folder / DONE)
+    except DataError:
+        return None
+
+
+def _write_marker(folder: Path, marker: dict) -> None:
+    with atomic_write(folder / DONE) as handle:
+        handle.write(json.dumps(marker, indent=1).encode())
 
 
 # --------------------------------------------------------------------------------------
@@ -688,36 +850,65 @@ def run_line(task: LineTask) -> dict:
     line = task.line
     folder = Path(task.folder)
     row = _row(line, status="failed")
+
+    def timed(row: dict) -> dict:
+        row["seconds"] = round(time.perf_counter() - t0, 3)
+        row["cpu_seconds"] = round(time.process_time() - cpu0, 3)
+        return row
+
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / DONE).unlink(missing_ok=True)  # first: the line is no longer finished
+        if task.synthesize:
+            # done.json first: the line is no longer finished; then every file of the
+            # earlier run, so that none is taken for this run's
+            for name in (DONE, *LINE_FILES):
+                (folder / name).unlink(missing_ok=True)
         _remove_temporaries(folder)
-        model = worker_model(task.db, task.db_version)
-        row.update(_make_line(task, model, folder))
-        row["status"] = "done"
+        if task.synthesize:
+            model = worker_model(task.db, task.db_version)
+            made = _make_line(task, model, folder)
+            outputs, guides = made.pop("_outputs"), made.pop("_guides")
+            row.update(made, status="done")
+            marker = {"format": FORMAT, "key": task.key, "outputs": outputs,
+                      "row": timed(dict(row))}
+            if guides:
+                marker["guides"] = guides
+            _write_marker(folder, marker)
+        else:
+            marker, saved = read_marker(folder), finished(folder, task.key)
+            if marker is None or saved is None:  # not since the check
+                raise LineError(f"{folder / DONE} changed during the batch; run it again")
+            row.update(saved)
+        if task.render != "none":
+            _render_line(task, folder, marker)
+        row["status"] = "done" if task.synthesize else "rendered"
+        row["error"] = ""
     except AnimeGraphError as exc:
-        row["error"] = str(exc)
+        row.update(status="failed", error=str(exc))
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename else ""
-        row["error"] = f"{where}{exc.strerror or exc}"
-    row["seconds"] = round(time.perf_counter() - t0, 3)
-    row["cpu_seconds"] = round(time.process_time() - cpu0, 3)
-    if row["status"] == "done":
-        outputs, guides = row.pop("_outputs"), row.pop("_guides")
-        marker = {"format": FORMAT, "key": task.key, "outputs": outputs, "row": row}
-        if guides:
-            marker["guides"] = guides
-        with atomic_write(folder / DONE) as handle:
-            handle.write(json.dumps(marker, indent=1).encode())
-    row.pop("_outputs", None)
-    row.pop("_guides", None)
-    row["_pid"] = os.getpid()
-    row["_loads"] = _LOADS[(str(Path(task.db).resolve()), task.db_version)]
+        row.update(status="failed", error=f"{where}{exc.strerror or exc}")
+    timed(row)
+    if task.synthesize:  # a render alone loads no model
+        row["_pid"] = os.getpid()
+        row["_loads"] = _LOADS[(str(Path(task.db).resolve()), task.db_version)]
     return row
 
 
+def _render_line(task: LineTask, folder: Path, marker: dict) -> None:
+    """Render the line's preview from its stored motion; record it in ``done.json``."""
+    if marker.pop("render", None) is not None:
+        _write_marker(folder, marker)  # first: the preview there is no longer of record
+    try:
+        _render(folder, task.motion_files[0])
+    except (AnimeGraphError, OSError) as exc:
+        raise LineError(f"rendering {PREVIEW} failed (the motion is made: the next run "
+                        f"only renders): {exc}") from None
+    marker["render"] = render_key(task.key, task.render)
+    _write_marker(folder, marker)
+
+
 def _make_line(task: LineTask, model, folder: Path) -> dict:
-    from animegraph.motion.files import motion_suffix
     from animegraph.synthesis import backoffs, synthesize, write_explain, write_motion
     from animegraph.synthesis.path import audio_only_guide
     from ingest.formats.media import read_audio
@@ -760,19 +951,16 @@ def _make_line(task: LineTask, model, folder: Path) -> dict:
     if missing:
         warnings.append(f"phones missing from the database, backed off: {', '.join(missing)}")
 
-    motion_name = "motion" + motion_suffix(model.names, model.kind)
     write_wav(folder / "speech.wav", audio, sample_rate)
-    write_motion(synth, model, folder / motion_name)
+    for name in task.motion_files:
+        write_motion(synth, model, folder / name)
     write_phones_csv(folder / "phones.csv", synth.phones)
     used = emotion_used(synth, line.emotion)
     write_explain(synth, folder / "explain.json", id=line.id, text=line.text,
                   speaker=line.speaker, speech=speech,
                   emotion={"requested": line.emotion.text, "source": line.emotion.source,
                            "used": used})
-    outputs = ["speech.wav", motion_name, "phones.csv", "explain.json"]
-    if task.render == "mp4":
-        _render(folder, motion_name, synth.phones)
-        outputs.append("preview.mp4")
+    outputs = ["speech.wav", *task.motion_files, "phones.csv", "explain.json"]
     return {
         "speech": speech, "path": path,
         "duration_s": round(len(audio) / sample_rate, 3),
@@ -848,21 +1036,23 @@ def _motion_emotions(explain: list[dict]) -> str:
     return ", ".join(f"{name} {share / total:.0%}" for name, share in time_by.most_common())
 
 
-def _render(folder: Path, motion_name: str, phones) -> None:
-    """``preview.mp4``: the line's motion on the face mesh (§7), its speech muxed in, its
-    phones as captions."""
+def _render(folder: Path, motion_name: str) -> None:
+    """``preview.mp4``: the line's motion (its file ``motion_name``) on the face mesh
+    (§7), its speech muxed in, its phones as captions: all read from the line's files."""
     import secrets
 
     from animegraph.face.render import deformer_for, render_motion
     from animegraph.motion.files import read_motion
+    from ingest.formats.phones_csv import read_phones_csv
 
     motion = read_motion(folder / motion_name)
-    track = [{"phone": p.phone, "start": p.start, "end": p.end} for p in phones]
+    track = [{"phone": p.phone, "start": p.start, "end": p.end}
+             for p in read_phones_csv(folder / "phones.csv")]
     tmp = folder / f".preview.{secrets.token_hex(6)}.tmp.mp4"
     try:
         render_motion(motion, tmp, deformer=deformer_for(motion.names),
                       audio=folder / "speech.wav", phones=track)
-        os.replace(tmp, folder / "preview.mp4")
+        os.replace(tmp, folder / PREVIEW)
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -97,6 +97,14 @@ def _whole_number(text: str) -> int:
     return value
 
 
+def _formats(text: str) -> tuple[str, ...]:
+    """``c3d,csv``: names, checked by the command (it knows the database's kind)."""
+    names = tuple(name.strip().lower() for name in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected formats separated by commas, got {text!r}")
+    return names
+
+
 def _number(text: str) -> float:
     try:
         return float(text)
@@ -387,11 +395,12 @@ def _add_batch(sub) -> None:
         "by eSpeak NG with their emotion's prosody, phone timing from the synthesizer; lines "
         "with one are force-aligned to their text. Each line gets OUT/<id>/ (speech.wav, "
         "motion, phones.csv, explain.json[, preview.mp4]); OUT/report.csv lists them all. "
-        "Finished lines are skipped on a re-run unless --force.",
+        "A re-run makes only the lines whose inputs changed (all with --force); a changed "
+        "--render renders the stored motion, without synthesizing it again.",
     )
     bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
     _db_option(bat)
-    bat.add_argument("--out", required=True, type=Path, help="output folder")
+    bat.add_argument("-o", "--out", required=True, type=Path, help="output folder")
     bat.add_argument("--workers", type=_whole_number, default=2,
                      help="worker processes of the local Dask cluster (default 2; "
                      "ignored with --scheduler)")
@@ -399,6 +408,11 @@ def _add_batch(sub) -> None:
                      help="run on an existing Dask cluster, e.g. tcp://host:8786")
     bat.add_argument("--render", choices=("none", "mp4"), default="none",
                      help="also render an MP4 preview of each line (default none)")
+    bat.add_argument("--motion-format", type=_formats, default=(), metavar="FORMATS",
+                     help="motion files to write, comma-separated: c3d, csv, npz, livelink "
+                     "(Live Link Face CSV), as synth -o writes them; default the "
+                     "database's own (C3D of markers, CSV of landmarks with their head "
+                     "pose, Live Link CSV of ARKit blendshapes)")
     bat.add_argument("--force", action="store_true", help="redo lines finished before")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
     bat.set_defaults(func=cmd_batch)

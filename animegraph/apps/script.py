@@ -30,7 +30,8 @@ script is checked before any work: a malformed row (with its line number), a
 duplicate id or an unknown column raises :class:`ScriptError`. Problems that depend on
 the database or on files (an emotion the database lacks, a missing recording, text eSpeak
 cannot speak) are left to the line itself (``animegraph.apps.batch`` fails a line with a
-missing recording or an emotion the database cannot give before any worker starts).
+missing recording, a voice eSpeak NG lacks or an emotion the database cannot give before
+any worker starts).
 """
 
 from __future__ import annotations

@@ -201,16 +201,17 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
                    extra: dict | None = None, timecode: str | None = None) -> Path:
     """Write motion (n_frames, n_channels) as C3D (point databases), CSV or NPZ.
 
-    A name ending in :data:`LIVELINK_SUFFIX` (``take.livelink.csv``) writes Live Link
-    Face CSV (:func:`ingest.formats.livelink.write_livelink`: ARKit channels only,
-    blendshapes clamped to [0, 1], the timecode running from ``timecode``, default
-    ``00:00:00:00``). ``extra`` arrays go into an NPZ beside ``motion``, ``fps`` and
-    ``channels``.
+    C3D holds the points only (:func:`channels_left_out`; :func:`check_output` says so
+    before the work). A name ending in :data:`LIVELINK_SUFFIX` (``take.livelink.csv``)
+    writes Live Link Face CSV (:func:`ingest.formats.livelink.write_livelink`: ARKit
+    channels only, blendshapes clamped to [0, 1], the timecode running from ``timecode``,
+    default ``00:00:00:00``). ``extra`` arrays go into an NPZ beside ``motion``, ``fps``
+    and ``channels``.
     """
     path = Path(path)
     motion = np.asarray(motion, dtype=np.float64)
     names = tuple(names)
-    check_output(path, names, kind, timecode=timecode)
+    check_format(path.name, names, kind, timecode=timecode)
     suffix = path.suffix.lower()
     if path.name.lower().endswith(LIVELINK_SUFFIX):
         from ingest.formats.livelink import write_livelink
@@ -221,13 +222,6 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 
         point_cols = point_columns(names)
         labels = tuple(names[i][:-2] for i in point_cols[::3])
-        in_points = set(point_cols)
-        others = [n for i, n in enumerate(names) if i not in in_points]
-        if others:  # e.g. a landmark database's head pose: said, not dropped in silence
-            logger.warning("%s holds the %d points; the %d channels that are not a "
-                           "point's (%s) are left out: write .csv or .npz to keep them",
-                           path.name, len(labels), len(others), ", ".join(others[:4])
-                           + (" ..." if len(others) > 4 else ""))
         points = motion[:, point_cols].reshape(len(motion), -1, 3)
         write_c3d(path, MarkerData(points=points, labels=labels, rate=fps))
     elif suffix == ".csv":
@@ -247,7 +241,8 @@ def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path,
 def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -> None:
     """ParameterError (DataError for a missing folder) unless :func:`write_channels` can
     write motion of these channels to ``path``: what it would refuse after the work, said
-    before it.
+    before it, with a warning of the channels it would leave out (a landmark database's
+    head pose in C3D: said, not dropped in silence).
 
     Parameters
     ----------
@@ -262,10 +257,20 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
         Goes only into Live Link CSV.
     """
     from db.atomic import check_folder
-    from ingest.formats.livelink import is_arkit
 
     check_folder(path)  # synth -o in a missing folder failed after the synthesis
-    name = Path(path).name
+    check_format(Path(path).name, names, kind, timecode=timecode)
+    left_out = channels_left_out(Path(path).name, names)
+    if left_out:
+        logger.warning("%s", left_out)
+
+
+def check_format(name: str, names, kind: str, *, timecode: str | None = None) -> None:
+    """ParameterError unless a motion file named ``name`` can hold motion of these
+    channels (:func:`check_output` without its folder: ``batch`` checks its formats
+    before it makes its output folder)."""
+    from ingest.formats.livelink import is_arkit
+
     if name.lower().endswith(LIVELINK_SUFFIX):
         if not is_arkit(names):
             raise ParameterError("Live Link Face CSV needs a database of ARKit blendshapes "
@@ -275,12 +280,29 @@ def check_output(path: Path, names, kind: str, *, timecode: str | None = None) -
     if timecode is not None:
         raise ParameterError(f"a timecode goes only into Live Link CSV (-o NAME"
                              f"{LIVELINK_SUFFIX}), not {name!r}")
-    suffix = Path(path).suffix.lower()
+    suffix = Path(name).suffix.lower()
     if suffix not in (".c3d", ".csv", ".npz"):
         raise ParameterError(f"output must end in .c3d, .csv or .npz, got {name!r}")
     if suffix == ".c3d" and (kind not in ("markers", "landmarks") or not point_labels(names)):
         raise ParameterError(f"C3D holds 3D points; this database has {kind} "
                              "(write .csv or .npz)")
+
+
+def channels_left_out(name: str, names) -> str:
+    """What a motion file named ``name`` leaves out of motion of channels ``names``, in a
+    line for the user (empty when it keeps them all): C3D holds points only, so a
+    landmark database's head pose is not in it."""
+    if Path(name).suffix.lower() != ".c3d":
+        return ""
+    names = tuple(names)
+    in_points = set(point_columns(names))
+    others = [n for i, n in enumerate(names) if i not in in_points]
+    if not others:
+        return ""
+    return (f"{name} holds the {len(point_labels(names))} points; the {len(others)} "
+            f"channels that are not a point's ({', '.join(others[:4])}"
+            f"{' ...' if len(others) > 4 else ''}) are left out: write .csv or .npz to "
+            "keep them")
 
 
 def motion_suffix(names, kind: str) -> str:

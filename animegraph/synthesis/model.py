@@ -27,6 +27,20 @@ def sessions_of(corpora, speakers) -> tuple[tuple[str, str], ...]:
                          for c, s in zip(corpora, speakers, strict=True)}))
 
 
+def read_channels(db: Database) -> tuple[list[dict], tuple[str, ...], tuple[str, ...], str]:
+    """(rows, names, groups, kind) of the database's motion channels (its ``channels``
+    table), or DataError naming the table if it does not hold up (a database is shared
+    between people: the summary in its manifest is not relied on for the kind)."""
+    try:
+        channels = db.table("channels").to_pylist()
+        names = tuple(str(c["name"]) for c in channels)
+        groups = tuple(str(c["group"]) for c in channels)
+        kind = str(channels[0]["kind"])
+    except (KeyError, IndexError, TypeError) as exc:
+        raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None
+    return channels, names, groups, kind
+
+
 @dataclass(frozen=True, eq=False)
 class Model:
     """Everything synthesis needs from a database, loaded once."""
@@ -54,13 +68,7 @@ class Model:
         db = Database.open(path)
         arrays = db.arrays()
         graph = AnimeGraph.from_database(db)
-        try:
-            channels = db.table("channels").to_pylist()
-            names = tuple(str(c["name"]) for c in channels)
-            groups = tuple(str(c["group"]) for c in channels)
-            kind = str(channels[0]["kind"])
-        except (KeyError, IndexError, TypeError) as exc:
-            raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None
+        channels, names, groups, kind = read_channels(db)
         try:
             decomposer = Unmixing.from_arrays(arrays)
             cutoffs = np.asarray(arrays["ic_cutoff_hz"], dtype=np.float64)

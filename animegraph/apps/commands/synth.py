@@ -258,6 +258,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
     from animegraph.emotion.control import AUTO, check_names, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
+    from animegraph.synthesis.model import read_channels
     from db.store import Database
     from ingest.formats.media import read_audio
 
@@ -287,8 +288,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                          f"only applies to --method anime-graph; name one emotion for "
                          f"{args.method}")
     db = Database.open(args.db)
-    check_output("synth", args.output, db.table("channels").column("name").to_pylist(),
-                  db.manifest["kind"])
+    _, names, _, kind = read_channels(db)  # the kind from the channels, as synthesis reads it
+    check_output("synth", args.output, names, kind)
     emotion = check_names(emotion, None, db.table("clips", columns=["emotion"])
                           .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
@@ -308,20 +309,29 @@ def _synth_baseline(args: argparse.Namespace) -> int:
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
-    from animegraph.apps.batch import BatchOptions, run_batch
+    from animegraph.apps.batch import BatchInterrupted, BatchOptions, run_batch
 
     if args.scheduler is None and args.workers < 1:
         raise UsageError(f"animegraph batch: --workers must be at least 1, got {args.workers}")
     options = BatchOptions(db=args.db, out=args.out, workers=args.workers,
-                           scheduler=args.scheduler, render=args.render, force=args.force)
+                           scheduler=args.scheduler, render=args.render, force=args.force,
+                           motion_formats=args.motion_format)
 
     def say(line: str) -> None:
         if not args.quiet:
             print(f"animegraph: {line}", file=sys.stderr)
 
-    result = run_batch(args.script, options, say=say,
-                       progress=lambda total: progress(total, args.quiet, "line",
-                                                       "batch: lines"))
+    try:
+        result = run_batch(args.script, options, say=say,
+                           progress=lambda total: progress(total, args.quiet, "line",
+                                                           "batch: lines"))
+    except BatchInterrupted as stop:  # what was done, and how to go on
+        for line in stop.result.summary():
+            print(line)
+        print("batch: interrupted: " + (
+            "the lines not run keep what they had (--force again remakes every line)"
+            if args.force else "the lines made are kept; the same command makes the rest"))
+        raise  # the command line's "interrupted", status 130
     for line in result.summary():
         print(line)
     return 0 if result.ok else 1
