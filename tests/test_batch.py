@@ -246,7 +246,7 @@ def test_a_line_folder_linking_out_of_the_output_folder_is_that_lines_error(tiny
     (tmp_path / "out" / "b").mkdir(parents=True)
     (tmp_path / "out" / "a").symlink_to(outside)
     # b finished, by its marker, but the marker's row names another line
-    key = line_key(read_script(script)[1], database_identity(tiny_db[0])[1], "none")
+    key = line_key(read_script(script)[1], database_identity(tiny_db[0])[1], FILES)
     (tmp_path / "out" / "b" / DONE).write_text(json.dumps(
         {"key": key, "outputs": [], "row": {"id": "a", "status": "done"}}))
     result = run_batch(script, BatchOptions(db=tiny_db[0], out=tmp_path / "out", workers=1))
