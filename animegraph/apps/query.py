@@ -31,9 +31,8 @@ from animegraph.emotion.control import AUTO, check_names
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
+from ingest.speech.g2p import split_words
 from ingest.speech.phones import PHONE_SET
-
-_WORD = re.compile(r"^[A-Za-z0-9']+$")
 
 
 @dataclass(frozen=True)
@@ -75,11 +74,11 @@ def build_sql(spec: QuerySpec) -> str:
         raise ParameterError(f"--min-dur must be >= 0 seconds, got {spec.min_dur}")
     if spec.limit is not None and spec.limit < 1:
         raise ParameterError(f"--limit must be >= 1, got {spec.limit}")
-    words = (spec.text or "").split()
-    for word in words:
-        if not _WORD.match(word):
-            raise ParameterError(f"--text: words are letters, digits and apostrophes; got "
-                                 f"{word!r}")
+    # as a transcript is read: "boat," is the word boat (a token is letters and digits
+    # joined by ' or -, safe inside the regular expression below)
+    words = split_words(spec.text or "")
+    if spec.text is not None and spec.text.strip() and not words:
+        raise ParameterError(f"--text {spec.text!r} holds no word (letters or digits)")
     fields = CLIP_FIELDS if spec.clips else ANIME_FIELDS
     order = spec.order_by or ("clip_id" if spec.clips else "node_id")
     if order not in fields:
@@ -90,7 +89,8 @@ def build_sql(spec: QuerySpec) -> str:
     if spec.speaker is not None:
         where.append(f"{c}speaker = {_literal(spec.speaker)}")
     for word in words:
-        pattern = _literal(r"(?i)\b" + word + r"\b")
+        # a transcript may spell its apostrophes typographically
+        pattern = _literal(r"(?i)\b" + word.replace("'", "['\u2019]") + r"\b")
         where.append(f"regexp_matches(c.text, {pattern})")
     if spec.clips:
         if spec.phoneme is not None:
@@ -150,7 +150,7 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     if spec.speaker is not None:
         known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
         spec = replace(spec, speaker=find_speaker(spec.speaker, known))
-    if spec.text is not None and spec.text.split():
+    if split_words(spec.text or ""):
         # Recognised phones leave a clip without words: no hit would not mean no match.
         texts = db.table("clips", columns=["text"]).column("text")
         if texts.null_count == len(texts):
