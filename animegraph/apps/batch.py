@@ -469,6 +469,10 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                 # logs its failed heartbeat as an ERROR with a traceback; a line's own
                 # errors come back through its future, not through the workers' logs.
                 dashboard_address=None, silence_logs=logging.CRITICAL,
+                # No dashboard, and the scheduler's own HTTP server (which it starts even
+                # so, on 8787 by default) on a free local port: a second cluster said
+                # "Port 8787 is already in use".
+                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                 # One core per worker: numba's own threads would compete with the others.
                 env={"NUMBA_NUM_THREADS": "1"},
             )
