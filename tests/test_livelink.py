@@ -494,3 +494,26 @@ def test_synth_timecode_needs_a_livelink_output(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code != 0 and "--timecode needs -o NAME.livelink.csv" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_take_is_refused_by_a_marker_database_before_its_phones(tiny_db, tmp_path,
+                                                                   monkeypatch):
+    # Its channels were compared only once it was prepared: 16 s of phone recognition
+    # for a 112 s FACEGOOD clip that was then rejected.
+    import shutil
+
+    import ingest.pipeline as pipeline
+    from db.store import Database
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    before = Database.open(db).version_dir.name
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_take(take)
+    prepared = []
+    monkeypatch.setattr(pipeline, "prepare_clip",
+                        lambda raw, **kw: prepared.append(raw.clip_id))  # must not be reached
+    with pytest.raises(ParameterError, match="its motion is curves, the database's markers"):
+        pipeline.ingest([take], db)
+    assert prepared == [] and Database.open(db).version_dir.name == before
