@@ -18,6 +18,7 @@ from ingest.formats.livelink import (
     parse_timecode,
     read_livelink,
     sniff_livelink,
+    timecode_frames,
     write_livelink,
 )
 from ingest.formats.wav import write_wav
@@ -409,6 +410,12 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
                  str(tmp_path / "hits")]) == 0
     exported = sorted((tmp_path / "hits").glob("*.livelink.csv"))
     assert len(exported) == 2 and read_livelink(exported[0]).names == ARKIT_CHANNELS
+    # A hit carries the take's timecode at its start (it counted from 00:00:00:00).
+    with open(tmp_path / "hits" / "index.csv") as handle:
+        first = next(csv.DictReader(handle))
+    expected = timecode_frames("10:13:39:01.936", 60) + float(first["snippet_start"]) * 60
+    assert read_livelink(tmp_path / "hits" / first["motion"]).frames[0] \
+        == pytest.approx(expected, abs=0.01)
 
     # render draws the face of a synthesized take.
     assert main(["render", str(out), "-o", str(tmp_path / "line.png")]) == 0

@@ -198,6 +198,9 @@ class ClipData:
     audio: np.ndarray  # (n_samples,) int16
     sample_rate: int
     phones: list[dict]
+    #: (first frame's timecode as frames since midnight, timecode rate) of an iPhone take
+    #: (its ``extra``), None for other clips
+    timecode: tuple[float, float] | None = None
 
 
 def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
@@ -238,7 +241,33 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
               for p, s, e in zip(phone_list, starts, ends, strict=True)]
     return ClipData(motion=motion, names=names, groups=groups, kind=channels[0]["kind"],
                     fps=float(fps), audio=np.frombuffer(sound[0]["pcm16"], dtype=np.int16),
-                    sample_rate=int(sound[0]["sample_rate"]), phones=phones)
+                    sample_rate=int(sound[0]["sample_rate"]), phones=phones,
+                    timecode=_take_timecode(clip.get("extra"), damaged))
+
+
+def _take_timecode(extra: str | None, damaged: str) -> tuple[float, float] | None:
+    """An iPhone take's first timecode (frames since midnight) and timecode rate, from a
+    clip's ``extra`` (None if it has none: not a take, or ingested before it was kept).
+
+    Raises
+    ------
+    DataError
+        If ``extra`` is not JSON or holds a timecode that does not read.
+    """
+    import json
+
+    from ingest.formats.livelink import TIMECODE_RATES, timecode_frames
+
+    try:
+        facts = json.loads(extra) if extra else {}
+        start, rate = facts.get("timecode_start"), facts.get("timecode_rate")
+        if start is None:
+            return None
+        if rate not in TIMECODE_RATES:
+            raise ValueError(f"timecode rate {rate!r}")
+        return timecode_frames(start, float(rate)), float(rate)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise DataError(f"{damaged} has a take timecode that does not read: {exc}") from None
 
 
 def check_export(out: Path, *, context: float, force: bool) -> None:
@@ -376,7 +405,8 @@ def _safe(name: str) -> str:
 
 def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     """C3D for marker databases, Live Link Face CSV for ARKit
-    databases (timecode = the snippet's start in its recording), else channel CSV; the
+    databases (timecode = the take's at the snippet's start, or the time from the
+    recording's start for a clip that is not an iPhone take), else channel CSV; the
     file name."""
     from animegraph.motion.files import (
         LIVELINK_SUFFIX,
@@ -391,9 +421,10 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     suffix = motion_suffix(clip.names, clip.kind)
     if suffix == LIVELINK_SUFFIX:
         path = stem.with_name(stem.name + LIVELINK_SUFFIX)
+        first, rate = clip.timecode or (0.0, LIVELINK_FPS)
         write_livelink(path, part, clip.names, clip.fps,
-                       start=format_timecode(f0 / clip.fps * LIVELINK_FPS, LIVELINK_FPS),
-                       timecode_rate=LIVELINK_FPS)
+                       start=format_timecode(first + f0 / clip.fps * rate, rate),
+                       timecode_rate=rate)
     elif suffix == ".c3d":
         path = stem.with_suffix(".c3d")
         write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3),
