@@ -815,3 +815,26 @@ def test_a_local_batch_leaves_port_8787_alone(tmp_path):
             port = client.cluster.scheduler.http_server.port
     assert not [w for w in caught if "8787" in str(w.message)], [str(w.message) for w in caught]
     assert port != 8787
+
+
+def test_the_report_is_written_as_lines_finish(tiny_db, tmp_path, monkeypatch):
+    # report.csv was written only when the batch ended: after a SIGKILL it was missing,
+    # or the previous run's.
+    import animegraph.apps.batch as batch
+
+    monkeypatch.setattr(batch, "REPORT_EVERY_S", 0.0, raising=False)  # every line
+    script = tmp_path / "lines.csv"
+    script.write_text("id,text\na,Hi\nb,Hello\n")
+    out = tmp_path / "out"
+    seen = []
+
+    def progress(total):
+        def watch(finished_lines):
+            for item in finished_lines:  # the report as it is when a line comes back
+                seen.append(sorted(r["status"] for r in read_report(out / "report.csv")))
+                yield item
+        return watch
+
+    run_batch(script, BatchOptions(db=tiny_db[0], out=out, workers=1), progress=progress)
+    assert seen == [["not run", "not run"], ["done", "not run"]]
+    assert [r["status"] for r in read_report(out / "report.csv")] == ["done", "done"]
