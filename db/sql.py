@@ -232,7 +232,36 @@ def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Re
             rows += batch.num_rows
     finally:
         reader.close()
-    return Result(statement, pa.Table.from_batches(batches, schema=reader.schema), truncated)
+    table = pa.Table.from_batches(batches, schema=reader.schema)
+    return Result(statement, table.rename_columns(unique_names(table.column_names)), truncated)
+
+
+def unique_names(names: list[str]) -> list[str]:
+    """``names`` made unique as DuckDB's ``df()`` does: a repeated name (``SELECT a.x,
+    b.x``) gets the first free suffix ``_1``, ``_2`` ... (``x``, ``x_1``). JSON rows
+    and DataFrames keep one column a name, so the second ``x`` was dropped. Names are
+    compared whatever their case, as SQL compares them.
+
+    Parameters
+    ----------
+    names : list of str
+        Column names, in order.
+
+    Returns
+    -------
+    list of str
+        As many names, no two equal ignoring case; a name already unique is kept.
+    """
+    seen: set[str] = set()
+    unique = []
+    for name in names:
+        new, k = name, 0
+        while new.lower() in seen:
+            k += 1
+            new = f"{name}_{k}"
+        seen.add(new.lower())
+        unique.append(new)
+    return unique
 
 
 def query(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,

@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from db.errors import DataError, ParameterError
 from db.store import arrays_to_table
+from ingest.clip import ChannelSchema
 from ingest.decompose import MotionDecomposer, pcs_of_clips
 from ingest.plausible import Limits, check_labels, check_stored_motion
 from ingest.prepare import PreparedClip
@@ -298,14 +299,17 @@ def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedCli
     return clips
 
 
+def stored_schema(db) -> ChannelSchema:
+    """The channels of ``db``'s motion (its ``channels`` table), as its clips had them."""
+    channels = db.table("channels").to_pylist()
+    return ChannelSchema(kind=channels[0]["kind"], names=tuple(c["name"] for c in channels),
+                         groups=tuple(c["group"] for c in channels), units=channels[0]["units"])
+
+
 def _read_prepared(db) -> list[PreparedClip]:
-    from ingest.clip import ChannelSchema
     from ingest.formats.phones_csv import Segment
 
-    channels = db.table("channels").to_pylist()
-    schema = ChannelSchema(kind=channels[0]["kind"], names=tuple(c["name"] for c in channels),
-                           groups=tuple(c["group"] for c in channels),
-                           units=channels[0]["units"])
+    schema = stored_schema(db)
     audio = {(r["corpus"], r["clip_id"]): r for r in db.table("audio").to_pylist()}
     # Row groups of about 64 MB (db.store.rows_per_group): read whole, without the
     # per-clip row groups of older databases that made the scanner hold 12.6 GB for GRID.

@@ -793,3 +793,48 @@ def test_emotion_auto_needs_the_lines_recording(tiny_db, tmp_path):
     assert [r["error"] for r in result.rows] == [
         "emotion auto is heard in the line's recording, and it has none (eSpeak NG speaks "
         "it): name the emotion, or give audio"]
+
+
+def test_a_local_batch_leaves_port_8787_alone(tmp_path):
+    # The local cluster's scheduler took 8787 (Dask's dashboard port) and, when another
+    # cluster had it, warned "Port 8787 is already in use".
+    import socket
+    import warnings
+
+    from animegraph.apps.batch import _client
+
+    holder = socket.socket()
+    try:
+        holder.bind(("", 8787))
+        holder.listen()
+    except OSError:  # another cluster has it: as much the case to test
+        pass
+    with warnings.catch_warnings(record=True) as caught, holder:
+        warnings.simplefilter("always")
+        with _client(BatchOptions(db=tmp_path, out=tmp_path, workers=1), None) as client:
+            port = client.cluster.scheduler.http_server.port
+    assert not [w for w in caught if "8787" in str(w.message)], [str(w.message) for w in caught]
+    assert port != 8787
+
+
+def test_the_report_is_written_as_lines_finish(tiny_db, tmp_path, monkeypatch):
+    # report.csv was written only when the batch ended: after a SIGKILL it was missing,
+    # or the previous run's.
+    import animegraph.apps.batch as batch
+
+    monkeypatch.setattr(batch, "REPORT_EVERY_S", 0.0, raising=False)  # every line
+    script = tmp_path / "lines.csv"
+    script.write_text("id,text\na,Hi\nb,Hello\n")
+    out = tmp_path / "out"
+    seen = []
+
+    def progress(total):
+        def watch(finished_lines):
+            for item in finished_lines:  # the report as it is when a line comes back
+                seen.append(sorted(r["status"] for r in read_report(out / "report.csv")))
+                yield item
+        return watch
+
+    run_batch(script, BatchOptions(db=tiny_db[0], out=out, workers=1), progress=progress)
+    assert seen == [["not run", "not run"], ["done", "not run"]]
+    assert [r["status"] for r in read_report(out / "report.csv")] == ["done", "done"]

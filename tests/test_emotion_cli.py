@@ -428,3 +428,17 @@ def test_ingest_summary_of_a_database_without_emotion_components_reads_as_words(
         "emotion": {"classifier": None, "emotion_components": [], "mappings": []}})
     (line,) = [line for line in report.lines() if line.startswith("emotion:")]
     assert line == "emotion: no emotion components, 0 emotion mappings, no classifier"
+
+
+def test_info_orders_tied_phones_by_name(neutral_db):
+    # The rarest list took ties in the order the clips happened to be read.
+    from animegraph.apps.info import database_info, info_lines
+    from db.store import Database
+
+    info = database_info(Database.open(neutral_db))
+    assert list(info["phones"]) == sorted(info["phones"], key=lambda p: (-info["phones"][p], p))
+    lines = [info_lines({**info, "phones": phones})
+             for phones in ({"ZH": 1, "OY": 1, "AA": 1, "B": 2, "UH": 1, "K": 1, "T": 9},
+                            {"T": 9, "K": 1, "UH": 1, "B": 2, "AA": 1, "OY": 1, "ZH": 1})]
+    assert lines[0] == lines[1]
+    assert "rarest AA 1, K 1, OY 1, UH 1, ZH 1" in next(x for x in lines[0] if "rarest" in x)

@@ -393,8 +393,7 @@ def test_phones_csv_empty_list(tmp_path):
     ("body", "line"),
     [
         ("0.0,0.1,SIL\n0.1,0.2,XX\n", 3),  # unknown phone
-        ("0.0,0.1,SIL\n0.1,0.2,aa\n", 3),  # lower case
-        ("0.0,0.1,SIL\n0.1,0.2,AA1\n", 3),  # stress digit
+        ("0.0,0.1,SIL\n0.1,0.2,a\u0251\n", 3),  # IPA
         ("0.0,0.1,SIL\n0.2,0.2,AA\n", 3),  # start == end
         ("0.0,0.1,SIL\n0.3,0.2,AA\n", 3),  # start > end
         ("0.2,0.3,SIL\n0.0,0.1,AA\n", 3),  # unsorted
@@ -413,9 +412,19 @@ def test_read_phones_csv_bad_lines(tmp_path, body, line):
         read_phones_csv(path)
 
 
+def test_read_phones_csv_reads_labels_as_the_other_readers_do(tmp_path):
+    # It wanted bare upper-case phones where a TextGrid or an HTK .lab may say ah0, sp.
+    path = tmp_path / "clip.phones.csv"
+    path.write_bytes("\ufeff Start , END,phone\n0,0.1,sp\n0.1,0.2, ah0\n0.2,0.3,HH\n"
+                     "0.3,0.4,ax\n".encode())
+    assert read_phones_csv(path) == [Segment("SIL", 0.0, 0.1), Segment("AH", 0.1, 0.2),
+                                     Segment("HH", 0.2, 0.3), Segment("AH", 0.3, 0.4)]
+
+
 def test_read_phones_csv_bad_files(tmp_path):
     path = tmp_path / "bad.phones.csv"
-    for content in (b"", b"phone,start,end\n0.0,0.1,SIL\n", b"\xff\xfe\x00garbage"):
+    for content in (b"", b"phone,start,end\n0.0,0.1,SIL\n", b"\xff\xfe\x00garbage",
+                    b"start;end;phone\n0.0;0.1;SIL\n", b"0.0,0.1,SIL\n"):
         path.write_bytes(content)
         with pytest.raises(DataError, match="bad.phones.csv"):
             read_phones_csv(path)

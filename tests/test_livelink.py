@@ -18,6 +18,7 @@ from ingest.formats.livelink import (
     parse_timecode,
     read_livelink,
     sniff_livelink,
+    timecode_frames,
     write_livelink,
 )
 from ingest.formats.wav import write_wav
@@ -409,6 +410,12 @@ def test_ingest_and_synthesize_from_a_few_seconds(capture, tmp_path, capsys):
                  str(tmp_path / "hits")]) == 0
     exported = sorted((tmp_path / "hits").glob("*.livelink.csv"))
     assert len(exported) == 2 and read_livelink(exported[0]).names == ARKIT_CHANNELS
+    # A hit carries the take's timecode at its start (it counted from 00:00:00:00).
+    with open(tmp_path / "hits" / "index.csv") as handle:
+        first = next(csv.DictReader(handle))
+    expected = timecode_frames("10:13:39:01.936", 60) + float(first["snippet_start"]) * 60
+    assert read_livelink(tmp_path / "hits" / first["motion"]).frames[0] \
+        == pytest.approx(expected, abs=0.01)
 
     # render draws the face of a synthesized take.
     assert main(["render", str(out), "-o", str(tmp_path / "line.png")]) == 0
@@ -494,3 +501,26 @@ def test_synth_timecode_needs_a_livelink_output(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code != 0 and "--timecode needs -o NAME.livelink.csv" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_take_is_refused_by_a_marker_database_before_its_phones(tiny_db, tmp_path,
+                                                                   monkeypatch):
+    # Its channels were compared only once it was prepared: 16 s of phone recognition
+    # for a 112 s FACEGOOD clip that was then rejected.
+    import shutil
+
+    import ingest.pipeline as pipeline
+    from db.store import Database
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    before = Database.open(db).version_dir.name
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_take(take)
+    prepared = []
+    monkeypatch.setattr(pipeline, "prepare_clip",
+                        lambda raw, **kw: prepared.append(raw.clip_id))  # must not be reached
+    with pytest.raises(ParameterError, match="its motion is curves, the database's markers"):
+        pipeline.ingest([take], db)
+    assert prepared == [] and Database.open(db).version_dir.name == before

@@ -65,6 +65,9 @@ def test_shown_sql_finds_what_the_query_finds(db, tiny_db, capsys):
 def test_every_filter(db):
     text_hits = run_query(db, QuerySpec(text="the young", limit=None)).to_pylist()
     assert text_hits and all("young" in r["text"].lower().split() for r in text_hits)
+    # punctuation around a word is not part of it, as when a transcript is read ("boat,"
+    # was refused)
+    assert run_query(db, QuerySpec(text='"The, young!"', limit=None)).to_pylist() == text_hits
     long = run_query(db, QuerySpec(min_dur=0.15, limit=None)).to_pylist()
     assert long and all(r["duration"] >= 0.15 - 1e-4 for r in long)
     speaker = run_query(db, QuerySpec(speaker="synth01", limit=3))
@@ -86,7 +89,7 @@ def test_every_filter(db):
     (QuerySpec(phoneme="XX"), "ARPAbet"),
     (QuerySpec(order_by="loudness"), "--order-by"),
     (QuerySpec(limit=0), "--limit"),
-    (QuerySpec(text="drop; table"), "--text"),
+    (QuerySpec(text="; --"), "--text '; --' holds no word"),
     (QuerySpec(min_dur=-1), "--min-dur"),
     (QuerySpec(emotion="bored"), "not in the database"),
     # an unknown speaker listed nothing, without a word

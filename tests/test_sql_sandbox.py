@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -129,10 +130,16 @@ def test_cli_prints_a_plan_whole_and_names_pivot_values(db):
 def test_a_result_repeating_a_column_name_prints(db, tmp_path):
     from animegraph.apps.tabular import format_table
 
-    [result] = run(db, "SELECT a.node_id, b.node_id FROM animes a, animes b ORDER BY 1, 2")
-    assert format_table(result.table, "csv").splitlines()[:2] == ["\"node_id\",\"node_id\"",
-                                                                  "0,0"]
-    assert "node_id  node_id" in format_table(result.table, "table")
+    # JSON rows kept one column a name: the second node_id was dropped.
+    [result] = run(db, "SELECT a.node_id, b.node_id, 7 AS NODE_ID_1, 8 AS node_id_1 "
+                       "FROM animes a, animes b ORDER BY 1, 2")
+    names = ["node_id", "node_id_1", "NODE_ID_1_1", "node_id_1_2"]  # as DuckDB's df()
+    assert result.table.column_names == names
+    assert format_table(result.table, "csv").splitlines()[:2] == [
+        ",".join(f'"{n}"' for n in names), "0,0,7,8"]
+    row = dict(zip(names, [0, 1, 7, 8], strict=True))
+    assert json.loads(format_table(result.table, "json"))[1] == row
+    assert "node_id  node_id_1" in format_table(result.table, "table")
 
 
 def test_a_misspelt_name_is_told_what_exists(db):

@@ -32,7 +32,9 @@ changed since. Every file is written to a temporary name and renamed; ``done.jso
 the files of the earlier run are removed before a line is synthesized again, and its
 render key before it is rendered again, so an interrupted batch never leaves a line
 whose files look finished but are not. A failing line records its reason in
-``OUT/report.csv`` and the others go on. One batch at a time writes into an output
+``OUT/report.csv`` and the others go on; the report is rewritten as lines finish (every
+:data:`REPORT_EVERY_S` at most), so that a batch killed outright leaves one that is
+nearly current. One batch at a time writes into an output
 folder (an OS lock, :func:`db.lock.writer_lock`); a second one fails with one line.
 """
 
@@ -88,6 +90,10 @@ REPORT_COLUMNS = ("id", "status", "speaker", "speech", "path", "duration_s", "em
 WARNINGS_SHOWN = 10
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
 CONNECT_TIMEOUT_S = 5.0
+#: Seconds between rewrites of ``report.csv`` while lines finish: a batch killed (SIGKILL,
+#: a lost machine) leaves a report this old at most, and a long batch does not rewrite
+#: its whole report at every line.
+REPORT_EVERY_S = 2.0
 #: The worked example shipped with the package: a tutor and a student, six lines.
 EXAMPLE_SCRIPT = Path(__file__).resolve().parent / "examples" / "dialogue.csv"
 
@@ -319,6 +325,9 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
 
     report = out / "report.csv"
     result = BatchResult(rows=[], report=report)
+
+    def so_far() -> list[dict]:
+        return [rows.get(line.id) or _row(line, status="not run") for line in lines]
     t0 = time.perf_counter()
     written = True
     interrupted = False
@@ -349,6 +358,9 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
             try:
                 with dask_client(options, prepare=prepare) as (client, n_workers):
                     entered = True
+                    # the previous run's report goes now: lines still to make say "not run"
+                    write_report(report, so_far())
+                    last_written = time.monotonic()
                     result.n_workers = n_workers
                     say(f"{_plan(len(making), len(tasks) - len(making))} on {n_workers} "
                         f"Dask worker{'s' * (n_workers != 1)} ({len(lines) - len(tasks)} "
@@ -358,6 +370,9 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
                         if pid is not None:
                             result.loads[pid] = loads
                         rows[task.line.id] = row
+                        if time.monotonic() - last_written >= REPORT_EVERY_S:
+                            write_report(report, so_far())
+                            last_written = time.monotonic()
             except AnimeGraphError as exc:
                 if entered:
                     raise
@@ -367,7 +382,7 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
         interrupted = True  # the report says what was done
     finally:
         result.elapsed_s = time.perf_counter() - t0
-        result.rows = [rows.get(line.id) or _row(line, status="not run") for line in lines]
+        result.rows = so_far()
         if written:
             write_report(report, result.rows)
     if interrupted:
@@ -469,6 +484,10 @@ def _client(options: BatchOptions, prepare: Callable[[], object] | None):
                 # logs its failed heartbeat as an ERROR with a traceback; a line's own
                 # errors come back through its future, not through the workers' logs.
                 dashboard_address=None, silence_logs=logging.CRITICAL,
+                # No dashboard, and the scheduler's own HTTP server (which it starts even
+                # so, on 8787 by default) on a free local port: a second cluster said
+                # "Port 8787 is already in use".
+                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                 # One core per worker: numba's own threads would compete with the others.
                 env={"NUMBA_NUM_THREADS": "1"},
             )

@@ -41,7 +41,8 @@ def _database_info(db: Database) -> dict:
         "clips_per_emotion": m["clips_per_emotion"], "corpora": m["corpora"],
         "speakers": sorted({c["speaker"] for c in clips if c["speaker"]}),
         "segmentation": dict(Counter(c["segmentation"] for c in clips)),
-        "phones": dict(sorted(phones.items(), key=lambda kv: -kv[1])),
+        # by count, then name: ties must not follow the order the clips were read in
+        "phones": dict(sorted(phones.items(), key=lambda kv: (-kv[1], kv[0]))),
         "phones_missing": [p for p in PHONES if p not in phones],
         "n_pcs": m["n_pcs"], "variance_kept": m["variance_kept"],
         "variance_target": m["variance_target"], "ica_converged": m["ica_converged"],
@@ -54,7 +55,7 @@ def _database_info(db: Database) -> dict:
 def info_lines(info: dict) -> list[str]:
     """The summary as lines of text."""
     emotions = ", ".join(f"{e} {n}" for e, n in info["clips_per_emotion"].items())
-    rare = sorted(info["phones"].items(), key=lambda kv: kv[1])[:5]
+    rare = sorted(info["phones"].items(), key=lambda kv: (kv[1], kv[0]))[:5]
     lines = [
         f"database:   {info['path']} ({info['version']}, schema {info['schema_version']}, "
         f"written by animegraph {info['animegraph_version']} at {info['created']})"

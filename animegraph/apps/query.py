@@ -31,9 +31,8 @@ from animegraph.emotion.control import AUTO, check_names
 from db.errors import DataError, ParameterError
 from db.sql import query as run_sql
 from db.store import Database
+from ingest.speech.g2p import split_words
 from ingest.speech.phones import PHONE_SET
-
-_WORD = re.compile(r"^[A-Za-z0-9']+$")
 
 
 @dataclass(frozen=True)
@@ -75,11 +74,11 @@ def build_sql(spec: QuerySpec) -> str:
         raise ParameterError(f"--min-dur must be >= 0 seconds, got {spec.min_dur}")
     if spec.limit is not None and spec.limit < 1:
         raise ParameterError(f"--limit must be >= 1, got {spec.limit}")
-    words = (spec.text or "").split()
-    for word in words:
-        if not _WORD.match(word):
-            raise ParameterError(f"--text: words are letters, digits and apostrophes; got "
-                                 f"{word!r}")
+    # as a transcript is read: "boat," is the word boat (a token is letters and digits
+    # joined by ' or -, safe inside the regular expression below)
+    words = split_words(spec.text or "")
+    if spec.text is not None and spec.text.strip() and not words:
+        raise ParameterError(f"--text {spec.text!r} holds no word (letters or digits)")
     fields = CLIP_FIELDS if spec.clips else ANIME_FIELDS
     order = spec.order_by or ("clip_id" if spec.clips else "node_id")
     if order not in fields:
@@ -90,7 +89,8 @@ def build_sql(spec: QuerySpec) -> str:
     if spec.speaker is not None:
         where.append(f"{c}speaker = {_literal(spec.speaker)}")
     for word in words:
-        pattern = _literal(r"(?i)\b" + word + r"\b")
+        # a transcript may spell its apostrophes typographically
+        pattern = _literal(r"(?i)\b" + word.replace("'", "['\u2019]") + r"\b")
         where.append(f"regexp_matches(c.text, {pattern})")
     if spec.clips:
         if spec.phoneme is not None:
@@ -150,7 +150,7 @@ def in_database(db: Database, spec: QuerySpec) -> QuerySpec:
     if spec.speaker is not None:
         known = db.table("clips", columns=["speaker"]).column("speaker").to_pylist()
         spec = replace(spec, speaker=find_speaker(spec.speaker, known))
-    if spec.text is not None and spec.text.split():
+    if split_words(spec.text or ""):
         # Recognised phones leave a clip without words: no hit would not mean no match.
         texts = db.table("clips", columns=["text"]).column("text")
         if texts.null_count == len(texts):
@@ -198,6 +198,9 @@ class ClipData:
     audio: np.ndarray  # (n_samples,) int16
     sample_rate: int
     phones: list[dict]
+    #: (first frame's timecode as frames since midnight, timecode rate) of an iPhone take
+    #: (its ``extra``), None for other clips
+    timecode: tuple[float, float] | None = None
 
 
 def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
@@ -238,7 +241,33 @@ def load_clip(db: Database, corpus: str, clip_id: str) -> ClipData:
               for p, s, e in zip(phone_list, starts, ends, strict=True)]
     return ClipData(motion=motion, names=names, groups=groups, kind=channels[0]["kind"],
                     fps=float(fps), audio=np.frombuffer(sound[0]["pcm16"], dtype=np.int16),
-                    sample_rate=int(sound[0]["sample_rate"]), phones=phones)
+                    sample_rate=int(sound[0]["sample_rate"]), phones=phones,
+                    timecode=_take_timecode(clip.get("extra"), damaged))
+
+
+def _take_timecode(extra: str | None, damaged: str) -> tuple[float, float] | None:
+    """An iPhone take's first timecode (frames since midnight) and timecode rate, from a
+    clip's ``extra`` (None if it has none: not a take, or ingested before it was kept).
+
+    Raises
+    ------
+    DataError
+        If ``extra`` is not JSON or holds a timecode that does not read.
+    """
+    import json
+
+    from ingest.formats.livelink import TIMECODE_RATES, timecode_frames
+
+    try:
+        facts = json.loads(extra) if extra else {}
+        start, rate = facts.get("timecode_start"), facts.get("timecode_rate")
+        if start is None:
+            return None
+        if rate not in TIMECODE_RATES:
+            raise ValueError(f"timecode rate {rate!r}")
+        return timecode_frames(start, float(rate)), float(rate)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise DataError(f"{damaged} has a take timecode that does not read: {exc}") from None
 
 
 def check_export(out: Path, *, context: float, force: bool) -> None:
@@ -376,7 +405,8 @@ def _safe(name: str) -> str:
 
 def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     """C3D for marker databases, Live Link Face CSV for ARKit
-    databases (timecode = the snippet's start in its recording), else channel CSV; the
+    databases (timecode = the take's at the snippet's start, or the time from the
+    recording's start for a clip that is not an iPhone take), else channel CSV; the
     file name."""
     from animegraph.motion.files import (
         LIVELINK_SUFFIX,
@@ -391,9 +421,10 @@ def _write_snippet(clip: ClipData, f0: int, f1: int, stem: Path) -> str:
     suffix = motion_suffix(clip.names, clip.kind)
     if suffix == LIVELINK_SUFFIX:
         path = stem.with_name(stem.name + LIVELINK_SUFFIX)
+        first, rate = clip.timecode or (0.0, LIVELINK_FPS)
         write_livelink(path, part, clip.names, clip.fps,
-                       start=format_timecode(f0 / clip.fps * LIVELINK_FPS, LIVELINK_FPS),
-                       timecode_rate=LIVELINK_FPS)
+                       start=format_timecode(first + f0 / clip.fps * rate, rate),
+                       timecode_rate=rate)
     elif suffix == ".c3d":
         path = stem.with_suffix(".c3d")
         write_c3d(path, MarkerData(points=part.reshape(len(part), -1, 3),

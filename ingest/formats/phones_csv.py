@@ -2,7 +2,9 @@
 
 One header line ``start,end,phone``, then one line per phone segment: start and end
 times in seconds with six decimals, and an ARPAbet phone of
-:data:`ingest.speech.phones.PHONE_SET` (upper case, no stress digit)::
+:data:`ingest.speech.phones.PHONE_SET` (written upper case, no stress digit; read as the
+other label readers read theirs, :func:`ingest.formats.labels.to_arpabet`: ``ah0``,
+``sp`` or ``sil`` as well)::
 
     start,end,phone
     0.000000,0.120000,SIL
@@ -180,7 +182,9 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
     Parameters
     ----------
     path : str or os.PathLike
-        The file; the header must be ``start,end,phone``.
+        The file; the header must be ``start,end,phone`` (any case, spaces around the
+        names, a leading BOM); phone labels as :func:`ingest.formats.labels.to_arpabet`
+        reads them.
 
     Returns
     -------
@@ -194,6 +198,9 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
         by its number) has the wrong field count, an unknown phone, bad times,
         ``start >= end``, or is out of order or overlaps the line before.
     """
+    # here, not at the top: ingest.formats.labels imports this module's Segment
+    from ingest.formats.labels import to_arpabet
+
     path = Path(path)
     text = read_utf8(path, "phones file", limit=MAX_SIDE_FILE_BYTES)
     lines = csv.reader(io.StringIO(text))
@@ -212,9 +219,11 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
                 continue  # blank line
             if len(row) != 3:
                 raise DataError(f"{path}:{line}: expected 3 fields, got {len(row)}: {row!r}")
-            start_text, end_text, phone = (field.strip() for field in row)
-            if phone not in PHONE_SET:
-                raise DataError(f"{path}:{line}: unknown phone {phone!r}")
+            start_text, end_text, label = (field.strip() for field in row)
+            try:
+                phone = to_arpabet(label)
+            except DataError as exc:
+                raise DataError(f"{path}:{line}: {exc}") from None
             try:
                 start, end = float(start_text), float(end_text)
             except ValueError as exc:

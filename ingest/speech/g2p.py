@@ -37,6 +37,7 @@ __all__ = [
     "number_to_words",
     "pronounce",
     "rule_g2p",
+    "split_words",
     "transcript_words",
 ]
 
@@ -145,6 +146,24 @@ def _ascii_fold(text: str) -> str:
     return "".join(c for c in decomposed if not unicodedata.combining(c))
 
 
+def split_words(text: str) -> list[str]:
+    """The words of ``text`` as written, lower case: accents stripped, typographic
+    apostrophes and hyphens made plain, punctuation around words dropped (``"Boat,"`` ->
+    ``boat``); numbers and symbols stay as they are (:func:`transcript_words` reads them).
+
+    Parameters
+    ----------
+    text : str
+        Free text.
+
+    Returns
+    -------
+    list of str
+        Tokens of letters and digits, joined by inner ``'`` or ``-`` (empty if none).
+    """
+    return _TOKEN.findall(_ascii_fold(text).lower())
+
+
 def transcript_words(
     text: str, in_dictionary: Callable[[str], bool] | None = None
 ) -> list[str]:
@@ -183,7 +202,7 @@ def transcript_words(
         text = text.replace(symbol, spoken)
     text = _NUMBER.sub(_digits_to_words, text)
     words: list[str] = []
-    for token in _TOKEN.findall(text):
+    for token in split_words(text):
         if "-" in token and not known(token):
             words += [part for part in token.split("-") if part]
         else:
