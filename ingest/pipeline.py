@@ -185,15 +185,37 @@ class IngestReport:
         return buffer.getvalue()
 
 
-def _work(args):
+@dataclass(frozen=True)
+class ClipJob:
+    """One clip for a worker to read and prepare (:func:`_work`).
+
+    ``known``: the database's clips, (corpus, clip id) -> checksum (an unchanged one is
+    not read); ``fps``: the frame rate to resample to (None: the clip's own);
+    ``reference``: the head-pose reference; ``schema``: the channels a clip must have
+    (the database's), None to take any.
+    """
+
+    source: object
+    known: dict
+    fps: float | None
+    reference: object
+    engine: str | None
+    limits: Limits | None
+    posteriorgrams: bool
+    schema: object = None
+
+
+def _work(job: ClipJob):
     """Worker: read one clip and prepare it unless the database already has it (the phone
     model's outputs kept in the cache, as tracking is: :func:`ingest.speech.ctc.kept_on_disk`)."""
     with kept_on_disk():
-        return _prepare_source(args)
+        return _prepare_source(job)
 
 
-def _prepare_source(args):
-    source, known, fps, reference, engine, limits, posteriorgrams, schema = args
+def _prepare_source(job: ClipJob):
+    source, known, fps, reference, engine, limits, posteriorgrams, schema = (
+        job.source, job.known, job.fps, job.reference, job.engine, job.limits,
+        job.posteriorgrams, job.schema)
     try:
         # Every reader's checksum is that of the clip's files in role order: an unchanged
         # clip is known before it is read (a video is not decoded, nor its audio aligned).
@@ -435,8 +457,8 @@ def prepare_sources(
 def _run(found, known, fps, config, workers, progress, reference, schema=None):
     """Prepare each clip of ``found`` (see :func:`_prepare_source`); ``schema``: the
     channels a clip must have (the database's), None to take any."""
-    jobs = [(s, known, fps, reference, config.phones_engine, config.limits,
-             config.posteriorgrams, schema) for s in found]
+    jobs = [ClipJob(s, known, fps, reference, config.phones_engine, config.limits,
+                    config.posteriorgrams, schema) for s in found]
     if workers == 1 or len(jobs) == 1:
         results = map(_work, jobs)
         return list(progress(len(jobs))(results) if progress else results)

@@ -75,7 +75,7 @@ def _peak_mb() -> float:
 
 
 def per_clip(corpus: Path, every: int) -> int:
-    from ingest.pipeline import IngestConfig, _head_reference, _work
+    from ingest.pipeline import ClipJob, IngestConfig, _head_reference, _work
     from ingest.readers import discover
     from ingest.speech.g2p import pronounce
     from ingest.speech.segment import _engine
@@ -86,7 +86,8 @@ def per_clip(corpus: Path, every: int) -> int:
     pronounce("bin")
     _engine("align")  # one-off loads left out
     t0, (c0, k0) = time.perf_counter(), _cpu()
-    results = [_work((s, {}, None, reference, None, config.limits)) for s in found]
+    results = [_work(ClipJob(s, {}, None, reference, config.phones_engine, config.limits,
+                             config.posteriorgrams)) for s in found]
     wall, (c1, k1) = time.perf_counter() - t0, _cpu()
     n = len(found)
     print(f"{n} clips ({sum(r.status != 'rejected' for r, _ in results)} prepared): "

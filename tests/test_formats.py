@@ -504,3 +504,16 @@ def test_a_motion_goes_to_the_file_type_that_keeps_every_channel(tmp_path, caplo
         check_output(tmp_path / "markers.c3d", points, "markers")
         write_channels(motion[:, :9], 30.0, points, "markers", tmp_path / "markers.c3d")
     assert caplog.text == ""
+
+
+def test_read_phones_csv_forgives_the_rounding_other_tools_leave(tmp_path):
+    """A neighbour overlapping by less than ORDER_TOLERANCE (a float written by another
+    tool) is read, as the .lab and TextGrid readers read it; more is an error."""
+    from ingest.formats.phones_csv import read_phones_csv
+
+    path = tmp_path / "a.phones.csv"
+    path.write_text("start,end,phone\n0,0.30000000001,AA\n0.3,0.5,B\n")
+    assert [s.phone for s in read_phones_csv(path)] == ["AA", "B"]
+    path.write_text("start,end,phone\n0,0.301,AA\n0.3,0.5,B\n")
+    with pytest.raises(DataError, match=":3: start 0.3 overlaps"):
+        read_phones_csv(path)

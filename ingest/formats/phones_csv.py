@@ -231,7 +231,8 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
             if not (math.isfinite(start) and math.isfinite(end)) or start < 0:
                 raise DataError(f"{path}:{line}: times must be finite and >= 0, got {row!r}")
             segment = Segment(phone, start, end)
-            problem = order_error(segment, segments[-1] if segments else None)
+            problem = order_error(segment, segments[-1] if segments else None,
+                                  tolerance=ORDER_TOLERANCE)
             if problem is not None:
                 raise DataError(f"{path}:{line}: {problem}")
             segments.append(segment)
