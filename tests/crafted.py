@@ -19,6 +19,9 @@ import pyarrow.parquet as pq
 
 from db.store import file_sha256
 
+#: Bytes that drive a terminal: set its title (OSC 0, ended by BEL), clear the screen.
+TERMINAL_ESCAPE = "\x1b]0;PWNED\x07\x1b[2J\u202eevil"
+
 
 def _live(root: Path) -> Path:
     return root / (root / "CURRENT").read_text().strip()
@@ -184,6 +187,10 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     # Labels read back when clips are added (prepared_from_database), as new clips' are.
     "clip_id_path": lambda r: _clips(r, _set("clip_id", 0, "../../../../tmp/PWN_CLIP")),
     "speaker_newline": lambda r: _clips(r, _set("speaker", 0, "a\nb")),
+    # Terminal escapes (retitle the window, clear the screen) for info, sql and query.
+    "speaker_escape": lambda r: _clips(r, _set("speaker", 0, TERMINAL_ESCAPE)),
+    "corpus_escape": lambda r: _manifest(r, lambda m: {**m, "corpora": [
+        TERMINAL_ESCAPE]}),
     "sentence_id_path": lambda r: _clips(r, _set("sentence_id", 0, "../../../etc")),
     "phoneme_nul": lambda r: _animes(r, _set("phoneme", 0, "A\x00A")),
     "start_time_inf": lambda r: _animes(r, _set("start_time", 0, float("inf"))),
