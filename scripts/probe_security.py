@@ -66,6 +66,7 @@ from crafted import (  # noqa: E402
     disguised_playlists,
     flac_declaring,
     gltf_reaching,
+    sql_bombs,
     sql_escapes,
 )
 
@@ -135,9 +136,19 @@ def probe_sql(db: Path, work: Path) -> dict:
         pass
     changed = _snapshot(db) != before or sorted(p.name for p in outside.iterdir()) != [
         "outside.txt"]
+    bombs_held = 0
+    for name, sql in sql_bombs().items():
+        proc = _run(["sql", "--db", str(db), "--timeout", "10", sql])
+        bombs_held += proc.returncode == 1 and _held(proc)
+        print(f"  {name}: exit {proc.returncode}: "
+              f"{(proc.stderr.strip().splitlines() or [''])[-1][:120]}")
+    import resource
+
     return {"sql_escapes_tried": len(escapes), "sql_escapes_refused": refused,
             "sql_escapes_refused_by_duckdb_alone": refused_by_duckdb,
-            "files_changed": changed}
+            "files_changed": changed, "sql_bombs_tried": len(sql_bombs()),
+            "sql_bombs_held": bombs_held,
+            "sql_peak_child_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss // 1024}
 
 
 def probe_databases(corpus: Path, db: Path, work: Path) -> dict:

@@ -360,6 +360,24 @@ def sql_escapes(version_dir: Path, root: Path, outside: Path) -> list[str]:
     ]
 
 
+def sql_bombs() -> dict[str, str]:
+    """Reading statements that would take the machine's memory, disk or time unless the
+    sandbox bounds them (memory and spill caps, the timer, DuckDB's depth limit)."""
+    return {
+        "string_agg of 6 GB": "SELECT length(string_agg(repeat('x', 100000), '')) "
+                              "FROM range(60000)",
+        "GROUP BY of 10^9 groups": "SELECT count(*) FROM (SELECT range % 1000000000 AS g, "
+                                   "count(*) FROM range(2000000000) GROUP BY g)",
+        "list of 3*10^9 numbers": "SELECT max(len(l)) FROM (SELECT list(range) AS l "
+                                  "FROM range(3000000000))",
+        "recursive CTE of 10^9 rows": "WITH RECURSIVE t(n) AS (SELECT 1 UNION ALL SELECT "
+                                      "n + 1 FROM t WHERE n < 1000000000) SELECT count(*) "
+                                      "FROM t",
+        "10^12-row count": "SELECT count(*) FROM range(1000000000000)",
+        "5,000 nested brackets": "SELECT " + "(" * 5000 + "1" + ")" * 5000,
+    }
+
+
 # --------------------------------------------------------------------------- media files
 
 
