@@ -419,6 +419,23 @@ def flac_declaring(path: Path, n_samples: int) -> Path:
     return path
 
 
+def quad_bin() -> bytes:
+    """The buffer of :func:`gltf_reaching`'s quad."""
+    return (np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 1]], np.float32).tobytes()
+            + np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+
+
+def gltf_drawing(uri: str, n_nodes: int, *, nested: bool) -> dict:
+    """:func:`gltf_reaching`'s quad drawn by ``n_nodes`` nodes, each the child of the one
+    before (``nested``: trimesh walks every node's chain of parents) or all children of
+    the first: a few hundred bytes a node, the quad's vertices a node."""
+    gltf = gltf_reaching(uri)
+    gltf["nodes"] = ([{"mesh": 0, "children": [i + 1]} for i in range(n_nodes - 1)]
+                     if nested else [{"mesh": 0, "children": list(range(1, n_nodes))}]
+                     ) + [{"mesh": 0}] * (1 if nested else n_nodes - 1)
+    return gltf
+
+
 def gltf_reaching(uri: str) -> dict:
     """A one-quad glTF whose buffer is the file at ``uri`` (48 bytes of float32
     positions, 24 of uint32 indices): trimesh before 5.0 read it wherever it was."""
