@@ -19,7 +19,9 @@ untrusted input (a database is shared, a query is pasted), so two fences hold it
 
 Results are streamed in Arrow batches and stop at a row cap (:data:`ROW_LIMIT`), and a
 timer interrupts a query still running after :data:`TIMEOUT_S` seconds; both can be
-raised. Several statements separated by ``;`` each run, in order.
+raised. DuckDB's memory and spill space are capped (:data:`MEMORY_LIMIT`,
+:data:`SPILL_LIMIT`; a query beyond them fails in one line). Several statements
+separated by ``;`` each run, in order.
 """
 
 from __future__ import annotations
@@ -44,6 +46,11 @@ ROW_LIMIT = 100_000
 TIMEOUT_S = 60.0
 #: Rows per streamed Arrow batch.
 BATCH_ROWS = 8192
+#: Memory DuckDB may hold for a query, and disk it may spill to: its defaults are 80 %
+#: of the machine's memory and 90 % of the free disk, which one pasted query (a
+#: ``string_agg`` of 2 GB, a ``GROUP BY`` of 10^9 groups) took on a shared machine.
+MEMORY_LIMIT = "4GB"
+SPILL_LIMIT = "8GB"
 
 _ALLOWED = {duckdb.StatementType.SELECT}
 #: DuckDB's words for a table, and for a column, that a query names and no table has.
@@ -87,6 +94,8 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
             allowed.append(str(spill_dir) + os.sep)
             con.execute("SET temp_directory = ?", [str(spill_dir)])
         con.execute("SET allowed_directories = ?", [allowed])
+        con.execute("SET memory_limit = ?", [MEMORY_LIMIT])
+        con.execute("SET max_temp_directory_size = ?", [SPILL_LIMIT])
         con.execute("SET enable_external_access = false")
         con.execute("SET lock_configuration = true")
         for name in TABLES:

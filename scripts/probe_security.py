@@ -35,7 +35,8 @@ present), then prints, section by section:
    ``gltf_reaching``): playlists named ``speech.mp4`` (DASH, HLS, ffconcat) that name a
    private recording elsewhere, and a FLAC named ``.wav`` declaring 2**36 samples, each
    the speech of ``animegraph synth`` (a real process: held = exit 1 with one line, and
-   the private recording not read); glTFs whose buffer is outside their folder through
+   the private recording not read); glTFs whose buffer is outside their folder, and
+   glTFs drawing a quad from 5,000 nodes (nested, flat: ``gltf_drawing``), through
    ``load_mesh`` (held = refused in one line).
 5. **Kills**: ``--kills`` times, an ingest into the database killed with SIGKILL at a
    seeded moment: survived = the database still opens at a complete version and the next
@@ -65,7 +66,9 @@ from crafted import (  # noqa: E402
     crafted_database,
     disguised_playlists,
     flac_declaring,
+    gltf_drawing,
     gltf_reaching,
+    sql_bombs,
     sql_escapes,
 )
 
@@ -135,9 +138,19 @@ def probe_sql(db: Path, work: Path) -> dict:
         pass
     changed = _snapshot(db) != before or sorted(p.name for p in outside.iterdir()) != [
         "outside.txt"]
+    bombs_held = 0
+    for name, sql in sql_bombs().items():
+        proc = _run(["sql", "--db", str(db), "--timeout", "10", sql])
+        bombs_held += proc.returncode == 1 and _held(proc)
+        print(f"  {name}: exit {proc.returncode}: "
+              f"{(proc.stderr.strip().splitlines() or [''])[-1][:120]}")
+    import resource
+
     return {"sql_escapes_tried": len(escapes), "sql_escapes_refused": refused,
             "sql_escapes_refused_by_duckdb_alone": refused_by_duckdb,
-            "files_changed": changed}
+            "files_changed": changed, "sql_bombs_tried": len(sql_bombs()),
+            "sql_bombs_held": bombs_held,
+            "sql_peak_child_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss // 1024}
 
 
 def probe_databases(corpus: Path, db: Path, work: Path) -> dict:
@@ -468,6 +481,19 @@ def probe_media(corpus: Path, db: Path, work: Path) -> dict:
         except AnimeGraphError as exc:
             held += "\n" not in str(exc)
             print(f"  glTF buffer {uri}: held: {exc}")
+    (folder / "mesh" / "quad.bin").write_bytes(quad)
+    for nested in (True, False):  # minutes of trimesh's walk; vertices by the thousand
+        path = folder / "mesh" / f"drawn_{'nested' if nested else 'flat'}.gltf"
+        path.write_text(json.dumps(gltf_drawing("quad.bin", 5000, nested=nested)))
+        tried += 1
+        t0 = time.perf_counter()
+        try:
+            load_mesh(path)
+            print(f"  glTF of 5,000 {path.stem} nodes: NOT HELD: read")
+        except AnimeGraphError as exc:
+            held += "\n" not in str(exc)
+            print(f"  glTF of 5,000 {path.stem} nodes: held in "
+                  f"{time.perf_counter() - t0:.1f} s: {exc}")
     return {"media_cases_tried": tried, "media_cases_held": held}
 
 

@@ -19,6 +19,9 @@ import pyarrow.parquet as pq
 
 from db.store import file_sha256
 
+#: Bytes that drive a terminal: set its title (OSC 0, ended by BEL), clear the screen.
+TERMINAL_ESCAPE = "\x1b]0;PWNED\x07\x1b[2J\u202eevil"
+
 
 def _live(root: Path) -> Path:
     return root / (root / "CURRENT").read_text().strip()
@@ -184,6 +187,10 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     # Labels read back when clips are added (prepared_from_database), as new clips' are.
     "clip_id_path": lambda r: _clips(r, _set("clip_id", 0, "../../../../tmp/PWN_CLIP")),
     "speaker_newline": lambda r: _clips(r, _set("speaker", 0, "a\nb")),
+    # Terminal escapes (retitle the window, clear the screen) for info, sql and query.
+    "speaker_escape": lambda r: _clips(r, _set("speaker", 0, TERMINAL_ESCAPE)),
+    "corpus_escape": lambda r: _manifest(r, lambda m: {**m, "corpora": [
+        TERMINAL_ESCAPE]}),
     "sentence_id_path": lambda r: _clips(r, _set("sentence_id", 0, "../../../etc")),
     "phoneme_nul": lambda r: _animes(r, _set("phoneme", 0, "A\x00A")),
     "start_time_inf": lambda r: _animes(r, _set("start_time", 0, float("inf"))),
@@ -353,6 +360,24 @@ def sql_escapes(version_dir: Path, root: Path, outside: Path) -> list[str]:
     ]
 
 
+def sql_bombs() -> dict[str, str]:
+    """Reading statements that would take the machine's memory, disk or time unless the
+    sandbox bounds them (memory and spill caps, the timer, DuckDB's depth limit)."""
+    return {
+        "string_agg of 6 GB": "SELECT length(string_agg(repeat('x', 100000), '')) "
+                              "FROM range(60000)",
+        "GROUP BY of 10^9 groups": "SELECT count(*) FROM (SELECT range % 1000000000 AS g, "
+                                   "count(*) FROM range(2000000000) GROUP BY g)",
+        "list of 3*10^9 numbers": "SELECT max(len(l)) FROM (SELECT list(range) AS l "
+                                  "FROM range(3000000000))",
+        "recursive CTE of 10^9 rows": "WITH RECURSIVE t(n) AS (SELECT 1 UNION ALL SELECT "
+                                      "n + 1 FROM t WHERE n < 1000000000) SELECT count(*) "
+                                      "FROM t",
+        "10^12-row count": "SELECT count(*) FROM range(1000000000000)",
+        "5,000 nested brackets": "SELECT " + "(" * 5000 + "1" + ")" * 5000,
+    }
+
+
 # --------------------------------------------------------------------------- media files
 
 
@@ -392,6 +417,23 @@ def flac_declaring(path: Path, n_samples: int) -> Path:
     data[18:26] = fields.to_bytes(8, "big")
     path.write_bytes(data)
     return path
+
+
+def quad_bin() -> bytes:
+    """The buffer of :func:`gltf_reaching`'s quad."""
+    return (np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 1]], np.float32).tobytes()
+            + np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+
+
+def gltf_drawing(uri: str, n_nodes: int, *, nested: bool) -> dict:
+    """:func:`gltf_reaching`'s quad drawn by ``n_nodes`` nodes, each the child of the one
+    before (``nested``: trimesh walks every node's chain of parents) or all children of
+    the first: a few hundred bytes a node, the quad's vertices a node."""
+    gltf = gltf_reaching(uri)
+    gltf["nodes"] = ([{"mesh": 0, "children": [i + 1]} for i in range(n_nodes - 1)]
+                     if nested else [{"mesh": 0, "children": list(range(1, n_nodes))}]
+                     ) + [{"mesh": 0}] * (1 if nested else n_nodes - 1)
+    return gltf
 
 
 def gltf_reaching(uri: str) -> dict:

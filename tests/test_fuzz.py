@@ -151,3 +151,20 @@ def test_stored_labels_are_checked_as_new_ones_before_a_refit(tiny_db, tmp_path,
     path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
     with pytest.raises(DataError, match=f"is damaged: .*a stored clip's label: {what} "):
         prepared_from_database(Database.open(path))
+
+
+@pytest.mark.parametrize("mutation", ["speaker_escape", "corpus_escape"])
+def test_a_databases_terminal_escapes_are_printed_as_text(tiny_db, tmp_path, mutation,
+                                                          capsys):
+    """info, sql and query print what a (shared, untrusted) database holds: an escape
+    sequence in a speaker or the manifest drove the terminal (retitled it, cleared it)."""
+    from animegraph.apps.cli import main
+
+    path = str(crafted_database(tiny_db[0], tmp_path / "db", mutation))
+    shown = []
+    for command in (["info"], ["sql", "SELECT speaker, speaker AS \"\x1b[2J\" FROM clips"],
+                    ["sql", "EXPLAIN SELECT '\x1b[2J' FROM clips"], ["query", "--limit", "3"]):
+        main(command + ["--db", path])
+        shown.append(capsys.readouterr().out)
+        assert not {"\x1b", "\x07", "\u202e"} & set(shown[-1]), (command, shown[-1])
+    assert "\\x1b]0;PWNED\\x07\\x1b[2J\\u202eevil" in shown[0]  # info: shown, as text

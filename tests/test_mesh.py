@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from crafted import gltf_reaching
+from crafted import gltf_drawing, gltf_reaching, quad_bin
 from scipy.spatial.transform import Rotation
 
 from animegraph.face.mesh import (
@@ -187,6 +187,21 @@ def test_corpus_markers_csv_is_a_map_for_the_canonical_mesh(tmp_path):
     expected = default_marker_map([m[0] for m in face.MARKERS])
     assert mapped.regions == expected.regions
     assert np.array_equal(mapped.vertices, expected.vertices)
+
+
+@pytest.mark.parametrize("nested", [True, False])
+def test_a_gltf_drawing_its_pieces_at_too_many_places_is_refused_at_once(tmp_path, nested):
+    # 5,000 nested nodes (a 200 KB file) kept load_mesh for minutes (1,000: 5 s); nodes drawing a
+    # large piece many times would make billions of vertices from a small file
+    (tmp_path / "quad.bin").write_bytes(quad_bin())
+    for n, fits in [(256, True), (1000, False)]:
+        path = tmp_path / f"n{n}.gltf"
+        path.write_text(json.dumps(gltf_drawing("quad.bin", n, nested=nested)))
+        if fits:
+            assert load_mesh(path).vertices.shape == (4 * n, 3)
+        else:
+            with pytest.raises(DataError, match=f"draws its pieces at {n} places"):
+                load_mesh(path)
 
 
 def test_a_gltf_reads_no_buffer_outside_its_folder(tmp_path):

@@ -312,6 +312,19 @@ def test_size_is_the_frame_size_of_every_picture(take, capsys):
     assert not (take / "sized.glb").exists()
 
 
+def test_an_animation_beyond_its_memory_is_one_line(take, monkeypatch, capsys):
+    """The whole animation is held at once: a mesh of 10^6 vertices (a scanned head)
+    took 17 GB for 12 s, and the kernel killed the render. The budget is lowered here so
+    that the canonical face's second (2.7 MB of vertex positions) is beyond it."""
+    monkeypatch.setattr("animegraph.face.animation.MAX_ANIMATION_BYTES", 2_000_000,
+                        raising=False)
+    out = take / "too_big.glb"
+    assert main(["render", str(take / "take.c3d"), "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "120 frames of the 468-vertex mesh" in err and "decimate" in err
+    assert "\n" not in err and not out.exists()
+
+
 def test_glb_round_trip(take):
     import pygltflib
     import trimesh

@@ -87,6 +87,17 @@ def test_a_runaway_query_is_interrupted(db):
         run(db, "SELECT count(*) FROM range(100000000000000) a", timeout=0.5)
 
 
+def test_a_query_is_held_to_its_memory(db, monkeypatch):
+    # DuckDB's default is 80 % of the machine: a 2 GB string_agg took 6 GB. The limit is
+    # lowered here so that the query (256 MB) stays small when the limit is missing.
+    monkeypatch.setattr("db.sql.MEMORY_LIMIT", "64MB", raising=False)
+    with pytest.raises(ParameterError, match="Out of Memory") as err:
+        run(db, "SELECT length(string_agg(repeat('x', 1000), '')) FROM range(256000)")
+    assert "\n" not in str(err.value)
+    assert run(db, "SELECT current_setting('max_temp_directory_size') AS s")[0].table[
+        "s"][0].as_py() != "90% of available disk space"
+
+
 def test_several_selects_each_run(db):
     results = run(db, "SELECT 1 AS a; SELECT emotion FROM clips ORDER BY 1")
     assert [r.table.to_pylist() for r in results] == [

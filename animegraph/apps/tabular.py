@@ -13,6 +13,17 @@ import pyarrow.parquet as pq
 from db.atomic import atomic_write
 
 
+def visible(text: str) -> str:
+    """``text`` for a terminal: each control or format character (ESC, newline, BEL, a
+    right-to-left override ...) written as its Python escape, ``\\x1b``.
+
+    What is printed comes from a database or a query, both untrusted: an escape sequence
+    in a speaker's name or a manifest would drive the user's terminal (retitle it, set its
+    clipboard, hide lines), a newline would forge a line.
+    """
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def _shorten(value) -> str:
     if isinstance(value, list):
         head = ", ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in value[:3])
@@ -109,7 +120,8 @@ def _pretty(table: pa.Table, max_rows: int, truncated: bool = False) -> str:
     names = table.column_names
     shown = table.slice(0, max_rows)
     columns = [shown.column(i).to_pylist() for i in range(shown.num_columns)]
-    cells = [[_shorten(c[r]) for c in columns] for r in range(shown.num_rows)]
+    names = [visible(name) for name in names]
+    cells = [[visible(_shorten(c[r])) for c in columns] for r in range(shown.num_rows)]
     widths = [max([len(n)] + [len(c[i]) for c in cells]) for i, n in enumerate(names)]
     widths = [min(w, 60) for w in widths]
 

@@ -13,7 +13,15 @@ import numpy as np
 
 from animegraph.face.mesh import Deformer, Mesh, motion_points
 from animegraph.motion.files import Motion
+from db.errors import DataError
 from ingest.motion import fill_gaps
+
+#: Bytes of vertex positions an animation may hold (its head-frame and world copies,
+#: float64; the whole animation is held at once, the peak about 1.8 times these). A
+#: scanned head of 10^6 vertices would take 8.6 GB a copy for 12 s at 30 fps, and the
+#: kernel kills the process instead of a one-line error (measured: 115,233 vertices, 120
+#: frames, 1.2 GB peak); the canonical face (468 vertices) renders 3 hours at 30 fps.
+MAX_ANIMATION_BYTES = 8 << 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,9 +58,14 @@ class FaceAnimation:
         return len(self.vertices)
 
 
+def resampled_length(n_frames: int, fps: float, target_fps: float) -> int:
+    """Frames :func:`resample` makes of ``n_frames`` at ``fps``: the same duration."""
+    return max(1, int(np.floor(n_frames * target_fps / fps + 1e-9)))
+
+
 def resample(values: np.ndarray, fps: float, target_fps: float) -> np.ndarray:
     """Values (n_frames, ...) at ``target_fps``, linearly interpolated, same duration."""
-    n_out = max(1, int(np.floor(len(values) * target_fps / fps + 1e-9)))
+    n_out = resampled_length(len(values), fps, target_fps)
     t = np.arange(n_out) / target_fps * fps
     i0 = np.clip(np.floor(t).astype(int), 0, len(values) - 1)
     i1 = np.minimum(i0 + 1, len(values) - 1)
@@ -67,13 +80,21 @@ def animate(motion: Motion, deformer: Deformer, *, fps: float | None = None,
     Raises
     ------
     DataError
-        If the motion lacks markers of the map (one line naming them).
+        If the motion lacks markers of the map (one line naming them), or its vertex
+        positions would take more than :data:`MAX_ANIMATION_BYTES`.
     """
+    fps = motion.fps if fps is None else float(fps)
+    n_out = resampled_length(len(motion.values), motion.fps, fps)
+    need = 2 * n_out * deformer.mesh.n_vertices * 3 * 8
+    if need > MAX_ANIMATION_BYTES:
+        raise DataError(f"{n_out} frames of the {deformer.mesh.n_vertices}-vertex mesh "
+                        f"{deformer.mesh.name} would take {need / 2**30:.1f} GiB (at most "
+                        f"{MAX_ANIMATION_BYTES / 2**30:g}): decimate the mesh or render the "
+                        f"motion in parts")
     points = motion_points(motion.names, motion.values, deformer.markers.labels)
     if np.isnan(points).any():
         filled, _ = fill_gaps(points.reshape(len(points), -1))
         points = filled.reshape(points.shape)
-    fps = motion.fps if fps is None else float(fps)
     points = resample(points, motion.fps, fps)
     local, rotation, translation = deformer.local_frames(points, rigid=rigid)
     n = len(points)

@@ -54,6 +54,12 @@ REGIONS = ("lower_jaw", "upper_jaw", "eyelid_r", "eyelid_l", "upper_face")
 ANCHOR = "anchor"
 #: Width (mm of geodesic distance) of the blend between neighbouring regions.
 BAND_MM = 6.0
+#: Most places a mesh file (a glTF scene) may draw its pieces at, and most vertices it
+#: may make: trimesh walks every place's chain of parents, so a 200 KB glTF of 5,000
+#: nested nodes took minutes (1,000: 5 s), and 10,000 nodes drawing one 100,000-vertex
+#: piece would make 10^9 vertices. A face has a few pieces (head, eyes, teeth).
+MAX_MESH_INSTANCES = 256
+MAX_MESH_VERTICES = 5_000_000
 #: Inner-lip ring of the canonical mesh, right corner to left corner.
 _INNER_UPPER = (78,) + facemesh.UPPER_LIP_INNER + (308,)
 _INNER_LOWER = (78,) + facemesh.LOWER_LIP_INNER + (308,)
@@ -154,7 +160,18 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     if not path.is_file():
         raise DataError(f"mesh {path} does not exist")
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        scene = trimesh.load_scene(path, process=False)
+        pieces = scene.graph.geometry_nodes  # piece -> the nodes drawing it
+        places = sum(len(nodes) for nodes in pieces.values())
+        made = sum(len(getattr(scene.geometry.get(name), "vertices", ())) * len(nodes)
+                   for name, nodes in pieces.items())
+        if places > MAX_MESH_INSTANCES or made > MAX_MESH_VERTICES:
+            raise DataError(f"mesh {path} draws its pieces at {places} places into {made:,} "
+                            f"vertices (at most {MAX_MESH_INSTANCES} and "
+                            f"{MAX_MESH_VERTICES:,})")
+        loaded = scene.to_mesh()
+    except DataError:
+        raise
     except Exception as exc:  # trimesh raises many kinds on a bad file
         raise DataError(f"cannot read mesh {path}: {_first_line(exc)}") from None
     vertices = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), dtype=np.float64)

@@ -39,7 +39,7 @@ EXPLAIN_COLUMNS = ["explain_key", "explain_value"]
 
 
 def cmd_sql(args: argparse.Namespace) -> int:
-    from animegraph.apps.tabular import format_for, format_table
+    from animegraph.apps.tabular import format_for, format_table, visible
     from db.sql import ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
@@ -62,7 +62,8 @@ def cmd_sql(args: argparse.Namespace) -> int:
             sys.stdout.write("\n")
         if fmt == "table" and result.table.column_names == EXPLAIN_COLUMNS:
             # A plan is a drawing over many lines: a table cell would show its first.
-            text = "".join(f"{value}\n" for value in result.table.column(1).to_pylist())
+            text = "".join(f"{visible(line)}\n" for value in result.table.column(1).to_pylist()
+                           for line in value.splitlines())
         else:
             text = format_table(result.table, fmt, max_rows=args.max_rows,
                                 output=args.output, truncated=result.truncated)
@@ -129,6 +130,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     import json
 
     from animegraph.apps.info import database_info, info_lines
+    from animegraph.apps.tabular import visible
     from db.store import Database
 
     info = database_info(Database.open(args.db))
@@ -137,5 +139,5 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(json.dumps(info, indent=1))
     else:
         for line in info_lines(info):
-            print(line)
+            print(visible(line))
     return 0
