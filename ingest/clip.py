@@ -188,3 +188,16 @@ def checksum_files(paths) -> str:
             for block in iter(lambda: handle.read(1 << 20), b""):
                 digest.update(block)
     return digest.hexdigest()
+
+
+def stored_schema(db, channels: list[dict] | None = None) -> ChannelSchema:
+    """The channels of ``db``'s motion (its ``channels`` table, or its rows ``channels``
+    if already read), as its clips had them; the database's damage (DataError naming the
+    table) if they do not hold up: a database is shared between people."""
+    rows = db.table("channels").to_pylist() if channels is None else channels
+    try:
+        return ChannelSchema(kind=str(rows[0]["kind"]), names=tuple(str(c["name"]) for c in rows),
+                             groups=tuple(str(c["group"]) for c in rows),
+                             units=str(rows[0]["units"]))
+    except (KeyError, IndexError, TypeError, DataError) as exc:
+        raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None

@@ -44,7 +44,7 @@ from db.store import (
     own_folder,
     write_version,
 )
-from ingest.clip import checksum_files
+from ingest.clip import checksum_files, stored_schema
 from ingest.decompose import (
     ENERGY_KEPT,
     VARIANCE_KEPT,
@@ -60,7 +60,7 @@ from ingest.prepare import MIN_LAG_CORRECTED_S, PreparedClip, prepare_clip
 from ingest.readers import ClipSource, discover, load
 from ingest.readers.sync import MIN_EVIDENCE_S, MIN_PEAK_MARGIN
 from ingest.speech.ctc import kept_on_disk
-from ingest.tables import build_tables, prepared_from_database, stored_limits, stored_schema
+from ingest.tables import build_tables, prepared_from_database, stored_limits
 from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)

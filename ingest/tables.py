@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from db.errors import DataError, ParameterError
 from db.store import arrays_to_table
-from ingest.clip import ChannelSchema
+from ingest.clip import stored_schema
 from ingest.decompose import MotionDecomposer, pcs_of_clips
 from ingest.plausible import Limits, check_labels, check_stored_motion
 from ingest.prepare import PreparedClip
@@ -297,13 +297,6 @@ def prepared_from_database(db, limits: Limits | None = None) -> list[PreparedCli
         except DataError as exc:
             raise db.damaged("frames", f"clip {clip.corpus}/{clip.clip_id}: {exc}") from None
     return clips
-
-
-def stored_schema(db) -> ChannelSchema:
-    """The channels of ``db``'s motion (its ``channels`` table), as its clips had them."""
-    channels = db.table("channels").to_pylist()
-    return ChannelSchema(kind=channels[0]["kind"], names=tuple(c["name"] for c in channels),
-                         groups=tuple(c["group"] for c in channels), units=channels[0]["units"])
 
 
 def _read_prepared(db) -> list[PreparedClip]:

@@ -256,16 +256,10 @@ def _take_timecode(extra: str | None, damaged: str) -> tuple[float, float] | Non
     """
     import json
 
-    from ingest.formats.livelink import TIMECODE_RATES, timecode_frames
+    from ingest.readers.livelink import take_timecode
 
     try:
-        facts = json.loads(extra) if extra else {}
-        start, rate = facts.get("timecode_start"), facts.get("timecode_rate")
-        if start is None:
-            return None
-        if rate not in TIMECODE_RATES:
-            raise ValueError(f"timecode rate {rate!r}")
-        return timecode_frames(start, float(rate)), float(rate)
+        return take_timecode(json.loads(extra) if extra else {})
     except (ValueError, TypeError, AttributeError) as exc:
         raise DataError(f"{damaged} has a take timecode that does not read: {exc}") from None
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from animegraph.search.graph import AnimeGraph
 from db.store import Database
+from ingest.clip import stored_schema
 from ingest.emotion.model import EmotionModel, NoEmotionModel
 from ingest.invariants import check_stored_decomposition
 from ingest.motion import fill_gaps, head_points, stabilize_points, unstabilize_points
@@ -29,16 +30,12 @@ def sessions_of(corpora, speakers) -> tuple[tuple[str, str], ...]:
 
 def read_channels(db: Database) -> tuple[list[dict], tuple[str, ...], tuple[str, ...], str]:
     """(rows, names, groups, kind) of the database's motion channels (its ``channels``
-    table), or DataError naming the table if it does not hold up (a database is shared
-    between people: the summary in its manifest is not relied on for the kind)."""
-    try:
-        channels = db.table("channels").to_pylist()
-        names = tuple(str(c["name"]) for c in channels)
-        groups = tuple(str(c["group"]) for c in channels)
-        kind = str(channels[0]["kind"])
-    except (KeyError, IndexError, TypeError) as exc:
-        raise db.damaged("channels", f"{type(exc).__name__}: {exc}") from None
-    return channels, names, groups, kind
+    table, read as ingest reads it: :func:`ingest.tables.stored_schema`), or DataError
+    naming the table if it does not hold up (the summary in its manifest is not relied on
+    for the kind)."""
+    channels = db.table("channels").to_pylist()
+    schema = stored_schema(db, channels)
+    return channels, schema.names, schema.groups, schema.kind
 
 
 @dataclass(frozen=True, eq=False)

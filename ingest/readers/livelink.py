@@ -38,8 +38,10 @@ from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats.livelink import (
     ARKIT_BLENDSHAPES,
     ROTATIONS,
+    TIMECODE_RATES,
     format_timecode,
     read_livelink,
+    timecode_frames,
 )
 from ingest.readers.common import (
     ClipSource,
@@ -254,3 +256,21 @@ def load_livelink(source: ClipSource) -> RawClip:
         emotion=fields["emotion"], speaker=fields["speaker"],
         sentence_id=fields["sentence_id"], extra=extra,
     )
+
+
+def take_timecode(extra: dict) -> tuple[float, float] | None:
+    """A take's first timecode (frames since midnight) and timecode rate, as
+    :func:`load_livelink` keeps them in a clip's ``extra`` (``timecode_start``,
+    ``timecode_rate``); None for a clip that has none.
+
+    Raises
+    ------
+    ValueError
+        If they do not read (a database is shared between people).
+    """
+    start, rate = extra.get("timecode_start"), extra.get("timecode_rate")
+    if start is None:
+        return None
+    if rate not in TIMECODE_RATES:
+        raise ValueError(f"timecode rate {rate!r}")
+    return timecode_frames(start, float(rate)), float(rate)
