@@ -104,8 +104,7 @@ def main() -> int:
           + (f", guide {args.guide} ({args.guide_blend:g})" if args.guide else ""))
     for k in range(args.repeats):
         if hasattr(ctc, "forget"):  # every run hears the audio afresh (hama remembers its
-            ctc.forget()            # last outputs; checkouts before issue 13's second session
-            #                         have no such memory)
+            ctc.forget()            # last outputs; older checkouts have no such memory)
         t, cpu = time.perf_counter(), time.process_time()
         out = synthesize(model, utt.audio, utt.sample_rate, **kwargs)
         total = time.perf_counter() - t

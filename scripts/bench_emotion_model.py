@@ -1,4 +1,5 @@
-"""Time the serial emotion step of an ingest, part by part (issue #16, third session).
+"""Time the serial emotion step of an ingest, part by part
+(docs/results/emotion.md, "Cost").
 
 Usage::
 
@@ -14,8 +15,8 @@ the classifier), its wall and CPU seconds (the median over the repeats), the mac
 load average, and a digest of the fitted model's arrays (equal digests: equal results).
 ``--profile``: also the top of a cProfile of one run, by cumulative time.
 ``--n-codebooks K``: the database's classifier with K codebook pairs instead of the
-default's (:func:`ingest.emotion.model.database_classifier` replaced for the run; issue
-#16's fifth session, the ensemble of codebooks).
+default's (:func:`ingest.emotion.model.database_classifier` replaced for the run: the
+ensemble of codebooks against one pair).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Face tracking speed on videos, filling the tracking cache (issue #14).
+"""Face tracking speed on videos, filling the tracking cache
+(docs/results/speed.md, "Face tracking").
 
 Usage::
 

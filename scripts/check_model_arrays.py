@@ -21,8 +21,8 @@ ways (negated: -|v| - 1, zeroed, one NaN, its last column cut, times 1e30) and
 deliberate editor would (without it a database with checksums refuses every change);
 printed: the (corruption, exit status) counts, the arrays whose corruption was
 accepted (exit 0), and the runs that were neither exit 0 nor one line (tracebacks).
-The copy of the exploratory fuzz of the hardening task (its counts before the
-invariants are in docs/results.md).
+The fuzz's counts are in docs/results/robustness.md ("Stored model arrays checked
+when read").
 
 With ``--load-once``: ``Model.load(DB)`` once and nothing else, for an instruction count
 of the checks (``--no-checks`` replaces both check functions by no-ops).

@@ -1,4 +1,5 @@
-"""Emotion classification of speech, measured (Cao et al. 2005, §6, Table I; issue #16).
+"""Emotion classification of speech, measured (Cao et al. 2005, §6, Table I;
+docs/results/emotion.md).
 
 Usage::
 
@@ -18,8 +19,8 @@ comparable with published figures on the full recordings):
   together, label-free). LOSO is also scored one utterance at a time without a speaker
   (the ``classify`` case: the population fallback) and, for comparison, with a second SVM
   trained without speaker normalisation;
-* the confusion matrix of the functionals pipeline (``rich+cepstrum``, the default until
-  issue #16's fourth session; LOSO), feature times per utterance and fit times. The
+* the confusion matrix of the functionals pipeline (``rich+cepstrum``, the former default;
+  LOSO), feature times per utterance and fit times. The
   stored default adds the bag-of-audio-words, learned in each training fold:
   ``scripts/eval_emotion_boaw.py --systems stored`` measures it;
 * ``--opensmile``: eGeMAPS and ComParE functionals (openSMILE) with the same SVM, alone and
@@ -364,7 +365,7 @@ def main() -> int:
     configs = [
         ("paper (500 coefficients), no norm.", "paper", none, LINEAR_GRID),
         (f"{FUNCTIONALS}, no norm.", FUNCTIONALS, none, GRID),
-        (f"{FUNCTIONALS} + speaker norm. (the default to session 3)", FUNCTIONALS, sp, GRID),
+        (f"{FUNCTIONALS} + speaker norm. (functionals alone)", FUNCTIONALS, sp, GRID),
     ]
     if args.balanced:
         configs.append((f"{FUNCTIONALS} + speaker norm., class weights tuned",

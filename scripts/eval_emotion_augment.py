@@ -1,4 +1,5 @@
-"""Speed perturbation of the training folds, nested, on EmoDB (issue #16, third session).
+"""Speed perturbation of the training folds, nested, on EmoDB
+(docs/results/emotion.md).
 
 Usage::
 

@@ -1,5 +1,5 @@
 """Bag-of-audio-words and block-weighted fusion with the functionals, nested, on EmoDB
-(issue #16, third session).
+(docs/results/emotion.md).
 
 Usage::
 
@@ -24,16 +24,16 @@ chosen inside each training fold exactly as ``scripts/eval_emotion.py``: inner s
   *before* the classifier's per-speaker normalisation and scaling, which undo any
   per-column weight, so it measures plain concatenation);
 * ``stored``: default+boaw through the stored estimator, what ``ingest`` stores and
-  ``classify`` / ``synth --emotion auto`` use (issue #16, fourth session): kernel and C
+  ``classify`` / ``synth --emotion auto`` use: kernel and C
   chosen as ``default+boaw``'s, then ``EmotionClassifier()`` (features
   ``rich+cepstrum+boaw``, probabilities) fitted on the outer training fold's
   :class:`~ingest.emotion.classifier.SpeechFeatures` (functionals and frame descriptors:
   it learns its codebooks itself), written with ``to_arrays``, read back with
   ``from_arrays`` and scored; LOSO one utterance at a time is also scored by the
   highest probability (what ``classify`` lists first). One codebook pair
-  (``n_codebooks=1``: the stored default of issue #16's fourth session);
+  (``n_codebooks=1``);
 * ``ensemble``: ``stored`` with the ensemble of :data:`ingest.emotion.boaw.ENSEMBLE`
-  codebook pairs (``EmotionClassifier(n_codebooks=5)``, issue #16's fifth session; their
+  codebook pairs (``EmotionClassifier(n_codebooks=5)``, the default; their
   histograms one block), tuned on the same ensemble's features at the estimator's kernel
   scale (``kernel_width``: one pair's width); its first pair is ``stored``'s (the same
   seed), the others drawn from it.

@@ -1,4 +1,4 @@
-"""Fusion of emotion classifiers on EmoDB, nested (issue #16).
+"""Fusion of emotion classifiers on EmoDB, nested (docs/results/emotion.md).
 
 Usage::
 
@@ -23,7 +23,7 @@ are fitted, for every combination of bases:
 
 ``--feature-level`` adds feature-level fusion with the same protocol: the blocks
 concatenated, each block first z-scored over the training population and divided by the
-square root of its width. **This weighting has no effect** (found in the third session):
+square root of its width. **This weighting has no effect**:
 the classifier's per-speaker z-normalisation and its scaling to [-1, 1] act per column and
 undo any per-column factor applied before them, so this measures plain concatenation
 (measured in ``eval_emotion.py``). A block weighting that holds is applied after the

@@ -1,4 +1,5 @@
-"""Lip-audio lag on real data: each clip's own estimate against the pooled one (issue #14).
+"""Lip-audio lag on real data: each clip's own estimate against the pooled one
+(docs/results/capture.md, "Lip-audio lag").
 
 Usage::
 

@@ -7,7 +7,7 @@ Usage::
                                    [--corpus DIR] [--json OUT] [--plots DIR]
                                    [--param av-hmm:n_states=8 ...]
 
-Systems (issue #8): ``anime-graph`` (exact and windowed search, and the naive random /
+Systems: ``anime-graph`` (exact and windowed search, and the naive random /
 first-anime baselines), ``mu-mlp`` (Hong et al. 2002), ``hier-pca`` (Cosker et al.) and
 ``av-hmm`` (Terissi et al. 2013). Every fold fits each baseline on the same training clips
 the fold's database is built from and scores all systems on the same held-out clips,
@@ -25,8 +25,8 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
 * talkingface (real, English, landmarks from video): within-speaker splits of the two
   long clips (first 70 % as the database, last 30 % synthesized) and leave one clip out
   across the other eleven;
-* grid (real, English, one speaker on video, with transcripts and word alignments; issue
-  #14): the 800 GRID s1 utterances, faces tracked (``pip install -e ".[video]"``; cached),
+* grid (real, English, one speaker on video, with transcripts and word alignments):
+  the 800 GRID s1 utterances, faces tracked (``pip install -e ".[video]"``; cached),
   split within the speaker: in clip-id order every fifth clip is held out (160), the
   other 640 are the database. The database's phones are aligned inside GRID's word
   alignments (as ingest does); the held-out clips are synthesized (a) from those phones
@@ -37,7 +37,7 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
   reads the clips prepared by an ``animegraph ingest`` of ``grid/s1`` instead of preparing
   them again.
 
-Every table has two reference rows (issue 13; :mod:`animegraph.baselines.reference`):
+Every table has two reference rows (:mod:`animegraph.baselines.reference`):
 ``loudness``, the speech's smoothed RMS envelope mapped to every channel by least squares
 on the fold's training clips, and ``mean-pose``, the training motion's mean. A method
 that does not beat loudness is not lip-sync.
@@ -152,7 +152,7 @@ def fit_fold(tmp: Path, name: str, train, reference=None) -> dict:
             continue
         train_s[key] = time.perf_counter() - t0
         print(f"# {name}: {key} fitted in {train_s[key]:.1f} s", flush=True)
-    for peer in PEER_ROWS:  # published tools from PyPI (issue 13)
+    for peer in PEER_ROWS:  # published tools from PyPI
         t0 = time.perf_counter()
         try:
             est = PEERS[peer](**({"phones_engine": INGEST.get("phones_engine")}
@@ -162,7 +162,7 @@ def fit_fold(tmp: Path, name: str, train, reference=None) -> dict:
             print(f"# {name}: {peer} not fitted: {exc}", flush=True)
             continue
         train_s[peer] = time.perf_counter() - t0
-    for cls in (Loudness, MeanPose):  # reference rows in every table (issue 13)
+    for cls in (Loudness, MeanPose):  # reference rows in every table
         t0 = time.perf_counter()
         estimators[cls.method] = cls().fit(train)
         train_s[cls.method] = time.perf_counter() - t0

@@ -1,4 +1,5 @@
-"""How well the music check tells real music from real speech (issue 13, "Bad input").
+"""How well the music check tells real music from real speech
+(docs/results/robustness.md, "Speech input checks").
 
 Usage::
 

@@ -1,4 +1,5 @@
-"""Where each phone engine's recognised GRID phones differ from the aligned ones (issue 14).
+"""Where each phone engine's recognised GRID phones differ from the aligned ones
+(docs/results/segmentation.md).
 
 Usage::
 

@@ -1,4 +1,5 @@
-"""Probe what comes in as an attacker or a careless user would (issue #18), and count.
+"""Probe what comes in as an attacker or a careless user would, and count
+(docs/results/robustness.md).
 
 Usage::
 

@@ -1,5 +1,5 @@
-"""Mean and spread over codebook seeds of ``scripts/eval_emotion_boaw.py`` runs (issue #16,
-fifth session).
+"""Mean and spread over codebook seeds of ``scripts/eval_emotion_boaw.py`` runs
+(docs/results/emotion.md: what the codebook seed decides).
 
 Usage::
 
