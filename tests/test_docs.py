@@ -38,6 +38,7 @@ def _project(tmp_path: Path, extensions: list[str], page: str) -> Path:
         f"sys.path.insert(0, {str(DOCS / '_ext')!r})\n"
         f"extensions = ['myst_parser', *{extensions!r}]\n"
         "nitpicky = True\n"
+        "myst_heading_anchors = 3\n"
         "nitpick_ignore_regex = [(r'py:.*', r'(?!(animegraph|db|ingest)\\b).*')]\n")
     (source / "index.md").write_text(page)
     return source
@@ -72,6 +73,19 @@ def test_reference_to_missing_object_fails(tmp_path):
     stale = _sphinx_build(source, tmp_path / "stale", "-E")
     assert stale.returncode != 0
     assert "ingest.speech.segment.ENGINES" in stale.stderr
+
+
+def test_broken_link_between_pages_fails(tmp_path):
+    page = "# Page\n\n[the heading](other.md#a-heading)\n\n```{toctree}\nother\n```\n"
+    source = _project(tmp_path, [], page)
+    (source / "other.md").write_text("# Other\n\n## A heading\n")
+    ok = _sphinx_build(source, tmp_path / "ok")
+    assert ok.returncode == 0, ok.stderr
+
+    (source / "other.md").write_text("# Other\n\n## A renamed heading\n")
+    broken = _sphinx_build(source, tmp_path / "broken", "-E")
+    assert broken.returncode != 0
+    assert "a-heading" in broken.stderr
 
 
 def test_cli_reference_missing_command_fails(tmp_path):
