@@ -8,8 +8,8 @@ and ``nitpicky`` (docs/conf.py) makes that a warning: a docstring naming a funct
 was renamed or removed fails the build.
 
 Also leaves out of class pages the methods scikit-learn generates on every estimator
-(``set_fit_request`` and the like), whose docstrings point into scikit-learn's own
-documentation.
+(``set_fit_request`` and the like, whose docstrings point into scikit-learn's own
+documentation) and bare data attributes (the Attributes section says what they are).
 """
 
 from __future__ import annotations
@@ -67,14 +67,22 @@ def _resolve(app: Sphinx, env, node: nodes.Element, contnode: nodes.Element):
     return None
 
 
-def _skip_generated(app, what, name, obj, skip, options):
+def _skip_members(app, what, name, obj, skip, options):
+    if what != "class":
+        return None
     # scikit-learn's metadata-routing methods (set_fit_request ...), made for each class.
-    if what == "class" and name.startswith("set_") and name.endswith("_request"):
+    if name.startswith("set_") and name.endswith("_request"):
+        return True
+    # Data attributes (dataclass fields: ``obj`` is their default value, or autodoc's
+    # marker without one): the class's numpydoc Attributes section describes them, the
+    # signature gives their defaults; listed again they would be bare names.
+    if not (callable(obj) or inspect.isdatadescriptor(obj)
+            or isinstance(obj, (classmethod, staticmethod))):
         return True
     return None
 
 
 def setup(app: Sphinx) -> dict:
     app.connect("missing-reference", _resolve)
-    app.connect("autodoc-skip-member", _skip_generated)
+    app.connect("autodoc-skip-member", _skip_members)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
