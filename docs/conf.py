@@ -46,21 +46,22 @@ root_doc = "index"
 exclude_patterns = ["_build", "examples", "results.md"]
 templates_path = ["_templates"]
 
-# Every reference to a page, heading or object of this project must resolve; names of
+# Every reference to a page, heading or object of this project must resolve (an object
+# the API reference leaves out must at least exist: docs/_ext/internal_refs.py); names of
 # other libraries (numpy, pathlib, pyarrow ...) are left as plain text (no intersphinx:
 # the build runs offline).
 nitpicky = True
 nitpick_ignore_regex = [
     (r"py:.*", r"(?!(animegraph|db|ingest)\b).*"),
-    # numpydoc's type words ("optional", "default", "shape (n, 3)" ...) are not objects.
-    (r"py:obj", r"(animegraph|db|ingest)\.\S+ \S.*"),
 ]
-suppress_warnings: list[str] = []
 
 # -- MyST ---------------------------------------------------------------------------
-myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
+# linkify: bare URLs become links, as GitHub shows them.
+myst_enable_extensions = ["colon_fence", "deflist", "dollarmath", "linkify"]
 # ``page.md#a-heading`` links resolve for headings down to ###.
 myst_heading_anchors = 3
+# "$ANIMEGRAPH_DB or $HOME" stays text: math needs no space inside its dollars.
+myst_dmath_allow_space = False
 
 # -- autodoc / autosummary / numpydoc -------------------------------------------------
 autosummary_generate = True
