@@ -69,6 +69,15 @@ def test_reference_to_missing_object_fails(tmp_path):
     ok = _sphinx_build(source, tmp_path / "ok")
     assert ok.returncode == 0, ok.stderr
 
+    # Another name of a documented object (a re-export) links to it.
+    alias = page + ("\n```{eval-rst}\n.. autoexception:: db.errors.ParameterError\n```\n\n"
+                    "{class}`animegraph.ParameterError`\n")
+    (source / "index.md").write_text(alias)
+    linked = _sphinx_build(source, tmp_path / "alias", "-E")
+    assert linked.returncode == 0, linked.stderr
+    html = (tmp_path / "alias" / "index.html").read_text(encoding="utf-8")
+    assert 'href="#db.errors.ParameterError"' in html
+
     (source / "index.md").write_text(page + "\n{data}`ingest.speech.segment.ENGINES`\n")
     stale = _sphinx_build(source, tmp_path / "stale", "-E")
     assert stale.returncode != 0
