@@ -156,7 +156,7 @@ def synthesize(
         anime is averaged relative to its recording's mean pose (None: when the database
         holds more than one speaker or session, :func:`recentres`).
     phones_engine : str, optional
-        The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
+        The phone engine without labels (:data:`ingest.speech.engines.ENGINES`; None: its
         default, PocketSphinx alignment of a transcript, hama recognition without one).
     audio_cost : str, optional
         C_audio of Eq. 5 (:data:`animegraph.synthesis.audio.AUDIO_COSTS`): ``"plp"`` (the

@@ -79,11 +79,11 @@ class EmotionMapping(RbfMapping, TransformerMixin, BaseEstimator):
 
     Attributes
     ----------
-    centres_ : np.ndarray, shape (n_centres_, n_emotion_components)
-        Source samples e_i^r of the interpolation (K-means centres).
-    targets_ : np.ndarray, shape (n_centres_, n_emotion_components)
+    centres_ : np.ndarray, shape (k, n_emotion_components)
+        Source samples e_i^r of the interpolation (K-means centres; k <= ``n_centres``).
+    targets_ : np.ndarray, shape (k, n_emotion_components)
         Their targets e_j^r (mean target of each cluster).
-    coef_ : np.ndarray, shape (n_centres_, n_emotion_components)
+    coef_ : np.ndarray, shape (k, n_emotion_components)
         Coefficients c_r of Eq. 10.
     d_ : float
         Distance between the two closest centres.
