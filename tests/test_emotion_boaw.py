@@ -1,5 +1,4 @@
-"""Speed perturbation and bag-of-audio-words for emotion from speech (issue #16, third
-session)."""
+"""Speed perturbation and bag-of-audio-words for emotion from speech (issue #16)."""
 
 from __future__ import annotations
 
@@ -294,8 +293,8 @@ def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     for bad in (0, 1.5, True):
         with pytest.raises(ParameterError, match="kernel_width"):
             EmotionClassifier(kernel_width=bad).fit(X, y)
-    # format 4 (one pair, no n_codebooks arrays), as the fourth session stored it (its
-    # features without the silence floor)
+    # format 4 (one pair, no n_codebooks arrays), as classifiers were stored before the
+    # ensemble (their features without the silence floor)
     single = EmotionClassifier(C=1.0, n_codebooks=1, probability=True, calibration_cv=2,
                                silence_floor=None).fit(audio, y, speakers=spk)
     four = {**{k: v for k, v in single.to_arrays().items()

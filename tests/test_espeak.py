@@ -6,7 +6,6 @@ import logging
 import multiprocessing
 import re
 import threading
-import time
 from pathlib import Path
 
 import librosa
@@ -347,19 +346,6 @@ def test_worker_processes(method):
         got = pool.apply(speak, (SENTENCE,))
     np.testing.assert_array_equal(got.audio, expected.audio)
     assert got.phones == expected.phones
-
-
-def test_fast_enough():
-    text = "The quick brown fox jumps over the lazy dog near the river."  # 11 words
-    speak(text)
-    best = min(_timed(lambda: speak(text)) for _ in range(5))
-    assert best < 0.1  # measured about 9 ms
-
-
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
 
 
 # --- errors ---------------------------------------------------------------------------------

@@ -126,7 +126,7 @@ def synthesize(
     guide_rank : bool, optional
         With ``guide``: add each candidate's distance to the guide's motion to C_audio
         (trajectory-guided selection); off by default (it did not hold across speakers,
-        docs/results.md, "Issue 13, third session").
+        docs/results/lipsync.md, "Options measured against the default").
     context : bool, optional
         With ``k_best``, beyond the paper: rank each phone's animes by phonetic context
         (their recorded neighbour phones against the input's) before the audio cost
@@ -363,7 +363,7 @@ def recentres(model: Model, options: PostOptions | None = None) -> bool:
     as asked, else when the database's clips come from more than one recording session
     (:attr:`Model.sessions`: speakers, or corpus folders). Rest poses differ between
     speakers and their sessions; within one session a short recording's mean pose is
-    mostly what it says, and subtracting it costs a little (docs/results.md,
-    "Session 10")."""
+    mostly what it says, and subtracting it costs a little (docs/results/lipsync.md,
+    "Options measured against the default": ``--no-recentre``)."""
     asked = (options or PostOptions()).recentre
     return len(model.sessions) > 1 if asked is None else bool(asked)

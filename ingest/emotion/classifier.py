@@ -73,11 +73,11 @@ __all__ = [
 #: Kernel the paper settles on (§6, Table I); also the best measured with the default
 #: features.
 KERNEL = "linear"
-#: Feature blocks of the default pipeline (measured best, docs/results.md issue #16:
-#: the functionals and the bag-of-audio-words, "Issue 16, fourth session"; its ensemble
-#: of codebooks, ``n_codebooks``, "Issue 16, fifth session").
+#: Feature blocks of the default pipeline: the functionals and the bag-of-audio-words,
+#: with its ensemble of codebooks (``n_codebooks``), measured best
+#: (docs/results/emotion.md, "EmoDB: the default and the alternatives").
 DEFAULT_FEATURES = "rich+cepstrum+boaw"
-#: The functionals alone (the default until issue #16's fourth session).
+#: The functionals alone (the default before the bag-of-audio-words).
 FUNCTIONALS = "rich+cepstrum"
 #: SVM penalty of the default pipeline (the value nested tuning picks on EmoDB).
 DEFAULT_C = 0.1
@@ -186,8 +186,8 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
         histograms concatenated as one block (:mod:`ingest.emotion.boaw`: the ensemble
         that averages out the codebook's random draw; the default K =
         :data:`ingest.emotion.boaw.ENSEMBLE` = 5 was decided before measuring and made
-        the default by it, ``docs/results.md`` "Issue 16, fifth session"; 1: one pair,
-        the stored default of issue #16's fourth session).
+        the default by it, ``docs/results/emotion.md`` "EmoDB: the default and the
+        alternatives"; 1: one pair, what classifiers of format 4 stored).
     silence_floor : float or None, optional
         Frames more than this many dB below the utterance's loudest frame are silence,
         replaced by the floor so that digital silence and a quiet noise floor give the

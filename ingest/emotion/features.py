@@ -31,7 +31,7 @@ boaw     bag-of-audio-words of frame descriptors (:mod:`ingest.emotion.boaw`)  1
 * The level is normalised first (issue #16), so mean, variance and RMS describe the
   signal's shape (its crest factor), not how loud it was recorded.
 
-Silence floor (issue s18). A pause is digital silence (exact zeros) in synthetic, noise-gated
+Silence floor. A pause is digital silence (exact zeros) in synthetic, noise-gated
 or clean studio speech, and a noise floor some 60 dB below the speech elsewhere (the
 synthetic corpus, most recordings). Frame statistics that include the pauses then describe
 the recording, not the speaker: the 10th percentile of the log energy *is* the pause level
