@@ -44,7 +44,7 @@ k * eps * (sum of the terms' magnitudes) (Higham, *Accuracy and Stability of Num
 Algorithms*, 2nd ed., §3.1); :func:`roundoff` allows :data:`SAFETY` times that, for the
 round-off of the stored values' own computation (eigen-decomposition, inverse, LU solve).
 The measured deviations of real databases are 2-4 orders of magnitude smaller
-(docs/results.md, "Stored model arrays checked when read").
+(docs/results/robustness.md, "Stored model arrays checked when read").
 """
 
 from __future__ import annotations

@@ -101,7 +101,7 @@ def test_fit_predict_shapes(fitted, split, method):
 @pytest.mark.parametrize("method", ["hier-pca", "mu-mlp"])
 def test_learns_more_than_the_mean(fitted, split, method):
     """On held-out speech the mouth moves with the recording; mu-mlp also beats the mean
-    face in lip RMSE (hier-pca does not on this little data, see docs/results.md).
+    face in lip RMSE (hier-pca does not on this little data, see docs/results/lipsync.md, "Baseline settings").
     ppg-ridge's 451 inputs overfit the 4 training sentences of this corpus (its
     posteriorgram part alone predicts the fifth sentence's mouth with R < 0): its check
     is on real speech, :func:`test_ppg_ridge_on_real_speech`."""
@@ -202,7 +202,7 @@ def test_ridge_loo_chooses_and_solves_as_ridge_cv(n, p, t, noise):
 def test_ppg_ridge_on_real_speech():
     """Fitted on a minute of each of two FACEGOOD clips (Mandarin, ARKit-style curves, read
     as recorded), it follows 30 s of a third clip's jaw opening (the full evaluation:
-    docs/results.md)."""
+    docs/results/lipsync.md)."""
     from animegraph.baselines.data import TrainingClip, TrainingSet
     from ingest.readers import discover, load
 

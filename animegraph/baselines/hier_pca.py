@@ -27,7 +27,7 @@ model for video-realistic facial animation" (``../shared/papers/cosker-*.txt``).
   model without that noise fits ``d`` to the speech by least squares and extrapolates: on
   the synthetic corpus Eq. 9 then explained -350 % (face) and -850 % (mouth) of the
   within-cluster appearance variance on the training frames themselves, against +20 % and
-  +37 % with the noise term (docs/results.md, "hier-pca: why it is weak").
+  +37 % with the noise term (docs/results/lipsync.md, "Baseline settings").
 * §4.5: local averaging of the synthesised frames (:data:`AVERAGE_FRAMES`).
 
 Choices the paper leaves open, and fallbacks (ours): the number of Mel-cepstra (12) and
@@ -104,7 +104,7 @@ def _speech_to_d(rs: np.ndarray, d_var: np.ndarray, noise_var: float,
     extrapolates the appearance (with no more kept modes than speech dimensions ``d`` is
     the plain least-squares fit of ``Rs``, whatever ``Λ``). On the synthetic corpus that
     made the appearance fit worse than the cluster mean on the training frames themselves
-    (docs/results.md).
+    (docs/results/lipsync.md, "Baseline settings").
     """
     lam = np.maximum(d_var - noise_var, 0.0)
     lam_rt = lam[:, None] * rs.T  # (k, n_s)
@@ -131,7 +131,7 @@ class HierPca(BaselineModel):
         Share of the speech vectors' variance the speech PCA keeps (Eq. 4; the paper gives
         none). Unnormalised Mel-cepstra are dominated by ``c_0``: the default 0.95 keeps 6
         of 12 dimensions on the synthetic corpus, 0.999 all 12 (mouth R 0.10 → 0.33 there,
-        docs/results.md).
+        docs/results/lipsync.md, "Baseline settings").
     random_state : int
         Seed of k-means and the mixture.
     """

@@ -1,7 +1,7 @@
 """Whether the search's numba kernels are compiled yet (they are cached on disk once).
 
 The first synthesis in a fresh environment compiles every kernel of the search (about a
-minute on two cores, measured in ``docs/results.md``, issue 17); later runs load them
+minute on two cores, ``docs/results/speed.md``, "Start-up"); later runs load them
 from numba's cache (``__pycache__/*.nbi`` beside each module). Commands say so before
 that first minute instead of going silent.
 """
@@ -19,7 +19,7 @@ KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree"),
 #: and tests (synthesis warps every anime in one compiled pass). Counted, they were never
 #: cached by a synthesis, and every ``synth`` announced a minute's compilation.
 NOT_IN_SYNTHESIS = frozenset({"dtw._dtw_path"})
-#: What the one-off compilation takes, for the message (measured, docs/results.md).
+#: What the one-off compilation takes, for the message (measured: docs/results/speed.md, "Start-up").
 COMPILE_NOTE = "about a minute on two cores"
 
 

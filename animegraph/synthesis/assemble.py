@@ -37,7 +37,7 @@ from db.errors import ParameterError
 from ingest.lowpass import smooth
 
 #: :func:`blend_k_best` weighs the r-th ranked anime (r = 1, 2, ...) by ``r ** -RANK_DECAY``.
-#: Measured against equal weights (0) and 1 (docs/results.md): 0.5 was as good or better
+#: Measured against equal weights (0) and 1 (docs/results/lipsync.md, "Choices inside the default"): 0.5 was as good or better
 #: on every data set.
 RANK_DECAY = 0.5
 #: PostOptions.helper: the helper pair's motion as recorded (the paper), or anchored.
@@ -395,7 +395,7 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     ``r ** -RANK_DECAY`` (:data:`RANK_DECAY`); the result is then smoothed with the
     learned cutoffs. One anime per phone is a single noisy sample of how the phone
     can look; the mean of the few whose audio matches best is a better estimate (on
-    real data with recognized phones, docs/results.md).
+    real data with recognized phones, docs/results/lipsync.md, "FACEGOOD" and "talkingface").
 
     Averaged neighbours are no longer single recordings to join as §4.3 does at a jump
     match. With ``options.blend`` (the default) each join is cross-faded instead through

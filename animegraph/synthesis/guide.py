@@ -1,7 +1,7 @@
 """A statistical model's predicted trajectory guiding which recorded animes are used
 (beyond the paper, behind an option: ``synthesize(..., guide=...)``, ``synth --guide``).
 
-Recognised phones are often wrong on real speech (docs/results.md, issue 13), and the
+Recognised phones are often wrong on real speech (docs/results/lipsync.md), and the
 paper's search then ranks animes of the wrong phone by an audio cost alone. The
 talking-head literature's remedy is *trajectory-guided sample selection*: a statistical
 audio-to-visual model predicts a visual trajectory for the input speech, and recorded

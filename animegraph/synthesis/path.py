@@ -7,13 +7,13 @@ the exact search's sequence). The paper's synthesis (one recorded anime a phone,
 al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search``; a
 script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
 too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
-single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results.md, issues 13
-and 14); and, beyond that, averaged 50/50 with the motion two statistical models (mu-mlp
+single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results/lipsync.md); and, beyond that, averaged 50/50 with the motion two
+statistical models (mu-mlp
 and ppg-ridge, :data:`AUDIO_ONLY_GUIDE`) predict for the speech
 (:mod:`animegraph.synthesis.guide`; ``synth --guide``). ``synth`` and ``batch`` both decide here.
 
 Why: on the one real database with transcripts (GRID s1, 640 clips of one speaker, 159
-held out: docs/results.md, issue 14) k-best 20 was ahead of the paper's exact and
+held out: docs/results/lipsync.md, "GRID s1") k-best 20 was ahead of the paper's exact and
 windowed search and of every statistical baseline on mouth R and lip vertex error, with
 phones aligned from the transcript. Averaging the k best-matching samples instead of
 taking the single best one is k-nearest-neighbour regression rather than 1-nearest-

@@ -7,8 +7,8 @@ normalisation (:mod:`ingest.emotion.speakers`), scaling to ``[-1, 1]`` and a Sup
 Machine (Libsvm's C-SVC, one-vs-one, as the paper) -- and stores it as plain arrays.
 
 Defaults are what measures best on EmoDB with every choice nested inside the training
-folds (``scripts/eval_emotion.py``, ``docs/results.md`` "Emotion classification (issue
-#16)"); the paper's configuration stays one call away, :meth:`EmotionClassifier.paper`:
+folds (``scripts/eval_emotion.py``, ``docs/results/emotion.md``, "EmoDB: the default and the
+alternatives"); the paper's configuration stays one call away, :meth:`EmotionClassifier.paper`:
 mean, variance and RMS of the signal and its first 500 real-cepstrum coefficients, a
 linear kernel, no speaker normalisation.
 

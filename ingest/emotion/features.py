@@ -82,7 +82,7 @@ N_CEPSTRUM = 500
 CEPSTRUM_FRAME = 2048
 CEPSTRUM_HOP = 512
 #: Coefficients of the ``cepstrum`` block (frame-averaged; 50 measured best beside ``rich``
-#: in docs/results.md, "Emotion classification").
+#: in docs/results/emotion.md, "EmoDB: the default and the alternatives").
 CEPSTRUM_BLOCK = 50
 #: Feature blocks a specification may join with "+".
 BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare", "boaw")

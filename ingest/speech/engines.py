@@ -4,7 +4,7 @@
   (:mod:`ingest.speech.ctc`): recognition, CTC-Viterbi forced alignment, posteriors;
 * ``"pocketsphinx"`` -- PocketSphinx with its US-English model (:mod:`ingest.speech.sphinx`);
 * ``"auto"`` (the default) -- each task by the engine that measured better at it
-  (``scripts/eval_segmentation.py``, docs/results.md "Issue 13"): forced alignment of a
+  (``scripts/eval_segmentation.py``, docs/results/segmentation.md): forced alignment of a
   transcript by PocketSphinx (finer boundaries: median phone onset error 3.8 ms against
   5.2 ms on eSpeak speech); in recognition hama names the phones (phone error rate 0.40
   against 0.75 on GRID, 0.27 against 0.58 on eSpeak speech) and PocketSphinx places them,
