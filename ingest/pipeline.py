@@ -82,7 +82,8 @@ class IngestConfig:
     # Store each clip's phone posteriorgram (hama installed; beyond the paper, for synth
     # --audio-cost posteriorgram): about 0.08 CPU-s per second of speech when hama has not
     # recognised the phones already. Off by default: the posteriorgram cost did not measure
-    # better than the paper's (docs/results/lipsync.md, "Choices inside the default"); on when the database has them.
+    # better than the paper's (docs/results/lipsync.md, "Choices inside the default"); on when the
+    # database has them.
     # Clips whose phones hama recognised keep theirs in any case (prepare_clip): it costs
     # nothing, and ppg-ridge's fit then need not hear them again.
     posteriorgrams: bool = False

@@ -101,7 +101,8 @@ def test_fit_predict_shapes(fitted, split, method):
 @pytest.mark.parametrize("method", ["hier-pca", "mu-mlp"])
 def test_learns_more_than_the_mean(fitted, split, method):
     """On held-out speech the mouth moves with the recording; mu-mlp also beats the mean
-    face in lip RMSE (hier-pca does not on this little data, see docs/results/lipsync.md, "Baseline settings").
+    face in lip RMSE (hier-pca does not on this little data, see docs/results/lipsync.md, "Baseline
+    settings").
     ppg-ridge's 451 inputs overfit the 4 training sentences of this corpus (its
     posteriorgram part alone predicts the fifth sentence's mouth with R < 0): its check
     is on real speech, :func:`test_ppg_ridge_on_real_speech`."""

@@ -21,7 +21,7 @@ from ingest.decompose import MotionDecomposer
 from ingest.emotion.mapping import EmotionMapping
 from ingest.unmixing import Unmixing
 
-#: Imported by a one-shot synth before issue 17's start-up work, used by other commands.
+#: Heavy libraries other commands use, which a one-shot synth does not need to import.
 HEAVY = ("sklearn", "scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.spatial",
          "scipy.fft", "pandas", "pyarrow.dataset", "librosa", "duckdb")
 

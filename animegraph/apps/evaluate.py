@@ -39,7 +39,8 @@ def baseline_nodes(candidate_nodes: Sequence[np.ndarray], kind: str,
 
 #: Methods compared: exact search, the paper's look-ahead, the two baselines, and (beyond
 #: the paper) the exact search's motion averaged over the 20 best animes of each phone
-#: (``synthesize(..., k_best=20)``; docs/results/lipsync.md, "Choices inside the default"). A suffix picks another
+#: (``synthesize(..., k_best=20)``; docs/results/lipsync.md, "Choices inside the default"). A
+#: suffix picks another
 #: audio cost than the paper's RASTA-PLP (:data:`COST_SUFFIXES`): ``kbest20-pg`` ranks by
 #: posteriorgram DTW, ``kbest20-mix`` by both (``synthesize(..., audio_cost=...)``).
 METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-pg",
@@ -79,7 +80,8 @@ GUIDE_SUFFIXES = ("-guided-blend", "-guided", "-blend")
 OPTIONAL_METHODS = tuple(f"exact-{mode}" for mode in HELPER_MODES)
 
 
-#: GRID's within-speaker split (docs/results/lipsync.md, "GRID s1"): in clip-id order every GRID_HOLDOUT-th clip
+#: GRID's within-speaker split (docs/results/lipsync.md, "GRID s1"): in clip-id order every
+#: GRID_HOLDOUT-th clip
 #: is held out (index % 5 == 4), the others are the database.
 GRID_HOLDOUT = 5
 

@@ -619,7 +619,8 @@ class AVHMMBaseline(BaselineModel):
     Notes
     -----
     Fitting cost is dominated by the full covariances of d = 11·7 + 4 = 81 dimensions:
-    each Baum–Welch iteration is O(T·N·M·d²). Timings: ``docs/results/lipsync.md``, "Baseline settings".
+    each Baum–Welch iteration is O(T·N·M·d²). Timings: ``docs/results/lipsync.md``, "Baseline
+    settings".
     """
 
     method = "av-hmm"

@@ -6,7 +6,8 @@ statistical mapping added as a **guide** for the audio-only path
 
 Why: the papers' mappings hear speech through spectral features (MFCCs), which carry
 the speaker and the channel as much as the phone, so a mapping fitted on one voice is a
-weak guide for another (mu-mlp across talkingface's speakers, docs/results/lipsync.md, "talkingface"). Speech-
+weak guide for another (mu-mlp across talkingface's speakers, docs/results/lipsync.md,
+"talkingface"). Speech-
 driven animation that must hold across speakers maps the output of a speech
 *recogniser's* acoustic model instead: VOCA (D. Cudeiro, T. Bolkart, C. Laidlaw,
 A. Ranjan & M. J. Black, "Capture, learning, and synthesis of 3D speaking styles",

@@ -19,7 +19,8 @@ KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree"),
 #: and tests (synthesis warps every anime in one compiled pass). Counted, they were never
 #: cached by a synthesis, and every ``synth`` announced a minute's compilation.
 NOT_IN_SYNTHESIS = frozenset({"dtw._dtw_path"})
-#: What the one-off compilation takes, for the message (measured: docs/results/speed.md, "Start-up").
+#: What the one-off compilation takes, for the message (measured: docs/results/speed.md,
+#: "Start-up").
 COMPILE_NOTE = "about a minute on two cores"
 
 

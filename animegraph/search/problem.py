@@ -72,7 +72,8 @@ class SearchWeights:
     w_audio: float = 0.01  # w3 (§4.2): per unit of audio (prosody DTW) distance, lowest
     # Per node whose emotion differs from the input's: as much as a jump match, so the
     # search takes a jump rather than motion of the wrong emotion. Measured on held-out
-    # synthetic sentences (docs/results/lipsync.md, "Choices inside the default"): with 10, a quarter of the nodes came from
+    # synthetic sentences (docs/results/lipsync.md, "Choices inside the default"): with 10, a
+    # quarter of the nodes came from
     # other emotions and face RMSE was 0.629 mm; with 100, none did, RMSE 0.557 mm, lip
     # vertex error 2.31 -> 1.99 mm, mouth-opening R 0.685 -> 0.715, for ~4 more jumps.
     w_emotion: float = 100.0

@@ -37,7 +37,8 @@ from db.errors import ParameterError
 from ingest.lowpass import smooth
 
 #: :func:`blend_k_best` weighs the r-th ranked anime (r = 1, 2, ...) by ``r ** -RANK_DECAY``.
-#: Measured against equal weights (0) and 1 (docs/results/lipsync.md, "Choices inside the default"): 0.5 was as good or better
+#: Measured against equal weights (0) and 1 (docs/results/lipsync.md, "Choices inside the
+#: default"): 0.5 was as good or better
 #: on every data set.
 RANK_DECAY = 0.5
 #: PostOptions.helper: the helper pair's motion as recorded (the paper), or anchored.

@@ -88,7 +88,8 @@ def likely_candidates(graph, phones, cands, top: int = LIKELY_PHONES):
     """Candidates widened to the phones each input's posteriorgram makes likely.
 
     Recognised phones are often wrong (phone error rate 0.4-0.6 on real speech,
-    docs/results/segmentation.md, "Recognition from the audio alone"), and the paper's matching constraint a_i.P = sn_i.P then offers only
+    docs/results/segmentation.md, "Recognition from the audio alone"), and the paper's matching
+    constraint a_i.P = sn_i.P then offers only
     animes of the wrong phone. As spoken term detection searches a recogniser's N-best
     hypotheses rather than its single best (e.g. the phone lattices of Can & Saraclar
     2011, "Lattice indexing for spoken term detection", IEEE TASLP), each input phone

@@ -7,7 +7,8 @@ the exact search's sequence). The paper's synthesis (one recorded anime a phone,
 al. 2005 §4.2-4.3) is one flag away (``--exact``, ``--window K`` or ``--search``; a
 script line's ``exact``/``window``). Speech alone (phones recognised) is k-best blended
 too, over ``AUDIO_ONLY_K_BEST`` animes: recognised phones are often wrong, and the paper's
-single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results/lipsync.md); and, beyond that, averaged 50/50 with the motion two
+single-anime search trusts them (FACEGOOD, talkingface, GRID: docs/results/lipsync.md); and, beyond
+that, averaged 50/50 with the motion two
 statistical models (mu-mlp
 and ppg-ridge, :data:`AUDIO_ONLY_GUIDE`) predict for the speech
 (:mod:`animegraph.synthesis.guide`; ``synth --guide``). ``synth`` and ``batch`` both decide here.

@@ -102,7 +102,8 @@ def synthesize(
         instead of the single picked anime joined at jumps (§4.3). None (default): the
         paper's synthesis. On real data with recognized phones 20 measured best; with
         exact phone labels (the synthetic corpus) the paper's synthesis is better
-        (docs/results/lipsync.md, "Synthetic corpus"). ``joins`` is then empty. ``options.recentre`` says whether each
+        (docs/results/lipsync.md, "Synthetic corpus"). ``joins`` is then empty.
+        ``options.recentre`` says whether each
         anime is averaged relative to its recording's mean pose (None: when the database
         holds more than one speaker or session, :func:`recentres`).
     phones_engine : str, optional

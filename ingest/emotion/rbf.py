@@ -18,7 +18,8 @@ N_CENTRES = 250
 #: Radial basis functions of Eq. 11: "exp" is exp(-x/d), "gauss" exp(-x^2/d).
 KERNELS = ("exp", "gauss")
 #: Default kernel: the paper gives both forms of Eq. 11 without preferring one; in the
-#: paper's cross-validation on the default synthetic corpus (docs/results/emotion.md, "Emotion mapping: cross-validation") the Gaussian
+#: paper's cross-validation on the default synthetic corpus (docs/results/emotion.md, "Emotion
+#: mapping: cross-validation") the Gaussian
 #: form has the lower error (unit-cube RMS 0.0077 against 0.0084 for exp(-x/d)).
 KERNEL = "gauss"
 

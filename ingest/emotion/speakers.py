@@ -3,7 +3,8 @@
 A speaker's voice (pitch level, timbre, speaking rate) moves utterance features more
 than the emotion does. Z-normalising each feature over a speaker's own utterances removes
 it, with no labels: on EmoDB it lifts leave-one-speaker-out accuracy by 13 points (69.1 to
-82.4 % with rich + cepstrum features; ``docs/results/emotion.md``, "EmoDB: the default and the alternatives").
+82.4 % with rich + cepstrum features; ``docs/results/emotion.md``, "EmoDB: the default and the
+alternatives").
 
 :class:`SpeakerNormalizer` is fitted on training features and their speakers; at
 prediction, a speaker with at least :data:`MIN_SPEAKER_UTTERANCES` utterances in the batch
@@ -12,7 +13,8 @@ fit), and any other utterance (a lone utterance of an unknown speaker, the ``cla
 case) by the *fallback*: the training population's statistics. The alternative, a second
 SVM trained on unnormalised features for such utterances, measured no better on EmoDB
 leave-one-speaker-out with one utterance at a time (70.3 % against 69.3 %, within the
-spread between speakers; docs/results/emotion.md, "EmoDB: the default and the alternatives"), so one model is kept.
+spread between speakers; docs/results/emotion.md, "EmoDB: the default and the alternatives"), so
+one model is kept.
 """
 
 from __future__ import annotations
