@@ -6,9 +6,10 @@ and MyST show neither the comment nor anything of it):
 - ``<!-- example: run -->`` before a ```` ```console ```` block: each line starting with
   ``$ `` is a command (a line ending in ``\\`` goes on with the next), the lines after it
   up to the next command are what it prints, stdout and stderr together as on a terminal,
-  progress bars and the one-off notice of compiling the search kernels left out. Lines are compared with their runs of whitespace made one space
-  and blank lines dropped; ``...`` matches any text within a line, and a line that is only
-  ``...`` matches any number of lines. A command must exit 0 unless what it is shown to
+  progress bars and the one-off notice of compiling the search kernels left out. Lines
+  are compared with their runs of whitespace made one space and blank lines dropped;
+  ``...`` matches any text within a line, and a line that is only ``...`` matches any
+  number of lines. A command must exit 0 unless what it is shown to
   print holds an ``animegraph: error:`` line.
 - ``<!-- example: run-python -->`` before a ```` ```python ```` block: the block runs as
   a script; if the next fenced block is marked ``<!-- example: output -->``, what the
