@@ -108,6 +108,27 @@ def test_feature_parameter_errors(rng):
         emotion_features(x, SR, cepstrum="mel")
 
 
+def test_features_do_not_depend_on_the_callers_blas_threads(rng):
+    # Ingest's workers run with the cores shared out, classify and a refit with all of them:
+    # OpenBLAS rounds a float32 product differently with another thread count (the mel
+    # filterbank's), so the features (and the stored classifier) would follow the machine
+    # (ingest.emotion.frames.BLAS_THREADS).
+    from threadpoolctl import threadpool_limits
+
+    t = np.arange(4 * SR) / SR
+    x = sum(np.sin(2 * np.pi * k * 120 * t) / k for k in range(1, 8)) * (1 + 0.5 * np.sin(
+        2 * np.pi * 3 * t)) + 0.05 * rng.standard_normal(t.size)
+    pcm = np.round(0.3 * x / np.abs(x).max() * 32767).astype(np.int16)
+    model = EmotionClassifier()  # the database's features: functionals and frame descriptors
+    described = []
+    for threads in (1, 2, 4):
+        with threadpool_limits(limits=threads, user_api="blas"):
+            described.append(model.describe([(pcm, SR)]))
+    for other in described[1:]:
+        np.testing.assert_array_equal(described[0].functionals, other.functionals)
+        np.testing.assert_array_equal(described[0].frames[0], other.frames[0])
+
+
 # ----------------------------------------------------------------- classifier
 def _toy_corpus(rng, per_class=12):
     """Three separable 'emotions': low voice-like buzz, high buzz, breathy noise."""

@@ -57,7 +57,10 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
-from ingest.emotion.frames import frame_analysis  # the ``rich`` block's frames
+from ingest.emotion.frames import (  # the ``rich`` block's frames
+    frame_analysis,
+    one_blas_thread,
+)
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "ENSEMBLE", "N_DESCRIPTORS", "BagOfAudioWords",
            "codebook_seeds", "descriptors", "frame_descriptors"]
@@ -70,15 +73,10 @@ ASSIGNMENTS = 10
 N_DESCRIPTORS = 22
 #: Codebook pairs of the ensemble (module docstring: decided before measuring).
 ENSEMBLE = 5
-#: BLAS threads of the words' matrix products: one. They are small (an utterance's
-#: frames x 22 x 500, a seeding step's frames x 22), and OpenBLAS's threads spin-waiting
-#: on a loaded machine made the classifier's fit on the demo corpus 14 times as long
-#: (101.8 s with the default threads, 7.3 s with one, at load 3.1-3.7;
-#: docs/results/emotion.md, "Cost"), with the same model.
-BLAS_THREADS = 1
 _HOP_S = 0.01  # frame hop of :func:`frame_descriptors`, seconds
 
 
+@one_blas_thread
 def frame_descriptors(audio, sample_rate) -> np.ndarray:
     """Frame-level descriptors of one utterance and their deltas.
 
@@ -191,6 +189,7 @@ class BagOfAudioWords:
         """Width of :meth:`transform`'s histograms, ``2 * n_codebooks * size``."""
         return 2 * self.n_codebooks * self.size
 
+    @one_blas_thread  # ingest.emotion.frames.BLAS_THREADS: why
     def fit(self, frames) -> BagOfAudioWords:
         """Learn the standardisation and the codebooks.
 
@@ -199,10 +198,7 @@ class BagOfAudioWords:
         frames : sequence of np.ndarray, each (n_frames_k, n_descriptors)
             :func:`frame_descriptors` of the training utterances.
         """
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-            return self._fit(frames)
+        return self._fit(frames)
 
     def _fit(self, frames) -> BagOfAudioWords:
         from sklearn.cluster import kmeans_plusplus
@@ -236,13 +232,11 @@ class BagOfAudioWords:
                 for i, part in enumerate((Z[:, :half], Z[:, half:]))]
         return self
 
+    @one_blas_thread
     def transform(self, frames) -> np.ndarray:
         """Histograms, shape (n_utterances, :attr:`n_words`): ``lg(1 + counts per
         second)`` of the descriptors' words, then of the deltas' words, pair after pair."""
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-            return self._transform(frames)
+        return self._transform(frames)
 
     def _transform(self, frames) -> np.ndarray:
         rows = []

@@ -49,7 +49,7 @@ from ingest.emotion.features import (
     real_cepstrum,
     rich_features,
 )
-from ingest.emotion.frames import SILENCE_FLOOR
+from ingest.emotion.frames import SILENCE_FLOOR, one_blas_thread
 from ingest.emotion.speakers import SpeakerNormalizer, speaker_normalize
 
 __all__ = [
@@ -328,6 +328,7 @@ class EmotionClassifier(ClassifierMixin, BaseEstimator):
                 f"calibration_cv must be an integer >= 2, got {self.calibration_cv!r}"
             )
 
+    @one_blas_thread  # the limit set once for all the utterances (not once per utterance)
     def describe(self, X) -> SpeechFeatures:
         """What is computed from ``X`` before anything is fitted (for ingest's workers).
 

@@ -60,7 +60,7 @@ import numpy as np
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, prepare_audio
 from ingest.emotion.boaw import descriptors
-from ingest.emotion.frames import SILENCE_FLOOR, check_floor, frame_analysis
+from ingest.emotion.frames import SILENCE_FLOOR, check_floor, frame_analysis, one_blas_thread
 
 __all__ = [
     "BLOCKS",
@@ -169,6 +169,7 @@ def _paper(x: np.ndarray, n_cepstrum: int, cepstrum: str,
     return np.concatenate([[x.mean(), x.var(), np.sqrt(np.mean(x * x))], ceps])
 
 
+@one_blas_thread  # ingest.emotion.frames.BLAS_THREADS: why
 def emotion_features(
     audio: np.ndarray,
     sample_rate: float,
@@ -260,6 +261,7 @@ def _rich(x: np.ndarray, fr: dict | None = None,
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 
+@one_blas_thread
 def rich_features(audio: np.ndarray, sample_rate: float,
                   silence_floor: float | None = SILENCE_FLOOR) -> np.ndarray:
     """A richer utterance-level feature set (not in the paper).
@@ -331,6 +333,7 @@ def parse_features(spec: str) -> tuple[str, ...]:
     return blocks
 
 
+@one_blas_thread
 def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int = N_CEPSTRUM,
                    cepstrum: str = "utterance", silence_floor: float | None = SILENCE_FLOOR
                    ) -> dict[str, np.ndarray]:

@@ -8,17 +8,55 @@ floor").
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from db.errors import ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE
 
-__all__ = ["SILENCE_FLOOR", "check_floor", "frame_analysis", "silent_frames"]
+__all__ = ["BLAS_THREADS", "SILENCE_FLOOR", "check_floor", "frame_analysis", "one_blas_thread",
+           "silent_frames"]
 
 #: Frames more than this many dB below the loudest frame of the utterance are silence
 #: (the module docstring; HTK's ``SILFLOOR`` default). The synthetic corpus' noise floor lies
 #: about 59 dB below its loudest frames, its speech above -45 dB.
 SILENCE_FLOOR = 50.0
+#: BLAS threads of the emotion features and the audio words' matrix products: one.
+#: Determinism: OpenBLAS splits a product's work between its threads differently for
+#: different thread counts, and the float32 sums come out rounded differently (the mel
+#: filterbank's product of one 4 s utterance, (40, 257) x (257, 399), differs by up to
+#: 3.6e-7 between one and two threads; 0.3.30 and 0.3.31 alike). Ingest's workers run
+#: with the cores shared out (:func:`ingest.workers.threads_per_worker`), ``classify`` and
+#: a refit with all of them: the features, and so the stored classifier, would depend on
+#: the machine's cores and the number of workers. Speed: the products are small, and
+#: OpenBLAS's threads spin-waiting on a loaded machine made the classifier's fit on the
+#: demo corpus 14 times as long (101.8 s with the default threads, 7.3 s with one, at load
+#: 3.1-3.7; docs/results/emotion.md, "Cost").
+BLAS_THREADS = 1
+
+
+_limited = [0]  # depth of one_blas_thread calls in progress (the limit is process-wide)
+
+
+def one_blas_thread(func):
+    """Decorator: run ``func`` with this process' BLAS limited to :data:`BLAS_THREADS`
+    (the limit before is restored after), so that its numbers do not depend on the thread
+    count of the caller's process. Within another such call nothing is done again (setting
+    the limit costs about 10 ms: threadpoolctl looks up the loaded libraries)."""
+    @functools.wraps(func)
+    def limited(*args, **kwargs):
+        if _limited[0]:
+            return func(*args, **kwargs)
+        from threadpoolctl import threadpool_limits  # deferred: only when features are made
+
+        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+            _limited[0] += 1
+            try:
+                return func(*args, **kwargs)
+            finally:
+                _limited[0] -= 1
+    return limited
 
 
 def check_floor(silence_floor) -> None:
@@ -53,6 +91,7 @@ def silent_frames(spec: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
     return power < floor, floor
 
 
+@one_blas_thread
 def frame_analysis(x: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
                    ) -> dict[str, np.ndarray]:
     """Frame-level analysis of prepared 16 kHz speech ``x`` (shared by the ``rich``
