@@ -32,6 +32,7 @@ export class FaceView {
     this.playing = false;
     this.mouth = 0; // inner-lip distance (mm) of the frame on screen
     this.frameTimes = []; // requestAnimationFrame timestamps while playing
+    this.workTimes = []; // ms each of those frames took the page (vertices, normals, draw)
     this.onPlayStarted = null;
     this.canvas = root.querySelector("canvas");
     this.audio = new Audio();
@@ -57,7 +58,7 @@ export class FaceView {
     this.inner = part(m.mouth);
     this.eyes = part(m.eyes);
     this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: true,
-                                              preserveDrawingBuffer: true });
+                                              preserveDrawingBuffer: false });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0x202124);
@@ -137,6 +138,7 @@ export class FaceView {
     if (this.time >= this.duration() - 1e-3) this.time = 0;
     this.playing = true;
     this.frameTimes = [];
+    this.workTimes = [];
     this._started = false;
     this.t0 = performance.now() - (this.time * 1000) / this.speed;
     this.audio.playbackRate = this.speed;
@@ -181,6 +183,10 @@ export class FaceView {
     }
     this.controls.update();
     this.renderer.render(this.scene, this.camera);
+    if (this.playing) {
+      this.workTimes.push(performance.now() - now);
+      if (this.workTimes.length > FRAME_LOG) this.workTimes.shift();
+    }
     if (this.playing && !this._started) {
       this._started = true;
       if (this.onPlayStarted) this.onPlayStarted(performance.now());

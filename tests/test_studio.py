@@ -1,0 +1,271 @@
+"""``animegraph studio``: the server over plain HTTP, and the page in a real browser
+(Debian's chromium driven by Playwright; skipped with the reason where it is absent)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+#: Longest wait for the server or the page (a bound on a hang, not a measurement).
+BOUND_S = 180.0
+#: Chromium's switches: headless, no sandbox (root in a container), no network of its own;
+#: WebGL through SwiftShader (software), as a machine without a GPU has it.
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--use-gl=swiftshader",
+                 "--enable-unsafe-swiftshader", "--autoplay-policy=no-user-gesture-required"]
+
+
+class Studio:
+    """A running ``animegraph studio`` process and its URL."""
+
+    def __init__(self, db: Path, tmp: Path):
+        env = {**os.environ, "PYTHONUNBUFFERED": "1",
+               "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                              os.environ.get("PYTHONPATH", "")])}
+        self.log = tmp / "studio.log"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "animegraph", "studio", "--db", str(db), "--port", "0",
+             "--no-browser"], stdout=self.log.open("w"), stderr=subprocess.STDOUT, env=env,
+            start_new_session=True)
+        deadline = time.monotonic() + BOUND_S
+        while not (found := re.search(r"http://127\.0\.0\.1:\d+/\?token=\S+",
+                                      self.log.read_text())):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                pytest.fail(f"the studio did not start: {self.log.read_text()}")
+            time.sleep(0.1)
+        self.url = found.group(0)
+        self.base, self.token = self.url.split("/?token=")
+
+    def get(self, path: str, *, token: bool = True, data: bytes | None = None,
+            headers: dict | None = None) -> tuple[int, bytes, dict]:
+        sep = "&" if "?" in path else "?"
+        url = self.base + path + (f"{sep}token={self.token}" if token else "")
+        request = urllib.request.Request(url, data=data, headers=headers or {})
+        try:
+            with urllib.request.urlopen(request, timeout=BOUND_S) as response:
+                return response.status, response.read(), dict(response.headers)
+        except urllib.error.HTTPError as exc:
+            return exc.code, exc.read(), dict(exc.headers)
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=BOUND_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode
+
+
+@pytest.fixture(scope="module")
+def studio(tiny_db, tmp_path_factory):
+    server = Studio(tiny_db[0], tmp_path_factory.mktemp("studio"))
+    yield server
+    assert server.stop() == 0
+    assert "studio stopped" in server.log.read_text()
+
+
+def test_no_token_is_refused(studio):
+    for path in ("/", "/api/overview", "/static/app.js", "/no/such/page"):
+        status, body, _ = studio.get(path, token=False)
+        assert status == 403, path
+    status, body, _ = studio.get("/api/overview?token=wrong", token=False)
+    assert status == 403
+    assert "token" in json.loads(body)["error"]
+    status, body, headers = studio.get("/")
+    assert status == 200 and b"animegraph studio" in body
+    assert "animegraph_studio_token" in headers.get("Set-Cookie", "")
+    assert "HttpOnly" in headers["Set-Cookie"]
+
+
+def test_api_answers_and_refuses_in_one_line(studio, tiny_db):
+    status, body, _ = studio.get("/api/overview")
+    info = json.loads(body)
+    assert status == 200 and info["n_clips"] == 34 and len(info["clip_durations"]) == 34
+    status, body, _ = studio.get("/api/clips?emotion=happy&limit=500")
+    rows = json.loads(body)
+    assert status == 200 and rows["rows"]
+    assert {r[rows["columns"].index("emotion")] for r in rows["rows"]} == {"happy"}
+    status, body, _ = studio.get("/api/clips?phoneme=QQ")
+    assert status == 400 and "not an ARPAbet phone" in json.loads(body)["error"]
+    status, body, _ = studio.get("/api/sql", data=json.dumps(
+        {"sql": "COPY clips TO '/tmp/x.csv'"}).encode(),
+        headers={"Content-Type": "application/json"})
+    assert status == 400 and "only SELECT" in json.loads(body)["error"]
+    # No path reaches the file system: the page's files are a fixed list.
+    for path in ("/static/../server.py", "/static/%2e%2e/server.py", "/static/face.py",
+                 "/api/outputs/abc/files/..%2f..%2fetc%2fpasswd"):
+        status, _, _ = studio.get(path)
+        assert status in (400, 404), path
+    status, body, _ = studio.get("/api/clip/face?corpus=x&clip_id=y")
+    assert status == 400 and "not in the database" in json.loads(body)["error"]
+    status, body, _ = studio.get("/no/such/page")
+    assert status == 404 and b"<h1>404</h1>" in body
+
+
+def test_clip_face_is_render_s_deformation(studio, tiny_db):
+    """The vertices the page gets are ``animate``'s, at the page's frame rate."""
+    from animegraph.apps.query import load_clip
+    from animegraph.face.animation import animate
+    from animegraph.face.render import deformer_for
+    from animegraph.motion.files import Motion
+    from animegraph.studio.face import PAGE_FPS
+    from db.store import Database
+
+    db = Database.open(tiny_db[0])
+    clip_id = db.table("clips", columns=["clip_id"]).column("clip_id")[0].as_py()
+    corpus = db.table("clips", columns=["corpus"]).column("corpus")[0].as_py()
+    status, body, _ = studio.get(f"/api/clip/face?corpus={corpus}&clip_id={clip_id}")
+    assert status == 200
+    length = int.from_bytes(body[:4], "little")
+    header = json.loads(body[4:4 + length])
+    vertices = np.frombuffer(body[4 + length:], dtype="<f4").reshape(
+        header["n_frames"], header["n_vertices"], 3)
+    clip = load_clip(db, corpus, clip_id)
+    expected = animate(Motion(values=clip.motion, names=clip.names, fps=clip.fps),
+                       deformer_for(clip.names), fps=PAGE_FPS).vertices
+    np.testing.assert_allclose(vertices, expected, atol=1e-3)
+    assert [p["phone"] for p in header["phones"]] == [p["phone"] for p in clip.phones]
+    status, wav, headers = studio.get(f"/api/clip/audio?corpus={corpus}&clip_id={clip_id}")
+    assert status == 200 and wav[:4] == b"RIFF" and headers["Content-Type"] == "audio/wav"
+
+
+def test_sql_csv_export_is_the_sql_command_s(studio, tiny_db):
+    query = "SELECT emotion, count(*) AS n FROM clips GROUP BY 1 ORDER BY 1"
+    status, body, headers = studio.get("/api/sql.csv", data=f"sql={query}".encode(),
+                                       headers={"Content-Type":
+                                                "application/x-www-form-urlencoded"})
+    assert status == 200 and "attachment" in headers["Content-Disposition"]
+    cli = subprocess.run([sys.executable, "-m", "animegraph", "sql", query, "--db",
+                          str(tiny_db[0]), "--format", "csv"], capture_output=True, text=True,
+                         check=True)
+    assert body.decode() == cli.stdout
+
+
+# --- in a real browser -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def page(studio, tmp_path_factory):
+    if not CHROMIUM.exists():
+        pytest.skip(f"needs Debian's chromium at {CHROMIUM} (apt-get install chromium; "
+                    ".ci/run installs it)")
+    playwright = pytest.importorskip("playwright.sync_api",
+                                     reason="needs playwright (pip install -e '.[dev]')")
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        page.goto(studio.url)
+        page.wait_for_function("document.body.dataset.ready", timeout=BOUND_S * 1000)
+        assert page.evaluate("document.body.dataset.ready") == "1", errors
+        page.errors = errors
+        yield page
+        browser.close()
+    assert not errors
+
+
+def test_page_overview_and_clip_table(page):
+    assert page.locator("#summary dt").count() >= 5
+    assert page.locator("#chart-phones svg rect").count() >= 20
+    assert page.locator("#chart-emotions svg rect").count() == 5
+    page.click("nav button[data-tab=clips]")
+    rows = page.locator("#clip-table tbody tr")
+    assert rows.count() == 34
+    page.select_option("#clip-filters [name=emotion]", "sad")
+    loads = page.evaluate("window.studio.clipsLoaded")
+    page.click("#clip-filters button[type=submit]")
+    page.wait_for_function(f"window.studio.clipsLoaded > {loads}")
+    emotions = page.locator("#clip-table tbody tr td:nth-child(3)").all_inner_texts()
+    assert emotions and set(emotions) == {"sad"} and len(emotions) < 34
+    page.fill("#clip-filters [name=phoneme]", "QQ")
+    page.click("#clip-filters button[type=submit]")
+    page.wait_for_selector("#clip-status.error")
+    assert "not an ARPAbet phone" in page.inner_text("#clip-status")
+    page.fill("#clip-filters [name=phoneme]", "")
+    page.select_option("#clip-filters [name=emotion]", "")
+    loads = page.evaluate("window.studio.clipsLoaded")
+    page.click("#clip-filters button[type=submit]")
+    page.wait_for_function(f"window.studio.clipsLoaded > {loads}")
+
+
+def _mouth_over_time(page, n: int = 12) -> list[float]:
+    values = []
+    for _ in range(n):
+        values.append(page.evaluate("window.studio.face.mouth"))
+        page.wait_for_timeout(120)
+    return values
+
+
+def test_clip_plays_on_the_face(page, tmp_path_factory):
+    page.click("nav button[data-tab=clips]")
+    page.click("#clip-table tbody tr:nth-child(2)")
+    page.wait_for_function("window.studio.lastPlay && window.studio.lastPlay.started",
+                           timeout=BOUND_S * 1000)
+    mouth = _mouth_over_time(page)
+    assert np.ptp(mouth) > 1.0, mouth  # millimetres: the lips move while it plays
+    assert page.evaluate("window.studio.face.frameTimes.length") > 3
+    assert page.locator("[data-role=phones] .phone").count() > 5
+    page.wait_for_function("!window.studio.face.playing", timeout=BOUND_S * 1000)
+    page.evaluate("window.studio.face.seek(window.studio.face.duration() / 2)")
+    shot = tmp_path_factory.mktemp("studio-artefacts") / "face.png"
+    page.locator(".canvas-wrap").screenshot(path=str(shot))
+    assert shot.stat().st_size > 10_000
+    # Kept for a look: pytest's temporary folder (printed with -rA).
+    print(f"face screenshot: {shot}")
+
+
+def test_sql_console(page):
+    page.click("nav button[data-tab=sql]")
+    page.fill("#sql-form [name=sql]", "SELECT phoneme, count(*) AS n FROM animes GROUP BY 1 "
+              "ORDER BY n DESC")
+    page.click("#sql-form button[type=submit]")
+    page.wait_for_selector(".sql-table tbody tr")
+    assert page.locator(".sql-table tbody tr").count() > 20
+    assert page.is_hidden("#sql-error")
+    page.fill("#sql-form [name=sql]", "DELETE FROM clips")
+    page.click("#sql-form button[type=submit]")
+    page.wait_for_selector("#sql-error:not([hidden])")
+    assert page.inner_text("#sql-error") == ("only SELECT queries run here (the database is "
+                                             "read-only); got DELETE")
+    with page.expect_download() as download:
+        page.fill("#sql-form [name=sql]", "SELECT clip_id FROM clips ORDER BY 1 LIMIT 3")
+        page.click("#sql-csv")
+    lines = Path(download.value.path()).read_text().splitlines()
+    assert lines[0] == '"clip_id"' and len(lines) == 4
+
+
+def test_synthesized_line_plays(page, tiny_corpus, tmp_path_factory):
+    speech = next(iter(sorted(tiny_corpus.rglob("*.wav"))))
+    page.click("nav button[data-tab=synth]")
+    page.set_input_files("#synth-form [name=audio]", str(speech))
+    page.fill("#synth-form [name=emotion]", "happy")
+    page.click("#synth-form button[type=submit]")
+    page.wait_for_function("window.studio.synthesized || "
+                           "!document.querySelector('#synth-error').hidden",
+                           timeout=BOUND_S * 1000)
+    assert page.is_hidden("#synth-error"), page.inner_text("#synth-error")
+    page.wait_for_function("window.studio.lastPlay.started", timeout=BOUND_S * 1000)
+    mouth = _mouth_over_time(page)
+    assert np.ptp(mouth) > 1.0, mouth
+    names = page.locator("#synth-files a").all_inner_texts()
+    assert {"speech.wav", "motion.c3d", "motion.csv", "motion.npz"} <= set(names)
+    with page.expect_download() as download:
+        page.click("#synth-files a:text('motion.csv')")
+    head = Path(download.value.path()).read_text().splitlines()[0]
+    assert head.startswith("frame,time,")
