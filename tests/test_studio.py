@@ -120,10 +120,10 @@ def test_api_answers_and_refuses_in_one_line(studio, tiny_db):
 def test_clip_face_is_render_s_deformation(studio, tiny_db):
     """The vertices the page gets are ``animate``'s, at the page's frame rate."""
     from animegraph.apps.query import load_clip
+    from animegraph.apps.studio.face import PAGE_FPS
     from animegraph.face.animation import animate
     from animegraph.face.render import deformer_for
     from animegraph.motion.files import Motion
-    from animegraph.studio.face import PAGE_FPS
     from db.store import Database
 
     db = Database.open(tiny_db[0])
@@ -269,3 +269,15 @@ def test_synthesized_line_plays(page, tiny_corpus, tmp_path_factory):
         page.click("#synth-files a:text('motion.csv')")
     head = Path(download.value.path()).read_text().splitlines()[0]
     assert head.startswith("frame,time,")
+
+
+def test_command_line_errors_are_one_line(tmp_path, capsys):
+    from animegraph.apps.cli import main
+
+    assert main(["studio", "--db", str(tmp_path / "none.db"), "--port", "70000",
+                 "--no-browser"]) == 2
+    assert capsys.readouterr().err.strip() == ("animegraph: error: studio: --port must be 0 "
+                                               "to 65535, got 70000")
+    assert main(["studio", "--db", str(tmp_path / "none.db"), "--no-browser"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("animegraph: error: ") and "\n" not in err

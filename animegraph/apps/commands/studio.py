@@ -1,4 +1,4 @@
-"""``animegraph studio``: the local web app over a database (:mod:`animegraph.studio`)."""
+"""``animegraph studio``: the local web app over a database (:mod:`animegraph.apps.studio`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from animegraph.apps.commands.common import UsageError
 
 def cmd_studio(args: argparse.Namespace) -> int:
     try:
-        from animegraph.studio.server import serve
+        from animegraph.apps.studio.server import serve
     except ImportError as exc:  # aiohttp is a dependency; a broken install says so
         raise UsageError(f"animegraph studio: {exc} (pip install aiohttp)") from None
 

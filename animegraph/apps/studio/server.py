@@ -29,8 +29,8 @@ from pathlib import Path
 
 from aiohttp import web
 
-from animegraph.studio import api, synth
-from animegraph.studio.face import FaceBuilder
+from animegraph.apps.studio import api, synth
+from animegraph.apps.studio.face import FaceBuilder
 from db.errors import AnimeGraphError
 from db.store import Database
 
@@ -48,7 +48,7 @@ CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/c
 def static_files() -> dict[str, Path]:
     """The page's files by their URL name (``app.js``, ``vendor/three.module.js``): the
     only files the server sends that it did not make itself."""
-    root = Path(str(resources.files("animegraph.studio") / "static"))
+    root = Path(str(resources.files("animegraph.apps.studio") / "static"))
     return {path.relative_to(root).as_posix(): path for path in sorted(root.rglob("*"))
             if path.is_file() and path.suffix in CONTENT_TYPES}
 

@@ -1,5 +1,5 @@
 // The face: the canonical mesh drawn by three.js, its vertices set frame by frame from
-// what the server computed with the project's own deformation (animegraph.studio.face),
+// what the server computed with the project's own deformation (animegraph.apps.studio.face),
 // interpolated between the server's frames at the display's rate; the speech plays
 // beside it, the phones scroll under it.
 
@@ -9,7 +9,7 @@ import { OrbitControls } from "./vendor/OrbitControls.js";
 const PX_PER_S = 400; // phone strip: pixels per second
 const FRAME_LOG = 1200; // display frame timestamps kept (the page's fps)
 
-// One binary message of the server (animegraph.studio.face.pack): uint32 header length,
+// One binary message of the server (animegraph.apps.studio.face.pack): uint32 header length,
 // JSON header, padding, float32 vertices (n_frames, n_vertices, 3).
 export function unpack(buffer) {
   const length = new DataView(buffer).getUint32(0, true);

@@ -1,5 +1,8 @@
 """The studio: a local web app over a motion database (``animegraph studio``).
 
+It sits in :mod:`animegraph.apps` (what users run): it serves what the commands do
+(``info``, ``query``, ``sql``, ``render``'s deformation, ``synth``) to a browser.
+
 * :mod:`.server` -- the aiohttp application, its token guard and error format, and
   :func:`~.server.serve`;
 * :mod:`.api` -- overview, clips, a clip's face and speech, SQL (the command line's own

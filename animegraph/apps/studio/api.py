@@ -4,7 +4,7 @@ and SQL.
 Every answer reuses the command line's own code: :func:`animegraph.apps.info.database_info`
 (``info``), :func:`animegraph.apps.query.run_query` (``query``),
 :func:`animegraph.apps.query.load_clip` (``query --export``), :func:`db.sql.run` (``sql``,
-its sandbox) and :mod:`animegraph.studio.face` (``render``'s deformation). Nothing the
+its sandbox) and :mod:`animegraph.apps.studio.face` (``render``'s deformation). Nothing the
 browser sends names a file: a clip is named by its corpus and id, looked up in the
 database's tables. Work that reads Parquet or runs DuckDB goes to a worker thread, so
 the server keeps answering while it runs.
@@ -21,7 +21,7 @@ import numpy as np
 import pyarrow as pa
 from aiohttp import web
 
-from animegraph.studio.face import FaceBuilder, mesh_json, pack
+from animegraph.apps.studio.face import FaceBuilder, mesh_json, pack
 from db.errors import ParameterError
 from db.store import Database
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from aiohttp import web
 
-from animegraph.studio.api import Studio, in_thread, pack, studio, wav_bytes
+from animegraph.apps.studio.api import Studio, in_thread, pack, studio, wav_bytes
 from db.errors import DataError, ParameterError
 
 #: Largest recording the page may upload (the server refuses a larger request).
