@@ -281,3 +281,47 @@ def test_command_line_errors_are_one_line(tmp_path, capsys):
     assert main(["studio", "--db", str(tmp_path / "none.db"), "--no-browser"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("animegraph: error: ") and "\n" not in err
+
+
+def test_uploads_are_bounded_and_checked(tiny_db, monkeypatch):
+    """In process (aiohttp's test server), with the bound lowered to 1 kB."""
+    import asyncio
+
+    from aiohttp import FormData
+    from aiohttp.test_utils import TestClient, TestServer
+
+    from animegraph.apps.studio import api, synth
+    from animegraph.apps.studio.server import make_app
+
+    monkeypatch.setattr(synth, "MAX_UPLOAD_BYTES", 1024)
+
+    async def post(client, name: str, payload: bytes) -> tuple[int, dict]:
+        form = FormData()
+        form.add_field("audio", payload, filename=name, content_type="application/octet-stream")
+        form.add_field("text", "hello")
+        response = await client.post("/api/synth?token=t", data=form)
+        return response.status, await response.json()
+
+    async def run() -> list:
+        app = make_app(tiny_db[0], "t")
+        folder = Path(app[api.STUDIO].synth_dir.name)
+        async with TestClient(TestServer(app)) as client:
+            answers = [await post(client, "big.wav", b"\0" * 4096),
+                       await post(client, "notes.txt", b"abc"),
+                       await post(client, "../../x.wav", b"RIFF")]
+            response = await client.post("/api/synth?token=t", data=FormData({"text": "x"}))
+            answers.append((response.status, await response.json()))
+            left = sorted(folder.rglob("*"))
+        return answers, left, folder
+
+    answers, left, folder = asyncio.run(run())
+    assert answers[0] == (400, {"error": "the recording is over 1024 bytes: the studio takes "
+                                         "no larger one"})
+    assert answers[1][0] == 400 and "must be one of" in answers[1][1]["error"]
+    # A name from the browser is never a path: the upload went under the server's name
+    # and, not being audio, was refused in one line; nothing is left behind.
+    assert answers[2][0] == 400 and "\n" not in answers[2][1]["error"]
+    assert answers[3] == (400, {"error": "send the recording and its fields as "
+                                         "multipart/form-data"})
+    assert left == []
+    assert not folder.exists()  # removed when the app stopped

@@ -85,8 +85,8 @@ class FaceBuilder:
 
 def mesh_json(mesh: Mesh) -> dict:
     """The mesh as the page builds it: rest vertices (mm), triangles in three groups
-    (skin, the mouth's inside, the eye openings) and the two inner-lip vertices whose
-    distance the page reports as the mouth opening."""
+    (skin, the mouth's inside, the eye openings), the two inner-lip vertices whose
+    distance the page reports as the mouth opening, and the eyes' corner vertices."""
     special = np.zeros(len(mesh.faces), dtype=np.int8)
     special[mesh.mouth] = 1
     special[mesh.eyes] = 2
@@ -98,6 +98,12 @@ def mesh_json(mesh: Mesh) -> dict:
         "mouth": mesh.faces[special == 1].ravel().tolist(),
         "eyes": mesh.faces[special == 2].ravel().tolist(),
         "lip_pair": [facemesh.UPPER_LIP_INNER[middle], facemesh.LOWER_LIP_INNER[middle]],
+        # Each eye's corners and lids (outer, inner, upper, lower): the page seats an
+        # eyeball behind each opening and moves it with them. Only the canonical mesh
+        # has them (the vertices are its own).
+        "eye_corners": ([[eye[k] for k in ("outer", "inner", "upper", "lower")]
+                         for eye in (facemesh.EYE_R, facemesh.EYE_L)]
+                        if mesh.canonical_topology else []),
     }
 
 

@@ -41,7 +41,9 @@ class Output:
 
 
 async def _upload(request: web.Request, folder: Path) -> tuple[Path | None, dict]:
-    """The multipart form: the recording saved as ``folder/speech<suffix>``, the fields."""
+    """The multipart form: the recording saved as ``folder/upload<suffix>``, the fields."""
+    if request.content_type != "multipart/form-data":
+        raise ParameterError("send the recording and its fields as multipart/form-data")
     reader = await request.multipart()
     fields, audio = {}, None
     while (part := await reader.next()) is not None:
@@ -56,8 +58,10 @@ async def _upload(request: web.Request, folder: Path) -> tuple[Path | None, dict
                 while chunk := await part.read_chunk(1 << 16):
                     size += len(chunk)
                     if size > MAX_UPLOAD_BYTES:
-                        raise ParameterError(f"the recording is over "
-                                             f"{MAX_UPLOAD_BYTES >> 20} MB")
+                        limit = (f"{MAX_UPLOAD_BYTES >> 20} MB" if MAX_UPLOAD_BYTES >= 1 << 20
+                                 else f"{MAX_UPLOAD_BYTES} bytes")
+                        raise ParameterError(f"the recording is over {limit}: the studio "
+                                             "takes no larger one")
                     handle.write(chunk)
         elif part.name in ("text", "emotion", "method"):
             fields[part.name] = (await part.text())[:10_000].strip()

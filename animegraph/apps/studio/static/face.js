@@ -68,8 +68,10 @@ export class FaceView {
     const eyes = new THREE.MeshPhongMaterial({ color: 0x1c1614, shininess: 90,
                                                specular: 0x666666, side: THREE.DoubleSide });
     this.group = new THREE.Group();
-    this.group.add(new THREE.Mesh(this.skin, skin), new THREE.Mesh(this.inner, mouth),
-                   new THREE.Mesh(this.eyes, eyes));
+    this.group.add(new THREE.Mesh(this.skin, skin), new THREE.Mesh(this.inner, mouth));
+    if (!(m.eye_corners || []).length) this.group.add(new THREE.Mesh(this.eyes, eyes));
+    this.eyeballs = (m.eye_corners || []).map(() => this._eyeball());
+    this.group.add(...this.eyeballs);
     this.scene.add(this.group);
     this.scene.add(new THREE.HemisphereLight(0xfff4ea, 0x303040, 1.1));
     const key = new THREE.DirectionalLight(0xffffff, 2.0);
@@ -88,6 +90,45 @@ export class FaceView {
     this.controls.update();
     this._resize();
     new ResizeObserver(() => this._resize()).observe(this.canvas.parentElement);
+  }
+
+  // An eyeball: a sphere coloured by direction (sclera, iris, pupil round +z), drawn
+  // behind the eye opening instead of its dark fill.
+  _eyeball() {
+    const geometry = new THREE.SphereGeometry(1, 48, 36);
+    const p = geometry.attributes.position;
+    const colours = new Float32Array(p.count * 3);
+    const sclera = new THREE.Color(0xece6e0), iris = new THREE.Color(0x4a3222);
+    const pupil = new THREE.Color(0x050505);
+    for (let i = 0; i < p.count; i++) {
+      const z = p.getZ(i);
+      const c = z > 0.96 ? pupil : z > 0.87 ? iris : sclera;
+      colours.set([c.r, c.g, c.b], 3 * i);
+    }
+    geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
+    return new THREE.Mesh(geometry, new THREE.MeshPhongMaterial({
+      vertexColors: true, shininess: 80, specular: 0x444444 }));
+  }
+
+  // Seat each eyeball behind its opening: centred between the corners, as wide as the
+  // opening, facing out of the face (the lids' plane turned towards the viewer's side).
+  _placeEyes() {
+    const p = this.positions.array;
+    const at = (i) => new THREE.Vector3(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+    this.mesh.eye_corners.forEach(([outer, inner, upper, lower], k) => {
+      const o = at(outer), n = at(inner), u = at(upper), l = at(lower);
+      const across = n.clone().sub(o);
+      const up = u.clone().sub(l);
+      const width = across.length();
+      const out = new THREE.Vector3().crossVectors(across, up).normalize();
+      if (out.z < 0) out.negate();
+      const radius = 0.5 * width;
+      const centre = o.clone().add(n).multiplyScalar(0.5).addScaledVector(out, -0.55 * radius);
+      const ball = this.eyeballs[k];
+      ball.position.copy(centre);
+      ball.scale.setScalar(radius);
+      ball.quaternion.setFromUnitVectors(new THREE.Vector3(0, 0, 1), out);
+    });
   }
 
   _resize() {
@@ -220,6 +261,7 @@ export class FaceView {
     this.positions.needsUpdate = true;
     this.skin.computeVertexNormals();
     this.eyes.computeVertexNormals();
+    if (this.eyeballs.length) this._placeEyes();
     const [u, l] = this.mesh.lip_pair;
     const p = this.positions.array;
     this.mouth = Math.hypot(p[3 * u] - p[3 * l], p[3 * u + 1] - p[3 * l + 1],
