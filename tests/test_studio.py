@@ -325,3 +325,48 @@ def test_uploads_are_bounded_and_checked(tiny_db, monkeypatch):
                                          "multipart/form-data"})
     assert left == []
     assert not folder.exists()  # removed when the app stopped
+
+
+@pytest.mark.shared
+def test_an_iphone_database_plays_its_arkit_shapes(tmp_path):
+    """An ARKit database (a Live Link Face capture) is shown through the ARKit shapes on
+    the canonical face, as ``render`` draws it."""
+    from conftest import require_shared
+
+    from animegraph.apps.query import load_clip
+    from animegraph.apps.studio.face import PAGE_FPS
+    from animegraph.face.arkit import arkit_animation
+    from animegraph.motion.files import Motion
+    from db.store import Database
+    from ingest.formats.wav import read_wav, write_wav
+    from ingest.pipeline import ingest
+
+    capture = require_shared("livelink", "neurosync_testset.csv")
+    corpus = tmp_path / "corpus"
+    corpus.mkdir()
+    lines = capture.read_text().splitlines()
+    n = int(6.0 * 59.9)  # the capture's first 6 s, a take of its own
+    (corpus / "take.csv").write_text("\n".join(lines[: n + 1]) + "\n")
+    audio, rate = read_wav(capture.with_suffix(".wav"))
+    write_wav(corpus / "take.wav", audio[: int(n / 59.9 * rate)], rate)
+    report = ingest([corpus], tmp_path / "db")
+    assert [c.status for c in report.clips] == ["added"]
+    server = Studio(tmp_path / "db", tmp_path)
+    try:
+        status, body, _ = server.get("/api/mesh")
+        assert status == 200 and json.loads(body)["n_vertices"] == 468
+        db = Database.open(tmp_path / "db")
+        corpus_name = db.table("clips", columns=["corpus"]).column("corpus")[0].as_py()
+        status, body, _ = server.get(f"/api/clip/face?corpus={corpus_name}&clip_id=take")
+        assert status == 200, body
+    finally:
+        assert server.stop() == 0
+    length = int.from_bytes(body[:4], "little")
+    header = json.loads(body[4:4 + length])
+    vertices = np.frombuffer(body[4 + length:], dtype="<f4").reshape(
+        header["n_frames"], header["n_vertices"], 3)
+    clip = load_clip(db, corpus_name, "take")
+    expected = arkit_animation(Motion(values=clip.motion, names=clip.names, fps=clip.fps),
+                               fps=PAGE_FPS).vertices
+    np.testing.assert_allclose(vertices, expected, atol=1e-3)
+    assert np.ptp(vertices[:, 14, 1]) > 1.0  # the lower lip moves (mm)
