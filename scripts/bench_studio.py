@@ -14,7 +14,9 @@ Playwright, WebGL through SwiftShader (software, as on a machine without a GPU).
 * **click to play**: from the click on a clip's row to the first frame drawn playing it
   (``window.studio.lastPlay``), over ``--clicks`` different clips (none is cached: the
   server deforms each clip when asked), and the part of it until the clip's vertices
-  arrived;
+  arrived. The page asks for a clip's vertices when the pointer comes onto its row;
+  Playwright's click moves the pointer there and clicks at once, so that head start is
+  not in these figures (a hand's move gives it a few hundred milliseconds);
 * **playback fps**: display frames a second while a clip plays, from the page's
   ``requestAnimationFrame`` timestamps (``window.studio.face.frameTimes``), with the
   page's own work per frame (vertices, normals, draw: ``face.workTimes``); and the rate

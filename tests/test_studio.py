@@ -28,17 +28,20 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 
 
 class Studio:
-    """A running ``animegraph studio`` process and its URL."""
+    """A running ``animegraph studio`` process and its URL (``browser``: the
+    ``$BROWSER`` it opens, else none)."""
 
-    def __init__(self, db: Path, tmp: Path):
+    def __init__(self, db: Path, tmp: Path, browser: str | None = None):
         env = {**os.environ, "PYTHONUNBUFFERED": "1",
                "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
                                               os.environ.get("PYTHONPATH", "")])}
+        if browser is not None:
+            env["BROWSER"] = browser
         self.log = tmp / "studio.log"
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "animegraph", "studio", "--db", str(db), "--port", "0",
-             "--no-browser"], stdout=self.log.open("w"), stderr=subprocess.STDOUT, env=env,
-            start_new_session=True)
+             *(["--no-browser"] if browser is None else [])], stdout=self.log.open("w"),
+            stderr=subprocess.STDOUT, env=env, start_new_session=True)
         deadline = time.monotonic() + BOUND_S
         while not (found := re.search(r"http://127\.0\.0\.1:\d+/\?token=\S+",
                                       self.log.read_text())):
@@ -370,3 +373,21 @@ def test_an_iphone_database_plays_its_arkit_shapes(tmp_path):
                                fps=PAGE_FPS).vertices
     np.testing.assert_allclose(vertices, expected, atol=1e-3)
     assert np.ptp(vertices[:, 14, 1]) > 1.0  # the lower lip moves (mm)
+
+
+def test_it_opens_the_browser_named_by_BROWSER(tiny_db, tmp_path):  # noqa: N802
+    """Without --no-browser the URL (with its token) goes to ``$BROWSER``, as Python's
+    webbrowser (and Jupyter) hand it over."""
+    opened = tmp_path / "opened.txt"
+    browser = tmp_path / "browser.sh"
+    browser.write_text(f"#!/bin/sh\necho \"$1\" > {opened}\n")
+    browser.chmod(0o755)
+    server = Studio(tiny_db[0], tmp_path, browser=f"{browser} %s")
+    try:
+        deadline = time.monotonic() + BOUND_S
+        while not (opened.exists() and opened.read_text().strip()):
+            assert time.monotonic() < deadline, "the browser was not opened"
+            time.sleep(0.1)
+        assert opened.read_text().strip() == server.url
+    finally:
+        assert server.stop() == 0

@@ -24,7 +24,7 @@ function showTab(name) {
   document.querySelectorAll(".panel").forEach((p) => p.classList.toggle("active", p.id === `tab-${name}`));
 }
 
-function fillTable(table, data, onRow) {
+function fillTable(table, data, onRow, onHover) {
   const head = document.createElement("thead");
   const tr = document.createElement("tr");
   for (const c of data.columns) { const th = document.createElement("th"); th.textContent = c; tr.append(th); }
@@ -38,6 +38,7 @@ function fillTable(table, data, onRow) {
       r.append(td);
     }
     if (onRow) r.addEventListener("click", () => onRow(row, r));
+    if (onHover) r.addEventListener("pointerenter", () => onHover(row));
     body.append(r);
   }
   table.replaceChildren(head, body);
@@ -76,13 +77,32 @@ function overview(info) {
   for (const e of Object.keys(info.clips_per_emotion)) $("#emotion-list").append(new Option(e, e));
 }
 
+// A clip's face, asked for when the pointer comes onto its row: the server deforms it
+// while the hand moves to click. The last few are kept.
+const faces = new Map();
+
+function clipQuery(row, columns) {
+  return new URLSearchParams({ corpus: row[columns.indexOf("corpus")],
+                               clip_id: row[columns.indexOf("clip_id")] }).toString();
+}
+
+function clipFace(query) {
+  if (!faces.has(query)) {
+    const promise = api(`api/clip/face?${query}`).then((r) => r.arrayBuffer()).then(unpack);
+    promise.catch(() => faces.delete(query));
+    faces.set(query, promise);
+    if (faces.size > 8) faces.delete(faces.keys().next().value);
+  }
+  return faces.get(query);
+}
+
 async function playClip(row, tr, columns) {
   const clicked = performance.now();
-  const key = { corpus: row[columns.indexOf("corpus")], clip_id: row[columns.indexOf("clip_id")] };
   document.querySelectorAll("#clip-table tr.playing").forEach((r) => r.classList.remove("playing"));
   tr.classList.add("playing");
-  const query = new URLSearchParams(key).toString();
-  const anim = unpack(await (await api(`api/clip/face?${query}`)).arrayBuffer());
+  const query = clipQuery(row, columns);
+  const key = { clip_id: row[columns.indexOf("clip_id")] };
+  const anim = await clipFace(query);
   state.lastPlay = { clicked, fetched: performance.now(), started: null, clip: key.clip_id };
   state.face.onPlayStarted = (t) => { state.lastPlay.started = t; };
   const emotion = row[columns.indexOf("emotion")];
@@ -97,7 +117,8 @@ async function searchClips(event) {
   status.className = "status";
   try {
     const data = await (await api(`api/clips?${query}`)).json();
-    fillTable($("#clip-table"), data, (row, tr) => playClip(row, tr, data.columns).catch(showFaceError));
+    fillTable($("#clip-table"), data, (row, tr) => playClip(row, tr, data.columns).catch(showFaceError),
+              (row) => clipFace(clipQuery(row, data.columns)).catch(() => {}));
     status.textContent = `${data.rows.length} clip${data.rows.length === 1 ? "" : "s"}`;
     state.clipsLoaded += 1;
   } catch (e) {
