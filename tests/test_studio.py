@@ -391,3 +391,41 @@ def test_it_opens_the_browser_named_by_BROWSER(tiny_db, tmp_path):  # noqa: N802
         assert opened.read_text().strip() == server.url
     finally:
         assert server.stop() == 0
+
+
+def test_a_line_recorded_from_the_microphone_plays(studio, tiny_corpus):
+    """Chromium's fake microphone plays a corpus recording; the page records it
+    (MediaRecorder, WebM/Opus), the server decodes and synthesizes it."""
+    if not CHROMIUM.exists():
+        pytest.skip(f"needs Debian's chromium at {CHROMIUM} (apt-get install chromium; "
+                    ".ci/run installs it)")
+    playwright = pytest.importorskip("playwright.sync_api",
+                                     reason="needs playwright (pip install -e '.[dev]')")
+    speech = next(iter(sorted(tiny_corpus.rglob("*.wav"))))
+    microphone = ["--use-fake-ui-for-media-stream", "--use-fake-device-for-media-stream",
+                  f"--use-file-for-fake-audio-capture={speech}"]
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM),
+                                    args=CHROMIUM_ARGS + microphone)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(studio.url)
+            page.wait_for_function("document.body.dataset.ready === '1'",
+                                   timeout=BOUND_S * 1000)
+            page.click("nav button[data-tab=synth]")
+            page.click("#record")
+            page.wait_for_function("document.querySelector('#record').textContent === 'Stop'",
+                                   timeout=BOUND_S * 1000)
+            page.wait_for_timeout(3000)
+            page.click("#record")
+            page.wait_for_function("/recorded/.test(document.querySelector"
+                                   "('#record-status').textContent)", timeout=BOUND_S * 1000)
+            page.click("#synth-form button[type=submit]")
+            page.wait_for_function("window.studio.synthesized || "
+                                   "!document.querySelector('#synth-error').hidden",
+                                   timeout=BOUND_S * 1000)
+            assert page.is_hidden("#synth-error"), page.inner_text("#synth-error")
+            page.wait_for_function("window.studio.lastPlay.started", timeout=BOUND_S * 1000)
+            assert np.ptp(_mouth_over_time(page)) > 1.0
+        finally:
+            browser.close()

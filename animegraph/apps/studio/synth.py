@@ -19,11 +19,13 @@ from aiohttp import web
 
 from animegraph.apps.studio.api import Studio, in_thread, pack, studio, wav_bytes
 from db.errors import DataError, ParameterError
+from ingest.formats.media import MEDIA_SUFFIXES
 
 #: Largest recording the page may upload (the server refuses a larger request).
 MAX_UPLOAD_BYTES = 64 << 20
-#: Suffixes of an upload (what ``synth`` reads); anything else is refused.
-AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3", ".m4a", ".mp4", ".mov", ".mkv", ".webm")
+#: Suffixes of an upload (what ``synth`` reads: libsndfile's, and the containers ffmpeg
+#: opens, among them the WebM of the page's microphone recording); anything else is refused.
+AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3") + MEDIA_SUFFIXES
 #: The synthesis paths the page offers: the README's default for a line with a
 #: transcript (k-best 20, as ``batch``), and the paper's (one anime a phoneme, exact search).
 METHODS = {"k-best": 20, "paper": None}

@@ -80,6 +80,7 @@ function overview(info) {
 // A clip's face, asked for when the pointer comes onto its row: the server deforms it
 // while the hand moves to click. The last few are kept.
 const faces = new Map();
+state.faces = faces;
 
 function clipQuery(row, columns) {
   return new URLSearchParams({ corpus: row[columns.indexOf("corpus")],
@@ -176,9 +177,40 @@ async function exportCsv() {
   }
 }
 
+// The browser's microphone (MediaRecorder): what it records is sent instead of a file.
+let recorder = null;
+let recorded = null;
+
+async function toggleRecording() {
+  const button = $("#record"), status = $("#record-status");
+  if (recorder) { recorder.stop(); return; }
+  try {
+    const stream = await navigator.mediaDevices.getUserMedia({ audio: true });
+    const chunks = [];
+    recorder = new MediaRecorder(stream);
+    const began = performance.now();
+    recorder.ondataavailable = (e) => chunks.push(e.data);
+    recorder.onstop = () => {
+      stream.getTracks().forEach((t) => t.stop());
+      recorded = new Blob(chunks, { type: recorder.mimeType });
+      status.textContent = `recorded ${((performance.now() - began) / 1000).toFixed(1)} s`;
+      button.textContent = "Record again";
+      recorder = null;
+    };
+    recorder.start();
+    button.textContent = "Stop";
+    status.textContent = "recording ...";
+  } catch (e) {
+    recorder = null;
+    status.textContent = `no microphone: ${e.message}`;
+  }
+}
+
 async function synthesize(event) {
   event.preventDefault();
   const form = $("#synth-form");
+  const body = new FormData(form);
+  if (recorded) body.set("audio", recorded, "recording.webm");
   const status = $("#synth-status"), error = $("#synth-error"), files = $("#synth-files");
   error.hidden = true;
   files.replaceChildren();
@@ -186,7 +218,7 @@ async function synthesize(event) {
   const button = form.querySelector("button");
   button.disabled = true;
   try {
-    const made = await (await api("api/synth", { method: "POST", body: new FormData(form) })).json();
+    const made = await (await api("api/synth", { method: "POST", body })).json();
     const base = `api/outputs/${made.id}`;
     const anim = unpack(await (await api(`${base}/face`)).arrayBuffer());
     const h = anim.header;
@@ -223,6 +255,9 @@ async function main() {
   });
   $("#sql-csv").addEventListener("click", exportCsv);
   $("#synth-form").addEventListener("submit", synthesize);
+  $("#record").addEventListener("click", toggleRecording);
+  // A file chosen after a recording is what is sent.
+  $("#synth-form [name=audio]").addEventListener("change", () => { recorded = null; });
   // The three answers are asked for at once; the clip table fills while the face is built.
   const clipsShown = searchClips();
   const [info, mesh] = await Promise.all([
