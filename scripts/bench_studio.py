@@ -63,6 +63,17 @@ def start(db: Path) -> tuple[subprocess.Popen, str]:
     return proc, url.group(0)
 
 
+def wait_until(page, expression: str, bound_s: float = 120.0):
+    """Poll ``expression`` in the page until truthy (Playwright's ``wait_for_function``
+    evaluates a string, which the page's content policy forbids)."""
+    deadline = time.monotonic() + bound_s
+    while not (value := page.evaluate(expression)):
+        if time.monotonic() > deadline:
+            sys.exit(f"gave up waiting for {expression}")
+        page.wait_for_timeout(10)
+    return value
+
+
 def fps(stamps: list[float]) -> float:
     return 1000.0 * (len(stamps) - 1) / (stamps[-1] - stamps[0])
 
@@ -88,12 +99,12 @@ def main() -> None:
             for _ in range(args.loads):
                 page = browser.new_page(viewport={"width": 1280, "height": 800})
                 page.goto(url)
-                page.wait_for_function("document.body.dataset.ready === '1'", timeout=120_000)
+                wait_until(page, "document.body.dataset.ready === '1'")
                 ready.append(page.evaluate("window.studio.readyAt"))
                 page.close()
             page = browser.new_page(viewport={"width": 1280, "height": 800})
             page.goto(url)
-            page.wait_for_function("document.body.dataset.ready === '1'", timeout=120_000)
+            wait_until(page, "document.body.dataset.ready === '1'")
             page.click("nav button[data-tab=clips]")
             latency, fetch, rates, work = [], [], [], []
             for k in range(args.clicks):
@@ -101,14 +112,13 @@ def main() -> None:
                 page.hover(row)
                 page.evaluate("window.studio.faces.clear()")  # a cold click: no head start
                 page.click(row)
-                page.wait_for_function("window.studio.lastPlay && window.studio.lastPlay.started "
-                                       "&& window.studio.lastPlay.clicked > (window._last || 0)",
-                                       timeout=120_000)
+                wait_until(page, "window.studio.lastPlay && window.studio.lastPlay.started "
+                           "&& window.studio.lastPlay.clicked > (window._last || 0)")
                 play = page.evaluate("window._last = window.studio.lastPlay.clicked, "
                                      "window.studio.lastPlay")
                 latency.append(play["started"] - play["clicked"])
                 fetch.append(play["fetched"] - play["clicked"])
-                page.wait_for_function("!window.studio.face.playing", timeout=120_000)
+                wait_until(page, "!window.studio.face.playing")
                 stamps = page.evaluate("window.studio.face.frameTimes")
                 rates.append(fps(stamps))
                 work += page.evaluate("window.studio.face.workTimes")

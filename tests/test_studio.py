@@ -93,6 +93,10 @@ def test_no_token_is_refused(studio):
     assert status == 200 and b"animegraph studio" in body
     assert "animegraph_studio_token" in headers.get("Set-Cookie", "")
     assert "HttpOnly" in headers["Set-Cookie"]
+    policy = headers["Content-Security-Policy"]
+    assert "default-src 'self'" in policy and "frame-ancestors 'none'" in policy
+    assert re.search(r"script-src 'self' 'sha256-[A-Za-z0-9+/=]{44}'", policy)
+    assert headers["X-Frame-Options"] == "DENY" and headers["Referrer-Policy"] == "no-referrer"
 
 
 def test_api_answers_and_refuses_in_one_line(studio, tiny_db):
@@ -162,24 +166,44 @@ def test_sql_csv_export_is_the_sql_command_s(studio, tiny_db):
 # --- in a real browser -------------------------------------------------------------
 
 
+def wait_until(page, expression: str, bound_s: float = BOUND_S):
+    """Poll ``expression`` in the page until it is truthy (its value). Playwright's own
+    ``wait_for_function`` evaluates a string, which the page's content policy forbids
+    (no 'unsafe-eval'): the tests keep the policy on, so the page is tested under it."""
+    deadline = time.monotonic() + bound_s
+    while not (value := page.evaluate(expression)):
+        if time.monotonic() > deadline:
+            pytest.fail(f"gave up waiting for {expression}")
+        page.wait_for_timeout(50)
+    return value
+
+
 @pytest.fixture(scope="module")
-def page(studio, tmp_path_factory):
+def playwright():
+    """Playwright's driver, one for the module (its sync API runs one at a time)."""
     if not CHROMIUM.exists():
         pytest.skip(f"needs Debian's chromium at {CHROMIUM} (apt-get install chromium; "
                     ".ci/run installs it)")
-    playwright = pytest.importorskip("playwright.sync_api",
-                                     reason="needs playwright (pip install -e '.[dev]')")
-    with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        errors = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(studio.url)
-        page.wait_for_function("document.body.dataset.ready", timeout=BOUND_S * 1000)
-        assert page.evaluate("document.body.dataset.ready") == "1", errors
-        page.errors = errors
-        yield page
-        browser.close()
+    sync_api = pytest.importorskip("playwright.sync_api",
+                                   reason="needs playwright (pip install -e '.[dev]')")
+    with sync_api.sync_playwright() as p:
+        yield p
+
+
+@pytest.fixture(scope="module")
+def page(studio, playwright):
+    browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    errors = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    # The content policy is on (no bypass): anything it blocks is an error here.
+    page.on("console", lambda m: errors.append(m.text)
+            if "Content Security Policy" in m.text else None)
+    page.goto(studio.url)
+    wait_until(page, "document.body.dataset.ready")
+    assert page.evaluate("document.body.dataset.ready") == "1", errors
+    yield page
+    browser.close()
     assert not errors
 
 
@@ -193,7 +217,7 @@ def test_page_overview_and_clip_table(page):
     page.select_option("#clip-filters [name=emotion]", "sad")
     loads = page.evaluate("window.studio.clipsLoaded")
     page.click("#clip-filters button[type=submit]")
-    page.wait_for_function(f"window.studio.clipsLoaded > {loads}")
+    wait_until(page, f"window.studio.clipsLoaded > {loads}")
     emotions = page.locator("#clip-table tbody tr td:nth-child(3)").all_inner_texts()
     assert emotions and set(emotions) == {"sad"} and len(emotions) < 34
     page.fill("#clip-filters [name=phoneme]", "QQ")
@@ -204,7 +228,7 @@ def test_page_overview_and_clip_table(page):
     page.select_option("#clip-filters [name=emotion]", "")
     loads = page.evaluate("window.studio.clipsLoaded")
     page.click("#clip-filters button[type=submit]")
-    page.wait_for_function(f"window.studio.clipsLoaded > {loads}")
+    wait_until(page, f"window.studio.clipsLoaded > {loads}")
 
 
 def _mouth_over_time(page, n: int = 12) -> list[float]:
@@ -218,13 +242,12 @@ def _mouth_over_time(page, n: int = 12) -> list[float]:
 def test_clip_plays_on_the_face(page, tmp_path_factory):
     page.click("nav button[data-tab=clips]")
     page.click("#clip-table tbody tr:nth-child(2)")
-    page.wait_for_function("window.studio.lastPlay && window.studio.lastPlay.started",
-                           timeout=BOUND_S * 1000)
+    wait_until(page, "window.studio.lastPlay && window.studio.lastPlay.started")
     mouth = _mouth_over_time(page)
     assert np.ptp(mouth) > 1.0, mouth  # millimetres: the lips move while it plays
     assert page.evaluate("window.studio.face.frameTimes.length") > 3
     assert page.locator("[data-role=phones] .phone").count() > 5
-    page.wait_for_function("!window.studio.face.playing", timeout=BOUND_S * 1000)
+    wait_until(page, "!window.studio.face.playing")
     page.evaluate("window.studio.face.seek(window.studio.face.duration() / 2)")
     shot = tmp_path_factory.mktemp("studio-artefacts") / "face.png"
     page.locator(".canvas-wrap").screenshot(path=str(shot))
@@ -259,11 +282,10 @@ def test_synthesized_line_plays(page, tiny_corpus, tmp_path_factory):
     page.set_input_files("#synth-form [name=audio]", str(speech))
     page.fill("#synth-form [name=emotion]", "happy")
     page.click("#synth-form button[type=submit]")
-    page.wait_for_function("window.studio.synthesized || "
-                           "!document.querySelector('#synth-error').hidden",
-                           timeout=BOUND_S * 1000)
+    wait_until(page, "window.studio.synthesized || "
+                     "!document.querySelector('#synth-error').hidden")
     assert page.is_hidden("#synth-error"), page.inner_text("#synth-error")
-    page.wait_for_function("window.studio.lastPlay.started", timeout=BOUND_S * 1000)
+    wait_until(page, "window.studio.lastPlay.started")
     mouth = _mouth_over_time(page)
     assert np.ptp(mouth) > 1.0, mouth
     names = page.locator("#synth-files a").all_inner_texts()
@@ -317,7 +339,11 @@ def test_uploads_are_bounded_and_checked(tiny_db, monkeypatch):
             left = sorted(folder.rglob("*"))
         return answers, left, folder
 
-    answers, left, folder = asyncio.run(run())
+    # In a thread of its own: Playwright's sync API may hold this thread's event loop.
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        answers, left, folder = pool.submit(asyncio.run, run()).result()
     assert answers[0] == (400, {"error": "the recording is over 1024 bytes: the studio takes "
                                          "no larger one"})
     assert answers[1][0] == 400 and "must be one of" in answers[1][1]["error"]
@@ -393,39 +419,30 @@ def test_it_opens_the_browser_named_by_BROWSER(tiny_db, tmp_path):  # noqa: N802
         assert server.stop() == 0
 
 
-def test_a_line_recorded_from_the_microphone_plays(studio, tiny_corpus):
+def test_a_line_recorded_from_the_microphone_plays(studio, playwright, tiny_corpus):
     """Chromium's fake microphone plays a corpus recording; the page records it
     (MediaRecorder, WebM/Opus), the server decodes and synthesizes it."""
-    if not CHROMIUM.exists():
-        pytest.skip(f"needs Debian's chromium at {CHROMIUM} (apt-get install chromium; "
-                    ".ci/run installs it)")
-    playwright = pytest.importorskip("playwright.sync_api",
-                                     reason="needs playwright (pip install -e '.[dev]')")
     speech = next(iter(sorted(tiny_corpus.rglob("*.wav"))))
     microphone = ["--use-fake-ui-for-media-stream", "--use-fake-device-for-media-stream",
                   f"--use-file-for-fake-audio-capture={speech}"]
-    with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM),
-                                    args=CHROMIUM_ARGS + microphone)
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 800})
-            page.goto(studio.url)
-            page.wait_for_function("document.body.dataset.ready === '1'",
-                                   timeout=BOUND_S * 1000)
-            page.click("nav button[data-tab=synth]")
-            page.click("#record")
-            page.wait_for_function("document.querySelector('#record').textContent === 'Stop'",
-                                   timeout=BOUND_S * 1000)
-            page.wait_for_timeout(3000)
-            page.click("#record")
-            page.wait_for_function("/recorded/.test(document.querySelector"
-                                   "('#record-status').textContent)", timeout=BOUND_S * 1000)
-            page.click("#synth-form button[type=submit]")
-            page.wait_for_function("window.studio.synthesized || "
-                                   "!document.querySelector('#synth-error').hidden",
-                                   timeout=BOUND_S * 1000)
-            assert page.is_hidden("#synth-error"), page.inner_text("#synth-error")
-            page.wait_for_function("window.studio.lastPlay.started", timeout=BOUND_S * 1000)
-            assert np.ptp(_mouth_over_time(page)) > 1.0
-        finally:
-            browser.close()
+    browser = playwright.chromium.launch(executable_path=str(CHROMIUM),
+                                         args=CHROMIUM_ARGS + microphone)
+    try:
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(studio.url)
+        wait_until(page, "document.body.dataset.ready === '1'")
+        page.click("nav button[data-tab=synth]")
+        page.click("#record")
+        wait_until(page, "document.querySelector('#record').textContent === 'Stop'")
+        page.wait_for_timeout(3000)
+        page.click("#record")
+        wait_until(page, "/recorded/.test(document.querySelector"
+                         "('#record-status').textContent)")
+        page.click("#synth-form button[type=submit]")
+        wait_until(page, "window.studio.synthesized || "
+                         "!document.querySelector('#synth-error').hidden")
+        assert page.is_hidden("#synth-error"), page.inner_text("#synth-error")
+        wait_until(page, "window.studio.lastPlay.started")
+        assert np.ptp(_mouth_over_time(page)) > 1.0
+    finally:
+        browser.close()

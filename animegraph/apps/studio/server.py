@@ -12,14 +12,19 @@ Safe by default:
   the database, outputs by random ids and their own list of files;
 * SQL runs only in :mod:`db.sql`'s sandbox; uploads are bounded in size and go to the
   studio's own temporary folder, deleted when it stops;
-* every error is one line: JSON ``{"error": ...}`` for the API, a small page otherwise.
+* every error is one line: JSON ``{"error": ...}`` for the API, a small page otherwise;
+* the page may load nothing from elsewhere and may not be framed (its content policy,
+  :func:`content_policy`), and no answer sends a Referer on.
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
+import hashlib
 import html
 import logging
+import re
 import secrets
 import tempfile
 import webbrowser
@@ -40,6 +45,7 @@ logger = logging.getLogger(__name__)
 COOKIE = "animegraph_studio_token"
 TOKEN_KEY = web.AppKey("token", str)
 STATIC_KEY = web.AppKey("static", dict)
+POLICY_KEY = web.AppKey("policy", str)
 #: Content types of the page's files, by suffix (ES modules must be served as JavaScript).
 CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css",
                  ".txt": "text/plain", ".md": "text/plain", ".svg": "image/svg+xml"}
@@ -51,6 +57,31 @@ def static_files() -> dict[str, Path]:
     root = Path(str(resources.files("animegraph.apps.studio") / "static"))
     return {path.relative_to(root).as_posix(): path for path in sorted(root.rglob("*"))
             if path.is_file() and path.suffix in CONTENT_TYPES}
+
+
+def content_policy(index_html: str) -> str:
+    """The page's Content-Security-Policy: its own files only (no other site's script,
+    style, media or connection), its one inline script (the import map) by its hash, and
+    no framing by another page."""
+    found = re.search(r'<script type="importmap">(.*?)</script>', index_html, re.S)
+    digest = base64.b64encode(hashlib.sha256(found.group(1).encode()).digest()).decode() \
+        if found else ""
+    scripts = f"'self' 'sha256-{digest}'" if digest else "'self'"
+    return (f"default-src 'self'; script-src {scripts}; style-src 'self' 'unsafe-inline'; "
+            "img-src 'self' data:; media-src 'self' blob:; connect-src 'self'; "
+            "object-src 'none'; base-uri 'none'; frame-ancestors 'none'")
+
+
+@web.middleware
+async def headers(request: web.Request, handler: Callable) -> web.StreamResponse:
+    """Every answer: no type sniffing, no framing, no Referer (the first URL holds the
+    token), the page's content policy."""
+    response = await handler(request)
+    response.headers.setdefault("X-Content-Type-Options", "nosniff")
+    response.headers.setdefault("X-Frame-Options", "DENY")
+    response.headers.setdefault("Referrer-Policy", "no-referrer")
+    response.headers.setdefault("Content-Security-Policy", request.app[POLICY_KEY])
+    return response
 
 
 def _wants_json(request: web.Request) -> bool:
@@ -133,10 +164,11 @@ def make_app(db_path: Path, token: str) -> web.Application:
     """
     db = Database.open(db_path)
     names = tuple(ch["name"] for ch in db.table("channels", columns=["name"]).to_pylist())
-    app = web.Application(middlewares=[errors, token_guard],
+    app = web.Application(middlewares=[headers, errors, token_guard],
                           client_max_size=synth.MAX_UPLOAD_BYTES + (1 << 20))
     app[TOKEN_KEY] = token
     app[STATIC_KEY] = static_files()
+    app[POLICY_KEY] = content_policy(app[STATIC_KEY]["index.html"].read_text())
     state = api.Studio(db=db, face=FaceBuilder(names),
                        synth_dir=tempfile.TemporaryDirectory(prefix="animegraph-studio-"))
     app[api.STUDIO] = state
