@@ -5,6 +5,7 @@ import { barChart, histogram } from "./charts.js";
 import { FaceView, unpack } from "./face.js";
 
 const $ = (sel) => document.querySelector(sel);
+const CLIP_ROWS = 500; // rows the clip table asks for
 const state = { ready: false, face: null, lastPlay: null, clipsLoaded: 0 };
 window.studio = state;
 
@@ -114,13 +115,16 @@ async function searchClips(event) {
   if (event) event.preventDefault();
   const form = new FormData($("#clip-filters"));
   const query = new URLSearchParams([...form].filter(([, v]) => v !== ""));
+  query.set("limit", String(CLIP_ROWS));
   const status = $("#clip-status");
   status.className = "status";
   try {
     const data = await (await api(`api/clips?${query}`)).json();
     fillTable($("#clip-table"), data, (row, tr) => playClip(row, tr, data.columns).catch(showFaceError),
               (row) => clipFace(clipQuery(row, data.columns)).catch(() => {}));
-    status.textContent = `${data.rows.length} clip${data.rows.length === 1 ? "" : "s"}`;
+    const n = data.rows.length;
+    status.textContent = n >= CLIP_ROWS ? `the first ${n} clips (narrow the filters to see others)`
+      : `${n} clip${n === 1 ? "" : "s"}`;
     state.clipsLoaded += 1;
   } catch (e) {
     $("#clip-table").replaceChildren();
