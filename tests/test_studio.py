@@ -308,6 +308,23 @@ def test_command_line_errors_are_one_line(tmp_path, capsys):
     assert err.startswith("animegraph: error: ") and "\n" not in err
 
 
+def test_a_port_in_use_is_one_line(tiny_db):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+            [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
+        run = subprocess.run([sys.executable, "-m", "animegraph", "studio", "--db",
+                              str(tiny_db[0]), "--port", str(port), "--no-browser"],
+                             capture_output=True, text=True, env=env, timeout=BOUND_S)
+    assert run.returncode == 2 and run.stdout == ""
+    assert run.stderr == (f"animegraph: error: studio: port {port} is in use: choose "
+                          "another --port, or --port 0 for any free one\n")
+
+
 def test_uploads_are_bounded_and_checked(tiny_db, monkeypatch):
     """In process (aiohttp's test server), with the bound lowered to 1 kB."""
     import asyncio

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import signal
 
 from animegraph.apps.commands.common import UsageError
@@ -28,6 +29,12 @@ def cmd_studio(args: argparse.Namespace) -> int:
               say=lambda line: print(line, flush=True))
     except KeyboardInterrupt:
         print("animegraph: studio stopped", flush=True)
+    except OSError as exc:
+        if exc.errno not in (errno.EADDRINUSE, errno.EACCES):
+            raise
+        why = "is in use" if exc.errno == errno.EADDRINUSE else "may not be used by you"
+        raise UsageError(f"animegraph studio: port {args.port} {why}: choose another "
+                         "--port, or --port 0 for any free one") from None
     finally:
         signal.signal(signal.SIGTERM, previous)
     return 0
