@@ -9,7 +9,8 @@
 * :mod:`.query` -- clip queries and export; :mod:`.info` -- what a database holds;
   :mod:`.tabular` -- tables printed as text, CSV or JSON;
 * :mod:`.plots` -- the pictures: ``animegraph plot``, the demo's, held-out comparisons;
-* :mod:`.evaluate` -- held-out lip-sync evaluation (``scripts/eval_lipsync.py``).
+* :mod:`.evaluate` -- held-out lip-sync evaluation (``scripts/eval_lipsync.py``);
+* :mod:`.studio` -- ``animegraph studio``, the local web app (server, API, the page).
 
 Imports: anything below it (``db``, ``ingest`` and every other room of ``animegraph``);
 nothing imports it but the scripts and tests.

@@ -115,7 +115,7 @@ def _main(argv: Sequence[str] | None) -> int:
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
                              "batch, fit, sql, query, render, plot, classify, map-emotion, "
-                             "info "
+                             "info, studio "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "

@@ -21,6 +21,7 @@ from animegraph.apps.commands.database import (
 )
 from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
 from animegraph.apps.commands.render import cmd_plot, cmd_render
+from animegraph.apps.commands.studio import cmd_studio
 from animegraph.apps.commands.synth import cmd_batch, cmd_synth
 from animegraph.baselines import METHODS
 from ingest.speech.engines import ENGINES
@@ -161,6 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_map_emotion(sub)
     _add_fit(sub)
     _add_info(sub)
+    _add_studio(sub)
     return parser
 
 
@@ -587,3 +589,22 @@ def _add_info(sub) -> None:
     _db_option(info)
     info.add_argument("--json", action="store_true", help="the summary as JSON")
     info.set_defaults(func=cmd_info)
+
+
+def _add_studio(sub) -> None:
+    """``studio``: the local web app over a database."""
+    studio = sub.add_parser(
+        "studio", help="browse a database in the browser: clips on a 3D face, SQL, synthesis",
+        description="Start a local web app on the database: an overview (what 'info' "
+        "shows, with plots), the clips ('query' filters) playing on a 3D face with their "
+        "speech, a SQL console (the 'sql' sandbox) and synthesis of an uploaded recording. "
+        "It listens on 127.0.0.1 only and prints its URL, which carries a random token "
+        "every request needs; Ctrl-C stops it.",
+    )
+    _db_option(studio)
+    studio.add_argument("--port", type=_whole_number, default=8765,
+                        help="port to listen on (default 8765; 0: any free port)")
+    studio.add_argument("--no-browser", action="store_true",
+                        help="do not open a browser (default: open one; $BROWSER chooses "
+                        "it, as Python's webbrowser does)")
+    studio.set_defaults(func=cmd_studio)

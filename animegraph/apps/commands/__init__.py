@@ -8,6 +8,7 @@ its command line (:mod:`animegraph.apps.cli_parser`) and chosen it.
 * :mod:`.emotion` -- ``classify`` and ``map-emotion``;
 * :mod:`.corpus` -- ``corpus synth`` and ``demo``;
 * :mod:`.database` -- ``ingest``, ``sql``, ``query``, ``fit`` and ``info``;
+* :mod:`.studio` -- ``studio`` (the web app, :mod:`animegraph.apps.studio`);
 * :mod:`.common` -- what they share: :class:`~.common.UsageError`, progress bars and
   lines, the phone labels beside a file.
 
