@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from animegraph.live.stream import join
+
 
 @dataclass
 class Take:
@@ -74,7 +76,9 @@ def run(stream, source, outputs=(), *, recorder=None, on_frames=None) -> Take:
                     recorder.audio(chunk)
             audio = (np.concatenate([c for _, c in batch]) if batch
                      else np.zeros(0, np.float32))
-            frames = stream.close() if done else stream.push(audio)
+            frames = stream.push(audio)
+            if done:
+                frames = join([frames, stream.close()], frames)
             now = time.perf_counter() - start
             for k, frame in zip(frames.indices, frames.motion, strict=True):
                 for sink in sinks:

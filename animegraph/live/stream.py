@@ -50,6 +50,9 @@ DEFAULT_CONTEXT_MS = 600.0
 MIN_RATE, MAX_RATE = 8000, 96000
 #: A window this many dB below the loudest sample heard so far is a pause.
 QUIET_DB = 40.0
+#: Audio waiting (ms) beyond which one update hears all of it at once (the stream has
+#: fallen behind: it catches up, with a longer window, instead of lagging ever more).
+DEFAULT_BACKLOG_MS = 400.0
 #: Frames at the start of an update cross-faded from the previous window's estimate.
 FADE_FRAMES = 3
 #: With ``emotion="auto"``: the speech is classified again every this many seconds, over
@@ -100,6 +103,7 @@ class Stats:
     wall_s: float = 0.0
     cpu_s: float = 0.0
     pauses: int = 0
+    caught_up: int = 0
     warnings: Counter = field(default_factory=Counter)
 
 
@@ -128,6 +132,10 @@ class Stream:
         database). None: the animes alone.
     k_best : int
         Animes averaged per phone.
+    backlog_ms : float or None
+        Audio waiting beyond which one update hears all of it (catching up when updates
+        take longer than the audio they cover); None: never (each update hears one hop,
+        whatever the chunks pushed: the frames do not depend on how the audio was cut).
 
     Raises
     ------
@@ -138,7 +146,8 @@ class Stream:
     def __init__(self, model, *, sample_rate: int = 16000,
                  lookahead_ms: float = DEFAULT_LOOKAHEAD_MS, hop_ms: float = DEFAULT_HOP_MS,
                  context_ms: float = DEFAULT_CONTEXT_MS, emotion=None, guide=None,
-                 k_best: int | None = None) -> None:
+                 k_best: int | None = None,
+                 backlog_ms: float | None = DEFAULT_BACKLOG_MS) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
@@ -153,6 +162,7 @@ class Stream:
         self.hop_s = hop_ms / 1000.0
         self.context_s = context_ms / 1000.0
         self.guide = guide
+        self.backlog_s = None if backlog_ms is None else backlog_ms / 1000.0
         self.k_best = AUDIO_ONLY_K_BEST if k_best is None else int(k_best)
         self.fps = float(self.model.graph.fps)
         self.names = self.model.names
@@ -215,15 +225,22 @@ class Stream:
         self._heard += len(x)
         if len(x):
             self._peak = max(self._peak, float(np.max(np.abs(x))))
-        if (self._heard - self._updated_at) / self.sample_rate < self.hop_s:
-            return self._empty()
-        return self._update(final=False)
+        hop = int(round(self.hop_s * self.sample_rate))
+        out = []
+        while self._heard - self._updated_at >= hop:
+            waiting = (self._heard - self._updated_at) / self.sample_rate
+            if self.backlog_s is not None and waiting > self.backlog_s:
+                self.stats.caught_up += 1
+                out.append(self._update(self._heard, final=False))
+            else:
+                out.append(self._update(self._updated_at + hop, final=False))
+        return join(out, self._empty())
 
     def close(self) -> Frames:
         """Send the frames left, up to the end of the audio (no more look-ahead)."""
         if self._closed:
             return self._empty()
-        frames = self._update(final=True)
+        frames = self._update(self._heard, final=True)
         self._closed = True
         return frames
 
@@ -232,10 +249,11 @@ class Stream:
     def _empty(self) -> Frames:
         return Frames(self._sent, np.zeros((0, len(self.names))), self.fps, self.heard_s)
 
-    def _update(self, *, final: bool) -> Frames:
+    def _update(self, end: int, *, final: bool) -> Frames:
+        """Send the frames that the audio up to sample ``end`` allows."""
         wall, cpu = time.perf_counter(), time.process_time()
-        self._updated_at = self._heard
-        end_s = self.heard_s
+        self._updated_at = end
+        end_s = end / self.sample_rate
         if final:
             target = int(round(end_s * self.fps))
         else:
@@ -244,7 +262,7 @@ class Stream:
         if target <= self._sent:
             return self._empty()
         first = max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps)))
-        motion = self._window(first)  # frames first, first + 1, ... (may end short)
+        motion = self._window(first, end)  # frames first, first + 1, ... (may end short)
         if len(motion) < target - first:  # rounding at the end: hold the last frame
             pad = motion[-1:] if len(motion) else self._last[None]
             motion = np.concatenate([motion, np.repeat(pad, target - first - len(motion), 0)])
@@ -268,11 +286,11 @@ class Stream:
             out[:n] = (1 - w) * prev[1][:n] + w * out[:n]
         return out
 
-    def _window(self, first: int) -> np.ndarray:
-        """Motion of the window from frame ``first`` to the newest sample, shape
+    def _window(self, first: int, end: int) -> np.ndarray:
+        """Motion of the window from frame ``first`` to sample ``end``, shape
         (n_frames, n_channels): synthesized as offline, or the rest pose in a pause."""
         start = int(round(first / self.fps * self.sample_rate))
-        audio = self._buffer[max(0, start - self._buffer_start):]
+        audio = self._buffer[max(0, start - self._buffer_start): end - self._buffer_start]
         n = int(round(len(audio) / self.sample_rate * self.fps))
         peak = float(np.max(np.abs(audio))) if len(audio) else 0.0
         if peak <= self._peak * 10 ** (-QUIET_DB / 20) or peak <= 1e-4:
@@ -328,6 +346,15 @@ class Stream:
         if cut > 0:
             self._buffer = self._buffer[cut:]
             self._buffer_start += cut
+
+
+def join(parts: list[Frames], empty: Frames) -> Frames:
+    """Consecutive :class:`Frames` as one (``empty`` if there are none)."""
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return empty
+    return Frames(parts[0].first, np.concatenate([p.motion for p in parts]), parts[0].fps,
+                  parts[-1].heard_s)
 
 
 def check_rate(sample_rate) -> int:

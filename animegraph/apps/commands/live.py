@@ -13,7 +13,7 @@ from animegraph.apps.commands.common import UsageError
 def cmd_live(args: argparse.Namespace) -> int:
     from animegraph.live import Stream
     from animegraph.live.run import run
-    from animegraph.live.stream import check_rate
+    from animegraph.live.stream import DEFAULT_BACKLOG_MS, check_rate
     from animegraph.synthesis import Model
     from db.errors import ParameterError
 
@@ -32,7 +32,8 @@ def cmd_live(args: argparse.Namespace) -> int:
     guide = _guide(args)
     try:
         stream = Stream(model, sample_rate=source.sample_rate, lookahead_ms=args.lookahead,
-                        hop_ms=args.hop, emotion=args.emotion, guide=guide)
+                        hop_ms=args.hop, emotion=args.emotion, guide=guide,
+                        backlog_ms=None if args.fast else DEFAULT_BACKLOG_MS)
     except ParameterError as exc:
         raise UsageError(f"animegraph live: {exc}") from None
     outputs = []
@@ -68,7 +69,7 @@ def cmd_live(args: argparse.Namespace) -> int:
         if recorder is not None and recorder.closed:
             print(f"animegraph: live: recorded {recorder.motion_path} and "
                   f"{recorder.audio_path}", file=sys.stderr)
-    for line in _summary(stream, take, outputs):
+    for line in _summary(stream, take, outputs, paced=not args.fast):
         print(f"animegraph: live: {line}", file=sys.stderr)
     return 0
 
@@ -114,12 +115,12 @@ def _where(args: argparse.Namespace) -> str:
     return ", ".join(parts)
 
 
-def _summary(stream, take, outputs) -> list[str]:
+def _summary(stream, take, outputs, *, paced: bool) -> list[str]:
     import numpy as np
 
     lines = [f"{take.frames} frames for {take.heard_s:.1f} s of speech; {stream.stats.updates} "
              f"updates, {stream.stats.cpu_s:.1f} CPU-s ({stream.stats.pauses} in pauses)"]
-    if take.sent_at:
+    if take.sent_at and paced:  # played as fast as possible, arrival means nothing
         lag = (np.asarray(take.sent_at) - np.asarray(take.arrived_at)) * 1000
         lines.append(f"latency from a sample's arrival to its frame: median "
                      f"{np.median(lag):.0f} ms, 95th percentile {np.percentile(lag, 95):.0f} "
