@@ -231,17 +231,16 @@ def test_websocket_slow_and_gone_clients_are_counted_not_waited_for():
     from animegraph.live.websocket import QUEUE_FRAMES, FrameServer
 
     server = FrameServer(0, [f"c{i}" for i in range(500)], 30.0)
-    ws = connect(f"ws://127.0.0.1:{server.port}/")
-    ws.recv(timeout=5)
     frame = np.random.default_rng(0).random(500)
-    for k in range(3000):  # ~30 MB to a client that reads nothing
-        server.send(k, frame)
-    deadline = time.monotonic() + 30
-    while server.dropped == 0 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert server.dropped > 0 and server.sent >= QUEUE_FRAMES
-    ws.close()
-    deadline = time.monotonic() + 30
+    with connect(f"ws://127.0.0.1:{server.port}/") as ws:
+        ws.recv(timeout=5)
+        for k in range(3000):  # ~30 MB to a client that reads nothing
+            server.send(k, frame)
+        deadline = time.monotonic() + 30
+        while server.dropped == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.dropped > 0 and server.sent >= QUEUE_FRAMES
+    deadline = time.monotonic() + 30  # the client has gone: forgotten, not waited for
     while server.clients and time.monotonic() < deadline:
         server.send(0, frame)
         time.sleep(0.05)
