@@ -97,11 +97,14 @@ class Frames:
 
 @dataclass
 class Stats:
-    """What a stream did: updates, their wall and CPU time, pauses, warnings by kind."""
+    """What a stream did: updates, their wall and CPU time (in all and each: ``update_wall``,
+    ``update_cpu``, s), pauses, updates that caught up, warnings by kind."""
 
     updates: int = 0
     wall_s: float = 0.0
     cpu_s: float = 0.0
+    update_wall: list = field(default_factory=list)
+    update_cpu: list = field(default_factory=list)
     pauses: int = 0
     caught_up: int = 0
     warnings: Counter = field(default_factory=Counter)
@@ -272,9 +275,12 @@ class Stream:
         self._sent, self._last = target, out[-1].copy()
         first_sent = target - len(out)
         self._drop_old()
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         self.stats.updates += 1
-        self.stats.wall_s += time.perf_counter() - wall
-        self.stats.cpu_s += time.process_time() - cpu
+        self.stats.wall_s += wall
+        self.stats.cpu_s += cpu
+        self.stats.update_wall.append(wall)
+        self.stats.update_cpu.append(cpu)
         return Frames(first_sent, out, self.fps, end_s)
 
     def _fade(self, out: np.ndarray) -> np.ndarray:
