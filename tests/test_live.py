@@ -172,7 +172,7 @@ def test_livelink_packet_matches_pylivelinkface():
 def test_livelink_refuses_what_it_cannot_send(model):
     from animegraph.live.livelink import LiveLinkSender, decode
 
-    with pytest.raises(DataError, match="no mapping"):  # a marker database
+    with pytest.raises(DataError, match="lack 52"):  # points, not mapped onto the shapes
         LiveLinkSender("127.0.0.1:11111", model.names, 30.0)
     names, _ = _arkit_frame(lambda n: 0.0)
     with pytest.raises(ParameterError, match="HOST:PORT"):
@@ -199,6 +199,55 @@ def test_livelink_to_a_port_nobody_listens_on_never_stalls():
         sender.send(k, frame)
     assert sender.sent + sender.dropped == 50
     sender.close()
+
+
+def test_points_map_onto_the_arkit_shapes(model):
+    """A marker database's frame displaced by a pure ARKit shape maps back to that shape;
+    the rest pose maps to no shape."""
+    from animegraph.face.arkit import arkit_shapes
+    from animegraph.face.mesh import default_marker_map
+    from animegraph.live.arkit_map import PointsToArkit
+    from animegraph.live.stream import rest_pose
+    from animegraph.motion.files import point_labels
+    from animegraph.synthesis.model import to_world
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    mapping = PointsToArkit(model)
+    rest = rest_pose(model)
+    assert np.abs(mapping.weights(rest)).max() < 1e-6
+    vertices = default_marker_map(point_labels(model.names)).vertices
+    for shape, amount in (("jawOpen", 0.5), ("mouthSmileLeft", 0.7), ("mouthPucker", 0.3)):
+        k = ARKIT_BLENDSHAPES.index(shape)
+        local = model.to_local(rest[None])[0]
+        local[mapping.columns] += amount * arkit_shapes()[k, vertices].reshape(-1) / mapping.scale
+        w = mapping.weights(to_world(local[None], model.groups, model.head_reference))[0]
+        assert int(np.argmax(w)) == k and w[k] == pytest.approx(amount, abs=0.1), shape
+        assert np.delete(w, k).max() < 0.1
+
+
+def test_live_mouth_reaches_livelink_from_a_marker_database(model, speech):
+    """Stream -> points mapped onto ARKit -> UDP: jawOpen follows the mouth opening."""
+    from animegraph.live import Stream
+    from animegraph.live.arkit_map import PointsToArkit
+    from animegraph.live.livelink import LiveLinkSender, decode
+    from animegraph.motion.measures import mouth_opening, pearson
+
+    audio, sr = speech
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+    receiver.settimeout(5)
+    sender = LiveLinkSender(f"127.0.0.1:{receiver.getsockname()[1]}", model.names,
+                            model.graph.fps, convert=PointsToArkit(model))
+    batches, _ = _play(Stream(model, sample_rate=sr, hop_ms=200), audio)
+    motion = np.concatenate([b.motion for b in batches])
+    jaw = []
+    for k, frame in enumerate(motion):
+        sender.send(k, frame)
+        jaw.append(decode(receiver.recv(2048)).value("jawOpen"))
+    sender.close()
+    receiver.close()
+    assert pearson(np.asarray(jaw), mouth_opening(motion, model.names, model.kind)) > 0.5
 
 
 # --- WebSocket --------------------------------------------------------------------------
@@ -304,8 +353,7 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", "-", "--record", str(tmp_path)], 2, "--rate"),
         (["--source", str(tmp_path / "none.wav"), "--record", str(tmp_path)], 2, "no such"),
         (["--source", "-", "--rate", "16000"], 2, "say where"),
-        (["--source", "-", "--rate", "16000", "--livelink", "127.0.0.1:11111"], 1,
-         "no mapping"),
+        (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")

@@ -20,8 +20,8 @@ before ``JawRight``, ``MouthLeft`` before ``MouthRight``), not the app's CSV col
 (:data:`ingest.formats.livelink.ARKIT_BLENDSHAPES`, right before left): values are placed
 by name.
 
-Only ARKit databases (channels named by the 52 shapes) are sent: a marker or landmark
-database has no documented mapping to them yet (:func:`arkit_columns` says so).
+An ARKit database's channels are sent as they are; a marker or landmark database's frames
+are first mapped onto the 52 shapes (:mod:`animegraph.live.arkit_map`).
 """
 
 from __future__ import annotations
@@ -146,17 +146,15 @@ def arkit_columns(names) -> np.ndarray:
     Raises
     ------
     DataError
-        If the database's channels are not ARKit blendshapes (markers, landmarks): no
-        mapping to the 52 shapes is made for them.
+        If the channels are not ARKit blendshapes (map points first:
+        :mod:`animegraph.live.arkit_map`).
     """
     lower = {str(n).lower(): i for i, n in enumerate(names)}
     cols = np.array([lower.get(n.lower(), -1) for n in PACKET_ORDER], dtype=np.int64)
     if (cols[:52] < 0).sum() > 0:
         missing = [n for n, c in zip(PACKET_ORDER[:52], cols[:52], strict=True) if c < 0]
-        raise DataError(f"Live Link sends ARKit's 52 blendshapes; this database's channels "
-                        f"lack {len(missing)} of them ({', '.join(missing[:3])}, ...): a "
-                        f"marker or landmark database has no mapping to them (use "
-                        f"--websocket or --record)")
+        raise DataError(f"Live Link sends ARKit's 52 blendshapes; these channels lack "
+                        f"{len(missing)} of them ({', '.join(missing[:3])}, ...)")
     return cols
 
 
@@ -183,11 +181,16 @@ class LiveLinkSender:
     fps : float
     subject : str
         The subject name Unreal lists.
+    convert : callable, optional
+        Maps a frame to ARKit channel values named ``convert.names`` (a point database:
+        :class:`animegraph.live.arkit_map.PointsToArkit`).
     """
 
-    def __init__(self, target: str, names, fps: float, *, subject: str = "animegraph") -> None:
+    def __init__(self, target: str, names, fps: float, *, subject: str = "animegraph",
+                 convert=None) -> None:
         host, port = parse_target(target)
-        self.columns = arkit_columns(names)
+        self.convert = convert  # frame -> ARKit channel values (its ``names``), or None
+        self.columns = arkit_columns(names if convert is None else convert.names)
         self.fps = fps
         self.subject = subject
         self.device_id = str(uuid_module.uuid4()).upper()  # 36 characters, as the app's
@@ -205,6 +208,8 @@ class LiveLinkSender:
 
     def send(self, index: int, frame: np.ndarray) -> None:
         """Send frame ``index`` (n_channels,)."""
+        if self.convert is not None:
+            frame = self.convert(frame)
         data = encode(packet_values(frame, self.columns), frame=index, fps=self.fps,
                       device_id=self.device_id, subject=self.subject)
         try:

@@ -40,9 +40,15 @@ def cmd_live(args: argparse.Namespace) -> int:
     try:
         if args.livelink:
             from animegraph.live.livelink import LiveLinkSender
+            from ingest.formats.livelink import is_arkit
 
+            convert = None
+            if not is_arkit(model.names):  # markers or landmarks: onto the 52 shapes
+                from animegraph.live.arkit_map import PointsToArkit
+
+                convert = PointsToArkit(model)
             outputs.append(LiveLinkSender(args.livelink, model.names, stream.fps,
-                                          subject=args.subject))
+                                          subject=args.subject, convert=convert))
         if args.websocket is not None:
             from animegraph.live.websocket import FrameServer
 
