@@ -84,8 +84,8 @@ def split(name: str, tmp: Path, facegood_seconds: float):
         from ingest.prepare import slice_clip
 
         held = clips[-1]
-        n = int(facegood_seconds * held.fps)
-        return clips[:-1], [slice_clip(held, 0, n)], reference
+        seconds = min(facegood_seconds, held.duration)
+        return clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")], reference
     raise SystemExit(f"unknown split {name!r}")
 
 
