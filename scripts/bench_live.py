@@ -131,7 +131,8 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     print(f"# {name}: {len(train)} clips in the database, {len(test)} held out; guide "
           f"{AUDIO_ONLY_GUIDE}{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
           f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
-    rows = {"offline": [], "offline-hama": [], "loudness": [], **{f"live-{la:g}": [] for la in lookaheads}}
+    rows = {"offline": [], "offline-hama": [], "loudness": [],
+            **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
     for clip in test:
         audio = clip.audio.astype(np.float32) / 32768.0

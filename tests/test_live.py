@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import require_shared
+
 from db.errors import DataError, ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
