@@ -59,6 +59,8 @@ from ingest.readers import discover
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 CHUNK_S = 0.02
+#: The stream's hop and context (``--hop``, ``--context``; the defaults if not given).
+WINDOW: dict = {}
 #: Speech for latency and drift with --db (eSpeak NG).
 SENTENCES = ("Please bring the blue box to the table.",
              "We were away a year ago when the rain came down on the hills.",
@@ -102,7 +104,7 @@ def guides(train) -> tuple[object, list[str]]:
 
 def live_motion(model, audio, sr, lookahead_ms, guide) -> tuple[np.ndarray, Stream]:
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
-                    backlog_ms=None)
+                    backlog_ms=None, **WINDOW)
     step = int(CHUNK_S * sr)
     parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
     parts.append(stream.close().motion)
@@ -165,7 +167,7 @@ def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:
     warm.push(FileSource(wav).audio[: warm.sample_rate])  # loads hama, compiles the DTW
     warm.close()
     stream = Stream(model, sample_rate=FileSource(wav).sample_rate, lookahead_ms=lookahead_ms,
-                    guide=guide)
+                    guide=guide, **WINDOW)
     source = FileSource(wav)
     cpu0, wall0 = time.process_time(), time.perf_counter()
     take = run(stream, source)
@@ -223,7 +225,13 @@ def main() -> int:
     parser.add_argument("--db", type=Path, default=None,
                         help="with --quality and nothing after it: time this database")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
+    parser.add_argument("--context", type=float, default=None,
+                        help="the stream's context (ms)")
     args = parser.parse_args()
+    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context))
+                   if v is not None})
+    print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
     results: dict = {"quality": {}, "latency": [], "drift": None}
     with tempfile.TemporaryDirectory() as tmp:
