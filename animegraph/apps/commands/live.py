@@ -23,6 +23,13 @@ def cmd_live(args: argparse.Namespace) -> int:
     if args.websocket is not None and not 0 <= args.websocket < 65536:
         raise UsageError(f"animegraph live: --websocket takes a port 0-65535, got "
                          f"{args.websocket}")
+    if args.livelink:  # before any work: a typo here is the command line's
+        from animegraph.live.livelink import parse_target
+
+        try:
+            parse_target(args.livelink)
+        except ParameterError as exc:
+            raise UsageError(f"animegraph live: {exc}") from None
     source = _source(args)
     try:
         check_rate(source.sample_rate)
