@@ -20,6 +20,7 @@ from animegraph.apps.commands.database import (
     cmd_sql,
 )
 from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
+from animegraph.apps.commands.live import cmd_live
 from animegraph.apps.commands.render import cmd_plot, cmd_render
 from animegraph.apps.commands.studio import cmd_studio
 from animegraph.apps.commands.synth import cmd_batch, cmd_synth
@@ -155,6 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sql(sub)
     _add_synth(sub)
     _add_batch(sub)
+    _add_live(sub)
     _add_query(sub)
     _add_render(sub)
     _add_plot(sub)
@@ -576,6 +578,45 @@ def _add_fit(sub) -> None:
     _db_option(fit)
     fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
     fit.set_defaults(func=cmd_fit)
+
+
+def _add_live(sub) -> None:
+    """``live``: speech in as it is spoken, motion out in real time."""
+    live = sub.add_parser(
+        "live", help="facial motion in real time for speech as it is spoken",
+        description="Hear speech as it arrives (a file at its pace, raw PCM on stdin, the "
+        "microphone) and send the face frame by frame: the synthesis' audio-only default "
+        "re-run on a sliding window, each frame sent once the look-ahead after it is heard.")
+    _db_option(live)
+    live.add_argument("--source", required=True, metavar="FILE|-|mic",
+                      help="a WAV or video played at real-time pace; - for raw 16-bit "
+                      "little-endian mono PCM on stdin (with --rate); mic for the microphone "
+                      "(pip install 'animegraph[live]' and the PortAudio library, "
+                      "libportaudio2)")
+    live.add_argument("--rate", type=_whole_number, default=None, metavar="HZ",
+                      help="sample rate of --source - (and of mic; default 16000)")
+    live.add_argument("--fast", action="store_true",
+                      help="play a file as fast as it is synthesized, not at its pace")
+    live.add_argument("--lookahead", type=_number, default=120.0, metavar="MS",
+                      help="audio heard after a frame before it is sent (120 ms)")
+    live.add_argument("--hop", type=_number, default=80.0, metavar="MS",
+                      help="audio between two updates (80 ms)")
+    live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
+                      help="the face's emotion: a name, auto, or a mix")
+    live.add_argument("--guide", choices=("default", "none"), default="default",
+                      help="the audio-only default's guide (mu-mlp and ppg-ridge), or none")
+    live.add_argument("--livelink", default=None, metavar="HOST:PORT",
+                      help="send Live Link Face packets over UDP (Unreal listens on 11111); "
+                      "ARKit databases")
+    live.add_argument("--subject", default="animegraph", help="the Live Link subject name")
+    live.add_argument("--websocket", type=_whole_number, default=None, metavar="PORT",
+                      help="serve JSON frames at ws://HOST:PORT/ (0: a free port)")
+    live.add_argument("--host", default="127.0.0.1",
+                      help="address the WebSocket server listens on (127.0.0.1)")
+    live.add_argument("--record", type=Path, default=None, metavar="DIR",
+                      help="keep what was sent in DIR: take.livelink.csv (or the database's "
+                      "motion format) and take.wav")
+    live.set_defaults(func=cmd_live)
 
 
 def _add_info(sub) -> None:

@@ -9,6 +9,8 @@ models restored without scikit-learn for a one-shot ``synth``
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from animegraph.baselines.data import frame_times
@@ -40,6 +42,16 @@ def implausible(method: str, where: str, exc: Exception) -> DataError:
     """The one-line error of a stored ``method`` model whose arrays do not work."""
     return DataError(f"stored {method} model {where} is implausible ({exc}); "
                      f"'animegraph fit --method {method}' fits it again")
+
+
+@functools.lru_cache(maxsize=1)
+def _threadpools():
+    """The process' thread pools (BLAS, OpenMP), found once: finding them walks the loaded
+    libraries (about 20 ms a time, which a live stream predicting ten times a second
+    would pay on every update)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
 
 
 class NotFitted(DataError):
@@ -77,8 +89,6 @@ class Predicting:
         np.ndarray, shape (n_frames, n_channels), float64
             Motion in the training database's channels at ``fps_``.
         """
-        from threadpoolctl import threadpool_limits
-
         if not hasattr(self, "channels_"):
             raise NotFitted(f"this {self.method or type(self).__name__} model is not fitted "
                             "yet: call fit first")
@@ -94,7 +104,7 @@ class Predicting:
             n_frames = int(round(len(audio) / sample_rate * self.fps_))
         if n_frames < 1:
             raise DataError("the audio is too short for one motion frame")
-        with threadpool_limits(limits=BLAS_THREADS):
+        with _threadpools().limit(limits=BLAS_THREADS):
             try:
                 out = self._predict(audio, int(sample_rate),
                                     frame_times(n_frames, self.fps_), emotion)

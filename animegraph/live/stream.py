@@ -1,0 +1,422 @@
+"""Speech pushed in as it is spoken, facial motion out frame by frame (:class:`Stream`).
+
+The offline audio-only default (:func:`animegraph.synthesis.synthesize`: phones heard by
+hama, each phone the mean of its k best animes, averaged with the guide's predicted
+motion) needs the whole utterance: the phone model hears all of its input, the search
+and k-best cross-fading look at the next phone, the low-pass runs forward and backward.
+Live, each update re-synthesizes a bounded *window* with the same code:
+
+* the window runs from ``context_ms`` before the first frame not yet sent to the newest
+  sample (so ``context + hop + lookahead``, 0.8 s by default); older audio is dropped;
+* its phones are recognised by hama on the window alone (the ``hama`` engine: CTC greedy
+  decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
+  PocketSphinx place hama's phones, left out here for its cost); its posteriorgram, which
+  ppg-ridge reads, is the same model call (kept by :mod:`ingest.speech.ctc`);
+* the window is synthesized as the offline path synthesizes an utterance (k-best
+  :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
+  blended 50/50) from those phones given as labels;
+* the frames of the window up to ``lookahead_ms`` before its end are sent: a frame is
+  sent once the audio ``lookahead`` after it has arrived, and it never changes after. The
+  first :data:`FADE_FRAMES` frames of an update are cross-faded from what the previous
+  window had for them, so that two windows meet without a step.
+
+A window whose loudest sample lies :data:`QUIET_DB` below the loudest heard so far (or is
+silent) is a pause: hama would hear the noise at full level (it hears every input at one
+level), so no phone is looked for; its frames ease into the database's rest pose (the
+mean of its silence animes).
+
+Frame ``k`` is at ``k / fps`` seconds in the input's clock (its first sample at 0), in the
+database's channel layout ``(n_frames, n_channels)``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from db.errors import DataError, ParameterError
+
+#: Look-ahead (ms) by default: the audio after a frame that is heard before it is sent.
+DEFAULT_LOOKAHEAD_MS = 120.0
+#: Audio (ms) between two updates by default.
+DEFAULT_HOP_MS = 80.0
+#: Audio (ms) before the first unsent frame that each window re-hears, by default.
+DEFAULT_CONTEXT_MS = 600.0
+#: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
+#: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
+MIN_RATE, MAX_RATE = 8000, 96000
+#: A window this many dB below the loudest sample heard so far is a pause.
+QUIET_DB = 40.0
+#: Audio waiting (ms) beyond which one update hears all of it at once (the stream has
+#: fallen behind: it catches up, with a longer window, instead of lagging ever more).
+DEFAULT_BACKLOG_MS = 400.0
+#: Frames at the start of an update cross-faded from the previous window's estimate.
+FADE_FRAMES = 3
+#: With ``emotion="auto"``: the speech is classified again every this many seconds, over
+#: the last :data:`AUTO_SPAN_S` seconds.
+AUTO_EVERY_S = 2.0
+AUTO_SPAN_S = 3.0
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Motion frames sent by one call of :meth:`Stream.push` or :meth:`Stream.close`.
+
+    Attributes
+    ----------
+    first : int
+        Index of the first frame (frames are numbered from the stream's start).
+    motion : np.ndarray, shape (n_frames, n_channels)
+        In the database's channels.
+    fps : float
+    heard_s : float
+        Seconds of audio heard when they were computed.
+    """
+
+    first: int
+    motion: np.ndarray
+    fps: float
+    heard_s: float
+
+    def __len__(self) -> int:
+        return len(self.motion)
+
+    @property
+    def indices(self) -> np.ndarray:
+        """Frame indices, shape (n_frames,)."""
+        return np.arange(self.first, self.first + len(self.motion))
+
+    @property
+    def times(self) -> np.ndarray:
+        """Each frame's time (s) in the input's clock, shape (n_frames,)."""
+        return self.indices / self.fps
+
+
+@dataclass
+class Stats:
+    """What a stream did: updates, their wall and CPU time (in all and each: ``update_wall``,
+    ``update_cpu``, s), pauses, updates that caught up, warnings by kind."""
+
+    updates: int = 0
+    wall_s: float = 0.0
+    cpu_s: float = 0.0
+    update_wall: list = field(default_factory=list)
+    update_cpu: list = field(default_factory=list)
+    pauses: int = 0
+    caught_up: int = 0
+    warnings: Counter = field(default_factory=Counter)
+
+
+class Stream:
+    """Facial motion for speech pushed in chunks, sent with a bounded look-ahead.
+
+    Parameters
+    ----------
+    model : animegraph.synthesis.Model or path
+        The motion database (a path is loaded).
+    sample_rate : int
+        Of the pushed samples, in [:data:`MIN_RATE`, :data:`MAX_RATE`] Hz.
+    lookahead_ms : float
+        Audio heard after a frame before it is sent (>= 0). Latency is at least this.
+    hop_ms : float
+        Audio between two updates (> 0): smaller updates more often, at more CPU.
+    context_ms : float
+        Audio before the first unsent frame that each window hears again (>= 100).
+    emotion : None, str or dict
+        As :func:`animegraph.synthesis.synthesize`: a name, a mix, ``"auto"`` (classified
+        every :data:`AUTO_EVERY_S` s on the last :data:`AUTO_SPAN_S` s); changed while
+        running by :meth:`set_emotion`.
+    guide : baseline model, tuple of them, or None
+        The guide (:mod:`animegraph.synthesis.guide`); the offline audio-only default is
+        the mean of mu-mlp and ppg-ridge (:func:`stored_guide` reads them from the
+        database). None: the animes alone.
+    k_best : int
+        Animes averaged per phone.
+    backlog_ms : float or None
+        Audio waiting beyond which one update hears all of it (catching up when updates
+        take longer than the audio they cover); None: never (each update hears one hop,
+        whatever the chunks pushed: the frames do not depend on how the audio was cut).
+
+    Raises
+    ------
+    ParameterError
+        On an unsupported rate or a look-ahead, hop or context out of range.
+    """
+
+    def __init__(self, model, *, sample_rate: int = 16000,
+                 lookahead_ms: float = DEFAULT_LOOKAHEAD_MS, hop_ms: float = DEFAULT_HOP_MS,
+                 context_ms: float = DEFAULT_CONTEXT_MS, emotion=None, guide=None,
+                 k_best: int | None = None,
+                 backlog_ms: float | None = DEFAULT_BACKLOG_MS) -> None:
+        from animegraph.synthesis import Model
+        from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
+
+        check_rate(sample_rate)
+        for name, value, low in (("lookahead_ms", lookahead_ms, 0.0), ("hop_ms", hop_ms, 1.0),
+                                 ("context_ms", context_ms, 100.0)):
+            if not (isinstance(value, int | float) and np.isfinite(value) and value >= low):
+                raise ParameterError(f"{name} must be a number >= {low:g}, got {value!r}")
+        self.model = model if isinstance(model, Model) else Model.load(model)
+        self.sample_rate = int(sample_rate)
+        self.lookahead_s = lookahead_ms / 1000.0
+        self.hop_s = hop_ms / 1000.0
+        self.context_s = context_ms / 1000.0
+        self.guide = guide
+        self.backlog_s = None if backlog_ms is None else backlog_ms / 1000.0
+        self.k_best = AUDIO_ONLY_K_BEST if k_best is None else int(k_best)
+        self.fps = float(self.model.graph.fps)
+        self.names = self.model.names
+        self.stats = Stats()
+        self._emotion = None
+        self._auto = False
+        self._auto_at = -np.inf
+        self._auto_choice: str | None = None
+        self.set_emotion(emotion)
+        self._rest = rest_pose(self.model)
+        self._buffer = np.zeros(0, dtype=np.float32)
+        self._buffer_start = 0  # sample index of _buffer[0]
+        self._heard = 0  # samples pushed
+        self._peak = 0.0  # loudest sample heard
+        self._sent = 0  # frames sent
+        self._updated_at = 0  # samples heard at the last update
+        self._last = self._rest.copy()  # the last frame sent
+        self._tentative: tuple[int, np.ndarray] | None = None  # unsent frames of a window
+        self._closed = False
+
+    # -- control ---------------------------------------------------------------------------
+
+    def set_emotion(self, emotion) -> None:
+        """Change the emotion from the next update on (a name, a mix, ``"auto"``, None)."""
+        from animegraph.emotion.control import AUTO, check_names, parse_emotion
+
+        spec = parse_emotion(emotion)
+        spec = check_names(spec, self.model.emotion_model, self.model.graph.emotions)
+        self._auto = spec == AUTO
+        if self._auto and self.model.emotion_model is None:
+            raise DataError("emotion auto needs the database's emotion classifier, which "
+                            "it does not have")
+        self._emotion = None if self._auto else spec
+        self._auto_at = -np.inf
+
+    @property
+    def emotion(self):
+        """The emotion synthesized now (for ``"auto"``, the last one classified)."""
+        return self._auto_choice if self._auto else self._emotion
+
+    @property
+    def heard_s(self) -> float:
+        """Seconds of audio pushed."""
+        return self._heard / self.sample_rate
+
+    @property
+    def sent(self) -> int:
+        """Frames sent so far."""
+        return self._sent
+
+    # -- audio in, frames out --------------------------------------------------------------
+
+    def push(self, samples: np.ndarray) -> Frames:
+        """Hear ``samples`` (shape (n,), float in [-1, 1] or integer PCM) and return the
+        frames that can now be sent (possibly none)."""
+        if self._closed:
+            raise ParameterError("the stream is closed")
+        x = as_mono_float(samples)
+        self._buffer = np.concatenate([self._buffer, x])
+        self._heard += len(x)
+        if len(x):
+            self._peak = max(self._peak, float(np.max(np.abs(x))))
+        hop = int(round(self.hop_s * self.sample_rate))
+        out = []
+        while self._heard - self._updated_at >= hop:
+            waiting = (self._heard - self._updated_at) / self.sample_rate
+            if self.backlog_s is not None and waiting > self.backlog_s:
+                self.stats.caught_up += 1
+                out.append(self._update(self._heard, final=False))
+            else:
+                out.append(self._update(self._updated_at + hop, final=False))
+        return join(out, self._empty())
+
+    def close(self) -> Frames:
+        """Send the frames left, up to the end of the audio (no more look-ahead)."""
+        if self._closed:
+            return self._empty()
+        frames = self._update(self._heard, final=True)
+        self._closed = True
+        return frames
+
+    # -- one update ------------------------------------------------------------------------
+
+    def _empty(self) -> Frames:
+        return Frames(self._sent, np.zeros((0, len(self.names))), self.fps, self.heard_s)
+
+    def _update(self, end: int, *, final: bool) -> Frames:
+        """Send the frames that the audio up to sample ``end`` allows."""
+        wall, cpu = time.perf_counter(), time.process_time()
+        self._updated_at = end
+        end_s = end / self.sample_rate
+        if final:
+            target = int(round(end_s * self.fps))
+        else:
+            target = int(np.floor((end_s - self.lookahead_s) * self.fps + 1e-9)) + 1
+        target = min(target, int(round(end_s * self.fps)))
+        if target <= self._sent:
+            return self._empty()
+        first = max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps)))
+        motion = self._window(first, end)  # frames first, first + 1, ... (may end short)
+        if len(motion) < target - first:  # rounding at the end: hold the last frame
+            pad = motion[-1:] if len(motion) else self._last[None]
+            motion = np.concatenate([motion, np.repeat(pad, target - first - len(motion), 0)])
+        out = motion[self._sent - first: target - first].copy()
+        out = self._fade(out)
+        self._tentative = (target, motion[target - first:])
+        self._sent, self._last = target, out[-1].copy()
+        first_sent = target - len(out)
+        self._drop_old()
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        self.stats.updates += 1
+        self.stats.wall_s += wall
+        self.stats.cpu_s += cpu
+        self.stats.update_wall.append(wall)
+        self.stats.update_cpu.append(cpu)
+        return Frames(first_sent, out, self.fps, end_s)
+
+    def _fade(self, out: np.ndarray) -> np.ndarray:
+        """The first frames of ``out`` eased from the previous window's estimate."""
+        prev = self._tentative
+        if prev is not None and prev[0] == self._sent and len(prev[1]):
+            n = min(FADE_FRAMES, len(out), len(prev[1]))
+            w = (np.arange(1, n + 1) / (FADE_FRAMES + 1))[:, None]
+            out[:n] = (1 - w) * prev[1][:n] + w * out[:n]
+        return out
+
+    def _window(self, first: int, end: int) -> np.ndarray:
+        """Motion of the window from frame ``first`` to sample ``end``, shape
+        (n_frames, n_channels): synthesized as offline, or the rest pose in a pause."""
+        start = int(round(first / self.fps * self.sample_rate))
+        audio = self._buffer[max(0, start - self._buffer_start): end - self._buffer_start]
+        n = int(round(len(audio) / self.sample_rate * self.fps))
+        peak = float(np.max(np.abs(audio))) if len(audio) else 0.0
+        if peak <= self._peak * 10 ** (-QUIET_DB / 20) or peak <= 1e-4:
+            return self._pause(n)
+        try:
+            return self._synthesize(audio, n)
+        except DataError as exc:  # e.g. nothing but silence heard in the window
+            self.stats.warnings[str(exc).split(":")[0][:80]] += 1
+            return self._pause(n)
+
+    def _pause(self, n: int) -> np.ndarray:
+        self.stats.pauses += 1
+        return np.repeat(self._rest[None], n, axis=0)
+
+    def _synthesize(self, audio: np.ndarray, n: int) -> np.ndarray:
+        from animegraph.synthesis import synthesize
+        from ingest.speech import ctc
+
+        segments = ctc.recognize(audio, self.sample_rate)
+        if all(s.phone == "SIL" for s in segments):
+            return self._pause(n)
+        out = synthesize(self.model, audio, self.sample_rate, labels=segments,
+                         emotion=self._emotion_for(audio), k_best=self.k_best, context=False,
+                         guide=self.guide)
+        for warning in out.warnings:
+            self.stats.warnings[warning[:80]] += 1
+        return out.motion
+
+    def _emotion_for(self, audio: np.ndarray):
+        """The emotion of this update: as set, or (``auto``) the speech's, classified
+        again every :data:`AUTO_EVERY_S` seconds."""
+        if not self._auto:
+            return self._emotion
+        if self.heard_s - self._auto_at >= AUTO_EVERY_S:
+            from animegraph.emotion.control import AUTO, resolve_emotion
+
+            span = self._buffer[-int(AUTO_SPAN_S * self.sample_rate):]
+            try:
+                choice = resolve_emotion(AUTO, self.model.emotion_model,
+                                         self.model.graph.emotions, span, self.sample_rate)
+                self._auto_choice = choice.target
+            except DataError as exc:
+                self.stats.warnings[f"emotion auto: {exc}"[:80]] += 1
+            self._auto_at = self.heard_s
+        return self._auto_choice
+
+    def _drop_old(self) -> None:
+        """Forget audio no window or classification will hear again."""
+        keep_from = int((self._sent / self.fps - self.context_s - 0.1) * self.sample_rate)
+        if self._auto:
+            keep_from = min(keep_from, self._heard - int(AUTO_SPAN_S * self.sample_rate))
+        cut = keep_from - self._buffer_start
+        if cut > 0:
+            self._buffer = self._buffer[cut:]
+            self._buffer_start += cut
+
+
+def join(parts: list[Frames], empty: Frames) -> Frames:
+    """Consecutive :class:`Frames` as one (``empty`` if there are none)."""
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return empty
+    return Frames(parts[0].first, np.concatenate([p.motion for p in parts]), parts[0].fps,
+                  parts[-1].heard_s)
+
+
+def check_rate(sample_rate) -> int:
+    """``sample_rate`` if an int in [:data:`MIN_RATE`, :data:`MAX_RATE`] Hz, else
+    ParameterError."""
+    if (isinstance(sample_rate, bool) or not isinstance(sample_rate, int | np.integer)
+            or not MIN_RATE <= int(sample_rate) <= MAX_RATE):
+        raise ParameterError(f"sample rate {sample_rate!r} Hz is not supported: live "
+                             f"speech must be {MIN_RATE}-{MAX_RATE} Hz")
+    return int(sample_rate)
+
+
+def as_mono_float(samples) -> np.ndarray:
+    """Samples as float32 in [-1, 1], shape (n,): integer PCM scaled by its full scale;
+    NaN or infinite samples refused (ParameterError)."""
+    x = np.asarray(samples)
+    if x.ndim == 2 and 1 in x.shape:
+        x = x.reshape(-1)
+    if x.ndim != 1:
+        raise ParameterError(f"live audio must be mono samples (n,), got shape {x.shape}")
+    if np.issubdtype(x.dtype, np.integer):
+        x = x.astype(np.float32) / (float(np.iinfo(x.dtype).max) + 1.0)
+    elif np.issubdtype(x.dtype, np.floating):
+        x = x.astype(np.float32, copy=False)
+    else:
+        raise ParameterError(f"live audio must be float or integer samples, got {x.dtype}")
+    if x.size and not np.all(np.isfinite(x)):
+        raise ParameterError("live audio contains NaN or infinite samples")
+    return x
+
+
+def rest_pose(model) -> np.ndarray:
+    """The database's rest pose in its channels, shape (n_channels,): the mean frame of
+    its silence animes (of all animes if it has none)."""
+    from animegraph.search.graph import PHONE_INDEX
+
+    graph = model.graph
+    nodes = graph.by_phone[PHONE_INDEX["SIL"]]
+    if len(nodes):
+        rows = np.concatenate([np.arange(graph.motion_offsets[k], graph.motion_offsets[k + 1])
+                               for k in nodes])
+        ics = graph.motion_values[rows].astype(np.float64).mean(axis=0)
+    else:
+        ics = graph.motion_values.astype(np.float64).mean(axis=0)
+    return model.to_channels(ics[None])[0]
+
+
+def stored_guide(db_root):
+    """The offline audio-only default's guide as stored with the database (the models of
+    :data:`animegraph.synthesis.path.AUDIO_ONLY_GUIDE`, restored without scikit-learn),
+    without fitting any: a tuple, one model, or None; and the names missing."""
+    from animegraph.baselines.stored import load_forward
+    from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
+
+    names = (AUDIO_ONLY_GUIDE or "").split("+")
+    found = {n: load_forward(db_root, n) for n in names if n}
+    got = tuple(m for m in found.values() if m is not None)
+    missing = tuple(n for n, m in found.items() if m is None)
+    return (None if not got else got[0] if len(got) == 1 else got), missing

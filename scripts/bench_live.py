@@ -1,0 +1,273 @@
+"""Live synthesis measured: latency, CPU, drift, and quality against the offline default.
+
+Usage::
+
+    python scripts/bench_live.py [--quality synthetic facegood] [--lookaheads 40 80 120 200 300]
+                                 [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
+
+* **Quality** (``--quality``): a database is built from a split's training clips (as
+  ``scripts/eval_lipsync.py`` builds a fold's) with its guides (mu-mlp and ppg-ridge, the
+  audio-only default's, fitted on the same clips; one that cannot be fitted is left out
+  and said). Each held-out clip is synthesized offline by the audio-only default
+  (:func:`animegraph.synthesis.synthesize`: phones by the default engine, k-best 20, the
+  guide blended) and live (:class:`animegraph.live.Stream`, pushed in 20 ms chunks, at
+  each look-ahead); the mouth R of each against the recording (Pearson r of the mouth
+  opening over the observed frames, :mod:`animegraph.motion.measures`, in the database's
+  stored space) is averaged over the clips, beside the loudness reference
+  (:class:`animegraph.baselines.reference.Loudness`). ``synthetic``: the last parallel
+  sentence and the last two single-emotion ones held out of a generated corpus;
+  ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored).
+* **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
+  (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
+  at each look-ahead: for every frame, the wall time from the arrival of the chunk that
+  holds the audio it shows to its sending (look-ahead, waiting for the update, compute);
+  median, 95th percentile, max. CPU: the stream's updates' process CPU time (all threads)
+  over the audio's duration (1.0 = one core), and their wall time likewise.
+* **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
+  frames sent against the audio heard times the frame rate, the latency over its first
+  and last tenth, and the updates that had to catch up.
+
+The machine's load is printed (``os.getloadavg``): on a shared machine wall times rise
+with it, CPU times much less.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from animegraph.baselines import make_estimator
+from animegraph.baselines.reference import Loudness
+from animegraph.live import Stream
+from animegraph.live.run import run
+from animegraph.live.sources import FileSource
+from animegraph.motion.measures import mouth_opening, pearson
+from animegraph.synthesis import Model, synthesize
+from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST
+from db.errors import AnimeGraphError
+from ingest.corpus.synthetic import CorpusConfig, generate_corpus
+from ingest.formats.wav import write_wav
+from ingest.pipeline import IngestConfig, build_database, prepare_sources
+from ingest.readers import discover
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+CHUNK_S = 0.02
+#: The stream's hop and context (``--hop``, ``--context``; the defaults if not given).
+WINDOW: dict = {}
+#: Speech for latency and drift with --db (eSpeak NG).
+SENTENCES = ("Please bring the blue box to the table.",
+             "We were away a year ago when the rain came down on the hills.",
+             "Seven wizards quietly hex a jolly box of frozen fish.")
+
+
+def split(name: str, tmp: Path, facegood_seconds: float):
+    """(train clips, held-out clips, head reference) of a split."""
+    if name == "synthetic":
+        corpus = tmp / "corpus"
+        generate_corpus(corpus, CorpusConfig(sentences=14, parallel=4, variations=3, seed=3),
+                        workers=2)
+        meta = json.loads((corpus / "corpus.json").read_text())
+        clips, reference = prepare_sources(discover([corpus]), IngestConfig(), workers=2)
+        singles = sorted({c.sentence_id for c in clips} - set(meta["parallel_sentences"]))
+        held = {meta["parallel_sentences"][-1], *singles[-2:]}
+        train = [c for c in clips if c.sentence_id not in held]
+        test = [c for c in clips if c.sentence_id in held]
+        return train, test, reference
+    if name == "facegood":
+        clips, reference = prepare_sources(discover([SHARED / "facegood"]), IngestConfig(),
+                                           workers=2)
+        from ingest.prepare import slice_clip
+
+        held = clips[-1]
+        seconds = min(facegood_seconds, held.duration)
+        return clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")], reference
+    raise SystemExit(f"unknown split {name!r}")
+
+
+def guides(train) -> tuple[object, list[str]]:
+    """The audio-only default's guide fitted on ``train``, and what could not be fitted."""
+    got, missing = [], []
+    for method in AUDIO_ONLY_GUIDE.split("+"):
+        try:
+            got.append(make_estimator(method).fit(train))
+        except AnimeGraphError as exc:
+            missing.append(f"{method}: {exc}")
+    return (None if not got else got[0] if len(got) == 1 else tuple(got)), missing
+
+
+def live_motion(model, audio, sr, lookahead_ms, guide) -> tuple[np.ndarray, Stream]:
+    stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
+                    backlog_ms=None, **WINDOW)
+    step = int(CHUNK_S * sr)
+    parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
+    parts.append(stream.close().motion)
+    return np.concatenate(parts), stream
+
+
+def mouth_r(model, pred, clip) -> float:
+    truth = clip.motion.astype(np.float64)
+    n = min(len(pred), len(truth))
+    keep = ~np.asarray(clip.missing, dtype=bool)[:n].any(axis=1)
+    local = model.to_local(pred[:n])[keep]
+    return pearson(mouth_opening(local, model.names, model.kind),
+                   mouth_opening(truth[:n][keep], model.names, model.kind))
+
+
+def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
+            max_clips: int) -> dict:
+    t0 = time.perf_counter()
+    train, test, reference = split(name, tmp, facegood_seconds)
+    test = test[::max(1, -(-len(test) // max_clips))]  # evenly, at most max_clips
+    db = tmp / f"db-{name}"
+    build_database(db, train, reference=reference)
+    model = Model.load(db)
+    guide, missing = guides(train)
+    loud = Loudness().fit(train)
+    print(f"# {name}: {len(train)} clips in the database, {len(test)} held out; guide "
+          f"{AUDIO_ONLY_GUIDE}{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
+          f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
+    rows = {"offline": [], "offline-hama": [], "loudness": [],
+            **{f"live-{la:g}": [] for la in lookaheads}}
+    cpu = {f"live-{la:g}": [] for la in lookaheads}
+    for clip in test:
+        audio = clip.audio.astype(np.float32) / 32768.0
+        sr = clip.sample_rate
+        off = synthesize(model, audio, sr, k_best=AUDIO_ONLY_K_BEST, guide=guide).motion
+        rows["offline"].append(mouth_r(model, off, clip))
+        # The engine the live windows use: how much of the gap is PocketSphinx's placing.
+        off = synthesize(model, audio, sr, k_best=AUDIO_ONLY_K_BEST, guide=guide,
+                         phones_engine="hama").motion
+        rows["offline-hama"].append(mouth_r(model, off, clip))
+        pred = loud.predict(clip.audio, sr, n_frames=len(clip.motion))
+        rows["loudness"].append(pearson(mouth_opening(pred, model.names, model.kind),
+                                        mouth_opening(clip.motion, model.names, model.kind)))
+        for la in lookaheads:
+            motion, stream = live_motion(model, audio, sr, la, guide)
+            rows[f"live-{la:g}"].append(mouth_r(model, motion, clip))
+            cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
+        print(f"#   {clip.clip_id}: " + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rows.items()),
+              flush=True)
+    out = {"clips": len(test), "fps": model.graph.fps,
+           "mouth_r": {k: float(np.mean(v)) for k, v in rows.items()},
+           "cpu_share": {k: float(np.mean(v)) for k, v in cpu.items()}}
+    out["model"], out["guide"] = model, guide
+    out["speech"] = [(c.audio.astype(np.float32) / 32768.0, c.sample_rate) for c in test]
+    return out
+
+
+def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:
+    warm = Stream(model, sample_rate=FileSource(wav).sample_rate, guide=guide, backlog_ms=None)
+    warm.push(FileSource(wav).audio[: warm.sample_rate])  # loads hama, compiles the DTW
+    warm.close()
+    stream = Stream(model, sample_rate=FileSource(wav).sample_rate, lookahead_ms=lookahead_ms,
+                    guide=guide, **WINDOW)
+    source = FileSource(wav)
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    take = run(stream, source)
+    wall = time.perf_counter() - wall0
+    lag = (np.asarray(take.sent_at) - np.asarray(take.arrived_at)) * 1000
+    tenth = max(1, len(lag) // 10)
+    return {"lookahead_ms": lookahead_ms, "seconds": take.heard_s, "frames": take.frames,
+            "expected_frames": int(round(take.heard_s * stream.fps)),
+            "latency_ms": {"median": float(np.median(lag)),
+                           "p95": float(np.percentile(lag, 95)), "max": float(lag.max())},
+            "latency_first_tenth_ms": float(np.median(lag[:tenth])),
+            "latency_last_tenth_ms": float(np.median(lag[-tenth:])),
+            "cpu_share": stream.stats.cpu_s / take.heard_s,
+            # On a machine of its own an update takes its CPU time: a frame then waits
+            # its look-ahead, up to a hop for the update, and the update.
+            "update_cpu_ms": {"median": 1000 * float(np.median(stream.stats.update_cpu)),
+                              "p95": 1000 * float(np.percentile(stream.stats.update_cpu, 95)),
+                              "max": 1000 * float(np.max(stream.stats.update_cpu))},
+            "update_wall_ms": {"median": 1000 * float(np.median(stream.stats.update_wall)),
+                               "p95": 1000 * float(np.percentile(stream.stats.update_wall,
+                                                                 95))},
+            "latency_bound_cpu_ms": {
+                "median": lookahead_ms + stream.hop_s * 500
+                + 1000 * float(np.median(stream.stats.update_cpu)),
+                "p95": lookahead_ms + stream.hop_s * 950
+                + 1000 * float(np.percentile(stream.stats.update_cpu, 95))},
+            "update_wall_share": stream.stats.wall_s / take.heard_s,
+            "process_cpu_share": (time.process_time() - cpu0) / wall,
+            "updates": stream.stats.updates, "caught_up": stream.stats.caught_up,
+            "load": os.getloadavg()}
+
+
+def speech_file(speech, seconds: float, path: Path) -> Path:
+    """Held-out speech joined (and repeated) to ``seconds``, as a WAV."""
+    sr = speech[0][1]
+    parts, total = [], 0
+    while total < seconds * sr:
+        for audio, rate in speech:
+            if rate == sr:
+                parts.append(audio)
+                total += len(audio)
+    write_wav(path, np.concatenate(parts)[: int(seconds * sr)], sr)
+    return path
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quality", nargs="*", default=["synthetic"])
+    parser.add_argument("--lookaheads", nargs="+", type=float, default=[40, 80, 120, 200, 300])
+    parser.add_argument("--latency-seconds", type=float, default=20.0)
+    parser.add_argument("--drift-seconds", type=float, default=120.0)
+    parser.add_argument("--facegood-seconds", type=float, default=30.0)
+    parser.add_argument("--max-clips", type=int, default=8,
+                        help="held-out clips scored at most (every k-th)")
+    parser.add_argument("--db", type=Path, default=None,
+                        help="with --quality and nothing after it: time this database")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
+    parser.add_argument("--context", type=float, default=None,
+                        help="the stream's context (ms)")
+    args = parser.parse_args()
+    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context))
+                   if v is not None})
+    print(f"# stream window {WINDOW or 'defaults'}", flush=True)
+    print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
+    results: dict = {"quality": {}, "latency": [], "drift": None}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        first = None
+        for name in args.quality:
+            q = quality(name, tmp, args.lookaheads, args.facegood_seconds, args.max_clips)
+            first = first or q
+            results["quality"][name] = {k: v for k, v in q.items()
+                                        if k not in ("model", "guide", "speech")}
+            print(json.dumps({name: results["quality"][name]}), flush=True)
+        if first is None:  # latency and drift only: a database given, eSpeak NG's speech
+            if args.db is None:
+                return 0
+            from animegraph.live import stored_guide
+            from ingest.speech.espeak import speak
+
+            model, (guide, _) = Model.load(args.db), stored_guide(args.db)
+            said = [speak(t) for t in SENTENCES]
+            first = {"speech": [(u.audio.astype(np.float32), u.sample_rate) for u in said]}
+        else:
+            model, guide = first["model"], first["guide"]
+        if args.latency_seconds > 0:
+            wav = speech_file(first["speech"], args.latency_seconds, tmp / "latency.wav")
+            for la in args.lookaheads:
+                row = paced(model, guide, wav, la)
+                results["latency"].append(row)
+                print(json.dumps(row), flush=True)
+        if args.drift_seconds > 0:
+            wav = speech_file(first["speech"], args.drift_seconds, tmp / "drift.wav")
+            results["drift"] = paced(model, guide, wav, 120.0)
+            print(json.dumps({"drift": results["drift"]}), flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

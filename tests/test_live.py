@@ -1,0 +1,448 @@
+"""Live: a stream of speech in, frames out (animegraph.live, ``animegraph live``).
+
+Real sockets, a real WebSocket client, eSpeak NG speech and the tiny database; no mocks."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import require_shared
+
+from db.errors import DataError, ParameterError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def speech():
+    from ingest.speech.espeak import speak
+
+    u = speak("Bring the blue box to the table, please.")
+    return u.audio.astype(np.float32), u.sample_rate
+
+
+@pytest.fixture(scope="module")
+def model(tiny_db):
+    from animegraph.synthesis import Model
+
+    return Model.load(tiny_db[0])
+
+
+def _play(stream, audio, chunk_s=0.02):
+    batches, heard = [], []
+    step = int(chunk_s * stream.sample_rate)
+    for k in range(0, len(audio), step):
+        frames = stream.push(audio[k:k + step])
+        if len(frames):
+            batches.append(frames)
+            heard.append(stream.heard_s)
+    batches.append(stream.close())
+    heard.append(stream.heard_s)
+    return batches, heard
+
+
+# --- the stream -------------------------------------------------------------------------
+
+
+def test_stream_sends_every_frame_once_in_order_after_its_lookahead(model, speech):
+    from animegraph.live import Stream
+
+    audio, sr = speech
+    stream = Stream(model, sample_rate=sr, lookahead_ms=100, hop_ms=200)
+    batches, heard = _play(stream, audio)
+    indices = np.concatenate([b.indices for b in batches])
+    motion = np.concatenate([b.motion for b in batches])
+    n = int(round(len(audio) / sr * model.graph.fps))
+    np.testing.assert_array_equal(indices, np.arange(n))  # each frame once, in order
+    assert motion.shape == (n, len(model.names)) and np.isfinite(motion).all()
+    for frames, h in zip(batches[:-1], heard[:-1], strict=True):
+        # Sent only once the look-ahead after it was heard.
+        assert frames.times[-1] <= h - 0.1 + 1e-9
+    assert stream.stats.updates >= len(audio) / sr / 0.2 - 1
+    # It moves with the speech: the mouth is not the rest pose throughout.
+    assert np.ptp(motion, axis=0).max() > 0
+
+
+def test_stream_follows_the_offline_mouth(model, speech):
+    """The live mouth opening correlates with the offline synthesis of the same speech."""
+    from animegraph.live import Stream
+    from animegraph.motion.measures import mouth_opening, pearson
+    from animegraph.synthesis import synthesize
+
+    audio, sr = speech
+    batches, _ = _play(Stream(model, sample_rate=sr, lookahead_ms=200, hop_ms=200), audio)
+    live = np.concatenate([b.motion for b in batches])
+    offline = synthesize(model, audio, sr, k_best=20, phones_engine="hama").motion
+    n = min(len(live), len(offline))
+    r = pearson(mouth_opening(live[:n], model.names, model.kind),
+                mouth_opening(offline[:n], model.names, model.kind))
+    assert r > 0.5, r
+
+
+def test_silence_is_the_rest_pose_and_no_error(model):
+    from animegraph.live import Stream
+    from animegraph.live.stream import rest_pose
+
+    stream = Stream(model, sample_rate=16000, hop_ms=200)
+    batches, _ = _play(stream, np.zeros(16000, dtype=np.float32))
+    motion = np.concatenate([b.motion for b in batches])
+    assert len(motion) == int(round(model.graph.fps))
+    np.testing.assert_allclose(motion, np.repeat(rest_pose(model)[None], len(motion), 0))
+    assert stream.stats.pauses >= 1
+
+
+def test_bad_input_is_refused_in_one_line(model):
+    from animegraph.live import Stream
+
+    with pytest.raises(ParameterError, match="4000 Hz is not supported"):
+        Stream(model, sample_rate=4000)
+    with pytest.raises(ParameterError, match="lookahead_ms"):
+        Stream(model, lookahead_ms=-5)
+    stream = Stream(model)
+    with pytest.raises(ParameterError, match="NaN"):
+        stream.push(np.array([0.0, np.nan], dtype=np.float32))
+    with pytest.raises(ParameterError, match="mono"):
+        stream.push(np.zeros((10, 2), dtype=np.float32))
+    stream.close()
+    with pytest.raises(ParameterError, match="closed"):
+        stream.push(np.zeros(10, dtype=np.float32))
+
+
+# --- Live Link over UDP -----------------------------------------------------------------
+
+
+def _arkit_frame(value_of):
+    from ingest.formats.livelink import ARKIT_CHANNELS
+
+    return list(ARKIT_CHANNELS), np.array([value_of(n) for n in ARKIT_CHANNELS])
+
+
+def test_livelink_packets_arrive_and_decode_by_name():
+    """A real UDP socket receives the packets; values are placed by name (the packet's
+    order is Unreal's enum's: jawLeft before jawRight, unlike the CSV)."""
+    from animegraph.live.livelink import LiveLinkSender, decode
+
+    names, frame = _arkit_frame(lambda n: 0.9 if n == "jawLeft" else
+                                0.1 if n == "jawRight" else 0.5 if n == "jawOpen" else 0.0)
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(5)
+    port = receiver.getsockname()[1]
+    sender = LiveLinkSender(f"127.0.0.1:{port}", names, 30.0, subject="face")
+    for k in range(3):
+        sender.send(k, frame)
+    packets = [decode(receiver.recv(2048)) for _ in range(3)]
+    sender.close()
+    receiver.close()
+    assert [p.frame for p in packets] == [0, 1, 2]
+    p = packets[0]
+    assert p.version == 6 and p.subject == "face" and p.rate == (30, 1)
+    assert len(p.device_id) == 36 and p.values.shape == (61,)
+    assert p.value("jawLeft") == pytest.approx(0.9) and p.value("jawRight") == pytest.approx(0.1)
+    assert p.values[15] == pytest.approx(0.9)  # EARFaceBlendShape: JawLeft = 15
+    assert p.value("jawOpen") == pytest.approx(0.5)
+    assert sender.sent == 3 and sender.dropped == 0
+
+
+def test_livelink_packet_matches_pylivelinkface():
+    """An independent decoder (pylivelinkface 0.1, packet version 6) reads the packets."""
+    pll = pytest.importorskip("pylivelinkface")
+    from animegraph.live.livelink import PACKET_ORDER, encode
+
+    values = np.linspace(0.0, 1.0, 61)
+    data = encode(values, frame=1234, fps=60.0, device_id="0" * 8 + "-1111-2222-3333-" + "4" * 12,
+                  subject="animegraph")
+    ok, face = pll.PyLiveLinkFace.decode(data)
+    assert ok and face._version == 6 and face.name == "animegraph"
+    assert face._frames == 1234 and face.fps == 60 and face._denominator == 1
+    np.testing.assert_allclose(face._blend_shapes, values, atol=1e-6)
+    # Its enum is the packet's order.
+    assert [b.name for b in pll.FaceBlendShape] == [n[0].upper() + n[1:] for n in PACKET_ORDER]
+
+
+def test_livelink_refuses_what_it_cannot_send(model):
+    from animegraph.live.livelink import LiveLinkSender, decode
+
+    with pytest.raises(DataError, match="lack 52"):  # points, not mapped onto the shapes
+        LiveLinkSender("127.0.0.1:11111", model.names, 30.0)
+    names, _ = _arkit_frame(lambda n: 0.0)
+    with pytest.raises(ParameterError, match="HOST:PORT"):
+        LiveLinkSender("localhost", names, 30.0)
+    with pytest.raises(DataError, match="cannot resolve"):
+        LiveLinkSender("no-such-host.invalid:11111", names, 30.0)
+    with pytest.raises(DataError):
+        decode(b"\x06\x00\x00\x10\x00")  # a string longer than the packet
+    with pytest.raises(DataError):
+        decode(b"")
+
+
+def test_livelink_to_a_port_nobody_listens_on_never_stalls():
+    """Nothing listens there: every frame is sent or dropped and counted, no error."""
+    from animegraph.live.livelink import LiveLinkSender
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()  # now nobody listens there
+    names, frame = _arkit_frame(lambda n: 0.2)
+    sender = LiveLinkSender(f"127.0.0.1:{port}", names, 30.0)
+    for k in range(50):
+        sender.send(k, frame)
+    assert sender.sent + sender.dropped == 50
+    sender.close()
+
+
+def test_points_map_onto_the_arkit_shapes(model):
+    """A marker database's frame displaced by a pure ARKit shape maps back to that shape;
+    the rest pose maps to no shape."""
+    from animegraph.face.arkit import arkit_shapes
+    from animegraph.face.mesh import default_marker_map
+    from animegraph.live.arkit_map import PointsToArkit
+    from animegraph.live.stream import rest_pose
+    from animegraph.motion.files import point_labels
+    from animegraph.synthesis.model import to_world
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    mapping = PointsToArkit(model)
+    rest = rest_pose(model)
+    assert np.abs(mapping.weights(rest)).max() < 1e-6
+    vertices = default_marker_map(point_labels(model.names)).vertices
+    for shape, amount in (("jawOpen", 0.5), ("mouthSmileLeft", 0.7), ("mouthPucker", 0.3)):
+        k = ARKIT_BLENDSHAPES.index(shape)
+        local = model.to_local(rest[None])[0]
+        local[mapping.columns] += amount * arkit_shapes()[k, vertices].reshape(-1) / mapping.scale
+        w = mapping.weights(to_world(local[None], model.groups, model.head_reference))[0]
+        assert int(np.argmax(w)) == k and w[k] == pytest.approx(amount, abs=0.1), shape
+        assert np.delete(w, k).max() < 0.1
+
+
+def test_live_mouth_reaches_livelink_from_a_marker_database(model, speech):
+    """Stream -> points mapped onto ARKit -> UDP: jawOpen follows the mouth opening."""
+    from animegraph.live import Stream
+    from animegraph.live.arkit_map import PointsToArkit
+    from animegraph.live.livelink import LiveLinkSender, decode
+    from animegraph.motion.measures import mouth_opening, pearson
+
+    audio, sr = speech
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+    receiver.settimeout(5)
+    sender = LiveLinkSender(f"127.0.0.1:{receiver.getsockname()[1]}", model.names,
+                            model.graph.fps, convert=PointsToArkit(model))
+    batches, _ = _play(Stream(model, sample_rate=sr, hop_ms=200), audio)
+    motion = np.concatenate([b.motion for b in batches])
+    jaw = []
+    for k, frame in enumerate(motion):
+        sender.send(k, frame)
+        jaw.append(decode(receiver.recv(2048)).value("jawOpen"))
+    sender.close()
+    receiver.close()
+    assert pearson(np.asarray(jaw), mouth_opening(motion, model.names, model.kind)) > 0.5
+
+
+# --- WebSocket --------------------------------------------------------------------------
+
+
+def test_websocket_client_gets_frames_in_order():
+    pytest.importorskip("websockets")
+    from websockets.sync.client import connect
+
+    from animegraph.live.websocket import FrameServer
+
+    server = FrameServer(0, ["a", "b"], 30.0)
+    with connect(f"ws://127.0.0.1:{server.port}/") as ws:
+        hello = json.loads(ws.recv(timeout=5))
+        assert hello == {"type": "hello", "fps": 30.0, "channels": ["a", "b"]}
+        for k in range(40):
+            server.send(k, np.array([k, -k], dtype=float))
+        got = [json.loads(ws.recv(timeout=5)) for _ in range(40)]
+        server.close(frames=40)
+        assert json.loads(ws.recv(timeout=5)) == {"type": "end", "frames": 40}
+    assert [m["index"] for m in got] == list(range(40))
+    assert got[3]["values"] == [3.0, -3.0] and got[3]["time"] == pytest.approx(0.1)
+    assert server.dropped == 0
+
+
+def test_websocket_slow_and_gone_clients_are_counted_not_waited_for():
+    pytest.importorskip("websockets")
+    from websockets.sync.client import connect
+
+    from animegraph.live.websocket import QUEUE_FRAMES, FrameServer
+
+    server = FrameServer(0, [f"c{i}" for i in range(500)], 30.0)
+    frame = np.random.default_rng(0).random(500)
+    with connect(f"ws://127.0.0.1:{server.port}/") as ws:
+        ws.recv(timeout=5)
+        for k in range(3000):  # ~30 MB to a client that reads nothing
+            server.send(k, frame)
+        deadline = time.monotonic() + 30
+        while server.dropped == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.dropped > 0 and server.sent >= QUEUE_FRAMES
+    deadline = time.monotonic() + 30  # the client has gone: forgotten, not waited for
+    while server.clients and time.monotonic() < deadline:
+        server.send(0, frame)
+        time.sleep(0.05)
+    assert server.clients == 0
+    server.close(frames=3000)
+
+
+# --- a file at real-time pace, the command, the recording ---------------------------------
+
+
+def test_file_at_real_time_pace_gives_frames_that_track_the_clock(model, speech, tmp_path):
+    """Played at its pace: no frame is sent before the audio it shows (and its look-ahead)
+    was spoken, sending never goes back in time, and frame times rise with the clock."""
+    from animegraph.live import Stream
+    from animegraph.live.run import run
+    from animegraph.live.sources import FileSource
+    from ingest.formats.wav import write_wav
+
+    audio, sr = speech
+    write_wav(tmp_path / "s.wav", audio, sr)
+    stream = Stream(model, sample_rate=sr, lookahead_ms=100, hop_ms=200)
+    take = run(stream, FileSource(tmp_path / "s.wav"))
+    n = int(round(len(audio) / sr * model.graph.fps))
+    assert take.frames == n
+    sent, arrived = np.asarray(take.sent_at), np.asarray(take.arrived_at)
+    times = np.arange(n) / model.graph.fps
+    assert np.all(np.diff(sent) >= 0) and np.all(np.diff(arrived) >= 0)
+    assert np.all(sent >= arrived)
+    assert np.all(arrived >= times - 1e-3)  # a sample arrives once it has been spoken
+    before_end = times < len(audio) / sr - 0.1 - 0.02  # not the frames the end flushed
+    assert np.all(sent[before_end] >= times[before_end] + 0.1 - 1e-3)
+    assert np.corrcoef(times, sent)[0, 1] > 0.9
+
+
+def _live(args, **kw):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "animegraph", "live", *args], env=env,
+                          capture_output=True, text=True, timeout=600, **kw)
+
+
+def test_live_command_records_what_it_sent(tiny_db, speech, tmp_path):
+    from ingest.formats.c3d import read_c3d
+    from ingest.formats.wav import read_wav, write_wav
+
+    audio, sr = speech
+    write_wav(tmp_path / "s.wav", audio, sr)
+    out = _live(["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
+                 "--hop", "200", "--guide", "none", "--record", str(tmp_path / "take")])
+    assert out.returncode == 0, out.stderr
+    assert "Traceback" not in out.stderr and "frames for" in out.stderr
+    heard, rate = read_wav(tmp_path / "take" / "take.wav")
+    assert rate == sr and len(heard) == len(audio)
+    markers = read_c3d(tmp_path / "take" / "take.c3d")
+    assert len(markers.points) == int(round(len(audio) / sr * 120))
+
+
+def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
+    db = str(tiny_db[0])
+    cases = [
+        (["--source", "-", "--rate", "4000", "--record", str(tmp_path)], 2, "not supported"),
+        (["--source", "-", "--record", str(tmp_path)], 2, "--rate"),
+        (["--source", str(tmp_path / "none.wav"), "--record", str(tmp_path)], 2, "no such"),
+        (["--source", "-", "--rate", "16000"], 2, "say where"),
+        (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
+    ]
+    for args, status, words in cases:
+        out = _live(["--db", db, *args], input="")
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode == status and "Traceback" not in out.stderr, out.stderr
+        assert any(words in line for line in lines), out.stderr
+
+
+def test_microphone_without_portaudio_is_one_line(tiny_db, tmp_path):
+    try:
+        import sounddevice  # noqa: F401
+        pytest.skip("a microphone stack is installed here")
+    except (ImportError, OSError):
+        pass
+    out = _live(["--db", str(tiny_db[0]), "--source", "mic", "--record", str(tmp_path)])
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert "sounddevice" in out.stderr or "PortAudio" in out.stderr
+
+
+def test_ctrl_c_ends_cleanly_and_keeps_the_recording(tiny_db, speech, tmp_path):
+    audio, sr = speech
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "animegraph", "live", "--db",
+                             str(tiny_db[0]), "--source", "-", "--rate", str(sr), "--hop",
+                             "200", "--guide", "none", "--record", str(tmp_path / "take")],
+                            stdin=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    lines = []
+    for line in proc.stderr:  # until the stream runs (the model is loaded)
+        lines.append(line.decode())
+        if "Ctrl-C ends" in lines[-1]:
+            break
+    proc.stdin.write((audio * 32767).astype("<i2").tobytes())  # the stdin stays open
+    proc.stdin.flush()
+    time.sleep(3)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    err = "".join(lines) + err.decode()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err
+    assert (tmp_path / "take" / "take.wav").is_file()
+
+
+# --- an ARKit database from the real capture (../shared) ----------------------------------
+
+
+@pytest.fixture(scope="module")
+def arkit_db(tmp_path_factory):
+    from ingest.formats.wav import read_wav, write_wav
+    from ingest.pipeline import ingest
+
+    capture = require_shared("livelink", "neurosync_testset.csv")
+    folder = tmp_path_factory.mktemp("arkit") / "corpus"
+    folder.mkdir()
+    lines = capture.read_text().splitlines()
+    n = int(12.0 * 59.9)
+    (folder / "part.csv").write_text("\n".join(lines[: n + 1]) + "\n")
+    audio, sr = read_wav(capture.with_suffix(".wav"))
+    write_wav(folder / "part.wav", audio[: int(n / 59.9 * sr)], sr)
+    db = folder.parent / "db"
+    ingest([folder], db)
+    line = folder.parent / "line.wav"
+    write_wav(line, audio[-4 * sr:], sr)  # speech the database does not hold
+    return db, line
+
+
+def test_live_command_sends_livelink_packets(arkit_db, tmp_path):
+    from animegraph.live.livelink import decode
+    from ingest.formats.livelink import read_livelink
+
+    db, line = arkit_db
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+    port = receiver.getsockname()[1]
+    out = _live(["--db", str(db), "--source", str(line), "--fast", "--hop", "200",
+                 "--livelink", f"127.0.0.1:{port}", "--record", str(tmp_path / "take")])
+    assert out.returncode == 0, out.stderr
+    receiver.settimeout(2)
+    packets = []
+    try:
+        while True:
+            packets.append(decode(receiver.recv(2048)))
+    except TimeoutError:
+        pass
+    receiver.close()
+    take = read_livelink(tmp_path / "take" / "take.livelink.csv")
+    assert len(packets) == len(take.values) > 0
+    assert [p.frame for p in packets] == list(range(len(packets)))
+    k = len(packets) // 2
+    for name in ("jawOpen", "jawLeft", "mouthRight", "eyeBlinkLeft"):
+        col = take.names.index(name)
+        assert packets[k].value(name) == pytest.approx(take.values[k, col], abs=1e-4)
