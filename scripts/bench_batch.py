@@ -8,7 +8,8 @@ Usage::
 The script is ``--lines`` held-out lines (the grammar's sentences after the default
 corpus' 40, so none is in the database; every other line two sentences) whose neutral
 eSpeak NG speech lasts 2-6 s, the five emotions in turn, no recordings: every line is
-spoken by eSpeak, synthesized as ``batch`` does by default and written (WAV, C3D, phones, explain JSON). Each
+spoken by eSpeak, synthesized as ``batch`` does by default and written (WAV, C3D, phones,
+explain JSON). Each
 configuration runs into a fresh folder on a fresh local cluster (``threads_per_worker=1``,
 numba single-threaded per worker).
 

@@ -45,7 +45,8 @@ SENTENCE = "The quiet fisherman sold his boat and moved to the city by the sea."
 
 
 #: The processes' environment: a user's Python caches bytecode (``__pycache__``); some
-#: environments (this machine's among them) set PYTHONDONTWRITEBYTECODE, which would compile every module of
+#: environments (this machine's among them) set PYTHONDONTWRITEBYTECODE, which would
+#: compile every module of
 #: the project at each start (``--no-bytecode`` keeps it).
 _ENV = dict(os.environ)
 

@@ -20,7 +20,8 @@ ROOMS = {
     "face": {"motion"},
     "baselines": {"motion"},
     "synthesis": {"motion", "search", "emotion"},
-    "apps": {"motion", "search", "emotion", "face", "baselines", "synthesis"},
+    "live": {"motion", "search", "emotion", "face", "baselines", "synthesis"},
+    "apps": {"motion", "search", "emotion", "face", "baselines", "synthesis", "live"},
 }
 
 
