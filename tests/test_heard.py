@@ -126,3 +126,26 @@ def test_remembered_bounds_the_folders(cache, speech, monkeypatch):
     sizes = [p.stat().st_size for p in (cache / "heard").iterdir()]
     assert sum(sizes) <= 3000
     assert len(_entries(cache)) >= 1 and not (cache / "heard" / "old0.json").exists()
+
+
+def test_a_second_synth_of_a_recording_hears_no_phones_and_gives_the_same_motion(
+        tiny_db, speech, cache, tmp_path, capsys):
+    from animegraph.apps.cli import main
+    from ingest.formats.wav import write_wav
+
+    audio, rate = speech
+    wav = tmp_path / "speech.wav"
+    write_wav(wav, audio, rate)
+    base = ["synth", str(wav), "--db", str(tiny_db[0]), "--guide", "none"]
+    assert main([*base, "-o", str(tmp_path / "a.npz")]) == 0
+    first = capsys.readouterr().err
+    assert "phones heard before" not in first and "(recognized)" in first
+    ctc.forget()
+    assert main([*base, "--k-best", "3", "-o", str(tmp_path / "k3.npz")]) == 0
+    assert "phones heard before" in capsys.readouterr().err
+    assert main([*base, "-o", str(tmp_path / "b.npz")]) == 0
+    assert "phones heard before" in capsys.readouterr().err
+    with np.load(tmp_path / "a.npz") as a, np.load(tmp_path / "b.npz") as b:
+        assert sorted(a.files) == sorted(b.files)
+        for name in a.files:
+            np.testing.assert_array_equal(a[name], b[name])
