@@ -18,6 +18,7 @@ from animegraph.apps.commands.database import (
     cmd_ingest,
     cmd_query,
     cmd_sql,
+    cmd_warmup,
 )
 from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
 from animegraph.apps.commands.render import cmd_plot, cmd_render
@@ -160,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_classify(sub)
     _add_map_emotion(sub)
     _add_fit(sub)
+    _add_warmup(sub)
     _add_info(sub)
     return parser
 
@@ -247,6 +249,9 @@ def _add_ingest(sub) -> None:
     ing.add_argument("--wait", type=_number, default=None,
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")
+    ing.add_argument("--no-prepare", action="store_true",
+                     help="leave fitting the default guides and compiling the search "
+                     "kernels to the first synth (or 'animegraph warmup')")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=cmd_ingest)
 
@@ -574,6 +579,19 @@ def _add_fit(sub) -> None:
     _db_option(fit)
     fit.add_argument("--method", required=True, choices=METHODS[1:], help="baseline method")
     fit.set_defaults(func=cmd_fit)
+
+
+def _add_warmup(sub) -> None:
+    """``warmup``: a database ready for its first synth."""
+    warm = sub.add_parser(
+        "warmup", help="make a database ready for its first synth (ingest does this)",
+        description="Fit and store the default guides of audio-only synth (mu-mlp and "
+        "ppg-ridge) if the database lacks them, and compile the search kernels once for "
+        "this installation (numba caches them on disk), saying each step and its time; "
+        "nothing to do takes no time. 'animegraph ingest' does this after writing.",
+    )
+    _db_option(warm)
+    warm.set_defaults(func=cmd_warmup)
 
 
 def _add_info(sub) -> None:
