@@ -8,6 +8,7 @@ import shutil
 import pytest
 
 from animegraph.apps.cli import main
+from animegraph.apps.prepare import unfitted_note
 from animegraph.baselines.stored import load_forward, model_path, unfit_reason
 from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
 
@@ -31,6 +32,8 @@ def db_copy(tiny_db, tmp_path):
 def test_warmup_fits_the_guides_once_and_synth_then_fits_nothing(db_copy, tiny_corpus,
                                                                  tmp_path, capsys):
     assert _decided(db_copy) == dict.fromkeys(GUIDES, False)
+    note = unfitted_note(db_copy)  # what the demo says of the database it built
+    assert all(f"{name} about " in note for name in GUIDES) and "animegraph warmup" in note
     assert main(["warmup", "--db", str(db_copy)]) == 0
     err = capsys.readouterr().err
     for name in GUIDES:
@@ -39,6 +42,7 @@ def test_warmup_fits_the_guides_once_and_synth_then_fits_nothing(db_copy, tiny_c
     stored = {name: model_path(db_copy, name).stat().st_mtime_ns for name in GUIDES
               if model_path(db_copy, name).is_file()}
     assert stored  # the tiny database has enough for at least one
+    assert unfitted_note(db_copy) is None
     assert main(["warmup", "--db", str(db_copy)]) == 0  # nothing left to do
     out = capsys.readouterr()
     assert "fitting" not in out.err and "is ready for synth" in out.out

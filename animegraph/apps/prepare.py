@@ -22,7 +22,7 @@ from pathlib import Path
 
 from db.errors import AnimeGraphError
 
-__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare"]
+__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare", "unfitted_note"]
 
 #: The sentence whose synthesis compiles the kernels (short: its phones cost nothing).
 WARM_SENTENCE = "Good morning, class."
@@ -105,6 +105,22 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             f"({time.process_time() - c0:.1f} s CPU)")
         done[name] = "fitted"
     return done
+
+
+def unfitted_note(db: Path) -> str | None:
+    """A line saying which default guides ``db`` lacks and how long the first audio-only
+    ``synth`` will spend fitting them (None if none is missing): for commands that build
+    a database without fitting them (``demo``, whose own sentence has its phones)."""
+    from animegraph.baselines.stored import model_path, unfit_reason
+    from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
+
+    missing = [name for name in (AUDIO_ONLY_GUIDE or "").split("+") if name
+               and not model_path(db, name).is_file() and unfit_reason(db, name) is None]
+    if not missing:
+        return None
+    times = ", ".join(f"{name} {fit_estimate(db, name) or 'unknown time'}" for name in missing)
+    return (f"the first synth from speech alone on {db} fits its guides first ({times}); "
+            f"'animegraph warmup --db {db}' does it now")
 
 
 def compile_kernels(db: Path, say: Callable[[str], object] = _quiet) -> list[str]:
