@@ -89,13 +89,17 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             done[name] = reason
             continue
         from animegraph.baselines.base import fitted_model
+        from ingest.speech import ctc
 
         how_long = fit_estimate(db, name)
         say(f"fitting the {name} guide of audio-only synth ({how_long + '; ' if how_long else ''}"
             "stored with the database) ...")
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            fitted_model(db, name, refit=True)
+            # hama's outputs kept in the cache as ingest keeps them: the refit after the
+            # next ingest (a new version) hears only the clips it added.
+            with ctc.kept_on_disk():
+                fitted_model(db, name, refit=True)
         except (AnimeGraphError, OSError) as exc:
             say(f"warning: no {name} guide ({exc})")
             record_unfit(db, name, str(exc))

@@ -125,13 +125,14 @@ def segment_once(audio: np.ndarray, sample_rate: int, *, text: str | None = None
     """
     from ingest.speech import ctc
     from ingest.speech.engines import check_engine
-    from ingest.speech.segment import _check_audio, segment
+    from ingest.speech.inputs import check_audio
+    from ingest.speech.segment import segment
 
     uses = _ON.get()
     if uses is None:
         return (*segment(audio, sample_rate, text=text, engine=engine,
                          on_fallback=on_fallback), False)
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    samples, sample_rate = check_audio(audio, sample_rate)
     engine = check_engine(engine)
     path = entry_path(samples, sample_rate, text, engine)
     entry = _read(path, len(samples) / sample_rate) if path.is_file() else None
