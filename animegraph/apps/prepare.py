@@ -22,7 +22,8 @@ from pathlib import Path
 
 from db.errors import AnimeGraphError
 
-__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare", "unfitted_note"]
+__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare", "unfitted_note",
+           "warm_kernels"]
 
 #: The sentence whose synthesis compiles the kernels (short: its phones cost nothing).
 WARM_SENTENCE = "Good morning, class."
@@ -128,22 +129,9 @@ def unfitted_note(db: Path) -> str | None:
 
 
 def compile_kernels(db: Path, say: Callable[[str], object] = _quiet) -> list[str]:
-    """Compile and cache the search kernels ``synth`` runs, if any are not yet.
-
-    One short eSpeak NG sentence is synthesized against ``db`` with its phone labels (the
-    default k-best path), with the paper's exact search, and with the search from
-    speech alone (recognized phones), and the audio cost is scored serially and in
-    parallel: what a first ``synth`` would compile. Returns the kernels that were
-    missing (empty: nothing was done).
-    """
-    import numpy as np
-
-    from animegraph.search.dtw import audio_costs
+    """Compile and cache the search kernels ``synth`` runs, if any are not yet
+    (:func:`warm_kernels`). Returns the kernels that were missing (empty: nothing done)."""
     from animegraph.search.kernels import COMPILE_NOTE, uncompiled_kernels
-    from animegraph.synthesis import Model, synthesize
-    from animegraph.synthesis.path import synthesis_path
-    from ingest.formats.phones_csv import Segment
-    from ingest.speech.espeak import Voice, speak
 
     missing = sorted(set(uncompiled_kernels("exact")) | set(uncompiled_kernels("paper")))
     if not missing:
@@ -151,20 +139,39 @@ def compile_kernels(db: Path, say: Callable[[str], object] = _quiet) -> list[str
     say(f"compiling the search kernels once ({len(missing)} to go, {COMPILE_NOTE}; cached "
         "for every later synth) ...")
     t0, c0 = time.perf_counter(), time.process_time()
-    model = Model.load(db)
-    utt = speak(WARM_SENTENCE, Voice())
-    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
-    k_best, _ = synthesis_path("labels", known_phones=True)  # synth's default path
-    out = synthesize(model, utt.audio, utt.sample_rate, labels=labels, k_best=k_best)
-    for method in ("exact", "paper"):
-        synthesize(model, utt.audio, utt.sample_rate, labels=labels, method=method)
-    g = model.graph
-    query = out.phones[len(out.phones) // 2].prosody.astype(np.float32)
-    for k in (2, min(g.n_nodes, 128)):
-        audio_costs(query, g.prosody_values, g.prosody_offsets, np.arange(k))
+    warm_kernels(db)
     say(f"compiled the search kernels in {time.perf_counter() - t0:.1f} s "
         f"({time.process_time() - c0:.1f} s CPU)")
     return missing
+
+
+def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *,
+                 align: bool = False) -> None:
+    """Compile (and cache) the numba kernels synthesis runs, in this process.
+
+    One short eSpeak NG sentence is synthesized against ``db`` with its phone labels: by
+    each ``(method, window)`` of ``methods``, or by default along ``synth``'s default
+    path (k-best), the paper's exact search and its original search; with ``align`` also
+    from its transcript (forced alignment). A synthesis scores enough pairs for the
+    audio cost's threaded path (it runs the same kernel as the serial one).
+    """
+    from animegraph.synthesis import Model, synthesize
+    from animegraph.synthesis.path import synthesis_path
+    from ingest.formats.phones_csv import Segment
+    from ingest.speech.espeak import Voice, speak
+
+    model = Model.load(db)
+    utt = speak(WARM_SENTENCE, Voice())
+    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    if methods is None:
+        k_best, _ = synthesis_path("labels", known_phones=True)  # synth's default path
+        runs = [{"k_best": k_best}, {"method": "exact"}, {"method": "paper"}]
+    else:
+        runs = [{"method": m, "window": w} for m, w in sorted(methods, key=str)]
+    for options in runs:
+        synthesize(model, utt.audio, utt.sample_rate, labels=labels, **options)
+    if align:
+        synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
 
 
 def prepare(db: Path, say: Callable[[str], object] = _quiet) -> None:

@@ -32,11 +32,11 @@ def cmd_ingest(args: argparse.Namespace) -> int:
     for line in report.lines():
         print(line)
     if not args.no_prepare:
-        _prepare(args.db, args.quiet, args.wait)
+        _prepare(args.db, args.quiet, args.wait, "ingest: ")
     return 1 if report.count("rejected") else 0
 
 
-def _prepare(db, quiet: bool, wait: float | None) -> None:
+def _prepare(db, quiet: bool, wait: float | None, step: str = "") -> None:
     """The database ready for its first synth (:mod:`animegraph.apps.prepare`), under its
     writer lock: the guides are fitted on the version they are stored with."""
     from animegraph.apps.prepare import prepare
@@ -46,7 +46,7 @@ def _prepare(db, quiet: bool, wait: float | None) -> None:
     if not is_database(db):  # nothing went in (every clip rejected)
         return
     with writer_lock(db, wait=600.0 if wait is None else wait, what="database"):
-        prepare(db, (lambda line: None) if quiet else (lambda line: say(f"ingest: {line}")))
+        prepare(db, (lambda line: None) if quiet else (lambda line: say(f"{step}{line}")))
 
 
 #: The columns of DuckDB's EXPLAIN (and EXPLAIN ANALYZE) result.
