@@ -31,6 +31,13 @@ With ``--kernels`` it measures the search's numba kernels instead
   row's horizontal steps a running minimum) against the compiled ``audio_costs`` on the
   same curves (the NumPy version only accumulates, a lower bound of its cost).
 
+With ``--heard`` it measures phones heard once (:mod:`ingest.speech.heard`): an
+audio-only ``synth`` of that sentence (no phone labels beside it) in a fresh cache folder,
+then the same recording again with another option (``--k-best 5``), each a new process:
+wall, CPU and the reported segmentation time of both, and the second's share of the first
+(target: <= 20 %). The database's default guides are used if it has them stored, else
+``--guide none`` for both (a first fit would be timed, not the phones).
+
 To compare with another checkout, run this script with ``PYTHONPATH=THAT_CHECKOUT``.
 """
 
@@ -208,6 +215,31 @@ def kernel_report(db: Path, repeats: int) -> None:
           f"{1e6 * numpy_s:.1f} us a pair ({numpy_s / compiled:.0f} x): numba kept")
 
 
+def heard_report(db: Path) -> None:
+    from animegraph.apps.prepare import unfitted_note
+
+    guide = [] if unfitted_note(db) is None else ["--guide", "none"]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        utt = speak(SENTENCE, Voice())
+        write_wav(tmp / "speech.wav", utt.audio, utt.sample_rate)
+        env = {"ANIMEGRAPH_CACHE": str(tmp / "cache")}
+        base = ["synth", str(tmp / "speech.wav"), "--db", str(db), *guide]
+        rows = []
+        for extra in ([], ["--k-best", "5"]):
+            wall, cpu, err = _run([*base, *extra, "-o", str(tmp / "m.npz")], env)
+            segment = float(re.search(r"= segment ([\d.]+)", err).group(1))
+            rows.append((wall, cpu, segment, "phones heard before" in err))
+    what = f"{utt.duration:.1f} s" + (", " + " ".join(guide) if guide else "")
+    for (wall, cpu, segment, hit), label in zip(rows, ("first", "again, --k-best 5"),
+                                                strict=True):
+        print(f"synth from speech alone ({what}), {label}: {wall:.2f} s wall, "
+              f"{cpu:.2f} s CPU, segment {segment:.2f} s"
+              f"{' (from the cache)' if hit else ''}")
+    print(f"the second run's share of the first: {rows[1][0] / rows[0][0]:.0%} wall, "
+          f"{rows[1][1] / rows[0][1]:.0%} CPU (target <= 20 %)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", type=Path, default=None)
@@ -215,6 +247,8 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=12)
     parser.add_argument("--kernels", action="store_true",
                         help="measure the numba kernels (fresh and warm cache, NumPy) instead")
+    parser.add_argument("--heard", action="store_true",
+                        help="measure a second synth of one recording (phones cached) instead")
     parser.add_argument("--no-bytecode", action="store_true",
                         help="keep PYTHONDONTWRITEBYTECODE if set (default: drop it)")
     args = parser.parse_args()
@@ -226,6 +260,9 @@ def main() -> None:
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} cores, load average "
           f"{os.getloadavg()[0]:.2f}; database {db}; median of {args.runs} warm runs; "
           f"bytecode {'not ' if _ENV.get('PYTHONDONTWRITEBYTECODE') else ''}cached")
+    if args.heard:
+        heard_report(db)
+        return
     if args.kernels:
         kernel_report(db, args.runs)
         print(f"load average at the end: {os.getloadavg()[0]:.2f}")

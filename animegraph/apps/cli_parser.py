@@ -222,7 +222,9 @@ def _add_ingest(sub) -> None:
         "captures: Live Link Face CSV; landmarks tracked from video: NPY, or the video "
         "itself) with their speech, segment them into phonemes and store them as "
         "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
-        "a bad clip is rejected with its reason while the others go in.",
+        "a bad clip is rejected with its reason while the others go in. Then the database "
+        "is made ready for its first synth: the default guides of audio-only synth fitted "
+        "and stored, the search kernels compiled once (see 'animegraph warmup').",
     )
     ing.add_argument("sources", nargs="+", type=Path, metavar="SRC",
                      help="clip files or folders")
