@@ -46,7 +46,12 @@ def _prepare(db, quiet: bool, wait: float | None, step: str = "") -> None:
     if not is_database(db):  # nothing went in (every clip rejected)
         return
     with writer_lock(db, wait=600.0 if wait is None else wait, what="database"):
-        prepare(db, (lambda line: None) if quiet else (lambda line: say(f"{step}{line}")))
+        try:
+            prepare(db, (lambda line: None) if quiet else (lambda line: say(f"{step}{line}")))
+        except KeyboardInterrupt:  # what is written stays: say what is not done
+            say(f"{db} is written; what was not fitted or compiled is left to the first "
+                "synth (or 'animegraph warmup')")
+            raise
 
 
 #: The columns of DuckDB's EXPLAIN (and EXPLAIN ANALYZE) result.
