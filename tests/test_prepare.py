@@ -62,7 +62,10 @@ def test_warmup_needs_a_database(tmp_path, capsys):
 
 @pytest.mark.parametrize("prepare", [True, False])
 def test_ingest_prepares_the_database_unless_told_not_to(tiny_corpus, tmp_path, capsys,
-                                                         prepare):
+                                                         prepare, monkeypatch):
+    from ingest.cache import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
     src = tmp_path / "src"
     src.mkdir()
     for path in sorted((tiny_corpus / "clips").glob("s0001_*_1.*")):
@@ -71,3 +74,7 @@ def test_ingest_prepares_the_database_unless_told_not_to(tiny_corpus, tmp_path, 
     argv = ["ingest", str(src), "--db", str(db), "--quiet"]
     assert main(argv + ([] if prepare else ["--no-prepare"])) == 0
     assert _decided(db) == dict.fromkeys(GUIDES, prepare)
+    # ppg-ridge's fit kept what hama heard of each clip (the refit after the next ingest
+    # hears only the clips it adds); ingest itself, given the phones, heard none.
+    kept = list((tmp_path / "cache" / "phones").glob("*.npy"))
+    assert len(kept) == (len(list(src.glob("*.wav"))) if prepare else 0)
