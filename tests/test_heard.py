@@ -149,3 +149,23 @@ def test_a_second_synth_of_a_recording_hears_no_phones_and_gives_the_same_motion
         assert sorted(a.files) == sorted(b.files)
         for name in a.files:
             np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_a_doubted_transcript_is_doubted_again_from_the_cache(cache):
+    """A transcript aligned with doubt (a look-alike, tests/test_ctc.py) is said again
+    when its segmentation comes from the cache, to whoever collects the doubts."""
+    from conftest import require_shared
+
+    from ingest.formats.media import read_audio
+
+    audio, rate = read_audio(require_shared("grid", "s1", "lbbk5s.mp4"))
+    other = "lay blue by y four please"
+    said = []
+    for _ in range(2):
+        with heard.remembered() as uses, ctc.doubts() as doubted:
+            segments, method, cached = heard.segment_once(audio, rate, text=other)
+        said.append((method, cached, list(doubted), segments))
+    assert uses.hits == 1 and [s[1] for s in said] == [False, True]
+    assert said[0][0] == said[1][0] == "aligned" and said[0][3] == said[1][3]
+    assert len(said[0][2]) == 1 and "fits the audio poorly" in said[0][2][0]
+    assert said[1][2] == said[0][2]

@@ -149,7 +149,7 @@ def segment_once(audio: np.ndarray, sample_rate: int, *, text: str | None = None
             else:
                 on_fallback(line)
         for line in doubts:
-            ctc._doubt(line)
+            ctc.doubt(line)
         return segments, method, True
     fallback: list[str] = []
 
@@ -164,7 +164,7 @@ def segment_once(audio: np.ndarray, sample_rate: int, *, text: str | None = None
         segments, method = segment(samples, sample_rate, text=text, engine=engine,
                                    on_fallback=fell_back)
     for line in doubted:  # said where the caller collects them, as segment would have
-        ctc._doubt(line)
+        ctc.doubt(line)
     uses.misses += 1
     _write(path, segments, method, fallback, doubted)
     return segments, method, False
