@@ -19,6 +19,25 @@ load than wall time, which on a loaded machine is several times a quiet one's):
 * the heaviest imports of ``synth`` by ``python -X importtime`` (cumulative), their sum,
   and which of the libraries a one-shot ``synth`` should not import it imported.
 
+With ``--kernels`` it measures the search's numba kernels instead
+(:mod:`animegraph.apps.prepare`, :mod:`animegraph.search.kernels`):
+
+* a fresh cache (``NUMBA_CACHE_DIR`` a new folder, a new process): what
+  ``animegraph warmup`` (and so ``ingest``) spends compiling them, in all and per kernel
+  (numba's compile events; a kernel's time includes the kernels it calls that were
+  compiled for it), wall and CPU time;
+* the same work in a new process on that now warm cache (the kernels loaded from disk);
+* the hot kernel against NumPy: Eq. 5's DTW as a vectorised NumPy row recurrence (each
+  row's horizontal steps a running minimum) against the compiled ``audio_costs`` on the
+  same curves (the NumPy version only accumulates, a lower bound of its cost).
+
+With ``--heard`` it measures phones heard once (:mod:`ingest.speech.heard`): an
+audio-only ``synth`` of that sentence (no phone labels beside it) in a fresh cache folder,
+then the same recording again with another option (``--k-best 5``), each a new process:
+wall, CPU and the reported segmentation time of both, and the second's share of the first
+(target: <= 20 %). The database's default guides are used if it has them stored, else
+``--guide none`` for both (a first fit would be timed, not the phones).
+
 To compare with another checkout, run this script with ``PYTHONPATH=THAT_CHECKOUT``.
 """
 
@@ -34,6 +53,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 from animegraph.apps.cache import default_database
 from db.store import is_database
@@ -110,11 +131,125 @@ def _imports(args: list[str], top: int):
     return sorted(rows, reverse=True)[:top], total, [h for h in HEAVY if h in names], names
 
 
+_KERNEL_CHILD = """
+import json, sys, time
+from pathlib import Path
+from numba.core import event
+
+class Recorder(event.Listener):
+    def __init__(self):
+        self.stack, self.rows = [], []
+    def on_start(self, ev):
+        self.stack.append((time.perf_counter(), time.process_time()))
+    def on_end(self, ev):
+        w0, c0 = self.stack.pop()
+        f = ev.data["dispatcher"].py_func
+        self.rows.append([f"{f.__module__.rsplit('.', 1)[-1]}.{f.__name__}", len(self.stack),
+                          time.perf_counter() - w0, time.process_time() - c0])
+
+rec = Recorder()
+event.register("numba:compile", rec)
+w0, c0 = time.perf_counter(), time.process_time()
+from animegraph.apps.prepare import compile_kernels
+import animegraph.search.kernels as kernels
+kernels.uncompiled_kernels = lambda method="exact": ["all"]  # run the work on a warm cache too
+compile_kernels(Path(sys.argv[1]))
+print(json.dumps({"wall": time.perf_counter() - w0, "cpu": time.process_time() - c0,
+                  "rows": rec.rows}))
+"""
+
+
+def _kernel_run(db: Path, cache: Path) -> dict:
+    import json
+
+    out = subprocess.run([sys.executable, "-c", _KERNEL_CHILD, str(db)], capture_output=True,
+                         text=True, env={**_ENV, "NUMBA_CACHE_DIR": str(cache)})
+    if out.returncode != 0:
+        sys.exit(f"bench_startup: the kernel run failed: {out.stderr.strip()[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _numpy_dtw_cost(x: np.ndarray, y: np.ndarray) -> float:
+    """Eq. 5's accumulated DTW cost (Euclidean frames, steps (1,0), (0,1), (1,1)) in NumPy:
+    each row's horizontal steps are a running minimum of ``b[k] - C[k]`` plus ``C[j]``."""
+    c = np.sqrt(((x[:, None, :] - y[None, :, :]) ** 2).sum(axis=2))  # (n, m)
+    prev = np.cumsum(c[0])
+    for i in range(1, len(x)):
+        best_above = np.minimum(prev, np.concatenate(([np.inf], prev[:-1])))
+        b = c[i] + best_above
+        run = np.cumsum(c[i])
+        prev = run + np.minimum.accumulate(b - run)
+    return float(prev[-1])
+
+
+def kernel_report(db: Path, repeats: int) -> None:
+    from animegraph.search.dtw import audio_costs
+
+    with tempfile.TemporaryDirectory() as tmp:
+        fresh = _kernel_run(db, Path(tmp))
+        warm = _kernel_run(db, Path(tmp))
+    print(f"kernels, fresh cache: {fresh['wall']:.1f} s wall, {fresh['cpu']:.1f} s CPU for "
+          f"the warm-up's synthesis (compiling {len(fresh['rows'])} kernel signatures)")
+    print(f"kernels, warm cache: {warm['wall']:.1f} s wall, {warm['cpu']:.1f} s CPU for the "
+          f"same work ({len(warm['rows'])} compiled)")
+    print("compile time per kernel (top level first; s wall / s CPU, including callees):")
+    for name, depth, wall, cpu in sorted(fresh["rows"], key=lambda r: (r[1], -r[3])):
+        print(f"  {'  ' * depth}{name:32s} {wall:7.2f} {cpu:7.2f}")
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((20, 9))
+    ys = [rng.standard_normal((int(m), 9)).astype(np.float32)
+          for m in rng.integers(10, 30, 200)]
+    offsets = np.concatenate([[0], np.cumsum([len(y) for y in ys])]).astype(np.int64)
+    values = np.concatenate(ys)
+    nodes = np.arange(len(ys))
+    audio_costs(x, values, offsets, nodes)  # compiled (cache) before timing
+    c0 = time.process_time()
+    for _ in range(repeats):
+        audio_costs(x, values, offsets, nodes)
+    compiled = (time.process_time() - c0) / repeats / len(ys)
+    c0 = time.process_time()
+    for y in ys:
+        _numpy_dtw_cost(x, y.astype(np.float64))
+    numpy_s = (time.process_time() - c0) / len(ys)
+    print(f"Eq. 5 DTW of a 20-frame phone against 10-30-frame animes: compiled "
+          f"{1e6 * compiled:.1f} us CPU a pair (audio_costs, {len(ys)} pairs a call), NumPy "
+          f"{1e6 * numpy_s:.1f} us a pair ({numpy_s / compiled:.0f} x): numba kept")
+
+
+def heard_report(db: Path) -> None:
+    from animegraph.apps.prepare import unfitted_note
+
+    guide = [] if unfitted_note(db) is None else ["--guide", "none"]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        utt = speak(SENTENCE, Voice())
+        write_wav(tmp / "speech.wav", utt.audio, utt.sample_rate)
+        env = {"ANIMEGRAPH_CACHE": str(tmp / "cache")}
+        base = ["synth", str(tmp / "speech.wav"), "--db", str(db), *guide]
+        rows = []
+        for extra in ([], ["--k-best", "5"]):
+            wall, cpu, err = _run([*base, *extra, "-o", str(tmp / "m.npz")], env)
+            segment = float(re.search(r"= segment ([\d.]+)", err).group(1))
+            rows.append((wall, cpu, segment, "phones heard before" in err))
+    what = f"{utt.duration:.1f} s" + (", " + " ".join(guide) if guide else "")
+    for (wall, cpu, segment, hit), label in zip(rows, ("first", "again, --k-best 5"),
+                                                strict=True):
+        print(f"synth from speech alone ({what}), {label}: {wall:.2f} s wall, "
+              f"{cpu:.2f} s CPU, segment {segment:.2f} s"
+              f"{' (from the cache)' if hit else ''}")
+    print(f"the second run's share of the first: {rows[1][0] / rows[0][0]:.0%} wall, "
+          f"{rows[1][1] / rows[0][1]:.0%} CPU (target <= 20 %)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", type=Path, default=None)
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--top", type=int, default=12)
+    parser.add_argument("--kernels", action="store_true",
+                        help="measure the numba kernels (fresh and warm cache, NumPy) instead")
+    parser.add_argument("--heard", action="store_true",
+                        help="measure a second synth of one recording (phones cached) instead")
     parser.add_argument("--no-bytecode", action="store_true",
                         help="keep PYTHONDONTWRITEBYTECODE if set (default: drop it)")
     args = parser.parse_args()
@@ -126,6 +261,13 @@ def main() -> None:
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} cores, load average "
           f"{os.getloadavg()[0]:.2f}; database {db}; median of {args.runs} warm runs; "
           f"bytecode {'not ' if _ENV.get('PYTHONDONTWRITEBYTECODE') else ''}cached")
+    if args.heard:
+        heard_report(db)
+        return
+    if args.kernels:
+        kernel_report(db, args.runs)
+        print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+        return
 
     (help_s, help_cpu, _), = _median(["--help"], args.runs)
     print(f"animegraph --help: {help_s:.2f} s wall, {help_cpu:.2f} s CPU (target <= 0.3 s)")

@@ -29,6 +29,8 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
     db = Database.open(default_db_dir())
     assert db.manifest["n_clips"] == len(plan_corpus(CorpusConfig()))
     assert "every one has matching animes" in first
+    # the guides of speech alone are not fitted by the demo: it says so, and how to
+    assert "fits its guides first (mu-mlp about" in first and "animegraph warmup" in first
     meta = json.loads((default_corpus_dir() / "corpus.json").read_text())
     assert meta["n_clips"] == len(plan_corpus(CorpusConfig()))
     assert meta["duration_s"] >= 300  # at least five minutes of speech

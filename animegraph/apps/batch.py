@@ -388,28 +388,12 @@ def warm_up(db: Path, methods: set[tuple[str, int | None]], *, align: bool = Fal
     Worker processes that compile and cache the same numba function at the same time can
     leave mismatched cache files and crash (numba issues #10128, #4807); after this they
     only load complete caches. One short eSpeak utterance is synthesized with each search
-    method used, force-aligned if any line has a recording, and both the serial and
-    the parallel audio-cost kernels are run.
+    method used, force-aligned if any line has a recording
+    (:func:`animegraph.apps.prepare.warm_kernels`).
     """
-    import numpy as np
+    from animegraph.apps.prepare import warm_kernels
 
-    from animegraph.search.dtw import audio_costs
-    from animegraph.synthesis import Model, synthesize
-    from ingest.formats.phones_csv import Segment
-    from ingest.speech.espeak import Voice, speak
-
-    model = Model.load(db)
-    utt = speak("Good morning, class.", Voice())
-    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
-    for method, window in sorted(methods, key=str):
-        out = synthesize(model, utt.audio, utt.sample_rate, labels=labels, method=method,
-                         window=window)
-    if align:
-        out = synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
-    g = model.graph
-    query = out.phones[len(out.phones) // 2].prosody.astype(np.float32)
-    for k in (2, min(g.n_nodes, 128)):
-        audio_costs(query, g.prosody_values, g.prosody_offsets, np.arange(k))
+    warm_kernels(db, methods, align=align)
 
 
 class EmotionCheck:

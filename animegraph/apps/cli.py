@@ -114,7 +114,7 @@ def _main(argv: Sequence[str] | None) -> int:
         _configure_logging(args.verbose)
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
-                             "batch, live, fit, sql, query, render, plot, classify, "
+                             "batch, live, fit, warmup, sql, query, render, plot, classify, "
                              "map-emotion, info, studio "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):

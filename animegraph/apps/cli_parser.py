@@ -18,6 +18,7 @@ from animegraph.apps.commands.database import (
     cmd_ingest,
     cmd_query,
     cmd_sql,
+    cmd_warmup,
 )
 from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
 from animegraph.apps.commands.live import cmd_live
@@ -163,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_classify(sub)
     _add_map_emotion(sub)
     _add_fit(sub)
+    _add_warmup(sub)
     _add_info(sub)
     _add_studio(sub)
     return parser
@@ -224,7 +226,9 @@ def _add_ingest(sub) -> None:
         "captures: Live Link Face CSV; landmarks tracked from video: NPY, or the video "
         "itself) with their speech, segment them into phonemes and store them as "
         "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
-        "a bad clip is rejected with its reason while the others go in.",
+        "a bad clip is rejected with its reason while the others go in. Then the database "
+        "is made ready for its first synth: the default guides of audio-only synth fitted "
+        "and stored, the search kernels compiled once (see 'animegraph warmup').",
     )
     ing.add_argument("sources", nargs="+", type=Path, metavar="SRC",
                      help="clip files or folders")
@@ -251,6 +255,9 @@ def _add_ingest(sub) -> None:
     ing.add_argument("--wait", type=_number, default=None,
                      help="seconds to wait for another ingest into the same --db to finish "
                      "(default 600); one writer at a time")
+    ing.add_argument("--no-prepare", action="store_true",
+                     help="leave fitting the default guides and compiling the search "
+                     "kernels to the first synth (or 'animegraph warmup')")
     ing.add_argument("--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=cmd_ingest)
 
@@ -617,6 +624,19 @@ def _add_live(sub) -> None:
                       help="keep what was sent in DIR: take.livelink.csv (or the database's "
                       "motion format) and take.wav")
     live.set_defaults(func=cmd_live)
+
+
+def _add_warmup(sub) -> None:
+    """``warmup``: a database ready for its first synth."""
+    warm = sub.add_parser(
+        "warmup", help="make a database ready for its first synth (ingest does this)",
+        description="Fit and store the default guides of audio-only synth (mu-mlp and "
+        "ppg-ridge) if the database lacks them, and compile the search kernels once for "
+        "this installation (numba caches them on disk), saying each step and its time; "
+        "nothing to do takes no time. 'animegraph ingest' does this after writing.",
+    )
+    _db_option(warm)
+    warm.set_defaults(func=cmd_warmup)
 
 
 def _add_info(sub) -> None:

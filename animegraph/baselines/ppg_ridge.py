@@ -38,6 +38,7 @@ no notion of emotion (``emotion`` is ignored) and needs ``hama`` (a core depende
 
 from __future__ import annotations
 
+import contextvars
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from typing import ClassVar
@@ -101,8 +102,12 @@ class PpgRidge(PpgForward, BaselineModel):
         # hama hears every clip whose posteriors ingest did not store (about 0.1 s a
         # second of speech, on one core a call): the clips on one thread per core, in
         # order, with a bar on a terminal.
+        # Each clip in a copy of this context: a pool's threads do not inherit it, and
+        # hama keeps its outputs on disk only where the caller asked (ctc.kept_on_disk).
+        jobs = [(contextvars.copy_context(), sample) for sample in samples]
         with ThreadPoolExecutor(usable_cpus(), thread_name_prefix="ppg-ridge") as pool:
-            x = list(tqdm(pool.map(features, samples), total=len(samples), unit="clip",
+            x = list(tqdm(pool.map(lambda job: job[0].run(features, job[1]), jobs),
+                          total=len(samples), unit="clip",
                           desc="ppg-ridge: phone posteriors", leave=False, disable=None,
                           file=sys.stderr, dynamic_ncols=True))
         x, y = np.concatenate(x), np.concatenate([motion for _, _, motion in samples])

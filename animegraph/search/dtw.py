@@ -41,6 +41,7 @@ function validates its arguments first.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from numbers import Integral
 
@@ -62,9 +63,10 @@ AUDIO_METRICS = {"euclidean": 0, "neglog-dot": 2}
 #: posteriorgram frames with no phone in common still have a finite distance.
 _DOT_FLOOR = 1e-10
 
-#: ``audio_costs_many`` runs in parallel (numba ``prange``) from this many nodes on, when numba
-#: has more than one thread. On 2 cores (OpenMP layer) parallel breaks even at ~10 nodes
-#: and is 1.6-1.8x faster from ~50 on; the margin keeps tiny batches off the thread pool.
+#: ``audio_costs_many`` runs in parallel (threads) from this many nodes on, when numba
+#: has more than one thread (``numba.get_num_threads()``, which ingest's workers divide).
+#: On 2 cores parallel broke even at ~10 nodes and was 1.6-1.8x faster from ~50 on
+#: (``scripts/bench_dtw.py``); the margin keeps tiny batches serial.
 #: (Pairs: an utterance's phones x candidates.)
 _PARALLEL_MIN_NODES = 64
 
@@ -314,20 +316,6 @@ def _pairs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metri
             out[t] = _audio_cost_one(xt, y, band, metric, acc, c, total)
 
 
-@_jit(parallel=True)
-def _pairs_parallel(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric, n_chunks,
-                    out, warps):
-    # Chunks of pairs, not pairs, in parallel: one workspace per chunk, and one parallel
-    # region for a whole utterance (a region per phone cost more in thread wake-ups than
-    # the work on a loaded 2-core machine). (numba.get_num_threads() is not called in
-    # here: it would make the function uncachable.)
-    n_pairs = nodes.shape[0]
-    for chunk in numba.prange(n_chunks):
-        _pairs_range(xs, x_off, values, offsets, inputs, nodes, max_len, band, metric,
-                     chunk * n_pairs // n_chunks, (chunk + 1) * n_pairs // n_chunks, out,
-                     warps)
-
-
 @_jit()
 def _first_nonfinite(values, offsets, nodes):
     """Index into ``nodes`` of the first node whose curve is not finite, else -1."""
@@ -554,7 +542,7 @@ def audio_costs_many(c_inputs: Sequence[np.ndarray], values: np.ndarray, offsets
     """Audio costs of Eq. 5 for every input phone against its candidate nodes.
 
     The search's hot path: one compiled loop over all (phone, node) pairs of an
-    utterance, in parallel (numba ``prange``) from ``_PARALLEL_MIN_NODES`` pairs on, with
+    utterance, in parallel (threads) from ``_PARALLEL_MIN_NODES`` pairs on, with
     the curves in the graph's ragged layout. Only the curves of ``nodes`` are read (and
     checked for NaN/inf).
 
@@ -651,10 +639,20 @@ def _run_pairs(c_inputs, values, offsets, nodes, band, code):
         xs_all = np.ascontiguousarray(np.concatenate(xs).T)
         inputs = np.repeat(np.arange(len(xs), dtype=np.int64), sizes)
         max_len = int(np.diff(offsets)[flat].max())
-        if len(flat) >= _PARALLEL_MIN_NODES and numba.get_num_threads() > 1:
-            n_chunks = min(len(flat), 8 * numba.get_num_threads())
-            _pairs_parallel(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
-                            n_chunks, out, warps)
+        threads = numba.get_num_threads() if len(flat) >= _PARALLEL_MIN_NODES else 1
+        if threads > 1:
+            # Chunks of pairs on Python threads (the kernel releases the GIL), each chunk
+            # writing its own rows of ``out``/``warps``; several chunks a thread even out
+            # pairs of unequal length. Not numba's prange: a parallel kernel took ~5 s
+            # CPU more to compile at first use (scripts/bench_startup.py --kernels).
+            cuts = np.linspace(0, len(flat), min(len(flat), 4 * threads) + 1).astype(np.int64)
+
+            def chunk(k: int) -> None:
+                _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
+                             code, cuts[k], cuts[k + 1], out, warps)
+
+            with ThreadPoolExecutor(threads, thread_name_prefix="dtw") as pool:
+                list(pool.map(chunk, range(len(cuts) - 1)))
         else:
             _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
                          0, len(flat), out, warps)

@@ -1,9 +1,12 @@
 """Whether the search's numba kernels are compiled yet (they are cached on disk once).
 
-The first synthesis in a fresh environment compiles every kernel of the search (about a
-minute on two cores, ``docs/results/speed.md``, "Start-up"); later runs load them
-from numba's cache (``__pycache__/*.nbi`` beside each module). Commands say so before
-that first minute instead of going silent.
+The first synthesis in a fresh environment compiles every kernel of the search (28 CPU-s
+for synth's default path, the exact and the paper's search, ``scripts/bench_startup.py
+--kernels``; NumPy is no substitute: its DTW, a vectorised row recurrence, is 14 times slower
+there); later runs load them from numba's cache (``__pycache__/*.nbi`` beside each
+module) in a few seconds. ``animegraph ingest`` and ``animegraph warmup`` compile them
+ahead (:mod:`animegraph.apps.prepare`); a command that meets them uncompiled says so
+before that half minute instead of going silent.
 """
 
 from __future__ import annotations
@@ -19,9 +22,9 @@ KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree"),
 #: and tests (synthesis warps every anime in one compiled pass). Counted, they were never
 #: cached by a synthesis, and every ``synth`` announced a minute's compilation.
 NOT_IN_SYNTHESIS = frozenset({"dtw._dtw_path"})
-#: What the one-off compilation takes, for the message (measured: docs/results/speed.md,
-#: "Start-up").
-COMPILE_NOTE = "about a minute on two cores"
+#: What the one-off compilation takes, for the message (28 CPU-s, measured by
+#: ``scripts/bench_startup.py --kernels``; a loaded machine takes longer).
+COMPILE_NOTE = "about half a minute on a quiet machine"
 
 
 def kernel_caches(method: str = "exact") -> list[tuple[str, Path]]:

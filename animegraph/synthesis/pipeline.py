@@ -57,6 +57,7 @@ from ingest.formats.phones_csv import Segment
 from ingest.lowpass import smooth
 from ingest.speech import ctc
 from ingest.speech.features import RastaPlpConfig, rasta_plp, slice_frames
+from ingest.speech.heard import segment_once
 from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.posteriorgram import compute as compute_posteriorgram
 from ingest.speech.quality import assess, is_silent, warnings_for
@@ -302,8 +303,11 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
     if audio.ndim != 1:
         raise ParameterError(f"audio must be mono (n_samples,), got shape {audio.shape}")
     check_not_silent(audio)
-    segments, method = segment(audio, sample_rate, text=text, labels=labels, engine=engine,
-                               on_fallback=on_fallback)
+    if labels is None:  # heard once within heard.remembered() (a command's synthesis)
+        segments, method, _ = segment_once(audio, sample_rate, text=text, engine=engine,
+                                           on_fallback=on_fallback)
+    else:
+        segments, method = segment(audio, sample_rate, labels=labels, engine=engine)
     if all(s.phone == "SIL" for s in segments):
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()

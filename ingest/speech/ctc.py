@@ -102,6 +102,7 @@ __all__ = [
     "align",
     "available",
     "check_transcript",
+    "doubt",
     "doubts",
     "phone_share",
     "posteriors",
@@ -613,7 +614,7 @@ def _fit_transcript(samples16: np.ndarray, text: str, *, check: bool = True,
         raise DataError(f"the transcript {text[:60]!r} does not match the audio (it names "
                         f"{len(phones)} phones, the audio has about {heard}: words missing?)")
     if check and loss > DOUBT_ALIGN_LOSS:
-        _doubt(f"the transcript {text[:60]!r} fits the audio poorly (alignment {loss:.2f} "
+        doubt(f"the transcript {text[:60]!r} fits the audio poorly (alignment {loss:.2f} "
                "nats/frame below recognition): is it this recording's? (much room echo "
                "can also do this)")
     return phones, labels, starts, log_probs, loss
@@ -637,7 +638,9 @@ def doubts() -> Iterator[list[str]]:
         _DOUBTS.reset(token)
 
 
-def _doubt(line: str) -> None:
+def doubt(line: str) -> None:
+    """Say a doubted transcript's ``line``: to the :func:`doubts` block around this call,
+    else as a warning (also what :mod:`ingest.speech.heard` says again from its cache)."""
     found = _DOUBTS.get()
     if found is None:
         logger.warning("%s", line)

@@ -46,4 +46,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
                       progress=demo_progress, say=print)
     for line in result.report():
         print(line)
+    from animegraph.apps.prepare import unfitted_note
+
+    # the demo's own sentence has its phones and needs no guide: said, not fitted
+    note = unfitted_note(result.db) if result.db is not None else None
+    if note:
+        print(note)
     return 0

@@ -31,7 +31,27 @@ def cmd_ingest(args: argparse.Namespace) -> int:
                     say=None if args.quiet else say, **wait)
     for line in report.lines():
         print(line)
+    if not args.no_prepare:
+        _prepare(args.db, args.quiet, args.wait, "ingest: ")
     return 1 if report.count("rejected") else 0
+
+
+def _prepare(db, quiet: bool, wait: float | None, step: str = "") -> None:
+    """The database ready for its first synth (:mod:`animegraph.apps.prepare`), under its
+    writer lock: the guides are fitted on the version they are stored with."""
+    from animegraph.apps.prepare import prepare
+    from db.lock import writer_lock
+    from db.store import is_database
+
+    if not is_database(db):  # nothing went in (every clip rejected)
+        return
+    with writer_lock(db, wait=600.0 if wait is None else wait, what="database"):
+        try:
+            prepare(db, (lambda line: None) if quiet else (lambda line: say(f"{step}{line}")))
+        except KeyboardInterrupt:  # what is written stays: say what is not done
+            say(f"{db} is written; what was not fitted or compiled is left to the first "
+                "synth (or 'animegraph warmup')")
+            raise
 
 
 #: The columns of DuckDB's EXPLAIN (and EXPLAIN ANALYZE) result.
@@ -123,6 +143,20 @@ def cmd_fit(args: argparse.Namespace) -> int:
     fitted_model(args.db, args.method, refit=True)
     print(f"fitted {args.method} on {args.db} in {time.perf_counter() - t0:.1f} s; stored "
           f"{model_path(args.db, args.method)}")
+    return 0
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    import time
+
+    from db.errors import DataError
+    from db.store import is_database
+
+    if not is_database(args.db):
+        raise DataError(f"no database at {args.db}")
+    t0 = time.perf_counter()
+    _prepare(args.db, False, 0.0)
+    print(f"{args.db} is ready for synth ({time.perf_counter() - t0:.1f} s)")
     return 0
 
 

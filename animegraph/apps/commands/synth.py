@@ -25,6 +25,13 @@ from animegraph.apps.commands.synth_plan import (
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    from ingest.speech.heard import remembered
+
+    with remembered() as heard:  # a recording's phones found once, whatever options follow
+        return _synth(args, heard)
+
+
+def _synth(args: argparse.Namespace, heard) -> int:
     import time
 
     import numpy as np
@@ -134,7 +141,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     write_motion(out, model, args.output, timecode=args.timecode)
     for line in _emotion_lines(out.emotion) + list(out.notes):
         print(f"animegraph: {line}", file=sys.stderr)
-    print(f"animegraph: {_summary(out, k_best)}; wrote {args.output}", file=sys.stderr)
+    print(f"animegraph: {_summary(out, k_best, heard.hits)}; wrote {args.output}",
+          file=sys.stderr)
     missing = backoffs(out)
     if missing:
         print(f"animegraph: phones missing from the database, backed off: "
@@ -199,13 +207,15 @@ def _emotion_lines(emotion) -> list[str]:
     return []
 
 
-def _summary(out, k_best: int | None) -> str:
-    """The line of phones, jumps, cost and time that ends a synthesis."""
+def _summary(out, k_best: int | None, heard_before: int = 0) -> str:
+    """The line of phones, jumps, cost and time that ends a synthesis (``heard_before``:
+    the phones were read from the cache, :mod:`ingest.speech.heard`)."""
     r, t = out.result, out.timings
     line = (f"{len(out.phones)} phone{'s' * (len(out.phones) != 1)} "
             f"({out.segmentation}), {r.n_jumps} jump match{'es' * (r.n_jumps != 1)}, cost "
             f"{r.cost:.3f} ({r.method}, {r.n_expanded} expansion{'s' * (r.n_expanded != 1)}); "
-            f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f} + audio cost "
+            f"{t['total_s']:.2f} s = segment {t['segment_s']:.2f}"
+            f"{' (phones heard before, from the cache)' if heard_before else ''} + audio cost "
             f"{t['audio_cost_s']:.2f} + search {t['search_s']:.3f} + post {t['post_s']:.2f}")
     if k_best:
         joined = ("cross-faded into its neighbours through the recorded transitions"

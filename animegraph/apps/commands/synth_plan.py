@@ -103,8 +103,12 @@ def load_guide(db, name: str | None, *, asked: bool = True):
     from animegraph.baselines.base import fitted_model, load_model
 
     if not model_path(db, name).is_file() or load_model(db, name) is None:
-        print(f"animegraph: fitting {name} on {db} to guide the motion (first use; "
-              f"stored with the database) ...", file=sys.stderr)
+        from animegraph.apps.prepare import fit_estimate
+
+        how_long = fit_estimate(db, name)  # said once: stored, it is not fitted again
+        print(f"animegraph: fitting {name} on {db} to guide the motion (first use"
+              f"{', ' + how_long if how_long else ''}; stored with the database; "
+              "'animegraph warmup' or ingest does it ahead) ...", file=sys.stderr)
     if asked:
         return fitted_model(db, name)
     try:

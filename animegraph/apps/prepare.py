@@ -1,0 +1,187 @@
+"""Ready before first use: what a database's first ``synth`` would otherwise do itself.
+
+A fresh database lacks two things its first audio-only ``synth`` needs: the default
+guides (:data:`animegraph.synthesis.path.AUDIO_ONLY_GUIDE`, fitted on the database and
+stored with its version) and, in a fresh environment, the search's numba kernels
+compiled and cached on disk (:mod:`animegraph.search.kernels`). Fitted inside that
+``synth`` they cost minutes (GRID s1: mu-mlp 121 s, ppg-ridge 277 s, the kernels about
+a minute on two cores). ``animegraph ingest`` does both once the database is written,
+and ``animegraph warmup`` does them on demand; each step is said with its time.
+
+The guides are fitted with hama's outputs kept in the cache folder
+(:func:`ingest.speech.ctc.kept_on_disk`), so the refit after the next ingest (a new
+version, every clip again) hears only the clips it added: on the demo's database
+(16.5 min of speech, 2 busy cores) ppg-ridge took 76.6 CPU-s the first time and 13.3
+CPU-s again; mu-mlp about 10 CPU-s each time.
+
+Data flows ``ingest`` -> ``db`` -> ``animegraph``: ingest does not know the guides, so
+the command line's ``ingest`` calls :func:`prepare` after :func:`ingest.pipeline.ingest`
+returns, holding the database's writer lock throughout, so the models are fitted on
+the version they are stored under.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from db.errors import AnimeGraphError
+
+__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare", "unfitted_note",
+           "warm_kernels"]
+
+#: The sentence whose synthesis compiles the kernels (short: its phones cost nothing).
+WARM_SENTENCE = "Good morning, class."
+#: CPU seconds a default guide's fit takes per minute of the database's speech: ``animegraph
+#: fit`` on the demo's database (16.5 min of speech, no stored posteriorgrams, so hama
+#: hears every clip for ppg-ridge, on one thread a core), 2 cores: mu-mlp 12 CPU-s,
+#: ppg-ridge 73 CPU-s (``scripts/bench_guide_fit.py``).
+FIT_CPU_S_PER_MIN = {"mu-mlp": 0.75, "ppg-ridge": 4.5}
+#: The fits that spread over the cores (ppg-ridge's hama, one clip a thread).
+_THREADED = frozenset({"ppg-ridge"})
+
+
+def fit_estimate(db: Path, name: str) -> str:
+    """About how long fitting the guide ``name`` on ``db`` takes here, for a message
+    (``"about 40 s"``; empty if unknown)."""
+    from db.store import Database
+    from db.system import usable_cpus
+
+    try:
+        minutes = float(Database.open(db).manifest["duration_s"]) / 60
+    except (AnimeGraphError, OSError, KeyError, TypeError, ValueError):
+        return ""
+    seconds = FIT_CPU_S_PER_MIN.get(name, 0.0) * minutes
+    if name in _THREADED:
+        seconds /= max(1, usable_cpus())
+    if seconds <= 0:
+        return ""
+    return (f"about {max(seconds, 1):.0f} s" if seconds < 90
+            else f"about {seconds / 60:.0f} min") + " on a quiet machine"
+
+
+def _quiet(line: str) -> None:
+    pass
+
+
+def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str]:
+    """Fit and store every default guide the live version of ``db`` lacks.
+
+    A guide that cannot be fitted (too little data, say) is kept as unfit with its
+    reason (:func:`animegraph.baselines.stored.record_unfit`), as ``synth`` would, so
+    that ``synth`` says why instead of trying again.
+
+    Returns
+    -------
+    dict
+        Guide name -> ``"stored"`` (there already), ``"fitted"`` or the reason it is not.
+    """
+    from animegraph.baselines.stored import load_forward, record_unfit, unfit_reason
+    from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
+
+    done = {}
+    for name in (AUDIO_ONLY_GUIDE or "").split("+"):
+        if not name:
+            continue
+        try:
+            stored = load_forward(db, name) is not None
+        except AnimeGraphError:  # unreadable or foreign: fitted again and replaced
+            stored = False
+        if stored:
+            done[name] = "stored"
+            continue
+        reason = unfit_reason(db, name)
+        if reason is not None:
+            done[name] = reason
+            continue
+        from animegraph.baselines.base import fitted_model
+        from ingest.speech import ctc
+
+        how_long = fit_estimate(db, name)
+        say(f"fitting the {name} guide of audio-only synth ({how_long + '; ' if how_long else ''}"
+            "stored with the database) ...")
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            # hama's outputs kept in the cache as ingest keeps them: the refit after the
+            # next ingest (a new version) hears only the clips it added.
+            with ctc.kept_on_disk():
+                fitted_model(db, name, refit=True)
+        except (AnimeGraphError, OSError) as exc:
+            say(f"warning: no {name} guide ({exc})")
+            record_unfit(db, name, str(exc))
+            done[name] = str(exc)
+            continue
+        say(f"fitted {name} in {time.perf_counter() - t0:.1f} s "
+            f"({time.process_time() - c0:.1f} s CPU)")
+        done[name] = "fitted"
+    return done
+
+
+def unfitted_note(db: Path) -> str | None:
+    """A line saying which default guides ``db`` lacks and how long the first audio-only
+    ``synth`` will spend fitting them (None if none is missing): for commands that build
+    a database without fitting them (``demo``, whose own sentence has its phones)."""
+    from animegraph.baselines.stored import model_path, unfit_reason
+    from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
+
+    missing = [name for name in (AUDIO_ONLY_GUIDE or "").split("+") if name
+               and not model_path(db, name).is_file() and unfit_reason(db, name) is None]
+    if not missing:
+        return None
+    times = ", ".join(f"{name} {fit_estimate(db, name) or 'unknown time'}" for name in missing)
+    return (f"the first synth from speech alone on {db} fits its guides first ({times}); "
+            f"'animegraph warmup --db {db}' does it now")
+
+
+def compile_kernels(db: Path, say: Callable[[str], object] = _quiet) -> list[str]:
+    """Compile and cache the search kernels ``synth`` runs, if any are not yet
+    (:func:`warm_kernels`). Returns the kernels that were missing (empty: nothing done)."""
+    from animegraph.search.kernels import COMPILE_NOTE, uncompiled_kernels
+
+    missing = sorted(set(uncompiled_kernels("exact")) | set(uncompiled_kernels("paper")))
+    if not missing:
+        return []
+    say(f"compiling the search kernels once ({len(missing)} to go, {COMPILE_NOTE}; cached "
+        "for every later synth) ...")
+    t0, c0 = time.perf_counter(), time.process_time()
+    warm_kernels(db)
+    say(f"compiled the search kernels in {time.perf_counter() - t0:.1f} s "
+        f"({time.process_time() - c0:.1f} s CPU)")
+    return missing
+
+
+def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *,
+                 align: bool = False) -> None:
+    """Compile (and cache) the numba kernels synthesis runs, in this process.
+
+    One short eSpeak NG sentence is synthesized against ``db`` with its phone labels: by
+    each ``(method, window)`` of ``methods``, or by default along ``synth``'s default
+    path (k-best), the paper's exact search and its original search; with ``align`` also
+    from its transcript (forced alignment). A synthesis scores enough pairs for the
+    audio cost's threaded path (it runs the same kernel as the serial one).
+    """
+    from animegraph.synthesis import Model, synthesize
+    from animegraph.synthesis.path import synthesis_path
+    from ingest.formats.phones_csv import Segment
+    from ingest.speech.espeak import Voice, speak
+
+    model = Model.load(db)
+    utt = speak(WARM_SENTENCE, Voice())
+    labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
+    if methods is None:
+        k_best, _ = synthesis_path("labels", known_phones=True)  # synth's default path
+        runs = [{"k_best": k_best}, {"method": "exact"}, {"method": "paper"}]
+    else:
+        runs = [{"method": m, "window": w} for m, w in sorted(methods, key=str)]
+    for options in runs:
+        synthesize(model, utt.audio, utt.sample_rate, labels=labels, **options)
+    if align:
+        synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
+
+
+def prepare(db: Path, say: Callable[[str], object] = _quiet) -> None:
+    """:func:`fit_guides`, then :func:`compile_kernels`: ``db`` ready for its first
+    ``synth``."""
+    fit_guides(db, say)
+    compile_kernels(db, say)

@@ -1,0 +1,80 @@
+"""A database ready for its first synth: ``ingest`` and ``warmup`` fit the default guides
+(:mod:`animegraph.apps.prepare`), so an audio-only ``synth`` fits nothing itself."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from animegraph.apps.cli import main
+from animegraph.apps.prepare import unfitted_note
+from animegraph.baselines.stored import load_forward, model_path, unfit_reason
+from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
+
+GUIDES = AUDIO_ONLY_GUIDE.split("+")
+
+
+def _decided(db) -> dict[str, bool]:
+    """Per default guide: whether the database has it stored or knows why it has not."""
+    return {name: load_forward(db, name) is not None or unfit_reason(db, name) is not None
+            for name in GUIDES}
+
+
+@pytest.fixture()
+def db_copy(tiny_db, tmp_path):
+    path = tmp_path / "db"
+    shutil.copytree(tiny_db[0], path)
+    shutil.rmtree(path / "baselines", ignore_errors=True)  # as ingest left it
+    return path
+
+
+def test_warmup_fits_the_guides_once_and_synth_then_fits_nothing(db_copy, tiny_corpus,
+                                                                 tmp_path, capsys):
+    assert _decided(db_copy) == dict.fromkeys(GUIDES, False)
+    note = unfitted_note(db_copy)  # what the demo says of the database it built
+    assert all(f"{name} about " in note for name in GUIDES) and "animegraph warmup" in note
+    assert main(["warmup", "--db", str(db_copy)]) == 0
+    err = capsys.readouterr().err
+    for name in GUIDES:
+        assert f"fitting the {name} guide of audio-only synth (about " in err
+    assert _decided(db_copy) == dict.fromkeys(GUIDES, True)
+    stored = {name: model_path(db_copy, name).stat().st_mtime_ns for name in GUIDES
+              if model_path(db_copy, name).is_file()}
+    assert stored  # the tiny database has enough for at least one
+    assert unfitted_note(db_copy) is None
+    assert main(["warmup", "--db", str(db_copy)]) == 0  # nothing left to do
+    out = capsys.readouterr()
+    assert "fitting" not in out.err and "is ready for synth" in out.out
+    wav = tmp_path / "speech.wav"  # away from its phone labels: speech alone
+    shutil.copy(tiny_corpus / "clips" / "s0001_angry_1.wav", wav)
+    assert main(["synth", str(wav), "--db", str(db_copy), "-o", str(tmp_path / "m.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "(recognized)" in err
+    assert not [name for name in GUIDES if f"fitting {name} on" in err]
+    assert {name: model_path(db_copy, name).stat().st_mtime_ns for name in stored} == stored
+
+
+def test_warmup_needs_a_database(tmp_path, capsys):
+    assert main(["warmup", "--db", str(tmp_path / "none")]) == 1
+    assert "no database at" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("prepare", [True, False])
+def test_ingest_prepares_the_database_unless_told_not_to(tiny_corpus, tmp_path, capsys,
+                                                         prepare, monkeypatch):
+    from ingest.cache import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    src = tmp_path / "src"
+    src.mkdir()
+    for path in sorted((tiny_corpus / "clips").glob("s0001_*_1.*")):
+        shutil.copy(path, src)
+    db = tmp_path / "db"
+    argv = ["ingest", str(src), "--db", str(db), "--quiet"]
+    assert main(argv + ([] if prepare else ["--no-prepare"])) == 0
+    assert _decided(db) == dict.fromkeys(GUIDES, prepare)
+    # ppg-ridge's fit kept what hama heard of each clip (the refit after the next ingest
+    # hears only the clips it adds); ingest itself, given the phones, heard none.
+    kept = list((tmp_path / "cache" / "phones").glob("*.npy"))
+    assert len(kept) == (len(list(src.glob("*.wav"))) if prepare else 0)
