@@ -38,7 +38,7 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 
 from db.errors import DataError, ParameterError
-from db.store import PARTITIONED, TABLES, Database
+from db.store import TABLES, Database
 
 #: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
 ROW_LIMIT = 100_000
@@ -56,6 +56,8 @@ _ALLOWED = {duckdb.StatementType.SELECT}
 #: DuckDB's words for a table, and for a column, that a query names and no table has.
 _NO_TABLE = re.compile(r"Table with name (\S+) does not exist")
 _NO_COLUMN = re.compile(r'(?:Referenced column|does not have a column named|Column) "([^"]+)"')
+#: DuckDB's words when the Arrow scan of a table failed (pyarrow could not read a file).
+_SCAN_FAILED = re.compile(r"reading the stream registered as '(\w+)' failed: (.*)")
 _EXPLAIN = re.compile(r"^\s*EXPLAIN\s+(?:ANALY[SZ]E\s+|\([^)]*\)\s*)?", re.IGNORECASE)
 
 
@@ -107,14 +109,12 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
 
 
 def _dataset(db: Database, name: str) -> ds.Dataset:
-    partitioning = "hive" if name in PARTITIONED else None
     db.check_rows(name)  # a crafted file is refused before DuckDB scans it
     try:
-        dataset = ds.dataset(db.table_path(name), format="parquet", partitioning=partitioning)
+        dataset = db.dataset(name)  # its pages' checksums verified as DuckDB scans them
         wide = _without_float16(dataset.schema)
         if wide is not dataset.schema:  # DuckDB reads no half floats: scanned as float32
-            dataset = ds.dataset(db.table_path(name), format="parquet",
-                                 partitioning=partitioning, schema=wide)
+            dataset = db.dataset(name, schema=wide)
         return dataset
     except (OSError, pa.ArrowException) as exc:
         raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
@@ -216,6 +216,9 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
                                  f"--timeout)") from None
         except duckdb.Error as exc:
+            scan = _SCAN_FAILED.search(_first_line(exc))
+            if scan is not None and scan.group(1) in TABLES:  # the files, not the query
+                raise db.damaged(scan.group(1), f"cannot be read: {scan.group(2)}") from None
             raise ParameterError(f"query failed: {_failure(con, exc)}") from None
         except OSError as exc:
             raise DataError(f"database {db.root} could not be read: {exc}") from exc
