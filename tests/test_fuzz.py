@@ -65,6 +65,11 @@ def test_export_of_a_crafted_database_stays_in_its_folder_or_is_one_line(tiny_db
 
     path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
     db = Database.open(path)
+    try:
+        run_query(db, QuerySpec(limit=None))
+    except DataError as exc:  # refused before any export: its footers say the damage
+        assert "\n" not in str(exc).strip() and str(path) in str(exc), str(exc)
+        return
     live = path / (path / "CURRENT").read_text().strip()
     # the damaged rows: the first of the first part of animes, clips and audio
     first = {name: pq.read_table(sorted((live / name).rglob("*.parquet"))[0],
