@@ -383,7 +383,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
                      "0 with --guide-rank: ranking only)")
     syn.add_argument("--guide-rank", action="store_true",
                      help="also rank each phone's animes by their distance to the guide's "
-                     "motion beside the audio cost (trajectory-guided selection)")
+                     "motion beside the audio cost (trajectory-guided selection; it helped "
+                     "within one speaker, not across speakers: off by default)")
 
 
 def _add_batch(sub) -> None:
