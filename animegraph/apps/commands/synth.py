@@ -254,7 +254,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from animegraph.baselines.base import fitted_model
+    from animegraph.baselines.base import fitted_model, fitting_line, load_model
     from animegraph.emotion.control import AUTO, check_names, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
@@ -294,6 +294,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                           .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     t0 = time.perf_counter()
+    if args.refit or load_model(args.db, args.method) is None:  # minutes, once: said
+        print(f"animegraph: {fitting_line(args.method, args.db)}", file=sys.stderr)
     model = fitted_model(args.db, args.method, refit=args.refit)
     t1 = time.perf_counter()
     motion = model.predict(audio, sample_rate, emotion=emotion)

@@ -100,11 +100,10 @@ def load_guide(db, name: str | None, *, asked: bool = True):
         print(f"animegraph: warning: no {name} guide ({reason}; kept from an earlier run, "
               f"--guide {name} to try again)", file=sys.stderr)
         return None
-    from animegraph.baselines.base import fitted_model, load_model
+    from animegraph.baselines.base import fitted_model, fitting_line, load_model
 
     if not model_path(db, name).is_file() or load_model(db, name) is None:
-        print(f"animegraph: fitting {name} on {db} to guide the motion (first use; "
-              f"stored with the database) ...", file=sys.stderr)
+        print(f"animegraph: {fitting_line(name, db, ' to guide the motion')}", file=sys.stderr)
     if asked:
         return fitted_model(db, name)
     try:
