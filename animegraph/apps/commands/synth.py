@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from animegraph.apps.commands.common import (
     UsageError,
@@ -41,7 +42,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     )
     from animegraph.synthesis.guide import guide_names
     from ingest.formats.media import read_audio
-    from ingest.readers.common import read_labels
+    from ingest.readers.common import read_labels_for
 
     check_motion_suffix("synth", args.output)
     _check_timecode(args)
@@ -77,7 +78,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if sidecar is not None:
         print(f"animegraph: using the phone labels beside the speech, {sidecar} "
               "(--labels or --text to use others)", file=sys.stderr)
-    labels = read_labels(args.labels) if args.labels else None
+    # A GRID word alignment (.align) too, as ingest reads it (phones aligned in its words).
+    labels = (read_labels_for(Path(args.labels), audio if np.ndim(audio) == 1
+                              else np.mean(audio, axis=1), sample_rate)
+              if args.labels else None)
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
