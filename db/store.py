@@ -228,7 +228,7 @@ def dictionary_columns(table: pa.Table) -> list[str]:
     lists (motion, prosody and posteriors, whose values hardly repeat) and binary ones (a
     clip's speech). A dictionary tried on them is given up page by page, after the work:
     the 800 GRID clips' frames took 7.3 s to write as 461 MB with it, 2.1 s as 325 MB
-    without (``docs/results.md``, session 15). The speech of every clip in one dictionary
+    without (``docs/results/speed.md``, "Ingest"). The speech of every clip in one dictionary
     page made a reader read all of it to bound its size (:meth:`Database.check_rows`)."""
     return [f.name for f in table.schema
             if not (pa.types.is_floating(f.type) or pa.types.is_list(f.type)

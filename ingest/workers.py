@@ -15,7 +15,7 @@
 * Each worker's native thread pools (BLAS, OpenMP, numba) get the cores divided among
   the workers. Left at their default, every worker's BLAS starts a thread per core and
   the threads of all workers spin for the same cores: ingesting GRID's 800 clips on 2
-  cores took 90 s to read the clips instead of 40 (``docs/results.md``, session 15).
+  cores took 90 s to read the clips instead of 45 (``docs/results/speed.md``, "Ingest").
 """
 
 from __future__ import annotations

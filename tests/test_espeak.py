@@ -6,7 +6,6 @@ import logging
 import multiprocessing
 import re
 import threading
-import time
 from pathlib import Path
 
 import librosa
@@ -16,7 +15,6 @@ import pytest
 from db.errors import DataError, ParameterError
 from ingest.speech.espeak import (
     _LOCK,
-    ESPEAK_TO_ARPABET,
     SYLLABIC_SPLIT,
     VOWEL_SPLIT,
     PhoneSegment,
@@ -24,9 +22,9 @@ from ingest.speech.espeak import (
     Voice,
     _engine,
     _spans,
-    map_mnemonic,
     speak,
 )
+from ingest.speech.espeak_phones import ESPEAK_TO_ARPABET, map_mnemonic
 from ingest.speech.phones import PHONE_SET, VOWELS
 
 SENTENCE = "Hello there. How are you today? I hope the weather is nice where you are, my friend."
@@ -348,19 +346,6 @@ def test_worker_processes(method):
         got = pool.apply(speak, (SENTENCE,))
     np.testing.assert_array_equal(got.audio, expected.audio)
     assert got.phones == expected.phones
-
-
-def test_fast_enough():
-    text = "The quick brown fox jumps over the lazy dog near the river."  # 11 words
-    speak(text)
-    best = min(_timed(lambda: speak(text)) for _ in range(5))
-    assert best < 0.1  # measured about 9 ms
-
-
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
 
 
 # --- errors ---------------------------------------------------------------------------------

@@ -6,8 +6,6 @@ The thresholds were measured on this implementation; each comment gives the meas
 
 from __future__ import annotations
 
-import time
-
 import librosa
 import numpy as np
 import pytest
@@ -312,14 +310,11 @@ def test_lifter_scales_coefficient_i_by_i_to_the_power(speech):
                                atol=1e-5)
 
 
-def test_speed_of_a_minute_of_audio():
+def test_a_minute_of_audio_gives_a_frame_every_10_ms():
+    # Its speed is a benchmark's to measure, not a unit test's.
     x = np.random.default_rng(2).standard_normal(60 * 16000).astype(np.float32) * 0.1
-    rasta_plp(x[:1600], 16000)
-    start = time.perf_counter()
     f = rasta_plp(x, 16000)
-    elapsed = time.perf_counter() - start
-    assert f.shape == (6001, 9)
-    assert elapsed < 1.0  # measured 0.07 s
+    assert f.shape == (6001, 9) and np.isfinite(f).all()
 
 
 # ---------------------------------------------------------------------------------------------

@@ -129,7 +129,8 @@ def ridge_loo(x: np.ndarray, y: np.ndarray, alphas) -> tuple[float, np.ndarray]:
     a matrix product for each penalty. No division by a singular value, so the features
     may be collinear. RidgeCV recomputes the leverages' squares for every penalty; on
     the ppg-ridge fit of the demo database (49,500 frames, 451 features, 216 channels)
-    it took 20 s, this about 4 s (docs/results.md, "Session 13").
+    choosing the penalty took it 20.5 s, this 9.8 s, for the same penalty and
+    coefficients (docs/results/speed.md, "Start-up").
 
     Parameters
     ----------

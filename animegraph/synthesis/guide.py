@@ -30,9 +30,10 @@ R.-H. Wang, ICASSP 2007). Here:
   rather than fitted ones, the robust choice of forecast combination, Bates & Granger
   1969, Clemen 1989).
 
-Measured (docs/results.md, "Issue 13, third session"): the blend alone beat k-best 20 and
-mu-mlp on FACEGOOD and talkingface, within and across speakers; the guided ranking did
-not hold across speakers (a guide fitted on other speakers is a poor target), so
+Measured (docs/results/lipsync.md, "FACEGOOD" and "talkingface"): the blend beat k-best
+20 without a guide and mu-mlp on FACEGOOD and talkingface, within and across speakers;
+the guided ranking did not hold across speakers (a guide fitted on other speakers is a
+poor target; lipsync.md, "Options measured against the default"), so
 ``synthesize`` ranks by the guide only when asked (``guide_rank``, ``synth --guide-rank``).
 """
 

@@ -27,7 +27,8 @@ With known phones the k best animes are ranked by phonetic context first
 (:data:`KNOWN_PHONES_CONTEXT`; :func:`animegraph.search.k_best` with ``context``: the
 animes recorded between the same neighbour phones, or visemes, before the audio cost;
 unit selection's context target cost, Hunt & Black 1996). Set a priori, then measured
-(docs/results.md, "Issue 14, third session"): on GRID s1 with aligned phones mouth R
+(docs/results/lipsync.md, "GRID s1" and "Synthetic corpus"): on GRID s1 with aligned phones
+mouth R
 0.884 -> 0.891 (paired +0.007 [+0.003, +0.010]), lip RMSE lower; on the synthetic corpus
 mouth R 0.827 -> 0.873 (+0.046, better on every clip), ahead of the exact search's errors.
 With recognised phones it is not the default (#13's path): on GRID it helped hama's
@@ -54,9 +55,9 @@ CONTEXT_PHRASE = ", ranked by phonetic context first"
 #: posteriors, speaker-independent): each alone guided better than the other on some data
 #: (mu-mlp within a speaker, ppg-ridge across speakers), and their mean beat both on
 #: FACEGOOD, talkingface within speaker and GRID, and mu-mlp alone across talkingface's
-#: speakers (docs/results.md, "Session 9"); forecast combination with equal weights
-#: (Bates & Granger 1969), as the blend with the animes is. mu-mlp alone was the guide
-#: from issue 13's third session to session 8.
+#: speakers (docs/results/lipsync.md, "FACEGOOD", "talkingface" and "GRID s1"); forecast
+#: combination with equal weights (Bates & Granger 1969), as the blend with the animes
+#: is. mu-mlp alone was the guide before it.
 AUDIO_ONLY_GUIDE: str | None = "mu-mlp+ppg-ridge"
 
 

@@ -20,16 +20,17 @@ histogram says *which* short-time sounds occur how often, where functionals
   nearest words counted per frame (multi-assignment ``-a``; 10 as in openXBOW's
   tutorial), counts per second of speech (``-norm``, utterances differ in length) and
   logarithmic term frequency ``lg(TF + 1)`` (``-log``);
-* an **ensemble of codebooks** (``n_codebooks`` = K, issue #16's fifth session): K pairs
-  of codebooks drawn with different seeds, their histograms concatenated.
+* an **ensemble of codebooks** (``n_codebooks`` = K): K pairs of codebooks drawn with
+  different seeds, their histograms concatenated.
 
 The parameters are fixed a priori from those sources, not tuned on the evaluation data.
 
 Why an ensemble. The random++ codebook is a random draw, and the classifier's accuracy on
-EmoDB moved by up to 2.4 points with its seed alone (``docs/results.md``, "Issue 16,
-fourth session"): what a user gets should not depend on a seed. With one codebook pair
-the kernel the SVM sees between two utterances, ``k_c(u, v) = <h_c(u), h_c(v)>``, is one
-random draw of a kernel whose randomness comes only from the codebook ``c``. Concatenating
+EmoDB moved by up to 2.4 points with its seed alone (``docs/results/emotion.md``, "EmoDB:
+the default and the alternatives"): what a user gets should not depend on a seed. With
+one codebook pair the kernel the SVM sees between two utterances,
+``k_c(u, v) = <h_c(u), h_c(v)>``,
+is one random draw of a kernel whose randomness comes only from the codebook ``c``. Concatenating
 the histograms of K independently drawn codebook pairs into **one block** (weighted as one
 block against the functionals by the classifier's block weights, so that the words keep
 half of the total variance whatever K) gives the linear kernel
@@ -56,6 +57,7 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
+from ingest.emotion.frames import frame_analysis  # the ``rich`` block's frames
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "ENSEMBLE", "N_DESCRIPTORS", "BagOfAudioWords",
            "codebook_seeds", "descriptors", "frame_descriptors"]
@@ -70,9 +72,9 @@ N_DESCRIPTORS = 22
 ENSEMBLE = 5
 #: BLAS threads of the words' matrix products: one. They are small (an utterance's
 #: frames x 22 x 500, a seeding step's frames x 22), and OpenBLAS's threads spin-waiting
-#: on a loaded machine made the classifier's fit on the demo corpus 11 times as costly
-#: in CPU (22 CPU-s with the default threads, 2 with one, at load 3.5; docs/results.md,
-#: issue 16 fifth session), with the same results.
+#: on a loaded machine made the classifier's fit on the demo corpus 14 times as long
+#: (101.8 s with the default threads, 7.3 s with one, at load 3.1-3.7;
+#: docs/results/emotion.md, "Cost"), with the same model.
 BLAS_THREADS = 1
 _HOP_S = 0.01  # frame hop of :func:`frame_descriptors`, seconds
 
@@ -93,14 +95,12 @@ def frame_descriptors(audio, sample_rate) -> np.ndarray:
         Per 10 ms frame: 20 MFCCs, log RMS energy, F0 in semitones above 27.5 Hz (0 when
         unvoiced), then the deltas of these 22 (5-frame regression), float64.
     """
-    from ingest.emotion.features import frame_analysis  # the ``rich`` block's frames
-
     return descriptors(frame_analysis(prepare_audio(audio, sample_rate)))
 
 
 def descriptors(fr: dict) -> np.ndarray:
     """:func:`frame_descriptors` from an utterance's
-    :func:`ingest.emotion.features.frame_analysis` (shared with the ``rich`` block).
+    :func:`ingest.emotion.frames.frame_analysis` (shared with the ``rich`` block).
 
     Returns
     -------
@@ -156,8 +156,8 @@ class BagOfAudioWords:
         Candidates drawn per k-means++ step, the nearest-to-optimal kept: 1 is the
         k-means++ seeding of Arthur & Vassilvitskii (2007) and openXBOW's ``random++``
         (its ``CodebookNumeric.randomSamplingPlusPlus``: one draw per word); None is
-        scikit-learn's greedy default, ``2 + ln(size)`` draws (what issue #16's third
-        session measured; 8 times the distance computations).
+        scikit-learn's greedy default, ``2 + ln(size)`` draws (8 times the distance
+        computations).
     max_frames : int, optional
         Training frames the codebooks are seeded from (a random subset when there are
         more; k-means++ seeding costs frames x words).

@@ -48,7 +48,7 @@ _DURATION = re.compile(r"^\[info\]\s+Duration: (\d+):(\d\d):(\d\d(?:\.\d+)?)")
 #: What :func:`read_audio` gives for a file, as a number that changes whenever that
 #: changes: caches of decoded sound tracks are keyed by it, so a new way of reading never
 #: meets the old one's copies. 2: channels in opposite phase not averaged away, and a
-#: truncated track refused (session 16).
+#: truncated track refused.
 DECODING_VERSION = 2
 #: Seconds a complete sound track may fall short of the declared duration: codec priming
 #: and padding (AAC's 1024 samples, Opus's 312) and the rounding of the duration to 10 ms

@@ -37,7 +37,8 @@ Each check gives one line saying what is wrong and what it costs, or nothing:
   game-music and sample packages: no real speech called music (2,387 clips and cuts,
   noisy and reverberant ones too); 68 % of 955 music excerpts (3-10 s) named by these
   two, 96 % by the phone rate, 97.6 % by either. The phone rate alone misses music with
-  drums and voices: 5 confident phones per second in session 16's probe, GRID's speech 7.8.
+  drums and voices: 5 confident phones per second in a song with both, GRID's speech 7.8
+  (``docs/results/robustness.md``, "Speech input checks").
 
 Silence is an error elsewhere (:func:`animegraph.synthesis.query_phones`); a transcript
 that does not fit the audio is warned by :func:`ingest.speech.segment.segment`.
