@@ -538,6 +538,11 @@ def _add_classify(sub) -> None:
     cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
     _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
+    cls.add_argument("--timeline", action="store_true",
+                     help="classify the recording window by window (4 s every 4 s) and print "
+                     "each window's start, end, label and probabilities, or why it is not "
+                     "classified (silence, not speech); a recording over 15 s is always "
+                     "classified so, its probabilities their mean")
     cls.set_defaults(func=cmd_classify)
 
 
