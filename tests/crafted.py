@@ -264,6 +264,19 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
         _first_part(_live(r) / "clips"), _set("text", 0, "x" * (3 << 20))),
 }
 
+#: Damage no command checked: each is refused by every reader of the table it is in, in
+#: one line naming the database (db.validate).
+UNCHECKED_DAMAGE = ("channel_renamed", "clip_sample_rate_zero", "clip_sample_rate_negative",
+                    "audio_sample_rate_zero", "clip_duration_negative", "frames_nan",
+                    "frames_inf", "frame_negative", "frames_flipped_byte",
+                    "manifest_kind_path", "manifest_corpora_path",
+                    "manifest_tables_key_path", "frames_symlinked_out",
+                    "components_cutoff_nan", "clip_text_huge")
+#: ... of which those that SQL (DuckDB scans, with no value read before) sees too: NaN is
+#: in no Parquet statistics, so only a read of the values finds it.
+SQL_SEES = tuple(m for m in UNCHECKED_DAMAGE if m not in ("frames_nan",
+                                                          "components_cutoff_nan"))
+
 
 def _frames(root: Path, change) -> None:
     _rewrite(_first_part(_live(root) / "frames"), change)

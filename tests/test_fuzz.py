@@ -12,7 +12,7 @@ import shutil
 
 import numpy as np
 import pytest
-from crafted import DATABASE_MUTATIONS, crafted_database
+from crafted import DATABASE_MUTATIONS, SQL_SEES, UNCHECKED_DAMAGE, crafted_database
 
 from db.errors import AnimeGraphError, DataError
 
@@ -176,20 +176,6 @@ def test_a_databases_terminal_escapes_are_printed_as_text(tiny_db, tmp_path, mut
         assert shown == [""] * 4
         return
     assert "\\x1b]0;PWNED\\x07\\x1b[2J\\u202eevil" in shown[0]  # info: shown, as text
-
-
-#: Damage no command checked: each is refused by every reader of the table it is in, in
-#: one line naming the database (db.validate).
-UNCHECKED_DAMAGE = ("channel_renamed", "clip_sample_rate_zero", "clip_sample_rate_negative",
-                    "audio_sample_rate_zero", "clip_duration_negative", "frames_nan",
-                    "frames_inf", "frame_negative", "frames_flipped_byte",
-                    "manifest_kind_path", "manifest_corpora_path",
-                    "manifest_tables_key_path", "frames_symlinked_out",
-                    "components_cutoff_nan", "clip_text_huge")
-#: ... of which those that SQL (DuckDB scans, with no value read before) sees too: NaN is
-#: in no Parquet statistics, so only a read of the values finds it.
-SQL_SEES = tuple(m for m in UNCHECKED_DAMAGE if m not in ("frames_nan",
-                                                          "components_cutoff_nan"))
 
 
 @pytest.mark.parametrize("mutation", UNCHECKED_DAMAGE)
