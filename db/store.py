@@ -350,7 +350,8 @@ class Database:
     def open(cls, path: str | os.PathLike) -> Database:
         """Open the database at ``path``.
 
-        Its names, its links and its channels are checked (:mod:`db.validate`).
+        Its names, its links, its files' statistics and its channels are checked
+        (:mod:`db.validate`): every command sees the same damage.
 
         Raises
         ------
@@ -372,6 +373,7 @@ class Database:
         check_confined(root, version_dir, lambda problem: DataError(
             f"database {root} is damaged: {problem}"))
         db = cls(root=root, version_dir=version_dir, manifest=manifest)
+        check_statistics(db)
         check_channels(db)
         return db
 
@@ -400,6 +402,17 @@ class Database:
             names += ("emotion",)  # the partition key, a column of the table as read
         return names
 
+    def files(self, name: str) -> list[Path]:
+        """The Parquet files of table ``name``, the ones ``pyarrow.dataset`` reads (every
+        file below the table's folder but hidden and ``_`` ones); none if it is missing."""
+        path = self.table_path(name)
+        if path.is_file():
+            return [path]
+        if not path.is_dir():
+            return []
+        return sorted(f for f in path.rglob("*") if f.is_file() and not any(
+            part.startswith((".", "_")) for part in f.relative_to(path).parts))
+
     def check_rows(self, name: str) -> None:
         """DataError unless the footers of table ``name``'s files declare the rows the
         manifest counts for it (``tables``), no more than :data:`MAX_ROWS_PER_BYTE` a
@@ -416,12 +429,8 @@ class Database:
         ``_`` ones).
         """
         path = self.table_path(name)
-        if path.is_file():
-            files = [path]
-        elif path.is_dir():
-            files = sorted(f for f in path.rglob("*") if f.is_file() and not any(
-                part.startswith((".", "_")) for part in f.relative_to(path).parts))
-        else:
+        files = self.files(name)
+        if not files:
             return  # the read says the table is missing
         try:
             footers = [(f, pq.read_metadata(f), f.stat().st_size) for f in files]
@@ -451,7 +460,6 @@ class Database:
                 raise self.damaged(name, f"{where} decodes to up to {decoded} bytes from "
                                    f"{size}, more than {MAX_DECODED_PER_BYTE} times its "
                                    f"size: a crafted file (not read)")
-            check_statistics(self, name, where, meta)
             check_text(self, name, f, where, meta)
 
     def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:

@@ -12,12 +12,14 @@ A database is shared between people, so every command (``info``, ``sql``, ``quer
    the ``channels`` table (:func:`check_channels`) is a schema the motion can be read
    with (unique names, one kind, a point's coordinates as ``.x``, ``.y``, ``.z`` in
    order, every channel a column of ``frames``).
-2. **Before a table's files are read** (:func:`check_statistics`, from
-   :meth:`~db.store.Database.check_rows`): the footers' statistics (min and max of a
+   Then every table's footers' statistics (:func:`check_statistics`: min and max of a
    row group, written by every Parquet writer) of the columns in :data:`RULES`, with no
    value read: a sample rate of 0, a negative duration or frame number, an infinite
-   coordinate; and no text value longer than :data:`MAX_TEXT_BYTES` (from the column
-   chunks' uncompressed sizes; a chunk that could hold one is decoded a batch at a time).
+   coordinate.
+2. **Before a table's files are read** (:func:`check_text`, from
+   :meth:`~db.store.Database.check_rows`, after its bound of the decoded bytes): no
+   text value longer than :data:`MAX_TEXT_BYTES` (from the column chunks' uncompressed
+   sizes; a chunk that could hold one is decoded a few rows at a time).
 3. **When a table is read** (:func:`check_values`): the same rules on the values read,
    which also sees NaN (Parquet's statistics leave NaN out).
 
@@ -65,6 +67,8 @@ RULES: dict[str, dict[str, tuple[float, bool]]] = {
 MAX_TEXT_BYTES = 1 << 20
 #: Rows decoded at once to measure a text column's longest value.
 _TEXT_BATCH = 256
+#: ... and most bytes decoded at once doing so.
+_TEXT_BYTES = 16 << 20
 #: Most bytes of a name the manifest holds (a corpus, the motion's kind).
 MAX_NAME_BYTES = 255
 #: Parquet options: pages written with their CRC-32, and verified when read.
@@ -230,11 +234,22 @@ def _rule_text(column: str, value, bound: tuple[float, bool]) -> str:
     return f"{column} {value!r} (must be {need}" + (", finite)" if bound != FINITE else ")")
 
 
-def check_statistics(db, name: str, where, meta: pq.FileMetaData) -> None:
-    """DataError naming table ``name``'s file ``where`` if its footer's statistics show a
-    value of a column of :data:`RULES` out of its bound (NaN is not in statistics:
-    :func:`check_values` sees it), or a text column chunk could hold a value longer than
-    :data:`MAX_TEXT_BYTES` and does."""
+def check_statistics(db) -> None:
+    """DataError naming the table and file if a footer's statistics (a row group's min
+    and max) show a value of a column of :data:`RULES` out of its bound, in any table of
+    ``db``: footers only, no value read (NaN is in no statistics: :func:`check_values`
+    sees it when the values are read)."""
+    for name in RULES:
+        path = db.table_path(name)
+        for f in db.files(name):
+            try:
+                meta = pq.read_metadata(f)
+            except (OSError, pa.ArrowException) as exc:
+                raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+            _check_footer(db, name, f.name if f == path else f.relative_to(path), meta)
+
+
+def _check_footer(db, name: str, where, meta: pq.FileMetaData) -> None:
     schema = meta.schema
     leaves = {schema.column(c).path: c for c in range(meta.num_columns)}
     floats = {p for p, c in leaves.items() if schema.column(c).physical_type in ("FLOAT",
@@ -257,14 +272,15 @@ def check_text(db, name: str, path: Path, where, meta: pq.FileMetaData) -> None:
     uncompressed (the footer says so; a chunk holds its values) are decoded, a few rows
     at a time."""
     schema = meta.schema
-    suspects = set()
+    suspects: dict[str, int] = {}  # column -> its largest chunk, uncompressed
     for c in range(meta.num_columns):
         column = schema.column(c)
         if column.physical_type != "BYTE_ARRAY" or column.logical_type.type != "STRING":
             continue
-        if any(meta.row_group(g).column(c).total_uncompressed_size > MAX_TEXT_BYTES
-               for g in range(meta.num_row_groups)):
-            suspects.add(column.path)
+        largest = max((meta.row_group(g).column(c).total_uncompressed_size
+                       for g in range(meta.num_row_groups)), default=0)
+        if largest > MAX_TEXT_BYTES:
+            suspects[column.path] = largest
     if not suspects:
         return
     try:
@@ -272,7 +288,10 @@ def check_text(db, name: str, path: Path, where, meta: pq.FileMetaData) -> None:
         for column in sorted(suspects):
             if "." in column:
                 continue  # nested: this version writes no text in lists
-            for batch in reader.iter_batches(batch_size=_TEXT_BATCH, columns=[column]):
+            # As few rows at once as a value as long as the chunk allows: a dictionary
+            # string repeated in every row is decoded into each.
+            rows = max(1, min(_TEXT_BATCH, _TEXT_BYTES // suspects[column]))
+            for batch in reader.iter_batches(batch_size=rows, columns=[column]):
                 longest = pc.max(pc.binary_length(batch.column(0))).as_py() or 0
                 if longest > MAX_TEXT_BYTES:
                     raise db.damaged(name, f"{where}: a {column} value of {longest} bytes, "
