@@ -191,3 +191,16 @@ def test_damage_is_refused_in_one_line(tiny_db, tmp_path, mutation):
     if mutation in SQL_SEES:
         with pytest.raises(DataError, match="damaged"):
             query(Database.open(path), "SELECT * FROM frames, clips LIMIT 1")
+
+
+def test_point_columns_are_complete_triples():
+    """A channel ending in .x without its .y and .z (a renamed coordinate) is no point's:
+    counted as one, the C3D writer's reshape into points was a traceback."""
+    from animegraph.motion.files import point_columns, point_labels
+    from db.validate import point_triples_problem
+
+    names = ["lip_corner_r_x", "lip_corner_r.y", "lip_corner_r.z", "jaw.x", "jaw.y", "jaw.z",
+             "head_yaw"]
+    assert point_columns(names) == [3, 4, 5] and point_labels(names) == ("jaw",)
+    assert "lip_corner_r.y" in point_triples_problem(names)
+    assert point_triples_problem(names[3:]) == ""
