@@ -244,7 +244,7 @@ def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Re
     reader = relation.to_arrow_reader(BATCH_ROWS)
     batches, rows, size, truncated = [], 0, 0, False
     try:
-        for batch in _batches(reader, rows_so_far=lambda: rows, byte_limit=byte_limit):
+        for batch in _batches(reader):
             size += batch.nbytes
             if size > byte_limit:
                 raise _too_large(byte_limit, rows + batch.num_rows)
@@ -254,16 +254,22 @@ def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Re
                 break
             batches.append(batch)
             rows += batch.num_rows
+    except _Overflow:
+        raise _too_large(byte_limit, rows + BATCH_ROWS) from None
     finally:
         reader.close()
     table = pa.Table.from_batches(batches, schema=reader.schema)
     return Result(statement, table.rename_columns(unique_names(table.column_names)), truncated)
 
 
-def _batches(reader, rows_so_far, byte_limit: int):
-    """The reader's batches; a batch DuckDB cannot make because its values pass Arrow's
-    2 GB buffer is the result being too large (DuckDB advises a setting the sandbox
-    locks), not the database unreadable."""
+class _Overflow(Exception):
+    """A batch of the result passed Arrow's 2 GB buffers."""
+
+
+def _batches(reader):
+    """The reader's batches; :class:`_Overflow` for a batch DuckDB cannot make because its
+    values pass Arrow's 2 GB buffer: the result is too large (DuckDB advises a setting the
+    sandbox locks), the database is not unreadable."""
     while True:
         try:
             yield reader.read_next_batch()
@@ -271,7 +277,7 @@ def _batches(reader, rows_so_far, byte_limit: int):
             return
         except (OSError, pa.ArrowException, duckdb.Error) as exc:
             if _OVERFLOW.search(str(exc)):
-                raise _too_large(byte_limit, rows_so_far() + BATCH_ROWS) from None
+                raise _Overflow from None
             raise
 
 

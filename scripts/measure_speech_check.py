@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from db.errors import DataError
 from ingest.emotion.audio import (
     FEATURE_SAMPLE_RATE,
     prepare_audio,
@@ -29,7 +30,6 @@ from ingest.emotion.audio import (
     speech_problem,
 )
 from ingest.formats.media import read_audio
-from db.errors import DataError
 
 SR = FEATURE_SAMPLE_RATE
 
