@@ -231,6 +231,7 @@ def _broken(value: float, bound: tuple[float, bool]) -> bool:
 
 def _rule_text(column: str, value, bound: tuple[float, bool]) -> str:
     need = {POSITIVE: "> 0", NON_NEGATIVE: ">= 0"}.get(bound, "finite")
+    value = value + 0 if isinstance(value, float) else value  # Parquet's min 0 is -0.0
     return f"{column} {value!r} (must be {need}" + (", finite)" if bound != FINITE else ")")
 
 

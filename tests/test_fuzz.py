@@ -64,8 +64,8 @@ def test_export_of_a_crafted_database_stays_in_its_folder_or_is_one_line(tiny_db
     from db.store import Database
 
     path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
-    db = Database.open(path)
     try:
+        db = Database.open(path)
         run_query(db, QuerySpec(limit=None))
     except DataError as exc:  # refused before any export: its footers say the damage
         assert "\n" not in str(exc).strip() and str(path) in str(exc), str(exc)
