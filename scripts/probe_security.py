@@ -584,7 +584,7 @@ def probe_inputs(corpus: Path, db: Path, work: Path, shared: Path) -> dict:
     speech, rate = read_wav(wav)
     speech = np.asarray(speech, dtype=np.float64)
     t = np.arange(3 * rate) / rate
-    cases = {"white noise": (0.3 * rng.standard_normal(t.size), 1),
+    cases = {"white noise": (0.1 * rng.standard_normal(t.size), 1),
              "tone 220 Hz": (0.3 * np.sin(2 * np.pi * 220 * t), 1),
              "speech at -70 dBFS": (speech / np.abs(speech).max() * 10 ** (-70 / 20), 0)}
     held = 0
