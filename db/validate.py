@@ -312,16 +312,26 @@ def check_values(db, name: str, table: pa.Table) -> None:
             raise db.damaged(name, f"{column} is {values.type}, not numbers")
         if len(values) == values.null_count:
             continue
-        data = numbers(pc.drop_null(values) if values.null_count else values)
         low, strict = bound
+        data = numbers(values, null=max(low, 0.0) + 1.0)  # a null breaks no bound
         if data.dtype.kind == "f":
             bad = ~np.isfinite(data)
             bad |= (data <= low) if strict else (data < low)
         else:
             bad = (data <= low) if strict else (data < low)
         if bad.any():
-            value = data[np.argmax(bad)].item()
-            raise db.damaged(name, _rule_text(column, value, bound))
+            row = int(np.argmax(bad))
+            raise db.damaged(name, _whose(table, row) + _rule_text(column, data[row].item(),
+                                                                   bound))
+
+
+def _whose(table: pa.Table, row: int) -> str:
+    """"clip <corpus>/<clip_id>: " for a row of a table of clips' rows, else ""."""
+    if "clip_id" not in table.column_names:
+        return ""
+    clip = table.column("clip_id")[row].as_py()
+    corpus = table.column("corpus")[row].as_py() if "corpus" in table.column_names else None
+    return f"clip {corpus + '/' if corpus else ''}{clip}: "
 
 
 def _shown(value) -> str:
