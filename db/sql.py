@@ -38,14 +38,19 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 
 from db.errors import DataError, ParameterError
-from db.store import PARTITIONED, TABLES, Database
+from db.store import TABLES, Database
 
 #: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
 ROW_LIMIT = 100_000
 #: Seconds a query may run before it is interrupted (``animegraph sql --timeout``).
 TIMEOUT_S = 60.0
-#: Rows per streamed Arrow batch.
-BATCH_ROWS = 8192
+#: Rows per streamed Arrow batch: few enough that one batch of long values stays far
+#: below Arrow's 2 GB string buffer (8,192 rows of 300 KB strings overflowed it, after
+#: 19 s and 2.2 GB, in DuckDB's advice to ``SET arrow_large_buffer_size``).
+BATCH_ROWS = 1024
+#: Bytes of a statement's result kept (it is held whole to be printed or written): a
+#: larger one is refused, with how to narrow it, when it passes this.
+RESULT_BYTES = 256 << 20
 #: Memory DuckDB may hold for a query, and disk it may spill to: its defaults are 80 %
 #: of the machine's memory and 90 % of the free disk, which one pasted query (a
 #: ``string_agg`` of 2 GB, a ``GROUP BY`` of 10^9 groups) took on a shared machine.
@@ -56,6 +61,11 @@ _ALLOWED = {duckdb.StatementType.SELECT}
 #: DuckDB's words for a table, and for a column, that a query names and no table has.
 _NO_TABLE = re.compile(r"Table with name (\S+) does not exist")
 _NO_COLUMN = re.compile(r'(?:Referenced column|does not have a column named|Column) "([^"]+)"')
+#: DuckDB's words when the Arrow scan of a table failed (pyarrow could not read a file).
+_SCAN_FAILED = re.compile(r"reading the stream registered as '(\w+)' failed: (.*)")
+#: DuckDB's and Arrow's words when a batch of the result passed Arrow's 2 GB buffers.
+_OVERFLOW = re.compile(r"arrow_large_buffer_size|maximum total string size|capacity "
+                       r"overflow|offset overflow", re.IGNORECASE)
 _EXPLAIN = re.compile(r"^\s*EXPLAIN\s+(?:ANALY[SZ]E\s+|\([^)]*\)\s*)?", re.IGNORECASE)
 
 
@@ -107,14 +117,12 @@ def connect(db: Database, spill_dir: str | os.PathLike | None = None) -> duckdb.
 
 
 def _dataset(db: Database, name: str) -> ds.Dataset:
-    partitioning = "hive" if name in PARTITIONED else None
     db.check_rows(name)  # a crafted file is refused before DuckDB scans it
     try:
-        dataset = ds.dataset(db.table_path(name), format="parquet", partitioning=partitioning)
+        dataset = db.dataset(name)  # its pages' checksums verified as DuckDB scans them
         wide = _without_float16(dataset.schema)
         if wide is not dataset.schema:  # DuckDB reads no half floats: scanned as float32
-            dataset = ds.dataset(db.table_path(name), format="parquet",
-                                 partitioning=partitioning, schema=wide)
+            dataset = db.dataset(name, schema=wide)
         return dataset
     except (OSError, pa.ArrowException) as exc:
         raise db.damaged(name, f"cannot be read: {_first_line(exc)}") from None
@@ -216,6 +224,9 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
                                  f"--timeout)") from None
         except duckdb.Error as exc:
+            scan = _SCAN_FAILED.search(_first_line(exc))
+            if scan is not None and scan.group(1) in TABLES:  # the files, not the query
+                raise db.damaged(scan.group(1), f"cannot be read: {scan.group(2)}") from None
             raise ParameterError(f"query failed: {_failure(con, exc)}") from None
         except OSError as exc:
             raise DataError(f"database {db.root} could not be read: {exc}") from exc
@@ -226,23 +237,55 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
 
 
 def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Result:
+    byte_limit = RESULT_BYTES
     relation = con.sql(statement)
     if relation is None:  # pragma: no cover - only reading statements get here
         return Result(statement, pa.table({}), False)
     reader = relation.to_arrow_reader(BATCH_ROWS)
-    batches, rows, truncated = [], 0, False
+    batches, rows, size, truncated = [], 0, 0, False
     try:
-        for batch in reader:
+        for batch in _batches(reader):
+            size += batch.nbytes
+            if size > byte_limit:
+                raise _too_large(byte_limit, rows + batch.num_rows)
             if rows + batch.num_rows > row_limit:
                 batches.append(batch.slice(0, row_limit - rows))
                 truncated = True
                 break
             batches.append(batch)
             rows += batch.num_rows
+    except _Overflow:
+        raise _too_large(byte_limit, rows + BATCH_ROWS) from None
     finally:
         reader.close()
     table = pa.Table.from_batches(batches, schema=reader.schema)
     return Result(statement, table.rename_columns(unique_names(table.column_names)), truncated)
+
+
+class _Overflow(Exception):
+    """A batch of the result passed Arrow's 2 GB buffers."""
+
+
+def _batches(reader):
+    """The reader's batches; :class:`_Overflow` for a batch DuckDB cannot make because its
+    values pass Arrow's 2 GB buffer: the result is too large (DuckDB advises a setting the
+    sandbox locks), the database is not unreadable."""
+    while True:
+        try:
+            yield reader.read_next_batch()
+        except StopIteration:
+            return
+        except (OSError, pa.ArrowException, duckdb.Error) as exc:
+            if _OVERFLOW.search(str(exc)):
+                raise _Overflow from None
+            raise
+
+
+def _too_large(byte_limit: int, rows: int) -> ParameterError:
+    return ParameterError(
+        f"the result is too large: more than {byte_limit >> 20} MB in its first {rows} "
+        f"rows (a result is held whole); narrow it: fewer or shorter columns, a WHERE, a LIMIT, "
+        f"or an aggregate (count, avg, string_agg of a few)")
 
 
 def unique_names(names: list[str]) -> list[str]:

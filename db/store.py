@@ -49,6 +49,16 @@ from db.arrow import numbers, repeat_string
 from db.atomic import atomic_write
 from db.errors import DataError
 from db.lock import pid_alive, writer_lock
+from db.validate import (
+    READ_OPTIONS,
+    WRITE_OPTIONS,
+    check_channels,
+    check_confined,
+    check_manifest,
+    check_statistics,
+    check_text,
+    check_values,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -240,15 +250,16 @@ def _write_table(folder: Path, name: str, table: pa.Table) -> None:
             partitioning=ds.partitioning(pa.schema([("emotion", pa.string())]), flavor="hive"),
             basename_template="part-{i}.parquet", min_rows_per_group=rows,
             max_rows_per_group=rows, preserve_order=True, existing_data_behavior="error",
-            file_options=ds.ParquetFileFormat().make_write_options(use_dictionary=dictionary),
+            file_options=ds.ParquetFileFormat().make_write_options(
+                use_dictionary=dictionary, **WRITE_OPTIONS),
         )
     elif name in FOLDER_TABLES:
         (folder / name).mkdir()
         pq.write_table(table, folder / name / "part-0.parquet", row_group_size=rows,
-                       use_dictionary=dictionary)
+                       use_dictionary=dictionary, **WRITE_OPTIONS)
     else:
         pq.write_table(table, folder / f"{name}.parquet", row_group_size=rows,
-                       use_dictionary=dictionary)
+                       use_dictionary=dictionary, **WRITE_OPTIONS)
 
 
 def _fsync_tree(folder: Path) -> None:
@@ -339,6 +350,9 @@ class Database:
     def open(cls, path: str | os.PathLike) -> Database:
         """Open the database at ``path``.
 
+        Its names, its links, its files' statistics and its channels are checked
+        (:mod:`db.validate`): every command sees the same damage.
+
         Raises
         ------
         DataError
@@ -354,7 +368,14 @@ class Database:
                 f"database {root} has schema version {manifest.get('schema_version')}, "
                 f"this animegraph reads version {SCHEMA_VERSION}"
             )
-        return cls(root=root, version_dir=version_dir, manifest=manifest)
+        check_manifest(manifest, TABLES, lambda problem: DataError(
+            f"database {root} is damaged: {version_dir / 'manifest.json'}: {problem}"))
+        check_confined(root, version_dir, lambda problem: DataError(
+            f"database {root} is damaged: {problem}"))
+        db = cls(root=root, version_dir=version_dir, manifest=manifest)
+        check_statistics(db)
+        check_channels(db)
+        return db
 
     def damaged(self, name: str, problem: str) -> DataError:
         """The error for a table (or file) of this version that does not hold up."""
@@ -381,6 +402,17 @@ class Database:
             names += ("emotion",)  # the partition key, a column of the table as read
         return names
 
+    def files(self, name: str) -> list[Path]:
+        """The Parquet files of table ``name``, the ones ``pyarrow.dataset`` reads (every
+        file below the table's folder but hidden and ``_`` ones); none if it is missing."""
+        path = self.table_path(name)
+        if path.is_file():
+            return [path]
+        if not path.is_dir():
+            return []
+        return sorted(f for f in path.rglob("*") if f.is_file() and not any(
+            part.startswith((".", "_")) for part in f.relative_to(path).parts))
+
     def check_rows(self, name: str) -> None:
         """DataError unless the footers of table ``name``'s files declare the rows the
         manifest counts for it (``tables``), no more than :data:`MAX_ROWS_PER_BYTE` a
@@ -397,12 +429,8 @@ class Database:
         ``_`` ones).
         """
         path = self.table_path(name)
-        if path.is_file():
-            files = [path]
-        elif path.is_dir():
-            files = sorted(f for f in path.rglob("*") if f.is_file() and not any(
-                part.startswith((".", "_")) for part in f.relative_to(path).parts))
-        else:
+        files = self.files(name)
+        if not files:
             return  # the read says the table is missing
         try:
             footers = [(f, pq.read_metadata(f), f.stat().st_size) for f in files]
@@ -432,28 +460,37 @@ class Database:
                 raise self.damaged(name, f"{where} decodes to up to {decoded} bytes from "
                                    f"{size}, more than {MAX_DECODED_PER_BYTE} times its "
                                    f"size: a crafted file (not read)")
+            check_text(self, name, f, where, meta)
 
     def table(self, name: str, columns: list[str] | None = None, filter=None) -> pa.Table:
         """Read a table (optionally some columns, rows matching a pyarrow ``filter``).
 
-        The files' footers are checked first (:meth:`check_rows`)."""
+        The files' footers are checked first (:meth:`check_rows`), the values read after
+        (:func:`db.validate.check_values`), and the pages' checksums as they are read."""
         if name not in TABLES:
             raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
         self.check_rows(name)
         try:
+            table = None
             if filter is None:
                 table = _read_parts(self.table_path(name), columns, name in PARTITIONED)
-                if table is not None:
-                    return table
-            import pyarrow.dataset as ds  # deferred: it imports pandas (a third of a second)
-
-            if name in PARTITIONED:
-                dataset = ds.dataset(self.table_path(name), format="parquet", partitioning="hive")
-            else:
-                dataset = ds.dataset(self.table_path(name), format="parquet")
-            return dataset.to_table(columns=columns, filter=filter)
+            if table is None:
+                table = self.dataset(name).to_table(columns=columns, filter=filter)
         except (OSError, pa.ArrowException) as exc:
             raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+        check_values(self, name, table)
+        return table
+
+    def dataset(self, name: str, schema: pa.Schema | None = None):
+        """Table ``name`` as a ``pyarrow.dataset.Dataset`` whose reads verify the pages'
+        checksums (hive-partitioned by emotion if it is), unchecked otherwise: read it
+        after :meth:`check_rows`."""
+        import pyarrow.dataset as ds  # deferred: it imports pandas (a third of a second)
+
+        form = ds.ParquetFileFormat(default_fragment_scan_options=ds.ParquetFragmentScanOptions(
+            **READ_OPTIONS))
+        return ds.dataset(self.table_path(name), format=form, schema=schema,
+                          partitioning="hive" if name in PARTITIONED else None)
 
     def _check_sum(self, name: str) -> None:
         """DataError if the manifest holds a checksum of table ``name`` it does not match
@@ -589,7 +626,7 @@ def _read_parts(path: Path, columns: list[str] | None, partitioned: bool) -> pa.
 def _read_file(path: Path, columns: list[str] | None) -> pa.Table | None:
     """One Parquet file, or None if it lacks a column asked for (``pyarrow.dataset`` then
     says so)."""
-    file = pq.ParquetFile(path)
+    file = pq.ParquetFile(path, **READ_OPTIONS)
     if columns is not None and not set(columns) <= set(file.schema_arrow.names):
         return None
     return file.read(columns=columns)

@@ -63,6 +63,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from crafted import (  # noqa: E402
     DATABASE_MUTATIONS,
+    UNCHECKED_DAMAGE,
     PicklePayload,
     crafted_database,
     disguised_playlists,
@@ -85,7 +86,8 @@ def _run(args, timeout=600, **kw) -> subprocess.CompletedProcess:
 
 def _held(proc: subprocess.CompletedProcess) -> bool:
     lines = [line for line in proc.stderr.splitlines()
-             if line.strip() and "Warning" not in line and not line.startswith(" ")]
+             if line.strip() and "Warning" not in line and not line.startswith(" ")
+             and "%|" not in line]  # a progress bar's line (tqdm) is no error
     if proc.returncode == 0:
         return "Traceback" not in proc.stderr
     return proc.returncode == 1 and len(lines) == 1 and "Traceback" not in proc.stderr
@@ -498,6 +500,151 @@ def probe_media(corpus: Path, db: Path, work: Path) -> dict:
     return {"media_cases_tried": tried, "media_cases_held": held}
 
 
+def probe_damage(corpus: Path, db: Path, work: Path) -> dict:
+    """Damage no command checked (``tests/crafted.py: UNCHECKED_DAMAGE``) through info,
+    sql, query, classify, synth and query --export, each a real process: a break is a
+    command that exits 0 on damage it should refuse (all of it, but NaN, which no Parquet
+    statistic holds: the commands that read those values), a traceback any traceback or
+    more than one line."""
+    clip = sorted((corpus / "clips").glob("*.wav"))[0]
+    labels = clip.with_name(clip.name.replace(".wav", ".phones.csv"))
+    folder = work / "damage"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir()
+    commands = {"info": ["info"], "sql": ["sql", "SELECT * FROM frames, clips LIMIT 1"],
+                "query": ["query", "--limit", "3"], "classify": ["classify", str(clip)],
+                "synth": ["synth", str(clip), "--labels", str(labels), "-o",
+                          str(folder / "out.csv")],
+                "export": ["query", "--clips", "--limit", "1", "--export",
+                           str(folder / "export"), "--force"]}
+    # Damage a footer shows is refused by every command when it opens the database; NaN,
+    # in no footer, by the commands that read its values.
+    # A flipped byte, by those that read its page (a page's CRC is checked as it is read).
+    readers = {"frames_nan": ("export",), "components_cutoff_nan": ("info",),
+               "frames_flipped_byte": ("sql", "export")}
+    runs = breaks = tracebacks = 0
+    for name in UNCHECKED_DAMAGE:
+        path = crafted_database(db, folder / name, name)
+        said = []
+        for command, args in commands.items():
+            proc = _run(args + ["--db", str(path)])
+            runs += 1
+            if not _held(proc):
+                tracebacks += 1
+                said.append(f"{command} NOT HELD ({proc.stderr.strip()[-200:]})")
+                continue
+            damaged = proc.returncode == 1 and "damaged" in proc.stderr
+            if command in readers.get(name, commands) and not damaged:
+                breaks += 1
+                said.append(f"{command} PASSED")
+            else:
+                said.append(f"{command} {'refused' if damaged else 'ran'}")
+        print(f"  {name}: {', '.join(said)}")
+        shutil.rmtree(path, ignore_errors=True)
+    for extra in folder.parent.glob(f"{folder.name}*-outside-*"):
+        shutil.rmtree(extra, ignore_errors=True)
+    return {"damage_cases": len(UNCHECKED_DAMAGE), "damage_runs": runs,
+            "damage_breaks": breaks, "damage_tracebacks": tracebacks}
+
+
+def probe_inputs(corpus: Path, db: Path, work: Path, shared: Path) -> dict:
+    """Inputs that were lost or mis-said: a clip named ``..dots`` (ingest), a 2.2 GB SQL
+    result, noise / a tone / speech at -70 dBFS / a long recording (classify), a capped
+    paper search, ``synth --labels clip.align`` and the guide's path line (synth)."""
+    folder = work / "inputs"
+    shutil.rmtree(folder, ignore_errors=True)
+    (folder / "clips").mkdir(parents=True)
+    out = {}
+    stem = sorted(p.stem for p in (corpus / "clips").glob("*.c3d"))[0]
+    for path in (corpus / "clips").glob(f"{stem}.*"):
+        shutil.copy(path, folder / "clips" / ("..dots" + path.name[len(stem):]))
+    for name in ("corpus.json", "markers.csv"):
+        shutil.copy(corpus / name, folder / name)
+    proc = _run(["ingest", str(folder), "--db", str(folder / "db"), "--quiet"])
+    out["dots_clip_added"] = _held(proc) and "1 added" in proc.stdout
+    print(f"  ..dots clip: {proc.stdout.strip().splitlines()[:1]}")
+    proc = _run(["sql", "--db", str(db), "SELECT repeat('x', 300000) AS s FROM range(8192)",
+                 "-o", str(folder / "big.csv")])
+    last = (proc.stderr.strip().splitlines() or [""])[-1]
+    out["sql_2gb_result_held"] = (proc.returncode == 1 and _held(proc) and "too large" in last
+                                  and "database" not in last)
+    print(f"  2.4 GB SQL result: exit {proc.returncode}: {last}")
+    # classify needs a database with a classifier: 34 clips of five emotions (built once).
+    db = work / "emotion-db"
+    if not db.exists():
+        subprocess.run(CLI + ["corpus", "synth", "--out", str(work / "emotion-corpus"),
+                              "--sentences", "5", "--parallel", "3", "--variations", "2",
+                              "--seed", "7", "--quiet"], check=True)
+        subprocess.run(CLI + ["ingest", str(work / "emotion-corpus"), "--db", str(db),
+                              "--quiet"], check=True, capture_output=True)
+    corpus = work / "emotion-corpus"
+    rng = np.random.default_rng(10)
+    wav = sorted((corpus / "clips").glob("*_happy_1.wav"))[0]
+    from ingest.formats.wav import read_wav, write_wav
+
+    speech, rate = read_wav(wav)
+    speech = np.asarray(speech, dtype=np.float64)
+    t = np.arange(3 * rate) / rate
+    cases = {"white noise": (0.1 * rng.standard_normal(t.size), 1),
+             "tone 220 Hz": (0.3 * np.sin(2 * np.pi * 220 * t), 1),
+             "speech at -70 dBFS": (speech / np.abs(speech).max() * 10 ** (-70 / 20), 0)}
+    held = 0
+    for name, (x, code) in cases.items():
+        path = folder / f"{name.replace(' ', '_')}.wav"
+        write_wav(path, x.astype(np.float32), rate)
+        proc = _run(["classify", str(path), "--db", str(db)])
+        ok = proc.returncode == code and _held(proc)
+        held += ok
+        print(f"  classify {name}: exit {proc.returncode} "
+              f"{(proc.stderr.strip() or proc.stdout.strip()).splitlines()[:1]}"
+              f"{'' if ok else ' -- NOT HELD'}")
+    out["classify_inputs"], out["classify_inputs_held"] = len(cases), held
+    long = np.tile(speech, int(np.ceil(600 * rate / len(speech))))[:600 * rate]
+    write_wav(folder / "long.wav", long.astype(np.float32), rate)
+    t0 = time.perf_counter()
+    proc = subprocess.run(["/usr/bin/time", "-f", "%M", *CLI, "classify", str(folder / "long.wav"),
+                           "--db", str(db), "--timeline"], capture_output=True, text=True)
+    rows = proc.stdout.strip().splitlines()
+    out["classify_10min_s"] = round(time.perf_counter() - t0, 1)
+    out["classify_10min_peak_mb"] = int(proc.stderr.strip().splitlines()[-1]) // 1024 \
+        if proc.stderr.strip().splitlines()[-1].isdigit() else None
+    out["classify_10min_windows"] = max(0, len(rows) - 1)
+    print(f"  classify --timeline of 10 min: exit {proc.returncode}, {len(rows) - 1} windows, "
+          f"{out['classify_10min_s']} s, {out['classify_10min_peak_mb']} MB; {rows[-1:]}")
+    # A capped paper search says so, always (a warning through the search's logger).
+    import logging
+
+    from animegraph.search import candidates, search
+    from animegraph.synthesis.model import Model
+
+    model = Model.load(db)
+    phones = ["AA", "B", "S", "IY", "T", "AH"] * 3
+    cands = candidates(model.graph, phones)
+    audio = [rng.random(len(c)) * 50.0 for c in cands.nodes]  # audio costs of a sort
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logging.getLogger("animegraph.search").addHandler(handler)
+    try:
+        result = search(model.graph, cands, audio, method="paper", max_expansions=3)
+    except Exception as exc:  # noqa: BLE001 - reported, not hidden
+        result = None
+        print(f"  capped paper search: {type(exc).__name__}: {exc}")
+    finally:
+        logging.getLogger("animegraph.search").removeHandler(handler)
+    warned = [r.getMessage() for r in records if r.levelno >= logging.WARNING]
+    out["paper_cap_warned"] = bool(result is not None and result.capped and warned)
+    print(f"  capped paper search: {warned[:1]}")
+    align = shared / "grid" / "s1" / "bbaf2n.align"
+    if align.exists():
+        proc = _run(["synth", str(align.with_suffix(".mp4")), "--labels", str(align), "--db",
+                     str(db), "-o", str(folder / "grid.csv")])
+        out["synth_align_labels"] = proc.returncode == 0
+        print(f"  synth --labels .align: exit {proc.returncode} "
+              f"{[line for line in proc.stderr.splitlines() if 'path:' in line][:1]}")
+    return out
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=None)
@@ -509,7 +656,7 @@ def main(argv=None) -> int:
                         default=Path(__file__).resolve().parents[2] / "shared" / "data")
     parser.add_argument("--skip", nargs="*", default=[],
                         choices=["sql", "databases", "clips", "writers", "kills", "real",
-                                 "media"])
+                                 "media", "damage", "inputs"])
     args = parser.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="probe-security-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -521,7 +668,9 @@ def main(argv=None) -> int:
              ("kills", lambda: probe_kills(corpus, db, work, args.kills, args.seed)),
              ("databases", lambda: probe_databases(corpus, db, work)),
              ("real", lambda: probe_real(args.shared, corpus)),
-             ("media", lambda: probe_media(corpus, db, work))]
+             ("media", lambda: probe_media(corpus, db, work)),
+             ("damage", lambda: probe_damage(corpus, db, work)),
+             ("inputs", lambda: probe_inputs(corpus, db, work, args.shared))]
     for name, step in steps:
         if name in args.skip:
             continue

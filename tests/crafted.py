@@ -242,7 +242,79 @@ DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
         sorted((_live(r) / "clips").iterdir())[0],
         _live(r) / "clips" / "emotion=__HIVE_DEFAULT_PARTITION__"),
     "symlink_out": lambda r: _symlink(_live(r) / "channels.parquet", "/etc/passwd"),
+    # Damage no command checked (db.validate): a channel renamed in both its tables, values
+    # out of their range, a flipped byte, names that are paths, a folder linked outside.
+    "channel_renamed": lambda r: _rename_channel(r, "lip_corner_r.x", "lip_corner_r_x"),
+    "clip_sample_rate_zero": lambda r: _clips(r, _set("sample_rate", 0, 0)),
+    "clip_sample_rate_negative": lambda r: _clips(r, _set("sample_rate", 0, -16000)),
+    "audio_sample_rate_zero": lambda r: _audio(r, _set("sample_rate", 0, 0)),
+    "clip_duration_negative": lambda r: _clips(r, _set("duration", 0, -3.5)),
+    "frames_nan": lambda r: _frames(r, _set("lip_corner_l.y", 5, float("nan"))),
+    "frames_inf": lambda r: _frames(r, _set("lip_corner_l.y", 5, float("inf"))),
+    "frame_negative": lambda r: _frames(r, _set("frame", 3, -7)),
+    "frames_flipped_byte": lambda r: flip_page_byte(_first_part(_live(r) / "frames")),
+    "manifest_kind_path": lambda r: _manifest(r, lambda m: {**m, "kind": "../../etc"}),
+    "manifest_corpora_path": lambda r: _manifest(r, lambda m: {**m, "corpora": ["../x"]}),
+    "manifest_tables_key_path": lambda r: _manifest(r, lambda m: {
+        **m, "tables": {**m["tables"], "../../frames": 3}}),
+    "frames_symlinked_out": lambda r: _move_out(_live(r) / "frames"),
+    "components_cutoff_nan": lambda r: _rewrite(_live(r) / "components.parquet",
+                                                _set("cutoff_hz", 0, float("nan"))),
+    "clip_text_huge": lambda r: _rewrite_compressed(
+        _first_part(_live(r) / "clips"), _set("text", 0, "x" * (3 << 20))),
 }
+
+#: Damage no command checked: each is refused by every reader of the table it is in, in
+#: one line naming the database (db.validate).
+UNCHECKED_DAMAGE = ("channel_renamed", "clip_sample_rate_zero", "clip_sample_rate_negative",
+                    "audio_sample_rate_zero", "clip_duration_negative", "frames_nan",
+                    "frames_inf", "frame_negative", "frames_flipped_byte",
+                    "manifest_kind_path", "manifest_corpora_path",
+                    "manifest_tables_key_path", "frames_symlinked_out",
+                    "components_cutoff_nan", "clip_text_huge")
+#: ... of which those that SQL (DuckDB scans, with no value read before) sees too: NaN is
+#: in no Parquet statistics, so only a read of the values finds it.
+SQL_SEES = tuple(m for m in UNCHECKED_DAMAGE if m not in ("frames_nan",
+                                                          "components_cutoff_nan"))
+
+
+def _frames(root: Path, change) -> None:
+    _rewrite(_first_part(_live(root) / "frames"), change)
+
+
+def _rename_channel(root: Path, old: str, new: str) -> None:
+    """Channel ``old`` named ``new`` in the channels table and every frames file."""
+    path = _live(root) / "channels.parquet"
+    _rewrite(path, lambda t: t.set_column(t.column_names.index("name"), "name", pa.array(
+        [new if n == old else n for n in t.column("name").to_pylist()])))
+    for part in (_live(root) / "frames").rglob("*.parquet"):
+        _rewrite(part, lambda t: t.rename_columns([new if n == old else n
+                                                   for n in t.column_names]))
+
+
+def _rewrite_compressed(path: Path, change) -> None:
+    table = pq.read_table(path, partitioning=None)
+    pq.write_table(change(table), path, compression="zstd")
+
+
+def flip_page_byte(path: Path) -> None:
+    """One bit of the Parquet file at ``path`` flipped in the middle of its first column
+    chunk's data (a bad copy, a failing disk): the file still parses."""
+    meta = pq.read_metadata(path)
+    chunk = meta.row_group(0).column(meta.num_columns // 2)
+    start = chunk.data_page_offset
+    data = bytearray(path.read_bytes())
+    data[start + chunk.total_compressed_size // 2] ^= 0x08
+    path.write_bytes(bytes(data))
+
+
+def _move_out(folder: Path) -> None:
+    """``folder`` moved beside the database and linked back: read through the link."""
+    root = folder.parent.parent
+    outside = root.parent / f"{root.name}-outside-{folder.name}"
+    shutil.rmtree(outside, ignore_errors=True)
+    shutil.move(folder, outside)
+    folder.symlink_to(outside, target_is_directory=True)
 
 
 #: The ways :func:`corrupted` damages an array: ``negated`` (-|v| - 1), ``zeroed``, ``nan``

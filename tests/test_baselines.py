@@ -306,6 +306,26 @@ def _shortened(clip, n_frames):
                    emotion_features=None)
 
 
+def test_cli_synth_method_says_what_it_fits_on_first_use(tiny_db, split, tmp_path, capsys):
+    """av-hmm fitted for 5 minutes, hier-pca likewise, in silence on first use: it is said
+    once what is fitted (and that it takes a while), and not again once stored."""
+    from ingest.formats.wav import write_wav
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    clip = split[1][0]
+    wav = tmp_path / "speech.wav"
+    write_wav(wav, clip.audio.astype(np.float32) / 32767, clip.sample_rate)
+    command = ["synth", str(wav), "--db", str(db), "--method", "hier-pca", "-o",
+               str(tmp_path / "out.npz")]
+    assert main(command) == 0
+    err = capsys.readouterr().err
+    assert err.count("fitting hier-pca") == 1 and "Gaussian-mixture" in err \
+        and "first use" in err and "can take minutes" in err
+    assert main(command) == 0
+    assert "fitting" not in capsys.readouterr().err
+
+
 def test_cli_synth_method_uses_the_stored_model(fitted, tiny_db, split, tmp_path, capsys):
     from ingest.formats.wav import write_wav
 

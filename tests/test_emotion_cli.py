@@ -97,6 +97,48 @@ def test_classify_prints_probabilities(tiny_db, tiny_corpus, capsys):
     assert max(probs, key=probs.get) == "happy"  # a training clip
 
 
+def test_classify_refuses_noise_and_tones_and_hears_quiet_speech(tiny_db, tiny_corpus,
+                                                                   tmp_path, capsys):
+    """3 s of white noise was "angry 0.81" without a word, and real speech at -70 dBFS peak
+    was "audio is silence" though its level is normalised later."""
+    rng = np.random.default_rng(10)
+    t = np.arange(3 * 16000) / 16000
+    for name, x in (("noise", 0.3 * rng.standard_normal(t.size)),
+                    ("tone", 0.3 * np.sin(2 * np.pi * 220 * t))):
+        write_wav(tmp_path / f"{name}.wav", x.astype(np.float32), 16000)
+        assert main(["classify", str(tmp_path / f"{name}.wav"), "--db", str(tiny_db[0])]) == 1
+        _one_error_line(capsys, "audio is not speech")
+    audio, rate = read_wav(_clip(tiny_corpus, "happy").with_suffix(".wav"))
+    quiet = audio / np.abs(audio).max() * 10 ** (-70 / 20)
+    write_wav(tmp_path / "quiet.wav", quiet.astype(np.float32), rate)
+    assert main(["classify", str(tmp_path / "quiet.wav"), "--db", str(tiny_db[0])]) == 0
+    assert capsys.readouterr().out.split()[0] == "happy"  # the training clip, heard
+
+
+def test_classify_a_long_recording_window_by_window(tiny_db, tiny_corpus, tmp_path, capsys):
+    """A long recording was one label (a 10-minute one: 157 s, 1.9 GB): it is classified
+    in windows, and --timeline prints each (or why it is not classified)."""
+    from ingest.emotion.timeline import HOP_S, MAX_UTTERANCE_S, WINDOW_S
+
+    rng = np.random.default_rng(11)
+    audio, rate = read_wav(_clip(tiny_corpus, "angry").with_suffix(".wav"))
+    audio = np.asarray(audio, dtype=np.float32)
+    noise = 0.3 * rng.standard_normal(int(2 * WINDOW_S * rate)).astype(np.float32)
+    speech = np.tile(audio, int(np.ceil(MAX_UTTERANCE_S * rate / len(audio))))
+    long = np.concatenate([speech, noise])
+    write_wav(tmp_path / "long.wav", long, rate)
+    assert main(["classify", str(tmp_path / "long.wav"), "--db", str(tiny_db[0]),
+                 "--timeline"]) == 0
+    rows = capsys.readouterr().out.strip().splitlines()
+    windows, overall = rows[:-1], rows[-1]
+    assert len(windows) == int(np.floor((len(long) / rate - WINDOW_S) / HOP_S)) + 1 or \
+        len(windows) == int(np.floor((len(long) / rate - WINDOW_S) / HOP_S)) + 2
+    assert windows[0].split()[2] == "angry" and "not speech" in windows[-1]
+    assert overall.startswith("overall  angry")
+    assert main(["classify", str(tmp_path / "long.wav"), "--db", str(tiny_db[0])]) == 0
+    assert capsys.readouterr().out.split()[0] == "angry"
+
+
 def test_classify_audio_too_short(tiny_db, tmp_path, capsys):
     write_wav(tmp_path / "short.wav", 0.1 * np.sin(np.arange(1600) / 5.0).astype(np.float32),
               16000)

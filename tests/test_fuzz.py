@@ -12,7 +12,7 @@ import shutil
 
 import numpy as np
 import pytest
-from crafted import DATABASE_MUTATIONS, crafted_database
+from crafted import DATABASE_MUTATIONS, SQL_SEES, UNCHECKED_DAMAGE, crafted_database
 
 from db.errors import AnimeGraphError, DataError
 
@@ -64,7 +64,12 @@ def test_export_of_a_crafted_database_stays_in_its_folder_or_is_one_line(tiny_db
     from db.store import Database
 
     path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
-    db = Database.open(path)
+    try:
+        db = Database.open(path)
+        run_query(db, QuerySpec(limit=None))
+    except DataError as exc:  # refused before any export: its footers say the damage
+        assert "\n" not in str(exc).strip() and str(path) in str(exc), str(exc)
+        return
     live = path / (path / "CURRENT").read_text().strip()
     # the damaged rows: the first of the first part of animes, clips and audio
     first = {name: pq.read_table(sorted((live / name).rglob("*.parquet"))[0],
@@ -167,4 +172,35 @@ def test_a_databases_terminal_escapes_are_printed_as_text(tiny_db, tmp_path, mut
         main(command + ["--db", path])
         shown.append(capsys.readouterr().out)
         assert not {"\x1b", "\x07", "\u202e"} & set(shown[-1]), (command, shown[-1])
+    if mutation == "corpus_escape":  # a corpus name that is no plain name: refused at open
+        assert shown == [""] * 4
+        return
     assert "\\x1b]0;PWNED\\x07\\x1b[2J\\u202eevil" in shown[0]  # info: shown, as text
+
+
+@pytest.mark.parametrize("mutation", UNCHECKED_DAMAGE)
+def test_damage_is_refused_in_one_line(tiny_db, tmp_path, mutation):
+    from db.sql import query
+    from db.store import Database
+
+    path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
+    with pytest.raises(DataError) as caught:
+        _read_all(path)
+    message = str(caught.value)
+    assert "\n" not in message and str(path) in message and "damaged" in message, message
+    if mutation in SQL_SEES:
+        with pytest.raises(DataError, match="damaged"):
+            query(Database.open(path), "SELECT * FROM frames, clips LIMIT 1")
+
+
+def test_point_columns_are_complete_triples():
+    """A channel ending in .x without its .y and .z (a renamed coordinate) is no point's:
+    counted as one, the C3D writer's reshape into points was a traceback."""
+    from animegraph.motion.files import point_columns, point_labels
+    from db.validate import point_triples_problem
+
+    names = ["lip_corner_r_x", "lip_corner_r.y", "lip_corner_r.z", "jaw.x", "jaw.y", "jaw.z",
+             "head_yaw"]
+    assert point_columns(names) == [3, 4, 5] and point_labels(names) == ("jaw",)
+    assert "lip_corner_r.y" in point_triples_problem(names)
+    assert point_triples_problem(names[3:]) == ""

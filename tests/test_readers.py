@@ -95,6 +95,21 @@ def test_discover_synthetic_corpus(corpus):
     assert discover([corpus / "clips" / f"{first.clip_id}.controls.csv"]) == []
 
 
+def test_a_clip_whose_name_starts_with_dots_is_read(corpus, tmp_path):
+    """A clip ``..dots`` (its files ``..dots.c3d``, ``..dots.wav`` ...) was skipped as a
+    hidden file: neither added nor rejected, missing from the report. macOS's own files
+    beside it (``._..dots.c3d``, ``.DS_Store``) are no clip."""
+    first = sorted(p.name[: -len(".json")] for p in (corpus / "clips").glob("*.json"))[0]
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for path in (corpus / "clips").glob(f"{first}.*"):
+        shutil.copy(path, folder / ("..dots" + path.name[len(first):]))
+    (folder / "._..dots.c3d").write_bytes(b"\x00\x05\x16\x07 AppleDouble")
+    (folder / ".DS_Store").write_bytes(b"\x00\x00\x00\x01Bud1")
+    for where in ([folder], [folder / "..dots.wav"]):
+        source = _one(where)
+        assert source.clip_id == "..dots" and source.path == folder / "..dots.c3d"
+
 
 def test_one_file_says_nothing_of_the_other_clips_around_it(corpus, tmp_path, caplog):
     """Ingesting one file reads its folder (and FACEGOOD's folder above wav/), but what

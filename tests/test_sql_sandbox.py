@@ -82,6 +82,18 @@ def test_results_stop_at_the_row_cap(db):
         query(db, "SELECT * FROM range(11)", row_limit=10)
 
 
+def test_a_result_too_large_is_refused_saying_how_to_narrow_it(db, monkeypatch):
+    """A 2.2 GB result ended in DuckDB's advice to SET arrow_large_buffer_size (which the
+    sandbox locks) and blamed the database; a result is held to RESULT_BYTES (lowered
+    here to 1 MB: a 10 MB result), in one line saying it is the result's size."""
+    monkeypatch.setattr("db.sql.RESULT_BYTES", 1 << 20)
+    with pytest.raises(ParameterError, match="result is too large.*LIMIT") as err:
+        run(db, "SELECT repeat('x', 10000) AS s FROM range(1000)")
+    assert "\n" not in str(err.value) and "database" not in str(err.value)
+    [fits] = run(db, "SELECT repeat('x', 10000) AS s FROM range(50)")
+    assert fits.table.num_rows == 50
+
+
 def test_a_runaway_query_is_interrupted(db):
     with pytest.raises(ParameterError, match="stopped after 0.5 s"):
         run(db, "SELECT count(*) FROM range(100000000000000) a", timeout=0.5)

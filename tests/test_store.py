@@ -68,7 +68,10 @@ def test_a_table_built_clip_by_clip_is_written_in_few_row_groups(tmp_path, monke
     monkeypatch.setattr(store, "MIN_GROUP_ROWS", 1)
     rows = store.rows_per_group(frames)
     assert rows == 40_000 // (frames.nbytes / frames.num_rows)
-    write_version(tmp_path / "db", {**_tables(), "frames": frames}, {"fps": 30.0})
+    channels = pa.table({"channel": pa.array(range(50), pa.int32()),
+                         "name": [f"ch{c}" for c in range(50)]})
+    write_version(tmp_path / "db", {**_tables(), "frames": frames, "channels": channels},
+                  {"fps": 30.0})
     db = Database.open(tmp_path / "db")
     files = list(db.table_path("frames").rglob("*.parquet"))
     meta = pq.ParquetFile(files[0]).metadata

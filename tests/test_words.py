@@ -248,3 +248,26 @@ def test_a_look_alike_transcript_is_said_on_the_clips_line(tmp_path):
         assert clip.segmentation == "aligned" and "transcript_fallback" not in clip.extra
         assert ("transcript_doubt" in clip.extra) == doubted
         assert ("fits the audio poorly" in _note("", clip)) == doubted
+
+
+def test_synth_labels_read_a_grid_word_alignment_as_ingest_does():
+    """synth --labels clip.align (GRID's word alignment, which ingest reads beside a clip)
+    was "unknown phone label file type": it is read by ingest's reader, the phones
+    aligned inside its words."""
+    from conftest import require_shared
+
+    from ingest.formats.media import read_audio
+    from ingest.formats.words import read_grid_align
+    from ingest.readers.common import read_labels_for
+
+    align = require_shared("grid", "s1", "bbaf2n.align")
+    audio, rate = read_audio(align.with_suffix(".mp4"))
+    phones = read_labels_for(align, audio, rate)
+    words = [w for w in read_grid_align(align) if w.word]
+    spoken = [p for p in phones if p.phone != "SIL"]
+    assert len(spoken) >= 2 * len(words)  # each word at least ... two phones here
+    for word in words:  # every word's phones inside its times
+        inside = [p for p in spoken if word.start - 1e-6 <= p.start < word.end - 1e-6]
+        assert inside and all(p.end <= word.end + 1e-6 for p in inside), word
+    with pytest.raises(DataError, match="words end at"):
+        read_labels_for(align, audio[: rate], rate)  # an alignment of longer speech

@@ -394,7 +394,8 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
                      "0 with --guide-rank: ranking only)")
     syn.add_argument("--guide-rank", action="store_true",
                      help="also rank each phone's animes by their distance to the guide's "
-                     "motion beside the audio cost (trajectory-guided selection)")
+                     "motion beside the audio cost (trajectory-guided selection; it helped "
+                     "within one speaker, not across speakers: off by default)")
 
 
 def _add_batch(sub) -> None:
@@ -548,6 +549,11 @@ def _add_classify(sub) -> None:
     cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
     _db_option(cls)
     cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
+    cls.add_argument("--timeline", action="store_true",
+                     help="classify the recording window by window (4 s every 4 s) and print "
+                     "each window's start, end, label and probabilities, or why it is not "
+                     "classified (silence, not speech); a recording over 15 s is always "
+                     "classified so, its probabilities their mean")
     cls.set_defaults(func=cmd_classify)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from scipy import linalg
 from scipy.special import logsumexp
 
-from animegraph.baselines.base import BaselineModel, sample_times
+from animegraph.baselines.base import BaselineModel, fit_progress, sample_times
 from animegraph.baselines.data import audio_features_at, resample_to
 from animegraph.baselines.predicting import MAX_STORED_COUNT, MAX_STORED_RATE, check_stored_setting
 from db.errors import DataError, ParameterError
@@ -337,7 +337,15 @@ class AVHMM:
             random_state=self.random_state,
         )
         model.reg_covar = self.reg_covar
-        model.fit(z, lengths)
+        with fit_progress(self.n_iter, "av-hmm: Baum-Welch iterations") as bar:
+            report = model.monitor_.report
+
+            def counted(log_prob):  # hmmlearn's monitor hears every EM iteration
+                report(log_prob)
+                bar.update(1)
+            model.monitor_.report = counted
+            model.fit(z, lengths)
+            model.monitor_.report = report
         self.n_audio_ = audio.shape[1]
         self.n_visual_ = visual.shape[1]
         self.feature_mean_ = mean
@@ -623,6 +631,10 @@ class AVHMMBaseline(BaselineModel):
     settings".
     """
 
+    FIT_WHAT = ("Baum-Welch training of a 28-state audio-visual HMM on every clip: it can "
+                "take minutes")
+
+
     method = "av-hmm"
 
     def __init__(self, n_states: int = N_STATES, n_mix: int = N_MIX, *, n_mfcc: int = N_MFCC,
@@ -681,9 +693,11 @@ class AVHMMBaseline(BaselineModel):
         self._hmm()._validate()
         rate = float(self.feature_fps)
         audio, motion = [], []
-        for clip, times, values in sample_times(data.clips, rate):
-            audio.append(self.audio_vectors(clip.audio, clip.sample_rate, times))
-            motion.append(values)
+        with fit_progress(len(data.clips), "av-hmm: speech features") as bar:
+            for clip, times, values in sample_times(data.clips, rate):
+                audio.append(self.audio_vectors(clip.audio, clip.sample_rate, times))
+                motion.append(values)
+                bar.update(1)
         n_frames = sum(len(m) for m in motion)
         if n_frames <= self.n_visual:
             raise DataError(f"too little data for av-hmm: {n_frames} frames at {rate:g} fps "

@@ -46,6 +46,10 @@ class BaselineModel(Predicting, BaseEstimator):
     method: ClassVar[str] = ""
 
     # -- the scikit-learn API -------------------------------------------------------
+    #: What fitting it is, for the line said before a first use's fit (with a progress
+    #: bar on stderr for those that take minutes: :func:`fit_progress`).
+    FIT_WHAT: ClassVar[str] = ""
+
     def fit(self, clips, y=None) -> BaselineModel:
         """Fit on ``clips``: a database (or its path), prepared clips or a TrainingSet.
 
@@ -186,6 +190,27 @@ def load_model(db_root, method: str) -> BaselineModel | None:
     channels = Database.open(db_root).table("channels").column("name").to_pylist()
     model.check_channels(channels, f"database {db_root}")
     return model
+
+
+def fit_progress(total: int, what: str):
+    """A progress bar on stderr (tqdm, when stderr is a terminal) for a fit's ``total``
+    steps (EM iterations, clips): a first use's fit took minutes in silence."""
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=what, file=sys.stderr, disable=None, leave=False,
+                dynamic_ncols=True)
+
+
+def fitting_line(method: str, db_root, purpose: str = "") -> str:
+    """The line said once before ``method`` is fitted on a database on first use: what is
+    fitted, that it is stored, and that a bar follows for the slow ones."""
+    from animegraph.baselines import estimator_class
+
+    what = estimator_class(method).FIT_WHAT
+    return (f"fitting {method} on {db_root}{purpose} ({what + '; ' if what else ''}first "
+            f"use: stored with the database) ...")
 
 
 def fitted_model(db_root, method: str, *, refit: bool = False, **params) -> BaselineModel:

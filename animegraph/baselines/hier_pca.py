@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.mixture import GaussianMixture
 
-from animegraph.baselines.base import BaselineModel, check_enough, sample_times
+from animegraph.baselines.base import BaselineModel, check_enough, fit_progress, sample_times
 from animegraph.baselines.data import TrainingSet, audio_features_at, resample_to
 from animegraph.baselines.predicting import MAX_STORED_COUNT, MAX_STORED_RATE, check_stored_setting
 from animegraph.motion.measures import lip_channels
@@ -136,6 +136,10 @@ class HierPca(BaselineModel):
         Seed of k-means and the mixture.
     """
 
+    FIT_WHAT = ("PCA and Gaussian-mixture clusters of every clip's speech and motion: "
+                "it can take minutes")
+
+
     method = "hier-pca"
 
     def __init__(self, n_clusters: int = N_CLUSTERS, n_mfcc: int = N_MFCC,
@@ -168,9 +172,11 @@ class HierPca(BaselineModel):
     def _fit(self, data: TrainingSet) -> None:
         self._check_params()
         speech, motion = [], []
-        for clip, times, m in sample_times(data.clips, self.frame_rate):
-            speech.append(self._speech_vectors(clip.audio, clip.sample_rate, times))
-            motion.append(m)
+        with fit_progress(len(data.clips), "hier-pca: speech features") as bar:
+            for clip, times, m in sample_times(data.clips, self.frame_rate):
+                speech.append(self._speech_vectors(clip.audio, clip.sample_rate, times))
+                motion.append(m)
+                bar.update(1)
         a, x = np.concatenate(speech), np.concatenate(motion)
         check_enough(len(x), MIN_CLUSTER_FRAMES, "the hier-pca PCA models")
         # Eq. 4: speech parameters.
@@ -182,8 +188,11 @@ class HierPca(BaselineModel):
             self.node_channels_ = {"face": np.arange(data.n_channels)}
         else:
             self.node_channels_ = {"face": np.arange(data.n_channels), "mouth": mouth}
-        self.nodes_ = {name: self._fit_node(x[:, ch], s, seed)
-                       for seed, (name, ch) in enumerate(self.node_channels_.items())}
+        with fit_progress(len(self.node_channels_), "hier-pca: Gaussian mixtures") as bar:
+            self.nodes_ = {}
+            for seed, (name, ch) in enumerate(self.node_channels_.items()):
+                self.nodes_[name] = self._fit_node(x[:, ch], s, seed)
+                bar.update(1)
 
     def _fit_node(self, x: np.ndarray, s: np.ndarray, seed: int) -> dict:
         mean, p, sd, _ = _pca(x, APPEARANCE_VARIANCE)

@@ -117,17 +117,39 @@ def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
     ``auto``: asked for by the emotion ``auto`` (the error says to name the emotion
     instead), else by ``classify``.
 
+    Speech only: noise, tones and music are refused with the reason
+    (:func:`ingest.emotion.audio.check_speech`). A recording longer than
+    :data:`ingest.emotion.timeline.MAX_UTTERANCE_S` is classified window by window
+    (bounded memory, linear time); its probabilities are the mean of its speech windows'.
+
     Raises
     ------
     DataError
         No classifier in the database (:func:`no_classifier`); audio too short (< 0.25 s),
-        silent or non-finite.
+        silent, not speech, or non-finite.
     """
+    from ingest.emotion.audio import check_speech
+    from ingest.emotion.timeline import MAX_UTTERANCE_S, mean_probabilities
+
     if model.classifier is None:
         raise DataError(no_classifier(model, auto=auto))
+    if np.shape(audio)[0] / float(sample_rate) > MAX_UTTERANCE_S:
+        return mean_probabilities(classify_timeline(model, audio, sample_rate, auto=auto))
+    check_speech(audio, sample_rate)
     proba = model.classifier.predict_proba([(audio, sample_rate)])[0]
     order = np.argsort(-proba)
     return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
+
+
+def classify_timeline(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
+                      auto: bool = True) -> list:
+    """The recording's windows (:func:`ingest.emotion.timeline.classify_windows`), each
+    classified, or why it is not (silence, not speech)."""
+    from ingest.emotion.timeline import classify_windows
+
+    if model.classifier is None:
+        raise DataError(no_classifier(model, auto=auto))
+    return classify_windows(model.classifier, audio, sample_rate)
 
 
 @dataclass(frozen=True)

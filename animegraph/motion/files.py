@@ -323,7 +323,12 @@ def motion_suffix(names, kind: str) -> str:
 
 
 def point_columns(names) -> list[int]:
-    return [i for i, n in enumerate(names) if n.endswith((".x", ".y", ".z"))]
+    """Columns of the points of :func:`point_labels`, x, y, z a point: a channel that
+    ends in ``.x`` without its ``.y`` and ``.z`` is no point's (reshaped into points, it
+    was a traceback)."""
+    names = list(names)
+    index = {n: i for i, n in enumerate(names)}
+    return [index[f"{label}.{axis}"] for label in point_labels(names) for axis in "xyz"]
 
 
 def point_labels(names) -> tuple[str, ...]:

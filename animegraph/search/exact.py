@@ -122,6 +122,15 @@ def exact_layers(p: Problem, cn: np.ndarray, off: np.ndarray, u: np.ndarray,
 
 
 
+def lower_bound(p: Problem) -> float:
+    """A lower bound of the optimal cost of ``p`` (<= OPT): the relaxed backward costs'
+    least over the first layer, ``LB`` of :func:`exact_layers`. O(N), no search."""
+    pos = np.full(p.graph.n_nodes, -1, dtype=np.int64)
+    h = _relaxed_backward(p.cn, p.off, p.u, p.nxt, p.last, p.first, float(p.weights.w_jump),
+                          p.scale, pos)
+    return float(np.min(p.u[:p.off[1]] + h[:p.off[1]]))
+
+
 @numba.njit(cache=True, nogil=True)
 def _relaxed_backward(cn, off, u, nxt, last, first, w1, scale, pos):  # pragma: no cover
     n = len(off) - 1

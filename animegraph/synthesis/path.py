@@ -71,19 +71,30 @@ def audio_only_guide(*, known_phones: bool, searched: bool = False) -> str | Non
 def guide_line(name: str | None, share: float, rank: bool, *, known_phones: bool,
                asked: bool) -> str:
     """What the path line adds for a guide (empty without one): the default audio-only
-    guide with why, or the guide as asked."""
+    guide with why, or the guide as asked. A claim it makes is one docs/results.md
+    measured: the default blend, not the ranking (``--guide-rank``), which helped within
+    one speaker and hurt across speakers (docs/results.md, "The literature's design,
+    guided ranking, did not hold across speakers")."""
     if name is None:
         return ""
-    ranked = (", each phone's animes ranked by their distance to it beside the audio cost"
-              if rank else "")
     parts = name.split("+")
     motion = (f"{name}'s predicted motion" if len(parts) == 1 else
               "the mean of " + " and ".join(f"{p}'s" for p in parts) + " predicted motion")
+    ranked = (f"; each phone's animes also ranked by their distance to {motion} (as asked: "
+              "it helped within one speaker, not across speakers)" if rank else "")
+    if share == 0:
+        blend = ""
+    elif share == 0.5:
+        blend = f"; the output the mean of that and {motion}"
+    elif share == 1:
+        blend = f"; the output {motion} alone (none of the animes')"
+    else:
+        blend = f"; the output {share:g} {motion}, {1 - share:g} the animes' motion"
     if not asked and not known_phones:
-        return (f"; the output the mean of that and {motion}{ranked} (measured "
-                f"best on real speech without a transcript, FACEGOOD, talkingface and GRID; "
-                f"--guide none for the animes alone)")
-    return f"; the output {share:g} {motion}{ranked} (beyond the paper)"
+        why = (" (the blend measured best on real speech without a transcript, FACEGOOD, "
+               "talkingface and GRID; --guide none for the animes alone)" if blend else "")
+        return f"{blend}{why}{ranked}"
+    return f"{blend}{ranked} (beyond the paper)"
 
 
 def synthesis_path(given: str, *, known_phones: bool, k_best: int | None = None,

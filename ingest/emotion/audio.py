@@ -31,10 +31,14 @@ __all__ = [
     "LEVEL_PERCENTILE",
     "MIN_ACTIVE",
     "MIN_DURATION",
+    "SILENCE_BELOW_PEAK_DB",
     "SILENCE_DBFS",
     "as_float_pcm",
+    "check_speech",
     "is_pair",
     "prepare_audio",
+    "speech_measures",
+    "speech_problem",
     "speed_perturb",
     "utterances",
 ]
@@ -43,8 +47,25 @@ __all__ = [
 FEATURE_SAMPLE_RATE = 16000
 #: Shortest utterance accepted, in seconds.
 MIN_DURATION = 0.25
-#: Frames (25 ms, hop 10 ms) quieter than this (dB re full scale, RMS) count as silence.
-SILENCE_DBFS = -60.0
+#: Frames (25 ms, hop 10 ms) more than this many dB below the recording's loudest frame
+#: count as silence: judged against the recording's own level, which is normalised later
+#: (real speech whose peak is at -70 dBFS was refused as silence by a fixed -60 dBFS).
+SILENCE_BELOW_PEAK_DB = 50.0
+#: A recording whose loudest frame is quieter than this (dBFS, RMS) is silence whatever
+#: its dynamics: digital silence, or the dither of a 24-bit converter's idle input.
+SILENCE_DBFS = -110.0
+#: What speech is (:func:`speech_problem`), measured by ``scripts/measure_speech_check.py``
+#: on real speech (EmoDB, RAVDESS, GRID) against generated noise, tones and music
+#: (docs/results.md, "Is it speech?"): least share of sounding frames that are voiced
+#: (periodic: a normalised autocorrelation peak above VOICED_CORRELATION at a pitch lag
+#: of 2.5 to 16 ms, 62-400 Hz) -- noise has none --, most share of them -- a held tone,
+#: a chord, music's notes are voiced throughout, speech's consonants are not --, and the
+#: least spread (standard deviation, dB) of the sounding frames' levels -- speech's
+#: syllables rise and fall, a steady noise or tone does not.
+MIN_VOICED_SHARE = 0.10
+MAX_VOICED_SHARE = 0.94
+MIN_LEVEL_SPREAD_DB = 3.0
+VOICED_CORRELATION = 0.6
 #: Least time (s) of non-silent frames an utterance must hold.
 MIN_ACTIVE = 0.2
 #: Percentile of ``|x|`` scaled to 1 (the peak, but robust to a single click).
@@ -136,11 +157,62 @@ def prepare_audio(audio, sample_rate) -> np.ndarray:
     if rate != FEATURE_SAMPLE_RATE:
         ratio = Fraction(FEATURE_SAMPLE_RATE) / rate
         x = resample_poly(x, ratio.numerator, ratio.denominator)
-    active = _active_seconds(x)
-    if active < MIN_ACTIVE:
-        raise DataError(f"audio is silence: {active:.2f} s above {SILENCE_DBFS:g} dBFS, "
-                        f"{MIN_ACTIVE} s of sound needed")
+    levels = _frame_levels(x)
+    if levels.max() < SILENCE_DBFS:
+        raise DataError(f"audio is silence: its loudest 25 ms is at {levels.max():.0f} "
+                        f"dBFS, below {SILENCE_DBFS:g}")
+    active = _active(levels)
+    seconds = np.count_nonzero(active) * _HOP / FEATURE_SAMPLE_RATE
+    if seconds < MIN_ACTIVE:
+        raise DataError(f"audio is silence: {seconds:.2f} s within {SILENCE_BELOW_PEAK_DB:g} "
+                        f"dB of its loudest sound, {MIN_ACTIVE} s needed")
     return x / np.percentile(np.abs(x), LEVEL_PERCENTILE)
+
+
+def check_speech(audio, sample_rate) -> np.ndarray:
+    """:func:`prepare_audio`, and a DataError unless it sounds like speech
+    (:func:`speech_problem`): noise and music are refused with the reason, rather than
+    given an emotion (white noise was "angry 0.81")."""
+    x = prepare_audio(audio, sample_rate)
+    problem = speech_problem(x)
+    if problem:
+        raise DataError(f"audio is not speech: {problem}")
+    return x
+
+
+def speech_measures(x: np.ndarray) -> dict[str, float]:
+    """What :func:`speech_problem` judges, of a signal ``x`` at 16 kHz: ``voiced`` (share
+    of sounding frames that are periodic at a pitch lag), ``spread`` (standard deviation
+    of their levels, dB) and ``seconds`` (sounding time)."""
+    levels = _frame_levels(x)
+    active = _active(levels)
+    frames = _frames(x)[active]
+    voiced = _voiced(frames)
+    return {"voiced": float(voiced.mean()) if len(voiced) else 0.0,
+            "spread": float(np.std(levels[active])) if active.any() else 0.0,
+            "seconds": float(np.count_nonzero(active) * _HOP / FEATURE_SAMPLE_RATE)}
+
+
+def speech_problem(x: np.ndarray) -> str:
+    """Why the signal ``x`` (16 kHz) is not speech, in words; empty if it may be.
+
+    Speech alternates voiced sounds (periodic, at a pitch of 62-400 Hz) with unvoiced ones
+    and pauses, and its level rises and falls with its syllables. Noise is never periodic;
+    a tone, a chord or music are periodic throughout, or steady. Thresholds:
+    :data:`MIN_VOICED_SHARE`, :data:`MAX_VOICED_SHARE`, :data:`MIN_LEVEL_SPREAD_DB`.
+    """
+    m = speech_measures(x)
+    if m["voiced"] < MIN_VOICED_SHARE:
+        return (f"{100 * m['voiced']:.0f} % of its sound is voiced (periodic at a voice's "
+                f"pitch), speech has at least {100 * MIN_VOICED_SHARE:.0f} %: noise?")
+    if m["voiced"] > MAX_VOICED_SHARE:
+        return (f"{100 * m['voiced']:.0f} % of its sound is voiced, without the unvoiced "
+                f"sounds and pauses of speech (at most {100 * MAX_VOICED_SHARE:.0f} %): "
+                "a tone or music?")
+    if m["spread"] < MIN_LEVEL_SPREAD_DB:
+        return (f"its level hardly changes ({m['spread']:.1f} dB standard deviation, "
+                f"speech's syllables at least {MIN_LEVEL_SPREAD_DB:g} dB): a steady sound?")
+    return ""
 
 
 def speed_perturb(audio, sample_rate, factor: float) -> np.ndarray:
@@ -178,14 +250,45 @@ def speed_perturb(audio, sample_rate, factor: float) -> np.ndarray:
     return resample_poly(x, ratio.denominator, ratio.numerator)
 
 
-def _active_seconds(x: np.ndarray) -> float:
-    """Seconds of 25 ms frames whose RMS is above :data:`SILENCE_DBFS` (x at 16 kHz)."""
+def _frames(x: np.ndarray) -> np.ndarray:
+    """25 ms frames every 10 ms of ``x`` (16 kHz), a view: shape (n_frames, 400)."""
     if x.size < _FRAME:
         x = np.pad(x, (0, _FRAME - x.size))
-    frames = np.lib.stride_tricks.sliding_window_view(x, _FRAME)[::_HOP]
-    rms = np.sqrt(np.mean(frames * frames, axis=1))
-    return float(np.count_nonzero(rms > 10 ** (SILENCE_DBFS / 20))) * _HOP \
-        / FEATURE_SAMPLE_RATE
+    return np.lib.stride_tricks.sliding_window_view(x, _FRAME)[::_HOP]
+
+
+def _frame_levels(x: np.ndarray) -> np.ndarray:
+    """RMS level of each 25 ms frame, dBFS (-inf for digital silence)."""
+    frames = _frames(x)
+    with np.errstate(divide="ignore"):
+        return 10.0 * np.log10(np.einsum("ij,ij->i", frames, frames) / _FRAME)
+
+
+def _active(levels: np.ndarray) -> np.ndarray:
+    """The frames that sound: within :data:`SILENCE_BELOW_PEAK_DB` of the loudest."""
+    return levels > max(levels.max() - SILENCE_BELOW_PEAK_DB, SILENCE_DBFS)
+
+
+def _voiced(frames: np.ndarray) -> np.ndarray:
+    """Which frames (n, 400) are periodic at a voice's pitch: their normalised
+    autocorrelation (mean removed, Hann-windowed, by FFT) peaks above
+    :data:`VOICED_CORRELATION` at a lag of 2.5-16 ms (62-400 Hz)."""
+    if len(frames) == 0:
+        return np.zeros(0, dtype=bool)
+    lo, hi = FEATURE_SAMPLE_RATE // 400, FEATURE_SAMPLE_RATE // 62
+    out = np.empty(len(frames), dtype=bool)
+    window = np.hanning(_FRAME)
+    for start in range(0, len(frames), 4096):  # bounded memory on a long recording
+        f = frames[start:start + 4096]
+        f = (f - f.mean(axis=1, keepdims=True)) * window
+        spectrum = np.fft.rfft(f, n=2 * _FRAME, axis=1)
+        r = np.fft.irfft(np.abs(spectrum) ** 2, axis=1)[:, :hi + 1]
+        # Divided by the window's own autocorrelation: a periodic frame's peak is then
+        # near 1 whatever its lag (the unbiased estimate, Boersma 1993).
+        own = np.correlate(window, window, "full")[_FRAME - 1:_FRAME + hi]
+        r = r / np.maximum(r[:, :1], 1e-300) / (own / own[0])
+        out[start:start + len(f)] = r[:, lo:hi + 1].max(axis=1) > VOICED_CORRELATION
+    return out
 
 
 def is_pair(item) -> bool:

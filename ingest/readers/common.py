@@ -267,6 +267,25 @@ def read_labels(path: Path) -> list[Segment]:
     raise DataError(f"unknown phone label file type: {path}")
 
 
+def read_labels_for(path: Path, audio: np.ndarray, sample_rate: int) -> list[Segment]:
+    """Phones of speech ``audio`` from a label file, as ingest reads a clip's: phone
+    labels (:func:`read_labels`), or a GRID word alignment (``.align``, which ingest reads
+    beside a clip) whose words' times are kept and each word's phones aligned inside it
+    (:func:`ingest.speech.words.align_words`, what ingest does with it)."""
+    path = Path(path)
+    if not path.name.lower().endswith(".align"):
+        return read_labels(path)
+    from ingest.speech.words import align_words
+
+    words = tuple(read_grid_align(path))
+    seconds = len(audio) / sample_rate
+    if not words or words[-1].end > seconds + duration_tolerance(seconds):
+        end = f"end at {words[-1].end:.3f} s" if words else "are none"
+        raise DataError(f"{path}: its words {end}, the speech lasts {seconds:.3f} s")
+    phones, _ = align_words(np.asarray(audio, dtype=np.float32), sample_rate, words)
+    return list(phones)
+
+
 def check_labels(phones: list[Segment], audio_seconds: float, where: Path) -> None:
     """Raise DataError if phone labels run past the end of the audio."""
     if phones and phones[-1].end > audio_seconds + duration_tolerance(audio_seconds):

@@ -91,9 +91,19 @@ def _synthetic_root(folder: Path) -> bool:
         return False
 
 
+#: Files a folder may hold that are no clip's: macOS's Finder settings and the
+#: AppleDouble "._<name>" forks it writes beside every file copied to a foreign disk.
+NOT_CLIP_FILES = (".DS_Store",)
+NOT_CLIP_PREFIX = "._"
+
+
 def _files(folder: Path) -> list[Path]:
+    """The files of ``folder`` that may be a clip's. A name starting with a dot is one
+    (a clip ``..dots`` was neither added nor rejected: skipped as hidden, in silence)."""
     try:
-        return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
+        return sorted(p for p in folder.iterdir() if p.is_file()
+                      and p.name not in NOT_CLIP_FILES
+                      and not p.name.startswith(NOT_CLIP_PREFIX))
     except OSError as exc:
         logger.warning("cannot list %s: %s", folder, exc.strerror)
         return []

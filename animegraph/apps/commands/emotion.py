@@ -12,14 +12,31 @@ from animegraph.apps.commands.common import UsageError, check_motion_suffix, che
 def cmd_classify(args: argparse.Namespace) -> int:
     import json
 
-    from animegraph.emotion.control import classify_speech
+    from animegraph.emotion.control import classify_speech, classify_timeline
     from db.store import Database
     from ingest.emotion.model import EmotionModel
+    from ingest.emotion.timeline import mean_probabilities
     from ingest.formats.media import read_audio
 
     db = Database.open(args.db)
     model = EmotionModel.from_database(db)
     audio, sample_rate = read_audio(args.audio)  # mono, whatever the file holds
+    if args.timeline:
+        windows = classify_timeline(model, audio, sample_rate, auto=False)
+        if args.json:
+            print(json.dumps([{"start": w.start, "end": w.end, "probabilities":
+                               w.probabilities, "not_classified": w.reason or None}
+                              for w in windows], indent=1))
+            return 0
+        for w in windows:
+            row = (f"{w.start:8.2f} {w.end:8.2f}  " + (
+                f"{next(iter(w.probabilities)):<12s} " + " ".join(
+                    f"{k} {v:.3f}" for k, v in w.probabilities.items())
+                if w.probabilities is not None else f"{'-':<12s} {w.reason}"))
+            print(row)
+        overall = mean_probabilities(windows)
+        print("overall  " + " ".join(f"{k} {v:.3f}" for k, v in overall.items()))
+        return 0
     probabilities = classify_speech(model, audio, sample_rate, auto=False)
     if args.json:
         print(json.dumps(probabilities, indent=1))

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from animegraph.apps.commands.common import (
     UsageError,
@@ -48,7 +49,7 @@ def _synth(args: argparse.Namespace, heard) -> int:
     )
     from animegraph.synthesis.guide import guide_names
     from ingest.formats.media import read_audio
-    from ingest.readers.common import read_labels
+    from ingest.readers.common import read_labels_for
 
     check_motion_suffix("synth", args.output)
     _check_timecode(args)
@@ -84,7 +85,10 @@ def _synth(args: argparse.Namespace, heard) -> int:
     if sidecar is not None:
         print(f"animegraph: using the phone labels beside the speech, {sidecar} "
               "(--labels or --text to use others)", file=sys.stderr)
-    labels = read_labels(args.labels) if args.labels else None
+    # A GRID word alignment (.align) too, as ingest reads it (phones aligned in its words).
+    labels = (read_labels_for(Path(args.labels), audio if np.ndim(audio) == 1
+                              else np.mean(audio, axis=1), sample_rate)
+              if args.labels else None)
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
@@ -264,7 +268,7 @@ def _synth_baseline(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from animegraph.baselines.base import fitted_model
+    from animegraph.baselines.base import fitted_model, fitting_line, load_model
     from animegraph.emotion.control import AUTO, check_names, parse_emotion
     from animegraph.motion.files import write_channels
     from animegraph.synthesis import to_world
@@ -304,6 +308,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
                           .column("emotion").to_pylist())
     audio, sample_rate = read_audio(args.audio)  # a WAV, or a video's sound track
     t0 = time.perf_counter()
+    if args.refit or load_model(args.db, args.method) is None:  # minutes, once: said
+        print(f"animegraph: {fitting_line(args.method, args.db)}", file=sys.stderr)
     model = fitted_model(args.db, args.method, refit=args.refit)
     t1 = time.perf_counter()
     motion = model.predict(audio, sample_rate, emotion=emotion)
