@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import math
 from pathlib import Path
 
 from animegraph import __version__
@@ -35,6 +36,11 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 #: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
 SYNTH_GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
+
+#: ``sql --timeout``'s default and ceiling (:data:`db.sql.TIMEOUT_S`, :data:`db.sql.MAX_TIMEOUT_S`,
+#: spelled out here so that ``--help`` does not import DuckDB; tests/test_sql_sandbox.py
+#: checks that they are the same).
+TIMEOUT_S, MAX_TIMEOUT_S = 60.0, 86400.0
 
 #: ``sql --help``'s list of the tables and their main columns (tests/test_ingest.py checks
 #: that each column is in a database).
@@ -106,10 +112,16 @@ def _formats(text: str) -> tuple[str, ...]:
 
 
 def _number(text: str) -> float:
+    """A finite number: ``inf`` and ``nan`` parse as floats, and each option that took
+    them went on without its limit (``sql --timeout inf`` ended in a thread's
+    OverflowError and no time limit at all)."""
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def _phones_engine_option(parser, transcript: str) -> None:
@@ -276,7 +288,8 @@ def _add_sql(sub) -> None:
                      help="rows fetched per statement; the rest is never read "
                      "(default 100000)")
     sql.add_argument("--timeout", type=_number, default=None,
-                     help="seconds before the query is interrupted (default 60)")
+                     help=f"seconds before the query is interrupted: more than 0, at most "
+                     f"{MAX_TIMEOUT_S:g} (a day; default {TIMEOUT_S:g})")
     sql.set_defaults(func=cmd_sql)
 
 
