@@ -46,7 +46,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from db.arrow import numbers, repeat_string
-from db.atomic import atomic_write
+from db.atomic import atomic_write, write_error
 from db.errors import DataError
 from db.lock import pid_alive, writer_lock
 
@@ -228,6 +228,13 @@ def dictionary_columns(table: pa.Table) -> list[str]:
 
 
 def _write_table(folder: Path, name: str, table: pa.Table) -> None:
+    try:
+        _write_table_files(folder, name, table)
+    except OSError as exc:  # pyarrow's own error names no file ("Error writing bytes ...")
+        raise write_error(folder / name, exc) from None
+
+
+def _write_table_files(folder: Path, name: str, table: pa.Table) -> None:
     import pyarrow.dataset as ds  # deferred: it imports pandas, which reading does not need
 
     rows = rows_per_group(table)
