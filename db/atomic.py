@@ -40,7 +40,7 @@ _KINDS = ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISCHR, "a device"),
           (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder"), (stat.S_ISREG, "a file"))
 
 
-def check_output(path: str | os.PathLike[str], *, folder: bool | None = False) -> Path:
+def check_output_path(path: str | os.PathLike[str], *, folder: bool | None = False) -> Path:
     """Refuse a place a command's output may not go; return it as a Path.
 
     An output (``sql -o``, ``synth -o``, ``render -o``, ``query --export`` ...) is written
@@ -155,7 +155,7 @@ def _replaceable(target: Path) -> None:
     except OSError as exc:
         raise DataError(f"cannot write {target}: {exc.strerror or exc}") from None
     if not stat.S_ISREG(mode):
-        check_output(target)  # says what it is
+        check_output_path(target)  # says what it is
 
 
 def replace_dir(staging: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:

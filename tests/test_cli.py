@@ -216,3 +216,20 @@ def test_a_library_write_replaces_only_a_regular_file(tmp_path):
     with atomic_write(tmp_path / "new.csv") as out:
         out.write(b"2")
     assert (tmp_path / "new.csv").read_bytes() == b"2"
+
+
+def test_query_help_lists_every_export_format_the_export_writes(capsys):
+    # The help said "C3D for marker databases, CSV otherwise": no word of .livelink.csv.
+    from animegraph.motion.files import motion_suffix
+    from animegraph.motion.suffixes import EXPORT_FORMATS
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    with pytest.raises(SystemExit):
+        main(["query", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for suffix in EXPORT_FORMATS:
+        assert f"{suffix}:" in text, suffix
+    written = {motion_suffix(list(ARKIT_BLENDSHAPES), "curves"),
+               motion_suffix(["a.x", "a.y", "a.z"], "markers"),
+               motion_suffix(["a.x", "a.y", "a.z", "head.yaw"], "landmarks")}
+    assert written == set(EXPORT_FORMATS)

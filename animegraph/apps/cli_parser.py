@@ -104,15 +104,15 @@ def _whole_number(text: str) -> int:
 
 
 def _output(folder: bool | None):
-    """The type of an option naming an output: :func:`db.atomic.check_output` (a new path,
+    """The type of an option naming an output: :func:`db.atomic.check_output_path` (a new path,
     or an existing regular file or folder as ``folder`` says; never a device, FIFO or
     symbolic link, never inside a database), said as the option's error."""
-    from db.atomic import check_output
+    from db.atomic import check_output_path
     from db.errors import DataError
 
     def output(text: str) -> Path:
         try:
-            return check_output(text, folder=folder)
+            return check_output_path(text, folder=folder)
         except DataError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
     output.__name__ = "output path"  # argparse's word for it in "invalid output path value"
@@ -453,14 +453,16 @@ def _add_batch(sub) -> None:
 def _add_query(sub) -> None:
     """``query``: anime nodes or clips, exported for other tools."""
     from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
+    from animegraph.motion.suffixes import EXPORT_FORMATS
 
     qry = sub.add_parser(
         "query", help="find anime nodes or clips; export them for other tools",
         description="List the anime nodes (phoneme instances) or, with --clips, the "
         "utterances that match, as a table. The query is SQL over the database's views "
         "(--show-sql prints it; 'animegraph sql' runs it as it is). --export writes each hit "
-        "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
-        "(WAV), a PNG preview, and index.csv.",
+        f"as motion ({'; '.join(f'{suffix}: {what}' for suffix, what in EXPORT_FORMATS.items())})"
+        " with context, its speech (WAV), its phones (.phones.csv), a PNG preview, and "
+        "index.csv.",
     )
     _db_option(qry)
     qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
