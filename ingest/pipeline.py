@@ -78,7 +78,7 @@ class IngestConfig:
     correct_lag: bool = True
     pool_lag: bool = True  # lag per speaker/session, pooled (ingest.lag); False: per clip
     random_state: int = 0  # FastICA seed
-    phones_engine: str | None = None  # ingest.speech.segment.ENGINES (None: the default)
+    phones_engine: str | None = None  # ingest.speech.engines.ENGINES (None: the default)
     # Store each clip's phone posteriorgram (hama installed; beyond the paper, for synth
     # --audio-cost posteriorgram): about 0.08 CPU-s per second of speech when hama has not
     # recognised the phones already. Off by default: the posteriorgram cost did not measure

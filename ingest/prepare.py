@@ -121,7 +121,7 @@ def prepare_clip(
         Head-group positions of the database: points of a clip with a rigid head group
         are expressed in the head's frame (:func:`ingest.motion.stabilize_points`).
     phones_engine : str, optional
-        Phone engine for clips without labels (:data:`ingest.speech.segment.ENGINES`).
+        Phone engine for clips without labels (:data:`ingest.speech.engines.ENGINES`).
     posteriorgrams : bool, optional
         Compute the clip's phone posteriorgram (when hama is installed; beyond the paper).
         Kept anyway when hama recognised the clip's phones (it has heard the clip).

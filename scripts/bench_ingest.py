@@ -78,7 +78,7 @@ def per_clip(corpus: Path, every: int) -> int:
     from ingest.pipeline import ClipJob, IngestConfig, _head_reference, _work
     from ingest.readers import discover
     from ingest.speech.g2p import pronounce
-    from ingest.speech.segment import _engine
+    from ingest.speech.sphinx import _engine
 
     config = IngestConfig()
     found = discover([corpus])[::every]

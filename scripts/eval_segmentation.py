@@ -44,11 +44,12 @@ from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.formats.phones_csv import Segment, read_phones_csv
 from ingest.formats.wav import read_wav
 from ingest.speech import ctc
-from ingest.speech import segment as ps
+from ingest.speech import sphinx as ps
 from ingest.speech.engines import aligner, recognizer
 from ingest.speech.g2p import pronounce
 from ingest.speech.phones import SILENCE
-from ingest.speech.segment import boundary_errors, edit_alignment, matched_onsets, phone_error_rate
+from ingest.speech.scoring import boundary_errors, edit_alignment, matched_onsets, phone_error_rate
+from ingest.speech.tiling import snap_labels
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 #: EmoDB's copy is cut to this many seconds.
@@ -151,7 +152,7 @@ def read_lablaut(path: Path, duration: float) -> list[Segment]:
         else:
             pieces.append([phone, start, end])
     segments = [Segment(p, s, min(e, duration)) for p, s, e in pieces if s < duration]
-    return ps.snap_labels(segments, duration) if segments else [Segment(SILENCE, 0, duration)]
+    return snap_labels(segments, duration) if segments else [Segment(SILENCE, 0, duration)]
 
 
 def _mp4_audio(path: Path) -> np.ndarray:

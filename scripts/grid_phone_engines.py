@@ -43,7 +43,8 @@ from animegraph.motion.measures import mouth_opening
 from db.store import Database
 from ingest.speech.engines import ENGINES
 from ingest.speech.phones import SILENCE, VISEME_OF, VOWELS
-from ingest.speech.segment import phone_error_rate, segment
+from ingest.speech.scoring import phone_error_rate
+from ingest.speech.segment import segment
 from ingest.tables import prepared_from_database
 
 STEP_S = 0.01

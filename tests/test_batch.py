@@ -11,21 +11,21 @@ import numpy as np
 import pytest
 
 from animegraph.apps.batch import (
-    DONE,
     EXAMPLE_SCRIPT,
     BatchInterrupted,
     BatchOptions,
-    LineTask,
+    run_batch,
+)
+from animegraph.apps.batch_line import LineTask, run_line, voice_for
+from animegraph.apps.batch_markers import (
+    DONE,
     database_identity,
     finished,
     line_key,
-    read_report,
     render_key,
     rendered,
-    run_batch,
-    run_line,
-    voice_for,
 )
+from animegraph.apps.batch_report import read_report
 from animegraph.apps.cli import main
 from animegraph.apps.script import EmotionSpec, ScriptError, ScriptLine, parse_emotion, read_script
 from db.errors import DataError, ParameterError
@@ -276,7 +276,7 @@ def test_the_key_follows_inputs_recording_and_database(tmp_path):
 def test_run_line_in_process(tiny_db, tmp_path):
     """A worker's job, without the cluster: a stale marker goes first, a bad emotion fails
     the line with its reason, and the model is loaded once for both lines."""
-    from animegraph.apps import batch
+    from animegraph.apps import batch_line
 
     db = tiny_db[0]
     version, identity = database_identity(db)
@@ -300,8 +300,8 @@ def test_run_line_in_process(tiny_db, tmp_path):
     assert good["_loads"] == 1
     assert finished(folder, task("angry").key)["jumps"] == good["jumps"]
     with pytest.raises(DataError, match="changed during the batch"):
-        batch._MODELS.clear()
-        batch.worker_model(str(db), "v000999")
+        batch_line._MODELS.clear()
+        batch_line.worker_model(str(db), "v000999")
 
 
 def test_run_line_reads_a_videos_sound_track(tiny_db, tiny_corpus, tmp_path):
@@ -629,7 +629,7 @@ def test_a_failed_render_keeps_the_motion_for_the_next_run(tiny_db, tmp_path):
 def test_a_batch_writes_the_motion_formats_synth_writes(tiny_db, tmp_path):
     # A batch wrote one format per kind of database (C3D of markers, CSV of landmarks):
     # no C3D of a landmark database's points, no NPZ, where synth -o writes them.
-    from animegraph.apps.batch import motion_files
+    from animegraph.apps.batch_markers import motion_files
     from animegraph.motion.files import read_motion
 
     db = tiny_db[0]
@@ -715,7 +715,7 @@ def test_a_recording_whose_transcript_does_not_fit_goes_as_speech_alone(tiny_db,
     np.testing.assert_allclose(written.reshape(len(written), -1), alone.motion, atol=1e-3)
 
     # Finished, until the guide it lacked is fitted: then the line is made again.
-    from animegraph.apps.batch import guide_state
+    from animegraph.apps.batch_markers import guide_state
 
     def stored(parts):
         return guide_state(db, parts)
@@ -770,7 +770,7 @@ def test_a_recording_in_a_lines_output_folder_is_refused(tiny_db, tmp_path):
 def test_a_guide_that_could_not_be_fitted_says_why_in_a_batch(tiny_db, tmp_path):
     """A batch said 'not fitted: animegraph fit ...' of the guide synth had found cannot
     be fitted on the database (a fit that fails again): it says why, as synth does."""
-    from animegraph.apps.batch import worker_guide
+    from animegraph.apps.batch_line import worker_guide
     from animegraph.baselines.stored import record_unfit
 
     db = tmp_path / "db"
@@ -801,7 +801,7 @@ def test_a_local_batch_leaves_port_8787_alone(tmp_path):
     import socket
     import warnings
 
-    from animegraph.apps.batch import _client
+    from animegraph.apps.batch_cluster import _client
 
     holder = socket.socket()
     try:

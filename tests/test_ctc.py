@@ -11,17 +11,13 @@ from conftest import require_shared
 
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
-from ingest.speech import ctc
+from ingest.speech import ctc, ctc_timing
 from ingest.speech.engines import ENGINES, aligner, check_engine, recognizer
 from ingest.speech.espeak import Voice, speak
 from ingest.speech.phones import PHONE_SET, PHONES, SILENCE
-from ingest.speech.segment import (
-    BOUNDARY_OFFSET,
-    align_phones,
-    boundary_errors,
-    phone_error_rate,
-    segment,
-)
+from ingest.speech.scoring import boundary_errors, phone_error_rate
+from ingest.speech.segment import segment
+from ingest.speech.sphinx import BOUNDARY_OFFSET, align_phones
 
 pytestmark = pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
 
@@ -322,15 +318,16 @@ def test_ctc_viterbi_finds_the_known_path():
     best = [1, 1, 0, 2, 2, 0, 1]
     log_probs = np.full((len(best), 3), np.log(0.05))
     log_probs[np.arange(len(best)), best] = np.log(0.9)
-    starts, score = ctc.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0)
+    starts, score = ctc_timing.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0)
     assert starts.tolist() == [0, 3, 6]
     assert score == pytest.approx(7 * np.log(0.9))
-    assert ctc.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0, path=False) == (None, score)
+    assert ctc_timing.ctc_viterbi(log_probs, np.array([1, 2, 1]), blank=0,
+                                  path=False) == (None, score)
     # a repeated label needs a blank between its two copies
-    starts, _ = ctc.ctc_viterbi(log_probs, np.array([1, 1]), blank=0)
+    starts, _ = ctc_timing.ctc_viterbi(log_probs, np.array([1, 1]), blank=0)
     assert starts[1] > starts[0] + 1
     with pytest.raises(DataError, match="frames"):
-        ctc.ctc_viterbi(log_probs[:2], np.array([1, 1, 2]), blank=0)
+        ctc_timing.ctc_viterbi(log_probs[:2], np.array([1, 1, 2]), blank=0)
 
 
 def test_engine_choice(spoken, caplog):
@@ -363,12 +360,12 @@ def test_trailing_silence_starts_at_the_first_pause_after_the_last_phone():
     level[5:21] = 0.3                  # ... the phone's speech
     level[30:33] = 0.3                 # ... a breath after a 9-frame pause
     samples = (rng.standard_normal(50 * hop) * np.repeat(level, hop)).astype(np.float64)
-    segs = ctc._timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
+    segs = ctc_timing.timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
     assert [s.phone for s in segs] == [SILENCE, "AA", SILENCE]
     assert segs[-1].start == pytest.approx(21 / ctc.FRAME_RATE)
     level[21:30] = 0.3                 # no pause before the breath: the quiet end only
     samples = (rng.standard_normal(50 * hop) * np.repeat(level, hop)).astype(np.float64)
-    segs = ctc._timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
+    segs = ctc_timing.timed(["AA"], np.array([5]), np.array([10]), samples, 50, 1.0, False)
     assert segs[-1].phone == SILENCE and segs[-1].start == pytest.approx(33 / ctc.FRAME_RATE)
 
 

@@ -67,7 +67,8 @@ def test_bag_of_audio_words_counts_nearest_words(rng):
 
 
 def test_block_widths_weight_blocks_after_scaling_and_round_trip(rng):
-    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier, block_weights
+    from ingest.emotion.classifier import EmotionClassifier, block_weights
+    from ingest.emotion.classifier_arrays import CLASSIFIER_FORMAT
 
     w = block_weights((1, 4))
     np.testing.assert_allclose(w, [np.sqrt(2.5)] + [np.sqrt(5 / 8)] * 4)
@@ -136,7 +137,8 @@ def test_stored_codebooks_are_checked(rng):
 
 def test_classifier_learns_its_codebooks_at_fit_and_stores_them(rng):
     from db.errors import DataError
-    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier, SpeechFeatures
+    from ingest.emotion.classifier import EmotionClassifier, SpeechFeatures
+    from ingest.emotion.classifier_arrays import CLASSIFIER_FORMAT
 
     f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
     audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]
@@ -241,7 +243,8 @@ def test_the_ensemble_kernel_varies_less_with_the_seed(rng):
 
 def test_classifier_with_an_ensemble_stores_it_and_reads_format_4(rng):
     from db.errors import DataError
-    from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier
+    from ingest.emotion.classifier import EmotionClassifier
+    from ingest.emotion.classifier_arrays import CLASSIFIER_FORMAT
 
     f0s = {"low": (100.0, 120.0, 110.0, 105.0), "high": (240.0, 260.0, 250.0, 270.0)}
     audio = [(_voice(rng, f0=f, seconds=0.8), SR) for lab in f0s for f in f0s[lab]]

@@ -11,8 +11,10 @@ import pytest
 import soundfile as sf
 
 from db.errors import DataError
-from ingest.emotion.classifier import CLASSIFIER_FORMAT, EmotionClassifier
-from ingest.emotion.features import SILENCE_FLOOR, block_features, frame_analysis
+from ingest.emotion.classifier import EmotionClassifier
+from ingest.emotion.classifier_arrays import CLASSIFIER_FORMAT
+from ingest.emotion.features import block_features
+from ingest.emotion.frames import SILENCE_FLOOR, frame_analysis
 
 #: Samples below this are set to zero: a noise gate, well above the synthetic corpus'
 #: noise floor (3e-4) and far below its speech.
@@ -114,7 +116,7 @@ def test_silence_floor_stored_and_older_formats_read_without_it(clips, tiny_conf
 def test_a_classifier_from_before_the_floor_is_learnt_again_by_the_next_ingest():
     """``stored_model_current`` decides it, for ingest (learn the model again from the
     stored clips) and for the default database (brought up to date on first use)."""
-    from ingest.emotion.classifier import SILENCE_FLOOR_FORMAT
+    from ingest.emotion.classifier_arrays import SILENCE_FLOOR_FORMAT
     from ingest.emotion.model import stored_model_current
 
     def manifest(classifier):
@@ -129,7 +131,6 @@ def test_a_classifier_from_before_the_floor_is_learnt_again_by_the_next_ingest()
 
 def test_ingest_writes_its_classifiers_format_in_the_manifest(tiny_db):
     from db.store import Database
-    from ingest.emotion.classifier import CLASSIFIER_FORMAT
     from ingest.emotion.model import stored_model_current
 
     manifest = Database.open(tiny_db[0]).manifest

@@ -16,7 +16,6 @@ import pytest
 from db.errors import DataError, ParameterError
 from ingest.speech.espeak import (
     _LOCK,
-    ESPEAK_TO_ARPABET,
     SYLLABIC_SPLIT,
     VOWEL_SPLIT,
     PhoneSegment,
@@ -24,9 +23,9 @@ from ingest.speech.espeak import (
     Voice,
     _engine,
     _spans,
-    map_mnemonic,
     speak,
 )
+from ingest.speech.espeak_phones import ESPEAK_TO_ARPABET, map_mnemonic
 from ingest.speech.phones import PHONE_SET, VOWELS
 
 SENTENCE = "Hello there. How are you today? I hope the weather is nice where you are, my friend."

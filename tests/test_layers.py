@@ -1,5 +1,6 @@
 """Imports flow one way: ``db`` <- ``ingest`` <- ``animegraph``, and inside ``animegraph``
-from room to room in the order its package docstring gives."""
+from room to room in the order its package docstring gives; no modules import each other
+in a circle, and none is long."""
 
 from __future__ import annotations
 
@@ -87,3 +88,99 @@ def test_public_names_import_from_the_package():
     assert hasattr(animegraph.MuMlp(), "fit")
     with pytest.raises(AttributeError):
         animegraph.no_such_name  # noqa: B018
+
+
+#: The packages whose modules may not import each other in a circle.
+PACKAGES = ("db", "ingest", "animegraph")
+#: Longest module, in lines (the project's standard: small modules).
+MAX_LINES = 800
+
+
+def _module_files() -> dict[str, Path]:
+    """Dotted module name -> file, for every module of :data:`PACKAGES`."""
+    modules = {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return modules
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the project's modules it imports: every import statement, at the top, in a
+    function (a lazy import is as much a dependency) or under ``TYPE_CHECKING``, relative
+    ones resolved. ``from a.b import c`` is a dependency on ``a.b.c`` if that is a module,
+    else on ``a.b``."""
+    modules = _module_files()
+
+    def owner(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                targets |= {f"{base}.{a.name}" for a in node.names}
+        graph[name] = {m for m in map(owner, targets) if m is not None} - {name}
+    return graph
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_circle_finder_finds_a_circle():
+    # a -> b -> c -> a, and d alone: one circle of three.
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _circles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_circle():
+    # A circle of imports, even through an import inside a function, makes the modules
+    # one: none can be read, tested or moved without the others.
+    circles = _circles(_import_graph())
+    assert not circles, "modules import each other in a circle: " + "; ".join(
+        " <-> ".join(c) for c in circles)
+
+
+def test_no_module_is_long():
+    long = {str(path.relative_to(ROOT)): n for path in _module_files().values()
+            if (n := len(path.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines: {long}"

@@ -1,4 +1,5 @@
-"""Tests of phone segmentation (ingest.speech.segment) and G2P (ingest.speech.g2p).
+"""Tests of phone segmentation (ingest.speech.segment, .sphinx, .tiling, .scoring) and
+G2P (ingest.speech.g2p).
 
 Real PocketSphinx and eSpeak NG, no mocks. Reference timing comes from eSpeak NG, which
 knows where each phone it synthesises starts.
@@ -24,18 +25,17 @@ from ingest.speech.g2p import (
     rule_g2p,
     transcript_words,
 )
+from ingest.speech.inputs import MIN_DURATION, check_audio
 from ingest.speech.phones import PHONE_SET, SILENCE
-from ingest.speech.segment import (
-    MIN_DURATION,
-    align,
+from ingest.speech.scoring import (
     boundary_errors,
     edit_alignment,
     matched_onsets,
     phone_error_rate,
-    recognize,
-    segment,
-    snap_labels,
 )
+from ingest.speech.segment import segment
+from ingest.speech.sphinx import align, recognize
+from ingest.speech.tiling import snap_labels
 
 SENTENCES = (
     "The young boy took a brown bag of fresh cheese to the village market.",
@@ -95,12 +95,12 @@ def test_align_recovers_phones_and_timing(spoken):
 def test_one_phone_words_are_placed_by_the_word_pass_alone(spoken):
     # align_phones skips PocketSphinx's second (phone) pass: with words of one phone it
     # gives back the word pass's boundaries. Checked here against running it.
-    from ingest.speech import segment as seg
+    from ingest.speech import sphinx as seg
 
     engine = seg._engine("align")
     for utterance in spoken:
         phones = [p.phone for p in utterance.phones if p.phone != SILENCE]
-        prepared = seg._prepare(*seg._check_audio(utterance.audio, utterance.sample_rate))
+        prepared = seg._prepare(*check_audio(utterance.audio, utterance.sample_rate))
         words = " ".join(seg._phone_word(p) for p in phones)
         with engine.lock:
             seg._add_words(engine, [(seg._phone_word(p), p) for p in sorted(set(phones))
@@ -115,7 +115,7 @@ def test_one_phone_words_are_placed_by_the_word_pass_alone(spoken):
 def test_align_out_of_vocabulary_word(caplog):
     text = "The blorptastic wizard counted 42 frogs."
     utterance = speak(text)
-    with caplog.at_level(logging.DEBUG, logger="ingest.speech.segment"):
+    with caplog.at_level(logging.DEBUG, logger="ingest.speech.sphinx"):
         segments = align(utterance.audio, utterance.sample_rate, text)
     _check_tiling(segments, len(utterance.audio), utterance.sample_rate)
     assert "blorptastic" in caplog.text

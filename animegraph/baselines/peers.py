@@ -74,7 +74,7 @@ class OpenFaceFX(_ShapeWeights):
     Parameters
     ----------
     phones_engine : str, optional
-        Phone engine for audio without phones (:data:`ingest.speech.segment.ENGINES`).
+        Phone engine for audio without phones (:data:`ingest.speech.engines.ENGINES`).
     """
 
     method: ClassVar[str] = "openfacefx"

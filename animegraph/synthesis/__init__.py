@@ -5,6 +5,7 @@
   search, the motion, its emotion;
 * :mod:`.assemble` -- from an anime sequence to continuous motion: time-warping,
   blending at jumps, smoothing, and k-best blending (beyond the paper);
+* :mod:`.result` -- :class:`Synthesis`, what :func:`synthesize` returns;
 * :mod:`.explain` -- the ``--explain`` record: where each phone's motion came from;
 * :mod:`.output` -- a synthesis written to a motion file, a motion file read in a
   database's channels.
@@ -25,7 +26,6 @@ from animegraph.synthesis.explain import backoffs, explain_record, write_explain
 from animegraph.synthesis.model import Model, to_world
 from animegraph.synthesis.output import read_database_motion, write_motion
 from animegraph.synthesis.pipeline import (
-    Synthesis,
     check_not_silent,
     map_emotion,
     query_phones,
@@ -35,6 +35,7 @@ from animegraph.synthesis.pipeline import (
     score_candidates,
     synthesize,
 )
+from animegraph.synthesis.result import Synthesis
 
 __all__ = [
     "HELPER_MODES", "Model", "Phone", "PostOptions", "Synthesis", "backoffs", "blend_k_best",

@@ -10,17 +10,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from animegraph.search.graph import AnimeGraph
 from animegraph.synthesis.assemble import rank_weights
+from animegraph.synthesis.result import Synthesis
 from db.atomic import atomic_write
 from ingest.speech.phones import PHONES
-
-if TYPE_CHECKING:
-    from animegraph.synthesis.pipeline import Synthesis
 
 
 def blended_sources(graph: AnimeGraph, ranked: np.ndarray) -> list[dict]:

@@ -18,12 +18,12 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from animegraph.emotion.control import EmotionChoice, map_frames, resolve_emotion
-from animegraph.search import SearchResult, SearchWeights, candidates, search
+from animegraph.emotion.control import map_frames, resolve_emotion
+from animegraph.search import SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
 from animegraph.synthesis.assemble import (
     Phone,
@@ -51,6 +51,7 @@ from animegraph.synthesis.guide import (
 )
 from animegraph.synthesis.model import Model
 from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
+from animegraph.synthesis.result import Synthesis
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 from ingest.lowpass import smooth
@@ -60,57 +61,6 @@ from ingest.speech.posteriorgram import HOP_S as POSTERIOR_HOP_S
 from ingest.speech.posteriorgram import compute as compute_posteriorgram
 from ingest.speech.quality import assess, is_silent, warnings_for
 from ingest.speech.segment import segment
-
-
-@dataclass(frozen=True, eq=False)
-class Synthesis:
-    """A synthesized utterance.
-
-    Attributes
-    ----------
-    motion : np.ndarray, shape (n_frames, n_channels)
-        In the database's channels, at ``fps``.
-    ics : np.ndarray, shape (n_frames, n_ics)
-        The same motion in independent components.
-    blended : tuple of list of dict
-        With ``k_best``: per phone the animes its motion averages (node, clip_id,
-        position, weight), the search's pick first; empty otherwise.
-    warnings : tuple of str
-        What may be wrong with the input: a transcript that could not be aligned (the
-        phones were recognised), and the speech (:mod:`ingest.speech.quality`):
-        clipping, telephone band, music, little speech the phone engine knows.
-    context_ranked : bool
-        With ``k_best``: the animes were ranked by phonetic context first
-        (:func:`animegraph.search.k_best` with ``context``).
-    recentred : bool
-        With ``k_best``: each anime entered the mean relative to its recording's mean pose
-        (:func:`recentres`).
-    cross_faded : bool
-        With ``k_best``: each phone's mean was cross-faded into its neighbours' through
-        the recorded transitions (``PostOptions.blend``;
-        :func:`animegraph.synthesis.blend_k_best`), not cut at its boundaries.
-    guided : tuple of str
-        The baselines whose predicted motion guided this one (``guide``, or
-        ``recognized_guide`` after a transcript that did not fit); empty without.
-    """
-
-    motion: np.ndarray
-    ics: np.ndarray
-    fps: float
-    phones: tuple[Phone, ...]
-    segmentation: str
-    result: SearchResult
-    joins: list[dict]
-    explain: list[dict]
-    timings: dict = field(default_factory=dict)
-    emotion: EmotionChoice = field(default_factory=lambda: EmotionChoice(None, None))
-    notes: tuple[str, ...] = ()
-    blended: tuple[list[dict], ...] = ()
-    warnings: tuple[str, ...] = ()
-    context_ranked: bool = False
-    recentred: bool = False
-    cross_faded: bool = False
-    guided: tuple[str, ...] = ()
 
 
 def synthesize(
@@ -156,7 +106,7 @@ def synthesize(
         anime is averaged relative to its recording's mean pose (None: when the database
         holds more than one speaker or session, :func:`recentres`).
     phones_engine : str, optional
-        The phone engine without labels (:data:`ingest.speech.segment.ENGINES`; None: its
+        The phone engine without labels (:data:`ingest.speech.engines.ENGINES`; None: its
         default, PocketSphinx alignment of a transcript, hama recognition without one).
     audio_cost : str, optional
         C_audio of Eq. 5 (:data:`animegraph.synthesis.audio.AUDIO_COSTS`): ``"plp"`` (the

@@ -56,6 +56,7 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import prepare_audio
+from ingest.emotion.frames import frame_analysis  # the ``rich`` block's frames
 
 __all__ = ["ASSIGNMENTS", "CODEBOOK_SIZE", "ENSEMBLE", "N_DESCRIPTORS", "BagOfAudioWords",
            "codebook_seeds", "descriptors", "frame_descriptors"]
@@ -93,14 +94,12 @@ def frame_descriptors(audio, sample_rate) -> np.ndarray:
         Per 10 ms frame: 20 MFCCs, log RMS energy, F0 in semitones above 27.5 Hz (0 when
         unvoiced), then the deltas of these 22 (5-frame regression), float64.
     """
-    from ingest.emotion.features import frame_analysis  # the ``rich`` block's frames
-
     return descriptors(frame_analysis(prepare_audio(audio, sample_rate)))
 
 
 def descriptors(fr: dict) -> np.ndarray:
     """:func:`frame_descriptors` from an utterance's
-    :func:`ingest.emotion.features.frame_analysis` (shared with the ``rich`` block).
+    :func:`ingest.emotion.frames.frame_analysis` (shared with the ``rich`` block).
 
     Returns
     -------

@@ -59,6 +59,8 @@ import numpy as np
 
 from db.errors import DataError, ParameterError
 from ingest.emotion.audio import FEATURE_SAMPLE_RATE, prepare_audio
+from ingest.emotion.boaw import descriptors
+from ingest.emotion.frames import SILENCE_FLOOR, check_floor, frame_analysis
 
 __all__ = [
     "BLOCKS",
@@ -66,15 +68,12 @@ __all__ = [
     "CEPSTRUM_FRAME",
     "CEPSTRUM_HOP",
     "N_CEPSTRUM",
-    "SILENCE_FLOOR",
     "WORDS_BLOCK",
     "block_features",
     "emotion_features",
-    "frame_analysis",
     "parse_features",
     "real_cepstrum",
     "rich_features",
-    "silent_frames",
 ]
 
 #: Cepstrum coefficients in the paper's feature vector (§6).
@@ -91,11 +90,6 @@ BLOCKS = ("paper", "rich", "cepstrum", "egemaps", "compare", "boaw")
 WORDS_BLOCK = "boaw"
 #: Width of each block (``paper``: 3 + n_cepstrum).
 RICH_WIDTH, EGEMAPS_WIDTH, COMPARE_WIDTH = 121, 88, 6373
-
-#: Frames more than this many dB below the loudest frame of the utterance are silence
-#: (the module docstring; HTK's ``SILFLOOR`` default). The synthetic corpus' noise floor lies
-#: about 59 dB below its loudest frames, its speech above -45 dB.
-SILENCE_FLOOR = 50.0
 
 _CEPSTRA = ("utterance", "frames")
 _LEGACY_CEPSTRUM_FLOOR = 60.0  # dB: the frame-averaged cepstrum's cut without the floor
@@ -214,7 +208,7 @@ def emotion_features(
         Bad ``n_cepstrum``, ``cepstrum``, ``sample_rate`` or audio shape.
     """
     _check_cepstrum(n_cepstrum, cepstrum)
-    _check_floor(silence_floor)
+    check_floor(silence_floor)
     return _paper(prepare_audio(audio, sample_rate), n_cepstrum, cepstrum, silence_floor)
 
 
@@ -224,65 +218,6 @@ def _stats(v: np.ndarray) -> list[float]:
         return [0.0] * 5
     p10, p90 = np.percentile(v, [10, 90])
     return [float(v.mean()), float(v.std()), float(p10), float(p90), float(p90 - p10)]
-
-
-def _check_floor(silence_floor) -> None:
-    if silence_floor is not None and (
-            isinstance(silence_floor, bool) or not isinstance(silence_floor, int | float)
-            or not 0 < silence_floor < 200):
-        raise ParameterError(f"silence_floor must be None or a number of dB in (0, 200), "
-                             f"got {silence_floor!r}")
-
-
-def silent_frames(spec: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
-                  ) -> tuple[np.ndarray, float]:
-    """Which frames of a magnitude spectrogram are silence, and the floor's power.
-
-    Parameters
-    ----------
-    spec : np.ndarray, shape (n_bins, n_frames)
-    silence_floor : float or None
-        dB below the loudest frame's mean power (None: no frame is silence).
-
-    Returns
-    -------
-    silent : np.ndarray of bool, shape (n_frames,)
-    floor : float
-        Mean power per bin of the floor (0 when ``silence_floor`` is None).
-    """
-    power = np.mean(spec.astype(np.float64) ** 2, axis=0)
-    if silence_floor is None or power.size == 0:
-        return np.zeros(power.shape, dtype=bool), 0.0
-    floor = float(power.max()) * 10 ** (-silence_floor / 10)
-    return power < floor, floor
-
-
-def frame_analysis(x: np.ndarray, silence_floor: float | None = SILENCE_FLOOR
-                   ) -> dict[str, np.ndarray]:
-    """Frame-level analysis of prepared 16 kHz speech ``x`` (shared by the ``rich``
-    block and :mod:`ingest.emotion.boaw`), 32 ms frames, hop 10 ms: the magnitude
-    spectrogram ``spec`` (257, T), 20 MFCCs ``mfcc`` (20, T) from 40 mel bands, ``rms``
-    (T,), the YIN F0 ``f0`` (Hz, about T frames; 60-500 Hz) and ``silent`` (T,), the
-    frames below the silence floor (``silence_floor`` dB under the loudest; None: none),
-    whose spectrum is replaced by the floor's, flat (the module docstring)."""
-    import librosa
-
-    sr, n_fft, hop = FEATURE_SAMPLE_RATE, 512, 160
-    xf = x.astype(np.float32)
-    spec = np.abs(librosa.stft(xf, n_fft=n_fft, hop_length=hop))
-    silent, floor = silent_frames(spec, silence_floor)
-    # Silent frames become the floor, flat; in the others every bin is floored too, so that
-    # a noise floor under it does not fill the spectral valleys of speech either.
-    spec[:, silent] = np.sqrt(floor)
-    np.maximum(spec, np.float32(np.sqrt(floor)), out=spec)
-    mel = librosa.feature.melspectrogram(S=spec**2, sr=sr, n_mels=40)
-    return {
-        "spec": spec,
-        "mfcc": librosa.feature.mfcc(S=librosa.power_to_db(mel), n_mfcc=20),
-        "rms": librosa.feature.rms(S=spec, frame_length=n_fft, hop_length=hop)[0],
-        "f0": librosa.yin(xf, fmin=60, fmax=500, sr=sr, frame_length=1024, hop_length=hop),
-        "silent": silent,
-    }
 
 
 def _rich(x: np.ndarray, fr: dict | None = None,
@@ -356,7 +291,7 @@ def rich_features(audio: np.ndarray, sample_rate: float,
     DataError
         Audio shorter than 0.25 s, silent, or non-finite.
     """
-    _check_floor(silence_floor)
+    check_floor(silence_floor)
     return _rich(prepare_audio(audio, sample_rate), silence_floor=silence_floor)
 
 
@@ -424,7 +359,7 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
     blocks = parse_features(spec)
     if "paper" in blocks:
         _check_cepstrum(n_cepstrum, cepstrum)
-    _check_floor(silence_floor)
+    check_floor(silence_floor)
     x = prepare_audio(audio, sample_rate)
     fr = frame_analysis(x, silence_floor) if "rich" in blocks or WORDS_BLOCK in blocks \
         else None
@@ -435,8 +370,6 @@ def block_features(audio, sample_rate, spec: str = "paper", *, n_cepstrum: int =
         elif block == "rich":
             out[block] = _rich(x, fr)
         elif block == WORDS_BLOCK:
-            from ingest.emotion.boaw import descriptors
-
             out[block] = descriptors(fr)
         elif block == "cepstrum":
             out[block] = _frame_cepstrum(x, CEPSTRUM_BLOCK, silence_floor)

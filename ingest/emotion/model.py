@@ -144,7 +144,7 @@ def stored_model_current(manifest: dict) -> bool:
     ingest computes (one stored before the silence floor misjudged speech whose pauses
     are digital silence). If not, the next ingest learns it again from the stored clips.
     """
-    from ingest.emotion.classifier import SILENCE_FLOOR_FORMAT
+    from ingest.emotion.classifier_arrays import SILENCE_FLOOR_FORMAT
 
     emotion = manifest.get("emotion")
     if emotion is None:

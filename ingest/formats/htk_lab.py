@@ -20,8 +20,8 @@ from pathlib import Path
 
 from db.atomic import atomic_write
 from db.errors import DataError
-from ingest.formats.labels import as_segments, decode_text, to_arpabet
-from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, order_error
+from ingest.formats.labels import decode_text, to_arpabet
+from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, as_segments, order_error
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)

@@ -15,7 +15,6 @@ passes each label through :func:`to_arpabet`:
 from __future__ import annotations
 
 from db.errors import DataError, ParameterError
-from ingest.formats.phones_csv import Segment, as_segments  # noqa: F401  (re-exported)
 from ingest.speech.phones import PHONE_SET, SILENCE
 
 #: Labels (compared in lower case, white space stripped) that mean silence or non-speech:

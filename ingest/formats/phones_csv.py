@@ -26,6 +26,7 @@ from typing import NamedTuple
 
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
+from ingest.formats.labels import to_arpabet
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
 from ingest.speech.phones import PHONE_SET
 
@@ -198,9 +199,6 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
         by its number) has the wrong field count, an unknown phone, bad times,
         ``start >= end``, or is out of order or overlaps the line before.
     """
-    # here, not at the top: ingest.formats.labels imports this module's Segment
-    from ingest.formats.labels import to_arpabet
-
     path = Path(path)
     text = read_utf8(path, "phones file", limit=MAX_SIDE_FILE_BYTES)
     lines = csv.reader(io.StringIO(text))

@@ -1,6 +1,6 @@
 """Phones from speech with a CTC phone recogniser whose model ships in its wheel (``hama``).
 
-The second phonetic engine beside PocketSphinx (:mod:`ingest.speech.segment`). ``hama``
+The second phonetic engine beside PocketSphinx (:mod:`ingest.speech.sphinx`). ``hama``
 (Apache-2.0, on PyPI) ships a 4.7 MB waveform-to-IPA CTC acoustic model and the small
 native library that runs it (numpy and ctypes, no onnxruntime, no download at run time).
 Its output is one distribution over 191 symbols (IPA phones, diacritics, a word-boundary
@@ -23,15 +23,8 @@ symbol and the CTC *blank*) every 20 ms (:data:`FRAME_RATE`). From it:
 
 Timing
 ------
-CTC posteriors are *peaky*: a phone shows as one or two frames of high probability
-near its start, then blanks. A segment therefore runs from its phone's first frame (less
-:data:`ONSET_SHIFT`, the median lead measured on the synthetic corpus, see
-``scripts/eval_segmentation.py``) to the next phone's start. Pauses come from the audio:
-a run of at least :data:`MIN_PAUSE` seconds of quiet 20 ms frames (``_quiet_frames``:
-:data:`PAUSE_DB` below the clip's loud frames, or nearer its noise floor) lying between
-two phones is ``SIL``; so is the edge before the first phone, and the end of the clip from
-the first such quiet run after the last phone's frames (or the quiet frames that reach the
-end, if shorter): no phone is heard after it, so a louder frame there is not speech.
+CTC posteriors are *peaky*; how a phone's segment is placed, and where the pauses are:
+:mod:`ingest.speech.ctc_timing`.
 
 Pieces
 ------
@@ -84,8 +77,19 @@ import numpy as np
 from db.errors import DataError
 from db.system import thread_budget, usable_cpus
 from ingest.formats.phones_csv import Segment
+from ingest.speech.ctc_timing import (
+    FRAME_RATE,
+    PAUSE_SMOOTH,
+    SAMPLE_RATE,
+    ctc_viterbi,
+    frame_energy,
+    last_frames,
+    timed,
+)
 from ingest.speech.g2p import pronounce, transcript_words
+from ingest.speech.inputs import MIN_DURATION, SILENCE_PEAK, check_audio, check_text
 from ingest.speech.phones import PHONES, SILENCE
+from ingest.speech.tiling import silence
 
 logger = logging.getLogger(__name__)
 
@@ -94,10 +98,7 @@ __all__ = [
     "IPA_TO_ARPABET",
     "DOUBT_ALIGN_LOSS",
     "MAX_ALIGN_LOSS",
-    "MIN_PAUSE",
     "MIN_PHONE_SHARE",
-    "ONSET_SHIFT",
-    "PAUSE_DB",
     "align",
     "available",
     "check_transcript",
@@ -108,24 +109,6 @@ __all__ = [
     "transcript_loss",
 ]
 
-#: Sampling rate of the model's input (Hz).
-SAMPLE_RATE = 16000
-#: Output frames per second: 160-sample hop, subsampled by 2 (20 ms frames).
-FRAME_RATE = 50
-#: Seconds a phone's segment starts before its first frame: the median lead of the true
-#: onset on the synthetic corpus (``scripts/eval_segmentation.py --engine hama``).
-ONSET_SHIFT = 0.06
-#: Boundaries move to the largest spectral change this near (seconds; the 20 ms frames'
-#: quantisation), as PocketSphinx's do within 10 ms (:func:`ingest.speech.segment._refine`).
-REFINE_WINDOW = 0.02
-#: Shortest quiet run (seconds) between two phones taken as a pause (``SIL``).
-MIN_PAUSE = 0.1
-#: A 20 ms frame is quiet when this many dB below the clip's loud (95th percentile) frames.
-PAUSE_DB = 30.0
-#: ... or this fraction of the way from the clip's noise floor to its loud frames, if higher.
-PAUSE_FRACTION = 0.35
-#: Frames (20 ms) over which frame levels are median-smoothed before the quiet test.
-PAUSE_SMOOTH = 5
 #: Largest drop (nats per frame) of an alignment's log posterior below the free best
 #: path before the transcript is judged not to match the audio. Measured: 0.11-0.29 with
 #: the right transcript (eSpeak speech, GRID), 0.9-1.9 with another sentence of the
@@ -317,7 +300,7 @@ def _pieces(samples16: np.ndarray) -> np.ndarray:
     n = max(1, math.ceil(seconds / CHUNK_SECONDS), 2 if seconds >= SPLIT_SECONDS else 1)
     bounds = [0]
     if n > 1:
-        energy = np.convolve(_frame_energy(samples16, n_frames),
+        energy = np.convolve(frame_energy(samples16, n_frames),
                              np.full(PAUSE_SMOOTH, 1.0 / PAUSE_SMOOTH), mode="same")
         reach = int(round(CUT_WINDOW * FRAME_RATE))
         for k in range(1, n):
@@ -409,9 +392,7 @@ def posteriors(audio: np.ndarray, sample_rate: int) -> np.ndarray:
     DataError
         If the model cannot be loaded or run.
     """
-    from ingest.speech.segment import _check_audio
-
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    samples, sample_rate = check_audio(audio, sample_rate)
     return _phone_log_probs(_resample(samples, sample_rate))[0]
 
 
@@ -524,185 +505,6 @@ def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------------
-# CTC Viterbi
-# ---------------------------------------------------------------------------------------------
-
-
-def ctc_viterbi(log_probs: np.ndarray, labels: np.ndarray, blank: int, *,
-                path: bool = True) -> tuple[np.ndarray | None, float]:
-    """The best CTC path of a label sequence through frame log posteriors.
-
-    States are ``blank, l1, blank, l2, ..., lL, blank`` (``2L + 1``); a path starts in the
-    first blank or ``l1``, ends in ``lL`` or the last blank, and at each frame stays, moves
-    one state on, or skips a blank between two different labels (Graves et al. 2006, §4.1).
-
-    Parameters
-    ----------
-    log_probs : numpy.ndarray, shape (n_frames, n_classes)
-        Per-frame log posteriors.
-    labels : numpy.ndarray, shape (n_labels,), int
-        Class indices of the sequence (none equal to ``blank``), at least one.
-    blank : int
-        Class index of the blank.
-    path : bool, optional
-        Trace the path back (False: only its score, without the (n_frames, 2 n_labels
-        + 1) table of back-pointers: a byte per cell, 3 GB for 30 min of speech).
-
-    Returns
-    -------
-    starts : numpy.ndarray, shape (n_labels,), int, or None
-        First frame of each label on the best path (None without ``path``).
-    score : float
-        Log probability of that path.
-
-    Raises
-    ------
-    DataError
-        If there are fewer frames than the sequence needs.
-    """
-    n_frames, n_labels = len(log_probs), len(labels)
-    states = np.full(2 * n_labels + 1, blank, dtype=np.int64)
-    states[1::2] = labels
-    n_states = len(states)
-    needed = n_labels + int(np.sum(labels[1:] == labels[:-1]))
-    if n_frames < needed:
-        raise DataError(f"{n_labels} phones need at least {needed} frames of "
-                        f"{1000 // FRAME_RATE} ms, the audio has {n_frames}")
-    can_skip = np.zeros(n_states, dtype=bool)
-    can_skip[3::2] = labels[1:] != labels[:-1]
-    score = np.full(n_states, -np.inf)
-    score[:2] = log_probs[0, states[:2]]
-    back = np.zeros((n_frames if path else 0, n_states), dtype=np.int8)
-    for t in range(1, n_frames):
-        stay = score
-        step = np.concatenate(([-np.inf], score[:-1]))
-        skip = np.where(can_skip, np.concatenate(([-np.inf, -np.inf], score[:-2])), -np.inf)
-        best = np.maximum(stay, np.maximum(step, skip))
-        if path:
-            back[t] = np.where(best == stay, 0, np.where(best == step, 1, 2))
-        score = best + log_probs[t, states]
-    end = n_states - 1 if n_states == 1 or score[-1] >= score[-2] else n_states - 2
-    total = float(score[end])
-    if not math.isfinite(total):
-        raise DataError("no CTC path through the transcript")
-    if not path:
-        return None, total
-    visited = np.empty(n_frames, dtype=np.int64)  # the state at each frame
-    s = end
-    for t in range(n_frames - 1, -1, -1):
-        visited[t] = s
-        s -= int(back[t, s])
-    starts = np.empty(n_labels, dtype=np.int64)
-    label_frames = visited % 2 == 1
-    first = np.full(n_states, -1, dtype=np.int64)
-    frames = np.flatnonzero(label_frames)
-    for t in frames[::-1]:
-        first[visited[t]] = t
-    starts[:] = first[1::2]
-    return starts, total
-
-
-# ---------------------------------------------------------------------------------------------
-# Timing
-# ---------------------------------------------------------------------------------------------
-
-
-def _frame_energy(samples16: np.ndarray, n_frames: int) -> np.ndarray:
-    """Mean square of each 20 ms frame of 16 kHz audio (zero-padded to ``n_frames``),
-    float64, shape (n_frames,)."""
-    hop = SAMPLE_RATE // FRAME_RATE
-    padded = np.zeros(n_frames * hop, dtype=np.float64)
-    m = min(len(samples16), len(padded))
-    padded[:m] = samples16[:m]
-    return np.mean(padded.reshape(n_frames, hop) ** 2, axis=1)
-
-
-def _quiet_frames(samples16: np.ndarray, n_frames: int) -> np.ndarray:
-    """True for quiet 20 ms frames.
-
-    Frame levels (dB, median-smoothed over :data:`PAUSE_SMOOTH` frames) are quiet below
-    the higher of: :data:`PAUSE_DB` under the clip's loud frames (95th percentile), or
-    :data:`PAUSE_FRACTION` of the way from its noise floor (5th percentile) to them (a
-    recording's noise floor may lie only 30 dB under its speech).
-    """
-    from scipy.ndimage import median_filter
-
-    energy = _frame_energy(samples16, n_frames)
-    level = median_filter(10 * np.log10(energy + 1e-12), size=PAUSE_SMOOTH, mode="nearest")
-    if not n_frames:
-        return np.zeros(0, dtype=bool)
-    loud, floor = np.percentile(level, 95), np.percentile(level, 5)
-    threshold = max(loud - PAUSE_DB, floor + PAUSE_FRACTION * (loud - floor))
-    return level < threshold
-
-
-def _timed(phones: list[str], starts: np.ndarray, last: np.ndarray, samples16: np.ndarray,
-           n_frames: int, duration: float, refine: bool) -> list[Segment]:
-    """Phones with their first and last frames -> segments tiling ``[0, duration]``."""
-    from ingest.speech.segment import _refine, _tile
-
-    quiet = _quiet_frames(samples16, n_frames)
-
-    frame = 1.0 / FRAME_RATE
-    min_run = max(1, int(round(MIN_PAUSE * FRAME_RATE)))
-    onsets: list[tuple[str, float]] = [(SILENCE, 0.0)]
-    n = len(quiet)
-    for k, phone in enumerate(phones):
-        onsets.append((phone, max(0.0, starts[k] * frame - ONSET_SHIFT)))
-        lo = int(last[k]) + 1
-        if k + 1 == len(phones):
-            # Trailing silence from the first pause after the last phone: no phone was
-            # heard later, so a louder frame there (a breath, noise) is not speech either
-            # (GRID: the last phone ran on into the silence after the sentence).
-            tail = quiet[lo:n]
-            first = _first_run(tail, min_run)
-            if first is None and len(tail) and tail[-1]:  # else the quiet frames at the end
-                first = int(np.flatnonzero(~tail)[-1]) + 1 if (~tail).any() else 0
-            if first is not None:
-                onsets.append((SILENCE, (lo + first) * frame))
-            break
-        run = _longest_run(quiet[lo: int(starts[k + 1])])
-        if run is not None and run[1] - run[0] >= min_run:
-            onsets.append((SILENCE, (lo + run[0]) * frame))
-    if refine:
-        onsets = _refine(onsets, samples16 * 32767.0, REFINE_WINDOW)
-    return _tile(onsets, duration)
-
-
-def _first_run(mask: np.ndarray, min_run: int) -> int | None:
-    """Start of the first run of at least ``min_run`` True in ``mask``, or None."""
-    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
-    runs = np.flatnonzero(np.diff(padded)).reshape(-1, 2)
-    long = runs[runs[:, 1] - runs[:, 0] >= min_run]
-    return int(long[0, 0]) if len(long) else None
-
-
-def _longest_run(mask: np.ndarray) -> tuple[int, int] | None:
-    """(start, end) of the longest run of True in ``mask``, or None."""
-    if not mask.any():
-        return None
-    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    runs = edges.reshape(-1, 2)
-    k = int(np.argmax(runs[:, 1] - runs[:, 0]))
-    return int(runs[k, 0]), int(runs[k, 1])
-
-
-def _last_frames(path_starts: np.ndarray, log_probs: np.ndarray, labels: np.ndarray
-                 ) -> np.ndarray:
-    """Last frame of each phone: its start, extended while the phone stays most likely."""
-    last = path_starts.copy()
-    n = len(log_probs)
-    best = np.argmax(log_probs, axis=1)
-    for k, start in enumerate(path_starts):
-        stop = path_starts[k + 1] if k + 1 < len(path_starts) else n
-        t = int(start)
-        while t + 1 < stop and best[t + 1] == labels[k]:
-            t += 1
-        last[k] = t
-    return last
-
-
 # ---------------------------------------------------------------------------------------------
 # Recognition and alignment
 # ---------------------------------------------------------------------------------------------
@@ -718,7 +520,8 @@ def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> li
     sample_rate : int
         Its sampling rate in Hz.
     refine : bool, optional
-        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
+        Move boundaries to the largest spectral change within
+        :data:`ingest.speech.ctc_timing.REFINE_WINDOW`.
 
     Returns
     -------
@@ -733,21 +536,19 @@ def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> li
     DataError
         If the model cannot be loaded or run.
     """
-    from ingest.speech.segment import MIN_DURATION, SILENCE_PEAK, _check_audio, _silence
-
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    samples, sample_rate = check_audio(audio, sample_rate)
     duration = len(samples) / sample_rate
     peak = float(np.max(np.abs(samples))) if samples.size else 0.0
     if duration < MIN_DURATION or peak < SILENCE_PEAK:
-        return _silence(duration)
+        return silence(duration)
     samples16 = _resample(samples, sample_rate)
     _, log_probs = _phone_log_probs(samples16)
     starts = _best_path_starts(log_probs)
     if starts.size == 0:
-        return _silence(duration)
+        return silence(duration)
     labels = np.argmax(log_probs[starts], axis=1)
-    last = _last_frames(starts, log_probs, labels)
-    return _timed([PHONES[i] for i in labels], starts, last, samples16, len(log_probs),
+    last = last_frames(starts, log_probs, labels)
+    return timed([PHONES[i] for i in labels], starts, last, samples16, len(log_probs),
                   duration, refine)
 
 
@@ -783,10 +584,8 @@ def transcript_loss(audio: np.ndarray, sample_rate: int, text: str, *,
     """How much worse ``text``'s CTC alignment fits the audio than free recognition does:
     the mean drop of the log posterior along the best path, in nats per 20 ms frame
     (0 for audio shorter than a phone; ``check``: raise as :func:`check_transcript`)."""
-    from ingest.speech.segment import MIN_DURATION, _check_audio, _check_text
-
-    text = _check_text(text)
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    text = check_text(text)
+    samples, sample_rate = check_audio(audio, sample_rate)
     if len(samples) / sample_rate < MIN_DURATION:
         return 0.0
     return _fit_transcript(_resample(samples, sample_rate), text, check=check, path=False)[4]
@@ -850,12 +649,10 @@ def phone_share(audio: np.ndarray, sample_rate: int, text: str) -> float:
     """How many phones ``text`` names per phone free recognition hears in ``audio`` (the
     unconstrained best path's, repeats merged; inf when it hears none): the second test
     of :func:`check_transcript` (:data:`MIN_PHONE_SHARE`)."""
-    from ingest.speech.segment import _check_audio, _check_text
-
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    samples, sample_rate = check_audio(audio, sample_rate)
     _, log_probs = _phone_log_probs(_resample(samples, sample_rate))
     heard = len(_best_path_starts(log_probs))
-    return len(transcript_phones(_check_text(text))) / heard if heard else math.inf
+    return len(transcript_phones(check_text(text))) / heard if heard else math.inf
 
 
 def _best_path_starts(log_probs: np.ndarray) -> np.ndarray:
@@ -880,7 +677,8 @@ def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
     text : str
         What is said (English; numbers and symbols are spelled out).
     refine : bool, optional
-        Move boundaries to the largest spectral change within :data:`REFINE_WINDOW`.
+        Move boundaries to the largest spectral change within
+        :data:`ingest.speech.ctc_timing.REFINE_WINDOW`.
 
     Returns
     -------
@@ -896,14 +694,12 @@ def align(audio: np.ndarray, sample_rate: int, text: str, *, refine: bool = True
         has, or fits the audio much worse than recognition does (:data:`MAX_ALIGN_LOSS`):
         it does not match the audio.
     """
-    from ingest.speech.segment import MIN_DURATION, _check_audio, _check_text, _silence
-
-    text = _check_text(text)
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    text = check_text(text)
+    samples, sample_rate = check_audio(audio, sample_rate)
     duration = len(samples) / sample_rate
     if duration < MIN_DURATION:
-        return _silence(duration)
+        return silence(duration)
     samples16 = _resample(samples, sample_rate)
     phones, labels, starts, log_probs, _ = _fit_transcript(samples16, text)
-    last = _last_frames(starts, log_probs, labels)
-    return _timed(phones, starts, last, samples16, len(log_probs), duration, refine)
+    last = last_frames(starts, log_probs, labels)
+    return timed(phones, starts, last, samples16, len(log_probs), duration, refine)

@@ -2,7 +2,7 @@
 
 * ``"hama"`` -- the CTC phone recogniser whose model ships in the ``hama`` wheel
   (:mod:`ingest.speech.ctc`): recognition, CTC-Viterbi forced alignment, posteriors;
-* ``"pocketsphinx"`` -- PocketSphinx with its US-English model (:mod:`ingest.speech.segment`);
+* ``"pocketsphinx"`` -- PocketSphinx with its US-English model (:mod:`ingest.speech.sphinx`);
 * ``"auto"`` (the default) -- each task by the engine that measured better at it
   (``scripts/eval_segmentation.py``, docs/results.md "Issue 13"): forced alignment of a
   transcript by PocketSphinx (finer boundaries: median phone onset error 3.8 ms against
@@ -50,7 +50,7 @@ def aligner(engine: str | None = None) -> Callable:
     if engine == "hama":
         from ingest.speech.ctc import align
     elif engine == "pocketsphinx":
-        from ingest.speech.segment import align
+        from ingest.speech.sphinx import align
     else:
         align = align_auto
     return align
@@ -60,7 +60,7 @@ def recognizer(engine: str | None = None) -> Callable:
     """``recognize(audio, sample_rate)`` of ``engine``."""
     engine = check_engine(engine)
     if engine == "pocketsphinx":
-        from ingest.speech.segment import recognize
+        from ingest.speech.sphinx import recognize
     elif engine == "hama":
         from ingest.speech.ctc import recognize
     else:
@@ -86,11 +86,11 @@ def align_auto(audio, sample_rate, text: str, *, refine: bool = True) -> list:
     """PocketSphinx's forced alignment of ``text`` (the ``"auto"`` alignment), once hama
     has found that it is what the audio says.
 
-    Parameters, result and errors as :func:`ingest.speech.segment.align`; also
+    Parameters, result and errors as :func:`ingest.speech.sphinx.align`; also
     :class:`~db.errors.DataError` when the transcript does not match the audio
     (:func:`check_transcript`).
     """
-    from ingest.speech.segment import align
+    from ingest.speech.sphinx import align
 
     check_transcript(audio, sample_rate, text, "auto")
     return align(audio, sample_rate, text, refine=refine)
@@ -100,11 +100,11 @@ def recognize_auto(audio, sample_rate, *, refine: bool = True) -> list:
     """Phones named by hama and placed by PocketSphinx (the ``"auto"`` recognition).
 
     Parameters and result as :func:`ingest.speech.ctc.recognize`: hama's recognised phone
-    sequence force-aligned by :func:`ingest.speech.segment.align_phones`; hama's own
+    sequence force-aligned by :func:`ingest.speech.sphinx.align_phones`; hama's own
     segments when PocketSphinx finds no path (or nothing was recognised).
     """
     from ingest.speech.ctc import recognize
-    from ingest.speech.segment import align_phones
+    from ingest.speech.sphinx import align_phones
 
     named = recognize(audio, sample_rate, refine=refine)
     placed = align_phones(audio, sample_rate, [s.phone for s in named], refine=refine)

@@ -4,7 +4,8 @@ A :mod:`ctypes` binding to the eSpeak NG library shipped by the ``espeakng-loade
 eSpeak reports a phoneme event at the sample where it starts to synthesise each phoneme;
 those events are the ground truth of :func:`speak`'s phone segments, so a corpus built from
 it knows its phone timing exactly. eSpeak's phoneme mnemonics are converted to the project's
-phone set (:data:`ingest.speech.phones.PHONES`) by :data:`ESPEAK_TO_ARPABET`.
+phone set (:data:`ingest.speech.phones.PHONES`) by
+:data:`ingest.speech.espeak_phones.ESPEAK_TO_ARPABET`.
 
 The library is global state and not thread-safe: every synthesis holds a module-level lock.
 eSpeak also carries synthesis state from one call to the next in static variables that no
@@ -17,24 +18,11 @@ independent and deterministic, the same text and voice always give bit-identical
 A fork waits for a synthesis under way to finish (``os.register_at_fork``); spawned workers
 set themselves up on first use.
 
-Mapping eSpeak NG's English phonemes to ARPAbet
------------------------------------------------
-The table covers every phoneme of eSpeak NG's English phoneme tables (``en``, ``en-us``,
-``en-rp``, ``en-sc``, ``en-n``, ``en-wm``, ``en-wi``, ``en-us-nyc``, read from the shipped
-``phontab``) and the base-table consonants those voices use (``x``, ``?``, ``t[``, ``d[``
-...), and was checked by speaking every word of CMUdict. Choices worth knowing:
+Timing of the mapped phones
+---------------------------
+Phone labels come from :mod:`ingest.speech.espeak_phones` (how each eSpeak NG mnemonic
+maps to ARPAbet). Their timing:
 
-* Stress marks (``'`` primary, ``,`` secondary) are stripped into
-  :attr:`PhoneSegment.stress`; only vowels carry stress (for a two-phone mnemonic, its
-  vowel part).
-* Pauses (every mnemonic starting with ``_``: ``_``, ``_:``, ``_!``, ``_|`` ...) are ``SIL``.
-* American values, as CMUdict has them: ``0`` (LOT) and ``A:`` -> ``AA``; ``O:``, ``O``,
-  ``O2`` (THOUGHT, CLOTH) -> ``AO``; ``a``, ``aa`` (BATH) -> ``AE``; reduced vowels ``@``,
-  ``@2``, ``@5``, ``@-``, ``a#``, ``V`` -> ``AH``; ``3``, ``3:`` -> ``ER``; ``I``, ``I2``,
-  ``I#`` -> ``IH``; ``i``, ``i:`` -> ``IY``.
-* Flaps and glottal stops stand for /t/ or /d/ as in CMUdict: ``t#``, ``t2``, ``?`` -> ``T``
-  ("water", "button"), ``d#`` -> ``D``. ``x`` (loch, Bach) -> ``K`` as in CMUdict.
-* Nasalised vowels of French loans: ``A~`` -> ``AA``, ``O~`` -> ``AO`` (one phone each).
 * Two-phone mnemonics are split into two consecutive segments sharing the event's span.
   A vowel followed by its r-colour or glide (``A@`` AA R, ``O@``/``o@`` AO R, ``e@`` EH R,
   ``U@`` UH R, ``i@3``/``IR`` IH R, ``VR`` AH R, ``i@`` IY AH, ``aI@`` AY AH, ``aI3`` AY ER,
@@ -52,8 +40,8 @@ The table covers every phoneme of eSpeak NG's English phoneme tables (``en``, ``
 * A phone eSpeak reports with zero duration (a post-vocalic ``l`` it folds into the vowel:
   "all", "tell") takes the last 30 % of the segment before it (:data:`ZERO_LENGTH_SHARE`).
 
-Unknown mnemonics (from a non-English word eSpeak switched language for, say) do not stop
-synthesis: they are logged as a warning and mapped by :func:`_fallback`.
+Unknown mnemonics do not stop synthesis: they are logged as a warning and mapped by
+:func:`ingest.speech.espeak_phones.fallback`.
 """
 
 from __future__ import annotations
@@ -72,17 +60,16 @@ import numpy as np
 from scipy.signal import resample_poly
 
 from db.errors import DataError, ParameterError
-from ingest.speech.phones import CONSONANTS, PHONE_SET, SILENCE, VOWELS
+from ingest.speech.espeak_phones import ABSORBED, R_COLOURED, R_MNEMONICS, fallback, map_mnemonic
+from ingest.speech.phones import CONSONANTS, SILENCE, VOWELS
 
 logger = logging.getLogger(__name__)
 
 __all__ = [
     "ESPEAK_SAMPLE_RATE",
-    "ESPEAK_TO_ARPABET",
     "PhoneSegment",
     "Utterance",
     "Voice",
-    "map_mnemonic",
     "speak",
 ]
 
@@ -98,202 +85,11 @@ SYLLABIC_SPLIT = 0.3
 #: post-vocalic ``l`` that eSpeak folds into the vowel before it: "all", "tell").
 ZERO_LENGTH_SHARE = 0.3
 
-# ---------------------------------------------------------------------------------------------
-# The mapping
-# ---------------------------------------------------------------------------------------------
-
-#: eSpeak NG English phoneme mnemonic (without stress mark) -> ARPAbet phones. Pauses (any
-#: mnemonic starting with ``_``) are handled apart and map to ``SIL``. An empty tuple means
-#: "lengthen the previous segment" (see the module docstring).
-ESPEAK_TO_ARPABET: dict[str, tuple[str, ...]] = {
-    # --- monophthongs -------------------------------------------------------------------
-    "@": ("AH",),  # schwa (comma)
-    "@2": ("AH",),  # weak schwa, "the" before consonants
-    "@5": ("AH",),  # weak schwa from /u/, "to"
-    "@-": ("AH",),  # very short schwa, "additional"
-    "@#": ("AH",),  # schwa variant
-    "V": ("AH",),  # STRUT
-    "a#": ("AH",),  # reduced a, "about"
-    "a2": ("AH",),  # reduced a
-    "a#2": ("AH",),  # reduced a
-    "3": ("ER",),  # unstressed r-coloured schwa, "butter"
-    "3:": ("ER",),  # NURSE
-    "a": ("AE",),  # TRAP
-    "aa": ("AE",),  # BATH (American: AE)
-    "a/": ("AE",),  # Scottish TRAP/BATH
-    "A#": ("AE",),  # en-us "can't" class
-    "A:": ("AA",),  # PALM
-    "0": ("AA",),  # LOT (American: AA)
-    "0#": ("AA",),  # LOT variant
-    "02": ("AA",),  # LOT variant, "want"
-    "O:": ("AO",),  # THOUGHT
-    "O": ("AO",),  # THOUGHT, short
-    "O2": ("AO",),  # CLOTH, "cost"
-    "E": ("EH",),  # DRESS
-    "E#": ("EH",),  # DRESS, reduced
-    "E2": ("EH",),  # DRESS variant
-    "e#": ("EH",),  # DRESS variant
-    "e:": ("EY",),  # long e of loans, "cafe"
-    "I": ("IH",),  # KIT
-    "I2": ("IH",),  # unstressed KIT, "roses"
-    "I#": ("IH",),  # unstressed KIT, "wanted"
-    "I2#": ("IH",),  # unstressed KIT variant
-    "i": ("IY",),  # happY
-    "i:": ("IY",),  # FLEECE
-    "U": ("UH",),  # FOOT
-    "u:": ("UW",),  # GOOSE
-    "A~": ("AA",),  # nasal vowel of French loans, "croissant"
-    "O~": ("AO",),  # nasal vowel of French loans, "denouement"
-    # --- diphthongs ---------------------------------------------------------------------
-    "aI": ("AY",),  # PRICE
-    "aI2": ("AY",),  # Scottish PRICE
-    "aU": ("AW",),  # MOUTH
-    "eI": ("EY",),  # FACE
-    "OI": ("OY",),  # CHOICE
-    "oU": ("OW",),  # GOAT
-    "oU#": ("OW",),  # GOAT variant
-    "o:": ("OW",),  # GOAT monophthong
-    "o": ("OW",),  # GOAT, short, "tolkien"
-    # --- r-coloured vowels and vowel + glide: split VOWEL_SPLIT ------------------------
-    "A@": ("AA", "R"),  # START
-    "O@": ("AO", "R"),  # NORTH
-    "o@": ("AO", "R"),  # FORCE
-    "e@": ("EH", "R"),  # SQUARE
-    "U@": ("UH", "R"),  # CURE
-    "i@3": ("IH", "R"),  # NEAR
-    "IR": ("IH", "R"),  # "mirror"
-    "VR": ("AH", "R"),  # "hurry"
-    "i@": ("IY", "AH"),  # "-ia", "idea"
-    "aI@": ("AY", "AH"),  # "science"
-    "aI3": ("AY", "ER"),  # "fire"
-    "aU@": ("AW", "ER"),  # "hour"
-    # --- syllabic consonants: split SYLLABIC_SPLIT -------------------------------------
-    "@L": ("AH", "L"),  # "little"
-    "l-": ("AH", "L"),
-    "n-": ("AH", "N"),  # "button"
-    "m-": ("AH", "M"),
-    "N-": ("AH", "NG"),
-    # --- consonants ---------------------------------------------------------------------
-    "p": ("P",),
-    "b": ("B",),
-    "t": ("T",),
-    "t#": ("T",),  # flap, "water"
-    "t2": ("T",),  # unreleased t, "airtight"
-    "?": ("T",),  # glottal stop for t, "button"
-    "d": ("D",),
-    "d#": ("D",),  # flap from d
-    "t[": ("TH",),  # dental t for "th" (en-029, Caribbean)
-    "d[": ("DH",),  # dental d for "th"
-    "k": ("K",),
-    "g": ("G",),
-    "x": ("K",),  # velar fricative, "Bach", "loch"
-    "f": ("F",),
-    "v": ("V",),
-    "T": ("TH",),
-    "D": ("DH",),
-    "s": ("S",),
-    "z": ("Z",),
-    "z#": ("Z",),  # z variant
-    "z/2": ("Z",),  # z variant, "-s" endings
-    "S": ("SH",),
-    "Z": ("ZH",),
-    "h": ("HH",),
-    "tS": ("CH",),
-    "dZ": ("JH",),
-    "m": ("M",),
-    "n": ("N",),
-    "N": ("NG",),
-    "l": ("L",),
-    "l#": ("L",),  # l variant, "llano"
-    "l/": ("L",),  # l variant
-    "l/2": ("L",),  # dark l, en-us-nyc
-    "r": ("R",),
-    "r/": ("R",),  # en-us r
-    "r-": ("R",),  # linking r after an r-coloured vowel
-    "w": ("W",),
-    "w#": ("W",),  # "wh"
-    "j": ("Y",),
-    ";": (),  # palatal glide between i and a vowel: lengthens the previous segment
-}
-
-#: Mnemonics of r-coloured vowels whose ``R`` is dropped before one of :data:`_R_MNEMONICS`.
-_R_FINAL = frozenset(m for m, p in ESPEAK_TO_ARPABET.items() if len(p) == 2 and p[1] == "R")
-_R_MNEMONICS = frozenset({"r", "r/", "r-"})
-#: Mnemonics that lengthen the previous segment: always (``;``), or after an ``ER`` (the
-#: r's), as CMUdict writes ER for eSpeak's ``3 r`` ("aberration" AE B ER EY SH AH N).
-#: Their mapping when nothing can be lengthened:
-_ABSORBED: dict[str, tuple[str, ...]] = {";": ("Y",), "r": ("R",), "r/": ("R",), "r-": ("R",)}
-
-#: Last resort for unknown mnemonics: their first character, read as Kirshenbaum ASCII-IPA.
-_FALLBACK_CHAR: dict[str, str] = {
-    "@": "AH", "3": "ER", "V": "AH", "a": "AE", "A": "AA", "0": "AA", "O": "AO", "o": "OW",
-    "E": "EH", "e": "EY", "I": "IH", "i": "IY", "y": "IY", "Y": "UH", "U": "UH", "u": "UW",
-    "W": "UW", "p": "P", "b": "B", "t": "T", "d": "D", "k": "K", "g": "G", "q": "K",
-    "G": "G", "c": "K", "J": "JH", "f": "F", "v": "V", "B": "V", "T": "TH", "D": "DH",
-    "s": "S", "z": "Z", "S": "SH", "Z": "ZH", "C": "HH", "x": "K", "X": "HH", "h": "HH",
-    "H": "HH", "Q": "G", "m": "M", "n": "N", "N": "NG", "l": "L", "L": "L", "r": "R",
-    "R": "R", "w": "W", "j": "Y", "?": "T",
-}
-
 _VOWEL_SET = frozenset(VOWELS)
 _OBSTRUENTS = frozenset("P B T D K G CH JH F V TH DH S Z SH ZH HH".split())
 #: Shortest run of digital silence (eSpeak samples, 1 ms) taken for a closure.
 _MIN_CLOSURE = 22
 _CONSONANT_SET = frozenset(CONSONANTS)
-
-
-def _check_table() -> None:
-    for mnemonic, phones in ESPEAK_TO_ARPABET.items():
-        if not set(phones) <= PHONE_SET or SILENCE in phones or len(phones) > 2:
-            raise AssertionError(f"bad mapping {mnemonic!r} -> {phones}")
-
-
-_check_table()
-
-
-def _fallback(mnemonic: str) -> tuple[str, ...]:
-    """Best-effort ARPAbet for a mnemonic missing from :data:`ESPEAK_TO_ARPABET`.
-
-    Tries ever shorter prefixes (``"aI2#"`` -> ``"aI2"`` -> ``"aI"``), then the first
-    character alone, then ``AH``.
-    """
-    for k in range(len(mnemonic) - 1, 0, -1):
-        phones = ESPEAK_TO_ARPABET.get(mnemonic[:k])
-        if phones:
-            return phones
-    return (_FALLBACK_CHAR.get(mnemonic[:1], "AH"),)
-
-
-def map_mnemonic(mnemonic: str) -> tuple[tuple[str, ...], int, bool]:
-    """Convert one eSpeak phoneme mnemonic (as reported by its phoneme events) to ARPAbet.
-
-    Context rules (see the module docstring) are not applied here.
-
-    Parameters
-    ----------
-    mnemonic : str
-        eSpeak mnemonic with its optional stress mark, e.g. ``"'aU"``, ``",oU"``, ``"_:"``.
-
-    Returns
-    -------
-    phones : tuple of str
-        One or two ARPAbet phones (``("SIL",)`` for a pause, ``()`` for a mnemonic that only
-        lengthens its predecessor).
-    stress : int
-        0 none, 1 primary, 2 secondary.
-    known : bool
-        False if the mnemonic is not in :data:`ESPEAK_TO_ARPABET` and was mapped by the
-        fallback.
-    """
-    body = mnemonic.lstrip("',%=")
-    marks = mnemonic[: len(mnemonic) - len(body)]
-    stress = 1 if "'" in marks else 2 if "," in marks else 0
-    if body.startswith("_") or body == "":
-        return (SILENCE,), 0, True
-    phones = ESPEAK_TO_ARPABET.get(body)
-    if phones is None:
-        return _fallback(body), stress, False
-    return phones, stress, True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -688,7 +484,7 @@ def _spans(events: Sequence[tuple[int, str]], raw: np.ndarray) -> list[_Span]:
     for mnemonic in sorted(unknown):
         logger.warning(
             "unknown eSpeak phoneme %r mapped to %s", mnemonic,
-            " ".join(_fallback(mnemonic.lstrip("',%="))),
+            " ".join(fallback(mnemonic.lstrip("',%="))),
         )
 
     spans: list[_Span] = []
@@ -700,16 +496,16 @@ def _spans(events: Sequence[tuple[int, str]], raw: np.ndarray) -> list[_Span]:
         end = max(end, start)
         following = mnemonics[k + 1][1] if k + 1 < len(mnemonics) else ""
         previous = spans[-1] if spans else None
-        if body in _R_FINAL and following in _R_MNEMONICS:
+        if body in R_COLOURED and following in R_MNEMONICS:
             phones = phones[:1]
         absorbed = body == ";" or (
-            body in _R_MNEMONICS and previous is not None and previous.phones[-1] == "ER"
+            body in R_MNEMONICS and previous is not None and previous.phones[-1] == "ER"
         )
         if absorbed and previous is not None and previous.phones != (SILENCE,):
             previous.end = end
             continue
         if not phones:
-            phones = _ABSORBED.get(body, ("AH",))
+            phones = ABSORBED.get(body, ("AH",))
         if (
             end == start
             and phones != (SILENCE,)

@@ -1,6 +1,6 @@
 """Grapheme-to-phoneme conversion and transcript normalisation for the aligner.
 
-The forced aligner (:mod:`ingest.speech.segment`) needs a pronunciation for every word of a
+The forced aligner (:mod:`ingest.speech.sphinx`) needs a pronunciation for every word of a
 transcript. CMUdict (shipped with PocketSphinx) covers most English words; the others
 (names, coinages such as "blorptastic", misspellings) get one from this module:
 

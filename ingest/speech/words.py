@@ -3,7 +3,7 @@
 When a clip comes with a word alignment, its word boundaries are better than any a
 forced aligner finds on its own: :func:`align_words` keeps them and aligns each word's
 phones inside its own interval with the PocketSphinx aligner
-(:func:`ingest.speech.segment.align` on the word's stretch of audio). Pauses inside a
+(:func:`ingest.speech.sphinx.align` on the word's stretch of audio). Pauses inside a
 word's interval are given to the phones around them (a word boundary is a phone
 boundary, nothing else moves across it). Where PocketSphinx finds no path through a
 word (a word too short for its phones' minimum durations: 3 frames = 30 ms a phone in
@@ -22,8 +22,10 @@ from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
 from ingest.formats.words import WordSegment
 from ingest.speech.g2p import pronounce, transcript_words
+from ingest.speech.inputs import MIN_DURATION, check_audio
 from ingest.speech.phones import SILENCE
-from ingest.speech.segment import MIN_DURATION, _check_audio, _tile, align
+from ingest.speech.sphinx import align
+from ingest.speech.tiling import tile
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +53,7 @@ def align_words(
     words : sequence of WordSegment
         ``(word or None for silence, start, end)`` in seconds, in time order.
     refine : bool
-        Passed to :func:`ingest.speech.segment.align`.
+        Passed to :func:`ingest.speech.sphinx.align`.
 
     Returns
     -------
@@ -66,7 +68,7 @@ def align_words(
     ParameterError
         Bad audio or sample rate, or no words.
     """
-    samples, sample_rate = _check_audio(audio, sample_rate)
+    samples, sample_rate = check_audio(audio, sample_rate)
     duration = len(samples) / sample_rate
     if not any(w.word for w in words):
         raise ParameterError("words: expected at least one word, got only silence")
@@ -100,7 +102,7 @@ def align_words(
         inside[0] = (inside[0][0], start)  # the word's start is its first phone's
         onsets += inside
         onsets.append((SILENCE, end))  # closed by the next word if it starts here
-    return _tile(_merge_gaps(onsets), duration), n_even
+    return tile(_merge_gaps(onsets), duration), n_even
 
 
 def _merge_gaps(onsets: list[tuple[str, float]]) -> list[tuple[str, float]]:

@@ -1,0 +1,124 @@
+"""The Dask cluster ``animegraph batch`` (:mod:`animegraph.apps.batch`) runs its lines on:
+a new local one, or an existing one at a scheduler's address."""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from db.errors import DataError
+from ingest.workers import sigint_ignored_by_children
+
+logger = logging.getLogger(__name__)
+
+#: Longest wait for a local cluster's workers to start (a bound against a hang).
+WORKER_START_TIMEOUT_S = 300.0
+#: Seconds to wait for an existing scheduler (and for it to have a worker).
+CONNECT_TIMEOUT_S = 5.0
+
+
+@contextmanager
+def dask_client(options, *, prepare: Callable[[], object] | None = None
+                ) -> Iterator[tuple[object, int]]:
+    """A Dask client: of a new local cluster of ``options.workers`` processes (one thread
+    each, numba single-threaded), or of the cluster at ``options.scheduler``.
+
+    ``prepare()`` runs once the scheduler is known to be reachable and before a local
+    cluster's workers start. Yields (client, number of workers).
+
+    Raises
+    ------
+    DataError
+        The scheduler cannot be reached within ``options.connect_timeout`` seconds, or
+        has no worker.
+    """
+    import distributed  # noqa: F401  (first: importing it sets its loggers' levels)
+
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    if not logger.isEnabledFor(logging.DEBUG):
+        quiet.setLevel(logging.ERROR)  # Dask's news of its own start and stop
+    try:
+        with _client(options, prepare) as client:
+            yield client, len(client.scheduler_info()["workers"])
+    finally:
+        quiet.setLevel(level)
+
+
+@contextmanager
+def _client(options, prepare: Callable[[], object] | None):
+    from distributed import Client, LocalCluster
+
+    cluster = client = None
+    try:
+        if options.scheduler:
+            address = options.scheduler
+            # Made in two steps so that a Client that fails to connect can be closed here:
+            # left to the garbage collector, it waits 10 s for its stopped event loop
+            # and prints a traceback ("Exception ignored in: Client.__del__").
+            client = Client.__new__(Client)
+            try:
+                client.__init__(address, timeout=options.connect_timeout,
+                                set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                _close_unconnected(client)
+                client = None
+                raise DataError(f"cannot reach the Dask scheduler at {address}: {exc}; give "
+                                "the address of a running one, e.g. tcp://127.0.0.1:8786"
+                                ) from None
+            try:
+                client.wait_for_workers(1, timeout=options.connect_timeout)
+            except (OSError, TimeoutError) as exc:
+                raise DataError(f"the Dask scheduler at {options.scheduler} has no workers "
+                                f"({type(exc).__name__})") from None
+            if prepare is not None:
+                prepare()
+        else:
+            if prepare is not None:
+                prepare()
+            cluster = LocalCluster(
+                n_workers=0, threads_per_worker=1, processes=True,
+                # CRITICAL: a worker busy in a line when a Ctrl-C closes the scheduler
+                # logs its failed heartbeat as an ERROR with a traceback; a line's own
+                # errors come back through its future, not through the workers' logs.
+                dashboard_address=None, silence_logs=logging.CRITICAL,
+                # No dashboard, and the scheduler's own HTTP server (which it starts even
+                # so, on 8787 by default) on a free local port: a second cluster said
+                # "Port 8787 is already in use".
+                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                # One core per worker: numba's own threads would compete with the others.
+                env={"NUMBA_NUM_THREADS": "1"},
+            )
+            client = Client(cluster, set_as_default=False)
+            # The worker processes are born ignoring SIGINT (a terminal's Ctrl-C reaches
+            # the whole process group): a Ctrl-C ends the batch here, and the batch ends
+            # the workers. Ignored only until they exist, so no Ctrl-C goes unseen for long.
+            with sigint_ignored_by_children():
+                started = set(multiprocessing.active_children())
+                cluster.scale(options.workers)
+                deadline = time.monotonic() + options.connect_timeout
+                while (len(set(multiprocessing.active_children()) - started) < options.workers
+                       and time.monotonic() < deadline):
+                    time.sleep(0.01)
+            try:
+                client.wait_for_workers(options.workers, timeout=WORKER_START_TIMEOUT_S)
+            except TimeoutError:
+                raise DataError(f"the {options.workers} local Dask workers did not start "
+                                f"within {WORKER_START_TIMEOUT_S:.0f} s") from None
+        yield client
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _close_unconnected(client) -> None:
+    """Close a Client whose constructor failed, quietly."""
+    try:
+        client.close(timeout=1)
+    except Exception:  # half made: whatever it lacks, it is no longer used
+        logger.debug("closing an unconnected Dask client", exc_info=True)
