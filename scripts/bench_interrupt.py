@@ -32,13 +32,21 @@ from probe_security import CLI, setup  # noqa: E402
 
 #: Seconds after the start at which Ctrl-C is pressed: past the imports, inside the work.
 DELAY_S = {"sql": 4.0, "batch": 12.0, "ingest": 6.0, "synth": 8.0, "render": 5.0,
-           "fit": 5.0}
+           "fit": 3.5}
 
 
 def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
     """command name -> its arguments, each a run of several seconds at least."""
-    wav = sorted((corpus / "clips").glob("*.wav"))[0]
-    c3d = wav.with_suffix(".c3d")
+    import numpy as np
+
+    from ingest.formats.wav import read_wav, write_wav
+
+    wavs = sorted((corpus / "clips").glob("*.wav"))
+    wav, c3d = wavs[0], wavs[0].with_suffix(".c3d")
+    # synth of one clip ends within the delay: the corpus' speech end to end, 6 times
+    speech = [read_wav(path) for path in wavs]
+    long = work / "interrupt-speech.wav"
+    write_wav(long, np.concatenate([samples for samples, _ in speech] * 6), speech[0][1])
     script = work / "interrupt-script.csv"
     script.write_text("id,text\n" + "".join(
         f"l{i},This is line number {i} of a long dialogue.\n" for i in range(12)))
@@ -48,10 +56,10 @@ def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
                   "--workers", "2"],
         "ingest": ["ingest", str(corpus), "--db", str(work / "interrupt.db"), "--workers",
                    "2"],
-        "synth": ["synth", str(wav), "--db", str(db), "-o", str(work / "interrupt.c3d")],
+        "synth": ["synth", str(long), "--db", str(db), "-o", str(work / "interrupt.c3d")],
         "render": ["render", str(c3d), "-o", str(work / "interrupt.mp4"), "--audio",
                    str(wav)],
-        "fit": ["fit", "--db", str(work / "fit.db"), "--method", "mu-mlp"],
+        "fit": ["fit", "--db", str(work / "fit.db"), "--method", "hier-pca"],
     }
 
 
