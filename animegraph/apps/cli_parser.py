@@ -233,7 +233,8 @@ def _add_demo(sub) -> None:
         description="Create the default corpus in the cache folder (once), then run the "
         "pipeline on a sentence that is not in it and write the outputs and a plot.",
     )
-    demo.add_argument("--out", type=_output_folder, default=Path("animegraph-demo"),
+    # The default a string: argparse checks it through the type as it does a given one.
+    demo.add_argument("--out", type=_output_folder, default="animegraph-demo",
                       help="output folder (default ./animegraph-demo)")
     demo.add_argument("--emotion", default="happy", help="emotion of the demo sentence")
     demo.add_argument("--text", default=None, help="the sentence to say")
