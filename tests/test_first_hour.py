@@ -46,8 +46,8 @@ def test_without_db_the_demos_database_is_used(tiny_db, monkeypatch, capsys):
     try:
         assert main(["info"]) == 0
         out = capsys.readouterr().out
-        assert str(target) in out and ("the demo's database, the default (no --db given, $ANIMEGRAPH_DB not set)"
-                                       in out)
+        assert str(target) in out
+        assert "the demo's database, the default (no --db given, $ANIMEGRAPH_DB not set)" in out
     finally:
         shutil.rmtree(target)
 
