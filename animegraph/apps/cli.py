@@ -111,6 +111,9 @@ def entry() -> None:
     teardown of the loaded libraries, 2.5 s after a Dask batch, which a user who pressed
     Ctrl-C should not wait for. :func:`main` itself returns, for a caller in-process.
     """
+    # main() hands back the handler it found: ignoring, so that a Ctrl-C just as the
+    # command ends (an ingest that had written its database) is not a death by signal.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     status = main()
     if status == 130:
         for stream in (sys.stdout, sys.stderr):
