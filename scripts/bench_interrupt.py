@@ -32,7 +32,7 @@ from probe_security import CLI, setup  # noqa: E402
 
 #: Seconds after the start at which Ctrl-C is pressed: past the imports, inside the work.
 DELAY_S = {"sql": 4.0, "batch": 12.0, "ingest": 6.0, "synth": 8.0, "render": 5.0,
-           "fit": 3.5}
+           "fit": 2.5}
 
 
 def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
@@ -42,14 +42,20 @@ def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
     from ingest.formats.wav import read_wav, write_wav
 
     wavs = sorted((corpus / "clips").glob("*.wav"))
-    wav, c3d = wavs[0], wavs[0].with_suffix(".c3d")
-    # synth of one clip ends within the delay: the corpus' speech end to end, 6 times
+    c3d = wavs[0].with_suffix(".c3d")
+    # synth and render of one clip end within the delay: the corpus' speech end to end, 6
+    # times, and a clip's motion 8 times
+    from ingest.formats.c3d import MarkerData, read_c3d, write_c3d
+
+    clip = read_c3d(c3d)
+    c3d = work / "interrupt-motion.c3d"
+    write_c3d(c3d, MarkerData(np.concatenate([clip.points] * 8), clip.labels, clip.rate))
     speech = [read_wav(path) for path in wavs]
     long = work / "interrupt-speech.wav"
     write_wav(long, np.concatenate([samples for samples, _ in speech] * 6), speech[0][1])
     script = work / "interrupt-script.csv"
     script.write_text("id,text\n" + "".join(
-        f"l{i},This is line number {i} of a long dialogue.\n" for i in range(12)))
+        f"l{i},This is line number {i} of a long dialogue.\n" for i in range(60)))
     return {
         "sql": ["sql", "--db", str(db), "SELECT count(*) FROM range(1000000000000)"],
         "batch": ["batch", str(script), "--db", str(db), "--out", str(work / "batch-out"),
@@ -57,8 +63,7 @@ def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
         "ingest": ["ingest", str(corpus), "--db", str(work / "interrupt.db"), "--workers",
                    "2"],
         "synth": ["synth", str(long), "--db", str(db), "-o", str(work / "interrupt.c3d")],
-        "render": ["render", str(c3d), "-o", str(work / "interrupt.mp4"), "--audio",
-                   str(wav)],
+        "render": ["render", str(c3d), "-o", str(work / "interrupt.mp4")],
         "fit": ["fit", "--db", str(work / "fit.db"), "--method", "hier-pca"],
     }
 
