@@ -1,7 +1,5 @@
 """``python -m animegraph``: the command line, as the ``animegraph`` command."""
 
-import sys
+from animegraph.apps.cli import entry
 
-from animegraph.apps.cli import main
-
-sys.exit(main())
+entry()

@@ -31,6 +31,7 @@ import os
 import re
 import tempfile
 import threading
+import time
 from dataclasses import dataclass
 
 import duckdb
@@ -42,8 +43,14 @@ from db.store import TABLES, Database
 
 #: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
 ROW_LIMIT = 100_000
-#: Seconds a query may run before it is interrupted (``animegraph sql --timeout``).
+#: Seconds a query may run before it is interrupted (``animegraph sql --timeout``), and
+#: the most it may be given (a bounded wait; ``inf`` overflowed the timer's clock).
 TIMEOUT_S = 60.0
+MAX_TIMEOUT_S = 86400.0
+#: Seconds between two looks of the waiting thread at the clock (and at Ctrl-C).
+POLL_S = 0.05
+#: Seconds an interrupted query gets to stop before its thread is left to the exit.
+STOP_GRACE_S = 2.0
 #: Rows per streamed Arrow batch: few enough that one batch of long values stays far
 #: below Arrow's 2 GB string buffer (8,192 rows of 300 KB strings overflowed it, after
 #: 19 s and 2.2 GB, in DuckDB's advice to ``SET arrow_large_buffer_size``).
@@ -206,20 +213,19 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
     """
     if row_limit < 1:
         raise ParameterError(f"the row limit must be >= 1, got {row_limit}")
-    if not timeout > 0:
-        raise ParameterError(f"the time limit must be > 0 s, got {timeout}")
+    if not 0 < timeout <= MAX_TIMEOUT_S:
+        raise ParameterError(f"the time limit must be more than 0 and at most "
+                             f"{MAX_TIMEOUT_S:g} s, got {timeout}")
     statements = check_read_only(sql)
-    timer = None
     with tempfile.TemporaryDirectory(prefix="animegraph-sql-") as spill:
         try:
             con = connect(db, spill)
         except duckdb.Error as exc:
             raise DataError(f"database {db.root} could not be opened: {_first_line(exc)}") from None
+        stopped = False
         try:
-            timer = threading.Timer(timeout, con.interrupt)
-            timer.daemon = True
-            timer.start()
-            return [_fetch(con, statement, row_limit) for statement in statements]
+            return _interruptible(con, lambda: [_fetch(con, statement, row_limit)
+                                                for statement in statements], timeout)
         except duckdb.InterruptException:
             raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
                                  f"--timeout)") from None
@@ -230,10 +236,65 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise ParameterError(f"query failed: {_failure(con, exc)}") from None
         except OSError as exc:
             raise DataError(f"database {db.root} could not be read: {exc}") from exc
+        except _StillRunning:
+            stopped = True  # the query's thread still holds the connection
+            raise KeyboardInterrupt from None
         finally:
-            if timer is not None:
-                timer.cancel()
-            con.close()
+            if not stopped:
+                con.close()
+
+
+class _StillRunning(Exception):
+    """A Ctrl-C came, and the interrupted query had not stopped within the grace."""
+
+
+def _interruptible(con: duckdb.DuckDBPyConnection, work, timeout: float):
+    """``work()`` (DuckDB's calls on ``con``) in a thread, the caller waiting for it.
+
+    The caller, not DuckDB, waits: Python runs a Ctrl-C's handler in the main thread
+    only between its own instructions, and inside DuckDB's execution the handler's
+    ``KeyboardInterrupt`` was turned into DuckDB's ``RuntimeError: Query interrupted``
+    only when the query ended on its own (after the whole time limit). Waiting here, the
+    ``KeyboardInterrupt`` arrives at once; DuckDB is interrupted (``con.interrupt``) and
+    the interruption goes on. The time limit is this wait's deadline too.
+
+    Raises
+    ------
+    duckdb.InterruptException
+        The time limit passed.
+    KeyboardInterrupt
+        Ctrl-C, once the query stopped; :class:`_StillRunning` if it had not within
+        :data:`STOP_GRACE_S`.
+    """
+    outcome: dict = {}
+    # Waited for through an Event, not Thread.join: a join cut short by Ctrl-C marks the
+    # thread as ended while it still runs (CPython releases its lock, bpo-45274).
+    done = threading.Event()
+
+    def target() -> None:
+        try:
+            outcome["value"] = work()
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            outcome["error"] = exc
+        finally:
+            done.set()
+
+    # A daemon: a query that ignores its interruption must not keep the process alive.
+    thread = threading.Thread(target=target, name="animegraph-sql", daemon=True)
+    deadline = time.monotonic() + timeout
+    thread.start()
+    try:
+        while not done.wait(POLL_S):
+            if time.monotonic() > deadline:
+                con.interrupt()
+    except KeyboardInterrupt:
+        con.interrupt()
+        if not done.wait(STOP_GRACE_S):
+            raise _StillRunning from None
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
 
 
 def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Result:

@@ -37,6 +37,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,7 +47,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from db.arrow import numbers, repeat_string
-from db.atomic import atomic_write
+from db.atomic import atomic_write, write_error
 from db.errors import DataError
 from db.lock import pid_alive, writer_lock
 from db.validate import (
@@ -104,6 +105,8 @@ ANY_VERSION = object()
 _VERSION = re.compile(r"^v(\d{6})$")
 _STAGING = re.compile(r"^\.v\d{6}\.partial-(?:(\d+)-)?[0-9a-f]+$")
 _CURRENT = "CURRENT"
+#: Largest CURRENT read: a version's name and a newline fit many times over.
+_CURRENT_MAX_BYTES = 64
 #: Tables whose file's SHA-256 the manifest holds (``checksums``), checked when read.
 CHECKSUMMED = ("model_arrays",)
 
@@ -238,6 +241,13 @@ def dictionary_columns(table: pa.Table) -> list[str]:
 
 
 def _write_table(folder: Path, name: str, table: pa.Table) -> None:
+    try:
+        _write_table_files(folder, name, table)
+    except OSError as exc:  # pyarrow's own error names no file ("Error writing bytes ...")
+        raise write_error(folder / name, exc) from None
+
+
+def _write_table_files(folder: Path, name: str, table: pa.Table) -> None:
     import pyarrow.dataset as ds  # deferred: it imports pandas, which reading does not need
 
     rows = rows_per_group(table)
@@ -311,20 +321,33 @@ def own_folder(root: Path, *parts: str) -> Path:
 def current_version(path: str | os.PathLike) -> str:
     """Name of the live version of the database at ``path``."""
     root = Path(path)
+    # CURRENT must be the database's own small regular file: opened without following a
+    # symbolic link (one to /etc/passwd had its first bytes printed in the error), nor
+    # waiting on a FIFO; what it holds is said only if it is a version's name.
+    damaged = f"database {root} is damaged: {_CURRENT} "
     try:
-        with open(root / _CURRENT, "rb") as handle:
-            raw = handle.read(64)
+        fd = os.open(root / _CURRENT, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0)
+                     | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:
         raise DataError(f"{root} is not an animegraph database (no {_CURRENT} file)") from None
     except OSError as exc:
-        raise DataError(f"database {root} is damaged: cannot read {_CURRENT}: "
-                        f"{exc.strerror or exc}") from None
+        what = "is a symbolic link" if os.path.islink(root / _CURRENT) else \
+            f"cannot be read ({exc.strerror or exc})"
+        raise DataError(damaged + what) from None
     try:
-        name = raw.decode("ascii").strip()
-    except UnicodeDecodeError:
-        raise DataError(f"database {root} is damaged: {root / _CURRENT} is not text") from None
-    if not _VERSION.match(name) or not (root / name).is_dir():
-        raise DataError(f"database {root} is damaged: {_CURRENT} names {name!r}, not a version")
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_size > _CURRENT_MAX_BYTES:
+            raise DataError(damaged + "is not the small text file naming a version")
+        raw = os.read(fd, _CURRENT_MAX_BYTES + 1)
+    except OSError as exc:
+        raise DataError(damaged + f"cannot be read ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    name = raw.decode("ascii", errors="replace").strip()
+    if not _VERSION.match(name):
+        raise DataError(damaged + "does not name a version")
+    if not (root / name).is_dir():
+        raise DataError(damaged + f"names {name}, which is not there")
     return name
 
 

@@ -150,7 +150,11 @@ def map_in_processes(
                                initializer=worker_initializer,
                                initargs=(os.getpid(), threads_per_worker(workers)))
     try:
-        results = pool.map(func, jobs, chunksize=chunksize)
+        # pool.map submits every job, and the pool spawns its workers then: each is
+        # started ignoring SIGINT, or a Ctrl-C while a worker is still importing (before
+        # its initializer runs) printed that worker's KeyboardInterrupt traceback.
+        with sigint_ignored_by_children():
+            results = pool.map(func, jobs, chunksize=chunksize)
         done = list(progress(results) if progress else results)
     except BaseException:
         _abandon(pool)

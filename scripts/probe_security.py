@@ -39,6 +39,17 @@ present), then prints, section by section:
    the private recording not read); glTFs whose buffer is outside their folder, and
    glTFs drawing a quad from 5,000 nodes (nested, flat: ``gltf_drawing``), through
    ``load_mesh`` (held = refused in one line).
+8. **Outputs** (issue 39): every output option (``sql -o``, ``synth -o``, ``render -o``,
+   ``plot -o``, ``map-emotion -o``, ``query --export``, ``batch --out``) aimed at a device
+   (``/dev/null``), a FIFO, a symbolic link, a database's ``CURRENT``, a place inside a
+   database and a database: held = exit 2 in one line, and every target as it was.
+9. **Limits and messages**: ``sql --timeout`` of inf, nan, 1e12, -1, 0; an emotion weight
+   of 1e999; a ``CURRENT`` that is a symbolic link (to a file whose content must not be
+   printed) or a FIFO; a C3D cut short; a full disk (a 256 KB tmpfs, as root only);
+   ``info``'s and ``query --help``'s words: held = one line that says it, no traceback.
+10. **Interrupts** (``scripts/bench_interrupt.py``): Ctrl-C mid-work on ``sql``, ``batch``,
+   ``ingest``, ``synth``, ``render`` and ``fit``: held = exit 130 and no traceback; the
+   worst latency from the signal to the exit.
 5. **Kills**: ``--kills`` times, an ingest into the database killed with SIGKILL at a
    seeded moment: survived = the database still opens at a complete version and the next
    writer gets the lock at once.
@@ -51,6 +62,7 @@ import json
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -643,6 +655,145 @@ def probe_inputs(corpus: Path, db: Path, work: Path, shared: Path) -> dict:
         print(f"  synth --labels .align: exit {proc.returncode} "
               f"{[line for line in proc.stderr.splitlines() if 'path:' in line][:1]}")
     return out
+def _case(name: str, proc: subprocess.CompletedProcess, ok: bool, counts: dict) -> None:
+    """Count one case: held = ``ok`` and no traceback; print its last line."""
+    traceback = "Traceback" in proc.stderr
+    counts["tried"] += 1
+    counts["held"] += ok and not traceback
+    counts["tracebacks"] += traceback
+    last = (proc.stderr.strip().splitlines() or [""])[-1]
+    print(f"  {name}: {'held' if ok and not traceback else 'BROKEN'}: exit "
+          f"{proc.returncode}: {last[:150]}")
+
+
+def probe_outputs(corpus: Path, db: Path, work: Path) -> dict:
+    """Every output option aimed at what no output may replace (issue 39): a device, a
+    FIFO, a symbolic link, a database's CURRENT, a place inside a database, a database.
+    Held = exit 2 with one line, and the target as it was."""
+    folder = work / "outputs"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir()
+    (folder / "kept.txt").write_text("kept")
+    os.mkfifo(folder / "fifo")
+    (folder / "link").symlink_to(folder / "kept.txt")
+    victim = folder / "db"
+    shutil.copytree(db, victim)
+    current = (victim / "CURRENT").read_bytes()
+    wav = sorted((corpus / "clips").glob("*.wav"))[0]
+    c3d = wav.with_suffix(".c3d")
+    targets = {"/dev/null (a device)": Path("/dev/null"), "a FIFO": folder / "fifo",
+               "a symbolic link": folder / "link", "DB/CURRENT": victim / "CURRENT",
+               "inside DB": victim / "v000001" / "out.csv", "DB itself": victim}
+    files = {"sql -o": ["sql", "SELECT 1", "--db", str(db), "-o"],
+             "synth -o": ["synth", str(wav), "--db", str(db), "-o"],
+             "render -o": ["render", str(c3d), "-o"], "plot -o": ["plot", str(c3d), "-o"],
+             "map-emotion -o": ["map-emotion", str(c3d), "--db", str(db), "--to", "happy",
+                                "-o"]}
+    folders = {"query --export": ["query", "--db", str(db), "--force", "--export"],
+               "batch --out": ["batch", str(wav), "--db", str(db), "--out"]}
+    counts = {"tried": 0, "held": 0, "tracebacks": 0}
+    for option, argv in {**files, **folders}.items():
+        for what, target in targets.items():
+            if option in folders and what in ("DB/CURRENT", "a symbolic link"):
+                continue
+            proc = _run(argv + [str(target)], timeout=120)
+            lines = proc.stderr.strip().splitlines()
+            _case(f"{option} {what}", proc, proc.returncode == 2 and len(lines) == 1, counts)
+    intact = (stat.S_ISCHR(os.lstat("/dev/null").st_mode)
+              and stat.S_ISFIFO(os.lstat(folder / "fifo").st_mode)
+              and (folder / "link").is_symlink() and (folder / "kept.txt").read_text() == "kept"
+              and (victim / "CURRENT").read_bytes() == current
+              and not (victim / "v000001" / "out.csv").exists())
+    print(f"  every target as it was: {intact}")
+    return {"output_cases_tried": counts["tried"], "output_cases_held": counts["held"],
+            "output_tracebacks": counts["tracebacks"], "output_targets_intact": intact}
+
+
+def probe_limits(corpus: Path, db: Path, work: Path) -> dict:
+    """Numbers beyond their range (``sql --timeout inf``, an emotion weight of 1e999), a
+    CURRENT that is a symbolic link or a FIFO, a C3D cut short, a full disk, and the
+    words of ``info`` and ``query --help``. Held = one line (exit 1 or 2) that says it."""
+    from crafted import SECRET, crafted_database
+
+    counts = {"tried": 0, "held": 0, "tracebacks": 0}
+    for value in ("inf", "nan", "1e12", "-1", "0"):
+        proc = _run(["sql", "--db", str(db), "--timeout", value, "SELECT 1"], timeout=60)
+        _case(f"sql --timeout {value}", proc, proc.returncode == 2
+              and len(proc.stderr.strip().splitlines()) == 1, counts)
+    wav = sorted((corpus / "clips").glob("*.wav"))[0]
+    proc = _run(["synth", str(wav), "--db", str(db), "-o", str(work / "w.c3d"), "--emotion",
+                 "happy=1e999,sad=1"], timeout=300)
+    _case("synth --emotion happy=1e999,sad=1", proc,
+          proc.returncode in (1, 2) and "not a finite number" in proc.stderr, counts)
+    for kind in ("current_symlink", "current_fifo"):
+        path = crafted_database(db, work / kind, kind)
+        for command in (["info"], ["sql", "SELECT 1"]):
+            proc = _run(command + ["--db", str(path)], timeout=60)
+            _case(f"{kind} {command[0]}", proc, proc.returncode == 1 and _held(proc)
+                  and SECRET not in proc.stderr and "damaged" in proc.stderr, counts)
+        shutil.rmtree(path, ignore_errors=True)
+        (work / f"{kind}-secret.txt").unlink(missing_ok=True)
+    c3d = sorted((corpus / "clips").glob("*.c3d"))[0]
+    for cut in (100, 600, 700):
+        short = work / f"cut{cut}.c3d"
+        short.write_bytes(c3d.read_bytes()[:cut])
+        proc = _run(["plot", str(short), "-o", str(work / "cut.png")], timeout=120)
+        _case(f"C3D cut at {cut} bytes", proc, proc.returncode == 1 and _held(proc)
+              and str(short) in proc.stderr and "struct" not in proc.stderr, counts)
+    full = work / "full"
+    full.mkdir(exist_ok=True)
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(full)],
+                             capture_output=True).returncode == 0
+    if mounted:
+        try:
+            (full / "pad").write_bytes(b"\0" * (250 * 1024))
+            cases = {"sql -o on a full disk": ["sql", "--db", str(db), "SELECT * FROM frames",
+                                               "-o", str(full / "x.parquet")],
+                     "ingest on a full disk": ["ingest", str(corpus), "--db", str(full / "db"),
+                                               "--quiet"]}
+            for name, argv in cases.items():
+                proc = _run(argv, timeout=300)
+                _case(name, proc, proc.returncode == 1 and _held(proc)
+                      and "the disk is full" in proc.stderr and str(full) in proc.stderr,
+                      counts)
+        finally:
+            subprocess.run(["umount", str(full)], check=False)
+    else:
+        print("  full disk: skipped (mounting a small tmpfs needs root)")
+    proc = _run(["info", "--db", str(db)], timeout=60)
+    _case("info names where its database came from", proc, proc.returncode == 0
+          and "named by --db" in proc.stdout, counts)
+    proc = _run(["query", "--help"], timeout=60)
+    _case("query --help lists .livelink.csv", proc, proc.returncode == 0
+          and ".livelink.csv" in proc.stdout, counts)
+    return {"limit_cases_tried": counts["tried"], "limit_cases_held": counts["held"],
+            "limit_tracebacks": counts["tracebacks"]}
+
+
+def probe_interrupts(work: Path) -> dict:
+    """Ctrl-C mid-work on each command (scripts/bench_interrupt.py): held = exit 130 and
+    no traceback; the latency from the signal to the exit, printed."""
+    from bench_interrupt import DELAY_S, commands, interrupt_once
+
+    corpus, db = work / "corpus", work / "db"
+    runs = commands(corpus, db, work)
+    held = tracebacks = 0
+    worst = 0.0
+    for name, argv in runs.items():
+        if name == "fit":
+            shutil.rmtree(work / "fit.db", ignore_errors=True)
+            shutil.copytree(db, work / "fit.db")
+        code, latency, traceback, last = interrupt_once(argv, DELAY_S[name],
+                                                        work / f"{name}.err")
+        held += code == 130 and not traceback
+        tracebacks += traceback
+        worst = max(worst, latency)
+        print(f"  {name}: exit {code}, {latency:.2f} s after SIGINT, traceback: "
+              f"{'YES' if traceback else 'no'}")
+        for leftover in ("interrupt.db", "batch-out"):
+            shutil.rmtree(work / leftover, ignore_errors=True)
+    return {"interrupts_tried": len(runs), "interrupts_held": held,
+            "interrupt_tracebacks": tracebacks, "interrupt_worst_latency_s": round(worst, 2)}
 
 
 def main(argv=None) -> int:
@@ -656,7 +807,8 @@ def main(argv=None) -> int:
                         default=Path(__file__).resolve().parents[2] / "shared" / "data")
     parser.add_argument("--skip", nargs="*", default=[],
                         choices=["sql", "databases", "clips", "writers", "kills", "real",
-                                 "media", "damage", "inputs"])
+                                 "media", "damage", "inputs", "outputs", "limits",
+                                 "interrupts"])
     args = parser.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="probe-security-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -670,7 +822,10 @@ def main(argv=None) -> int:
              ("real", lambda: probe_real(args.shared, corpus)),
              ("media", lambda: probe_media(corpus, db, work)),
              ("damage", lambda: probe_damage(corpus, db, work)),
-             ("inputs", lambda: probe_inputs(corpus, db, work, args.shared))]
+             ("inputs", lambda: probe_inputs(corpus, db, work, args.shared)),
+             ("outputs", lambda: probe_outputs(corpus, db, work)),
+             ("limits", lambda: probe_limits(corpus, db, work)),
+             ("interrupts", lambda: probe_interrupts(work))]
     for name, step in steps:
         if name in args.skip:
             continue

@@ -140,12 +140,32 @@ def _repeated_string(root: Path, name: str = "phoneme", length: int = 1 << 20) -
                    compression="zstd", store_schema=False)
 
 
+#: What a file outside a database holds, which no error about the database may print.
+SECRET = "root:x:0:0:root:/root:/bin/bash"
+
+
+def _current_elsewhere(root: Path, kind: str) -> None:
+    """CURRENT replaced by a symbolic link to a file beside the database that holds
+    :data:`SECRET` (its first bytes were printed in every command's error), or by a FIFO
+    (opening it waited for a writer forever)."""
+    current = root / "CURRENT"
+    current.unlink()
+    if kind == "symlink":
+        secret = root.parent / f"{root.name}-secret.txt"
+        secret.write_text(f"{SECRET}\n")
+        current.symlink_to(secret)
+    else:
+        os.mkfifo(current)
+
+
 #: name -> mutation of a database folder (the live version is damaged in place).
 DATABASE_MUTATIONS: dict[str, Callable[[Path], None]] = {
     "current_binary": lambda r: (r / "CURRENT").write_bytes(b"\xff\xfe\x00\x9c" * 8),
     "current_huge": lambda r: (r / "CURRENT").write_bytes(b"v" * 10_000_000),
     "current_traversal": lambda r: (r / "CURRENT").write_text("../../etc"),
     "current_missing_version": lambda r: (r / "CURRENT").write_text("v999999"),
+    "current_symlink": lambda r: _current_elsewhere(r, "symlink"),
+    "current_fifo": lambda r: _current_elsewhere(r, "fifo"),
     "manifest_deep": lambda r: _manifest(r, lambda m: "[" * 100_000 + "]" * 100_000),
     "manifest_not_json": lambda r: _manifest(r, lambda m: "{not json"),
     "manifest_list": lambda r: _manifest(r, lambda m: [m]),

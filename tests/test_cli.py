@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import stat
 import subprocess
 import sys
 
@@ -132,3 +134,102 @@ def test_help_says_what_the_commands_do():
     assert "bag of audio words" in sub.choices["classify"].description
     # ingest's description named neither the iPhone's Live Link CSV nor videos.
     assert "Live Link" in sub.choices["ingest"].description
+
+
+def _places_no_output_may_take(tmp_path):
+    """name -> (path, its bytes or None for a folder, a FIFO): each must be there, as it
+    was, after a command was told to write its output to it."""
+    (tmp_path / "kept.txt").write_text("kept")
+    (tmp_path / "kept").mkdir()
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    db = tmp_path / "db"
+    (db / "v000001").mkdir(parents=True)
+    (db / "CURRENT").write_text("v000001")
+    (tmp_path / "file_link").symlink_to(tmp_path / "kept.txt")
+    (tmp_path / "folder_link").symlink_to(tmp_path / "kept")
+    return {"fifo": fifo, "file symlink": tmp_path / "file_link",
+            "folder symlink": tmp_path / "folder_link", "database CURRENT": db / "CURRENT",
+            "inside a database": db / "v000001" / "out.csv", "a database": db,
+            "through ..": db / "v000001" / ".." / "CURRENT"}
+
+
+#: Every option naming an output file (OUT: where it goes); the inputs need not exist,
+#: the output is refused before they are read.
+OUTPUT_FILES = {
+    "sql -o": ["sql", "SELECT 1", "--db", "nodb", "-o", "OUT"],
+    "synth -o": ["synth", "x.wav", "--db", "nodb", "-o", "OUT"],
+    "synth --explain-json": ["synth", "x.wav", "--db", "nodb", "-o", "y.c3d",
+                             "--explain-json", "OUT"],
+    "render -o": ["render", "x.c3d", "-o", "OUT"],
+    "plot -o": ["plot", "x.c3d", "-o", "OUT"],
+    "map-emotion -o": ["map-emotion", "x.c3d", "--db", "nodb", "--to", "happy", "-o", "OUT"],
+}
+#: Every option naming an output folder.
+OUTPUT_FOLDERS = {
+    "query --export": ["query", "--db", "nodb", "--export", "OUT", "--force"],
+    "batch --out": ["batch", "x.csv", "--db", "nodb", "--out", "OUT"],
+    "corpus synth --out": ["corpus", "synth", "--out", "OUT"],
+    "demo --out": ["demo", "--out", "OUT"],
+}
+
+
+@pytest.mark.parametrize("option", [*OUTPUT_FILES, *OUTPUT_FOLDERS])
+def test_an_output_never_replaces_what_is_not_an_output(capsys, tmp_path, monkeypatch,
+                                                         option):
+    # The write is a rename into place: '-o /dev/full' (as root) replaced the device node
+    # with a regular file, a FIFO or a symbolic link became a file, and '-o DB/CURRENT'
+    # overwrote the database's pointer (every later command said it was damaged).
+    monkeypatch.chdir(tmp_path)
+    places = _places_no_output_may_take(tmp_path)
+    argv = {**OUTPUT_FILES, **OUTPUT_FOLDERS}[option]
+    for name, path in places.items():
+        if option in OUTPUT_FOLDERS and name in ("database CURRENT", "file symlink"):
+            continue  # not folders: refused as such, tried above for the files
+        line = _one_line_error(capsys, main([str(path) if a == "OUT" else a for a in argv]),
+                               2)
+        assert str(path) in line, (name, line)
+        assert ("inside the database" in line or "a database folder" in line
+                or "symbolic link" in line or "FIFO" in line), (name, line)
+    assert stat.S_ISFIFO(os.lstat(places["fifo"]).st_mode)
+    assert os.readlink(tmp_path / "file_link") == str(tmp_path / "kept.txt")
+    assert (tmp_path / "kept.txt").read_text() == "kept"
+    assert (tmp_path / "db" / "CURRENT").read_text() == "v000001"
+    assert sorted(p.name for p in (tmp_path / "db").iterdir()) == ["CURRENT", "v000001"]
+    assert not list((tmp_path / "db" / "v000001").iterdir())
+
+
+def test_a_library_write_replaces_only_a_regular_file(tmp_path):
+    from db.atomic import atomic_write
+    from db.errors import DataError
+
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    (tmp_path / "link").symlink_to(tmp_path / "elsewhere")
+    for path in (fifo, tmp_path / "link"):
+        with pytest.raises(DataError, match="not a regular file"), atomic_write(path) as out:
+            out.write(b"x")
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and (tmp_path / "link").is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "link"]  # no temporary
+    with atomic_write(tmp_path / "new.csv") as out:  # a new path, and a file, still are
+        out.write(b"1")
+    with atomic_write(tmp_path / "new.csv") as out:
+        out.write(b"2")
+    assert (tmp_path / "new.csv").read_bytes() == b"2"
+
+
+def test_query_help_lists_every_export_format_the_export_writes(capsys):
+    # The help said "C3D for marker databases, CSV otherwise": no word of .livelink.csv.
+    from animegraph.motion.files import motion_suffix
+    from animegraph.motion.suffixes import EXPORT_FORMATS
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    with pytest.raises(SystemExit):
+        main(["query", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for suffix in EXPORT_FORMATS:
+        assert f"{suffix}:" in text, suffix
+    written = {motion_suffix(list(ARKIT_BLENDSHAPES), "curves"),
+               motion_suffix(["a.x", "a.y", "a.z"], "markers"),
+               motion_suffix(["a.x", "a.y", "a.z", "head.yaw"], "landmarks")}
+    assert written == set(EXPORT_FORMATS)

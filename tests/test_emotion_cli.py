@@ -63,6 +63,13 @@ def test_parse_emotion():
             parse_emotion(bad)
 
 
+@pytest.mark.parametrize("weight", ["1e999", "inf", "-inf", "nan"])
+def test_a_weight_that_is_no_finite_number_is_said_so(weight):
+    # 1e999 was told "must be >= 0, got 1e999".
+    with pytest.raises(ParameterError, match="not a finite number"):
+        parse_emotion(f"happy={weight},sad=1")
+
+
 def test_emotion_names_match_whatever_their_case():
     """Requests match the database's spelling (one written before ingest lowercased
     labels may hold ``Happy``); a mix adds up names that differ only in case."""

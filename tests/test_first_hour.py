@@ -35,7 +35,7 @@ def test_info_uses_the_database_named_by_the_environment(tiny_db, monkeypatch, c
     monkeypatch.setenv(DB_ENV, str(tiny_db[0]))
     assert main(["info"]) == 0
     out = capsys.readouterr().out
-    assert str(tiny_db[0]) in out and f"chosen by ${DB_ENV}" in out
+    assert str(tiny_db[0]) in out and f"named by ${DB_ENV}" in out
 
 
 def test_without_db_the_demos_database_is_used(tiny_db, monkeypatch, capsys):
@@ -46,7 +46,8 @@ def test_without_db_the_demos_database_is_used(tiny_db, monkeypatch, capsys):
     try:
         assert main(["info"]) == 0
         out = capsys.readouterr().out
-        assert str(target) in out and "chosen by the demo's default database" in out
+        assert str(target) in out
+        assert "the demo's database, the default (no --db given, $ANIMEGRAPH_DB not set)" in out
     finally:
         shutil.rmtree(target)
 

@@ -221,6 +221,18 @@ def test_read_c3d_corrupt(tmp_path, good_c3d, mangle):
         read_c3d(bad)
 
 
+@pytest.mark.parametrize("cut", [100, 600, 700])
+def test_a_c3d_cut_short_is_said_truncated_in_words(tmp_path, good_c3d, cut):
+    # It read "corrupt C3D file ...: struct.error: unpack requires a buffer of 1 bytes".
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(good_c3d.read_bytes()[:cut])
+    with pytest.raises(DataError) as err:
+        read_c3d(bad)
+    message = str(err.value)
+    assert str(bad) in message and "\n" not in message
+    assert "truncated" in message and "struct" not in message and "unpack" not in message
+
+
 def test_read_c3d_wav_renamed(tmp_path):
     wav = tmp_path / "speech.wav"
     write_wav(wav, _tone(8000, 16000), 16000)

@@ -49,6 +49,28 @@ def test_crafted_databases_are_read_or_refused_in_one_line(tiny_db, tmp_path, mu
             assert str(path) in str(exc), str(exc)
 
 
+@pytest.mark.parametrize("mutation", ["current_symlink", "current_fifo"])
+def test_a_current_that_is_not_the_databases_own_file_is_damage_unechoed(tiny_db, tmp_path,
+                                                                          mutation):
+    # A CURRENT linked to another file had that file's first 60 bytes printed in every
+    # command's error; a FIFO in its place kept every command waiting for a writer. The
+    # wait is bounded so that a hang fails rather than holds the suite.
+    import subprocess
+    import sys
+
+    from crafted import SECRET
+
+    path = crafted_database(tiny_db[0], tmp_path / "db", mutation)
+    for command in (["info"], ["sql", "SELECT 1"]):
+        proc = subprocess.run([sys.executable, "-m", "animegraph", *command, "--db", str(path)],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 1, proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert "damaged" in proc.stderr and "CURRENT" in proc.stderr
+        assert SECRET not in proc.stderr and "/bin/bash" not in proc.stderr
+        assert "Traceback" not in proc.stderr
+
+
 @pytest.mark.parametrize("mutation", ["phoneme_path", "phoneme_nul", "start_time_inf",
                                       "clip_fps_zero", "clip_fps_nan",
                                       "clip_phones_mismatch", "audio_odd_bytes"])

@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 
@@ -130,3 +131,81 @@ def test_ctrl_c_ends_a_batch(tiny_db, tmp_path):
         done = folder / "done.json"
         if done.exists():  # a line that says it is finished is complete
             json.loads(done.read_text())
+
+
+def _at_work(proc: subprocess.Popen, err: Path, marker: str | None = None,
+             cpu_s: float = 3.0) -> None:
+    """Wait until the command is inside its work: ``marker`` on its stderr, or (without
+    one) ``cpu_s`` seconds of CPU spent, past the imports. Fails if it ended before."""
+    def busy() -> bool:
+        if proc.poll() is not None:
+            return True
+        if marker is not None:
+            return marker in err.read_text()
+        try:
+            times = psutil.Process(proc.pid).cpu_times()
+        except psutil.NoSuchProcess:
+            return True
+        return times.user + times.system >= cpu_s
+
+    _wait_for(busy, f"the command at work ({marker or f'{cpu_s} s of CPU'})")
+    assert proc.poll() is None, f"it ended before the Ctrl-C: {err.read_text()}"
+
+
+def _long_speech(tiny_corpus: Path, tmp_path: Path, repeats: int = 6) -> Path:
+    """The corpus' speech end to end, several times: work of many seconds."""
+    from ingest.formats.wav import read_wav, write_wav
+
+    parts, rate = [], None
+    for wav in sorted((tiny_corpus / "clips").glob("*.wav")):
+        samples, rate = read_wav(wav)
+        parts.append(samples)
+    path = tmp_path / "long.wav"
+    write_wav(path, np.concatenate(parts * repeats), rate)
+    return path
+
+
+def test_ctrl_c_ends_a_sql_query(tiny_db, tmp_path):
+    # DuckDB ran on, deaf to the KeyboardInterrupt, until the query ended or its time
+    # limit passed (--timeout 120: 119 s), then a RuntimeError traceback and exit 1.
+    proc, err = _start(["sql", "--db", str(tiny_db[0]), "--timeout", "600",
+                        "SELECT count(*) FROM range(1000000000000)"], tmp_path)
+    _at_work(proc, err)
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, []), err)
+
+
+def test_ctrl_c_ends_a_synth(tiny_db, tiny_corpus, tmp_path):
+    speech = _long_speech(tiny_corpus, tmp_path)
+    out = tmp_path / "out.c3d"
+    proc, err = _start(["-v", "synth", str(speech), "--db", str(tiny_db[0]), "-o", str(out)],
+                       tmp_path)
+    _at_work(proc, err, "synthesizing")
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, _workers(proc)), err)
+    assert not out.exists()
+
+
+def test_ctrl_c_ends_a_render(tiny_corpus, tmp_path):
+    from ingest.formats.c3d import MarkerData, read_c3d, write_c3d
+
+    clip = read_c3d(sorted((tiny_corpus / "clips").glob("*.c3d"))[0])
+    motion = tmp_path / "long.c3d"
+    write_c3d(motion, MarkerData(np.concatenate([clip.points] * 8), clip.labels, clip.rate))
+    out = tmp_path / "out.mp4"
+    proc, err = _start(["render", str(motion), "-o", str(out)], tmp_path)
+    _at_work(proc, err, "rendering")
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, _workers(proc)), err)
+    assert not out.exists()
+
+
+def test_ctrl_c_ends_a_fit(tiny_db, tmp_path):
+    import shutil
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    proc, err = _start(["fit", "--db", str(db), "--method", "hier-pca"], tmp_path)
+    _at_work(proc, err, cpu_s=1.5)  # its imports take about 1 s of CPU, the fit seconds
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, _workers(proc)), err)

@@ -179,17 +179,19 @@ def test_export_of_clips_and_nothing_matched(tiny_db, tmp_path, capsys):
     assert not (tmp_path / "none").exists()
 
 
-@pytest.mark.parametrize("extra, said", [
-    (["--context", "-1"], "--context must be >= 0 seconds"),
-    (["--force"], "exists and is not a folder"),
+@pytest.mark.parametrize("extra, said, code", [
+    (["--context", "-1"], "--context must be >= 0 seconds", 1),
+    # a file is no folder to export into: refused as the option is read (the output check)
+    (["--force"], "it is a file, not a folder", 2),
 ])
 def test_an_export_that_cannot_be_written_is_refused_before_the_query(tiny_db, tmp_path,
-                                                                     capsys, extra, said):
+                                                                     capsys, extra, said,
+                                                                     code):
     # The table was printed first, then the error: as if the query had run and failed.
     (tmp_path / "afile").write_text("mine")
     out = tmp_path / ("afile" if "--force" in extra else "hits")
     assert main(["query", "--db", str(tiny_db[0]), "--phoneme", "AA", "--limit", "1",
-                 "--export", str(out), *extra]) == 1
+                 "--export", str(out), *extra]) == code
     captured = capsys.readouterr()
     assert captured.out == "" and said in captured.err
     assert (tmp_path / "afile").read_text() == "mine" and not (tmp_path / "hits").exists()

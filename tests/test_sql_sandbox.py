@@ -99,6 +99,27 @@ def test_a_runaway_query_is_interrupted(db):
         run(db, "SELECT count(*) FROM range(100000000000000) a", timeout=0.5)
 
 
+@pytest.mark.parametrize("timeout", ["inf", "nan", "1e12", "0", "-3"])
+def test_a_time_limit_beyond_its_range_is_one_line(db, timeout):
+    # 'inf' went through: the timer thread died (OverflowError: timestamp out of range)
+    # with a traceback, and the query ran with no limit at all.
+    proc = subprocess.run([sys.executable, "-m", "animegraph", "sql", "--db", str(db.root),
+                           "--timeout", timeout, "SELECT 1"], capture_output=True, text=True)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "finite" in proc.stderr or "at most 86400" in proc.stderr
+    with pytest.raises(ParameterError, match="at most 86400"):
+        run(db, "SELECT 1", timeout=float(timeout) if timeout != "nan" else float("nan"))
+
+
+def test_the_help_says_the_time_limits_of_the_sandbox():
+    from animegraph.apps import cli_parser
+    from db import sql
+
+    assert (cli_parser.TIMEOUT_S, cli_parser.MAX_TIMEOUT_S) == (sql.TIMEOUT_S,
+                                                                sql.MAX_TIMEOUT_S)
+
+
 def test_a_query_is_held_to_its_memory(db, monkeypatch):
     # DuckDB's default is 80 % of the machine: a 2 GB string_agg took 6 GB. The limit is
     # lowered here so that the query (256 MB) stays small when the limit is missing.

@@ -18,6 +18,9 @@ logger = logging.getLogger(__name__)
 WORKER_START_TIMEOUT_S = 300.0
 #: Seconds to wait for an existing scheduler (and for it to have a worker).
 CONNECT_TIMEOUT_S = 5.0
+#: The loggers a local cluster speaks through while it is stopped (tornado's "Exception
+#: in callback" among them; Dask's configuration sets tornado.application's own level).
+_DASK_LOGGERS = ("distributed", "tornado", "tornado.application", "asyncio")
 
 
 @contextmanager
@@ -53,6 +56,8 @@ def _client(options, prepare: Callable[[], object] | None):
     from distributed import Client, LocalCluster
 
     cluster = client = None
+    before = set(multiprocessing.active_children())
+    quiet: dict[str, int] = {}
     try:
         if options.scheduler:
             address = options.scheduler
@@ -109,11 +114,37 @@ def _client(options, prepare: Callable[[], object] | None):
                 raise DataError(f"the {options.workers} local Dask workers did not start "
                                 f"within {WORKER_START_TIMEOUT_S:.0f} s") from None
         yield client
+    except KeyboardInterrupt:
+        if cluster is not None:
+            # Quiet until the cluster is closed: a nanny whose worker is ended while it
+            # starts says so with a traceback (through tornado's logger), and nothing is
+            # wrong: the batch is being stopped.
+            quiet = {name: logging.getLogger(name).level for name in _DASK_LOGGERS}
+            for name in quiet:
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+            _end_workers_now(cluster, set(multiprocessing.active_children()) - before)
+        raise
     finally:
         if client is not None:
             client.close()
         if cluster is not None:
             cluster.close()
+        for name, level in quiet.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def _end_workers_now(cluster, processes) -> None:
+    """Ctrl-C: end a local cluster's worker processes at once. Closed gracefully, the
+    cluster waited for each worker to finish and say so (6 s of a 2-worker batch after
+    the Ctrl-C, and a closing worker's comm could raise CommClosedError); its nannies are
+    told first that a worker's end is no reason to start another."""
+    from ingest.workers import end_workers
+
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        close_gracefully = getattr(nanny, "close_gracefully", None)
+        if close_gracefully is not None:  # a Nanny (a Worker in threads has none)
+            close_gracefully(reason="animegraph batch interrupted")
+    end_workers(processes)
 
 
 def _close_unconnected(client) -> None:

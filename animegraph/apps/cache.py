@@ -34,4 +34,4 @@ def default_database() -> tuple[Path, str]:
     """
     if os.environ.get(DB_ENV):
         return Path(os.environ[DB_ENV]), f"${DB_ENV}"
-    return default_db_dir(), "the demo's default database"
+    return default_db_dir(), "the demo's database"

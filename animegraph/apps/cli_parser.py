@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import math
 from pathlib import Path
 
 from animegraph import __version__
@@ -38,6 +39,11 @@ SYNTH_AUDIO_COSTS = ("plp", "posteriorgram", "plp+posteriorgram")
 
 #: ``synth --guide`` (:data:`animegraph.synthesis.guide.GUIDES`, spelled out here too).
 SYNTH_GUIDES = ("mu-mlp", "av-hmm", "ppg-ridge", "mu-mlp+ppg-ridge")
+
+#: ``sql --timeout``'s default and ceiling (:data:`db.sql.TIMEOUT_S`, :data:`db.sql.MAX_TIMEOUT_S`,
+#: spelled out here so that ``--help`` does not import DuckDB; tests/test_sql_sandbox.py
+#: checks that they are the same).
+TIMEOUT_S, MAX_TIMEOUT_S = 60.0, 86400.0
 
 #: ``sql --help``'s list of the tables and their main columns (tests/test_ingest.py checks
 #: that each column is in a database).
@@ -100,6 +106,25 @@ def _whole_number(text: str) -> int:
     return value
 
 
+def _output(folder: bool | None):
+    """The type of an option naming an output: :func:`db.atomic.check_output_path` (a new path,
+    or an existing regular file or folder as ``folder`` says; never a device, FIFO or
+    symbolic link, never inside a database), said as the option's error."""
+    from db.atomic import check_output_path
+    from db.errors import DataError
+
+    def output(text: str) -> Path:
+        try:
+            return check_output_path(text, folder=folder)
+        except DataError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    output.__name__ = "output path"  # argparse's word for it in "invalid output path value"
+    return output
+
+
+_output_file, _output_folder, _output_file_or_folder = _output(False), _output(True), _output(None)
+
+
 def _formats(text: str) -> tuple[str, ...]:
     """``c3d,csv``: names, checked by the command (it knows the database's kind)."""
     names = tuple(name.strip().lower() for name in text.split(","))
@@ -109,10 +134,16 @@ def _formats(text: str) -> tuple[str, ...]:
 
 
 def _number(text: str) -> float:
+    """A finite number: ``inf`` and ``nan`` parse as floats, and each option that took
+    them went on without its limit (``sql --timeout inf`` ended in a thread's
+    OverflowError and no time limit at all)."""
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def _phones_engine_option(parser, transcript: str) -> None:
@@ -183,7 +214,7 @@ def _add_corpus(sub) -> None:
         "(eSpeak NG speech with exact phone timing, five emotions, 3D markers on the "
         "canonical face mesh).",
     )
-    synth.add_argument("--out", required=True, type=Path, help="folder to create")
+    synth.add_argument("--out", required=True, type=_output_folder, help="folder to create")
     synth.add_argument("--sentences", type=_whole_number, default=None,
                        help="distinct sentences (default 40)")
     synth.add_argument("--parallel", type=_whole_number, default=None,
@@ -208,7 +239,8 @@ def _add_demo(sub) -> None:
         description="Create the default corpus in the cache folder (once), then run the "
         "pipeline on a sentence that is not in it and write the outputs and a plot.",
     )
-    demo.add_argument("--out", type=Path, default=Path("animegraph-demo"),
+    # The default a string: argparse checks it through the type as it does a given one.
+    demo.add_argument("--out", type=_output_folder, default="animegraph-demo",
                       help="output folder (default ./animegraph-demo)")
     demo.add_argument("--emotion", default="happy", help="emotion of the demo sentence")
     demo.add_argument("--text", default=None, help="the sentence to say")
@@ -279,7 +311,7 @@ def _add_sql(sub) -> None:
                      default=None, help="json: one array of row objects; jsonl: JSON "
                      "Lines, an object a line (default: as -o's name says: .csv, .json, "
                      ".jsonl, .parquet; else table)")
-    sql.add_argument("-o", "--output", type=Path, default=None,
+    sql.add_argument("-o", "--output", type=_output_file, default=None,
                      help="write here instead of standard output (required for parquet)")
     sql.add_argument("--max-rows", type=_whole_number, default=50,
                      help="rows shown in table format (default 50)")
@@ -287,7 +319,8 @@ def _add_sql(sub) -> None:
                      help="rows fetched per statement; the rest is never read "
                      "(default 100000)")
     sql.add_argument("--timeout", type=_number, default=None,
-                     help="seconds before the query is interrupted (default 60)")
+                     help=f"seconds before the query is interrupted: more than 0, at most "
+                     f"{MAX_TIMEOUT_S:g} (a day; default {TIMEOUT_S:g})")
     sql.set_defaults(func=cmd_sql)
 
 
@@ -333,14 +366,14 @@ def _add_synth(sub) -> None:
     syn.add_argument("--tolerance", type=_number, default=None, metavar="T",
                      help="exact search only: accept a sequence certified within (1 + T) of "
                      "the optimum's cost, e.g. 0.01 (much faster on huge databases)")
-    syn.add_argument("-o", "--output", required=True, type=Path,
+    syn.add_argument("-o", "--output", required=True, type=_output_file,
                      help="motion file: .c3d (marker databases), .csv or .npz; "
                      "NAME.livelink.csv writes Live Link Face CSV (ARKit databases)")
     syn.add_argument("--timecode", default=None, metavar="HH:MM:SS:FF",
                      help="first frame's timecode in a .livelink.csv (default 00:00:00:00)")
     syn.add_argument("--explain", action="store_true",
                      help="print where every phone's motion came from and its costs")
-    syn.add_argument("--explain-json", type=Path, default=None,
+    syn.add_argument("--explain-json", type=_output_file, default=None,
                      help="write the explanation as JSON here")
     syn.add_argument("--no-time-warp", action="store_true", help="skip DTW time-warping")
     syn.add_argument("--no-blend", action="store_true",
@@ -412,7 +445,7 @@ def _add_batch(sub) -> None:
     )
     bat.add_argument("script", type=Path, metavar="SCRIPT", help="dialogue script (.csv, .jsonl)")
     _db_option(bat)
-    bat.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    bat.add_argument("-o", "--out", required=True, type=_output_folder, help="output folder")
     bat.add_argument("--workers", type=_whole_number, default=2,
                      help="worker processes of the local Dask cluster (default 2; "
                      "ignored with --scheduler)")
@@ -433,14 +466,16 @@ def _add_batch(sub) -> None:
 def _add_query(sub) -> None:
     """``query``: anime nodes or clips, exported for other tools."""
     from animegraph.apps.query_fields import ANIME_FIELDS, CLIP_FIELDS
+    from animegraph.motion.suffixes import EXPORT_FORMATS
 
     qry = sub.add_parser(
         "query", help="find anime nodes or clips; export them for other tools",
         description="List the anime nodes (phoneme instances) or, with --clips, the "
         "utterances that match, as a table. The query is SQL over the database's views "
         "(--show-sql prints it; 'animegraph sql' runs it as it is). --export writes each hit "
-        "as motion (C3D for marker databases, CSV otherwise) with context, its speech "
-        "(WAV), a PNG preview, and index.csv.",
+        f"as motion ({'; '.join(f'{suffix}: {what}' for suffix, what in EXPORT_FORMATS.items())})"
+        " with context, its speech (WAV), its phones (.phones.csv), a PNG preview, and "
+        "index.csv.",
     )
     _db_option(qry)
     qry.add_argument("--phoneme", default=None, help="ARPAbet phone, e.g. AA")
@@ -462,7 +497,7 @@ def _add_query(sub) -> None:
                      "line (default table)")
     qry.add_argument("--show-sql", action="store_true",
                      help="print the SQL instead of running it")
-    qry.add_argument("--export", type=Path, default=None, metavar="DIR",
+    qry.add_argument("--export", type=_output_folder, default=None, metavar="DIR",
                      help="write every hit into this new folder")
     qry.add_argument("--context", type=_number, default=0.25, metavar="SEC",
                      help="seconds of motion and speech kept around each anime (0.25)")
@@ -482,7 +517,7 @@ def _add_render(sub) -> None:
         "Curve motion (blendshape weights) is drawn as curves over time with the phones.",
     )
     ren.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
-    ren.add_argument("-o", "--output", required=True, type=Path,
+    ren.add_argument("-o", "--output", required=True, type=_output_file_or_folder,
                      help=".mp4, .gif, .png, .glb, or a folder name for OBJ frames")
     ren.add_argument("--audio", type=Path, default=None,
                      help="speech to mux into an MP4 (a WAV, or a video: its audio track)")
@@ -523,7 +558,7 @@ def _add_plot(sub) -> None:
         "marked and each phone is coloured by its source recording.",
     )
     plo.add_argument("motion", type=Path, metavar="MOTION", help="motion: .c3d, .csv or .npz")
-    plo.add_argument("-o", "--output", required=True, type=Path, help="PNG file")
+    plo.add_argument("-o", "--output", required=True, type=_output_file, help="PNG file")
     plo.add_argument("--truth", type=Path, default=None, help="ground-truth motion")
     plo.add_argument("--explain", type=Path, default=None, help="'synth --explain-json' file")
     plo.add_argument("--labels", type=Path, default=None,
@@ -574,7 +609,7 @@ def _add_map_emotion(sub) -> None:
                     "the emotion whose mean emotion components are nearest IN's")
     mp.add_argument("--audio", type=Path, default=None,
                     help="the speech of IN, for --from auto")
-    mp.add_argument("-o", "--output", required=True, type=Path,
+    mp.add_argument("-o", "--output", required=True, type=_output_file,
                     help="motion file to write (.c3d, .csv or .npz)")
     mp.set_defaults(func=cmd_map_emotion)
 

@@ -52,6 +52,16 @@ def _database_info(db: Database) -> dict:
     }
 
 
+def _origin(source: str | None) -> str:
+    """Why this database: named by an option or a variable (``--db``, ``$ANIMEGRAPH_DB``),
+    or the default, said as such ("chosen by the demo's default database" said neither)."""
+    if not source:
+        return ""
+    if source.startswith(("--", "$")):
+        return f"; named by {source}"
+    return f"; {source}, the default (no --db given, $ANIMEGRAPH_DB not set)"
+
+
 def info_lines(info: dict) -> list[str]:
     """The summary as lines of text."""
     emotions = ", ".join(f"{e} {n}" for e, n in info["clips_per_emotion"].items())
@@ -59,7 +69,7 @@ def info_lines(info: dict) -> list[str]:
     lines = [
         f"database:   {info['path']} ({info['version']}, schema {info['schema_version']}, "
         f"written by animegraph {info['animegraph_version']} at {info['created']})"
-        + (f"; chosen by {info['chosen_by']}" if info.get("chosen_by") else ""),
+        + _origin(info.get("chosen_by")),
         f"motion:     {info['kind']}, {info['n_channels']} channels at {info['fps']:g} fps",
         f"clips:      {info['n_clips']} ({emotions}); {info['duration_s'] / 60:.1f} min, "
         f"{info['n_frames']} frames; corpora {', '.join(info['corpora'])}",

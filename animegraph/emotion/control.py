@@ -77,7 +77,10 @@ def parse_emotion(spec) -> str | dict[str, float] | None:
             w = float(weight)
         except (TypeError, ValueError):
             raise ParameterError(f"emotion weight of {name} is not a number: {weight!r}") from None
-        if not np.isfinite(w) or w < 0:
+        if not np.isfinite(w):  # 1e999 parses, as inf: it is no weight
+            raise ParameterError(f"emotion weight of {name} is not a finite number: "
+                                 f"{weight!r}")
+        if w < 0:
             raise ParameterError(f"emotion weight of {name} must be >= 0, got {weight}")
         mix[name] = mix.get(name, 0.0) + w
     total = sum(mix.values())

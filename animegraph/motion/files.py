@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from animegraph.motion.suffixes import EXPORT_FORMATS, LIVELINK_SUFFIX
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
 from ingest.formats.phones_csv import Segment
@@ -193,8 +194,6 @@ def read_phone_track(*, labels: str | os.PathLike | None = None,
     return []
 
 
-#: Name ending that selects Live Link Face CSV (ARKit databases) over the channel CSV.
-LIVELINK_SUFFIX = ".livelink.csv"
 
 
 def write_channels(motion: np.ndarray, fps: float, names, kind: str, path: Path, *,
@@ -313,13 +312,14 @@ def motion_suffix(names, kind: str) -> str:
     from ingest.formats.c3d import MAX_MARKERS
     from ingest.formats.livelink import is_arkit
 
+    livelink, points, channels = EXPORT_FORMATS  # the table query --help lists
     if is_arkit(names):
-        return LIVELINK_SUFFIX
+        return livelink
     labels = point_labels(names)
     if kind in ("markers", "landmarks") and labels and 3 * len(labels) == len(names) \
             and len(labels) <= MAX_MARKERS:
-        return ".c3d"
-    return ".csv"
+        return points
+    return channels
 
 
 def point_columns(names) -> list[int]:

@@ -13,6 +13,7 @@ import io
 import logging
 import math
 import os
+import struct
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -314,10 +315,14 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     except DataError:
         raise
     except Exception as exc:  # the c3d package raises anything on a corrupt file
-        kind = type(exc).__qualname__
-        if type(exc).__module__ != "builtins":
-            kind = f"{type(exc).__module__}.{kind}"
-        raise DataError(f"corrupt C3D file {path}: {kind}: {exc}") from exc
+        # struct.error ("unpack requires a buffer of 1 bytes") where the file ends inside
+        # its header or parameters; a field that points nowhere, anything else.
+        if isinstance(exc, (struct.error, EOFError)):
+            why = "truncated: it ends inside its header or parameters"
+        else:
+            detail = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            why = f"damaged{f' ({detail[:200]})' if detail else ''}"
+        raise DataError(f"{path} is not a readable C3D file: {why}") from exc
     for warning in caught:
         logger.debug("c3d warning reading %s: %s", path, warning.message)
 

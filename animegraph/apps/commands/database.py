@@ -60,7 +60,7 @@ EXPLAIN_COLUMNS = ["explain_key", "explain_value"]
 
 def cmd_sql(args: argparse.Namespace) -> int:
     from animegraph.apps.tabular import format_for, format_table, visible
-    from db.sql import ROW_LIMIT, TIMEOUT_S, run
+    from db.sql import MAX_TIMEOUT_S, ROW_LIMIT, TIMEOUT_S, run
     from db.store import Database
 
     # -o hits.csv writes CSV: an aligned text table under that name (cut at --max-rows)
@@ -70,8 +70,9 @@ def cmd_sql(args: argparse.Namespace) -> int:
         raise UsageError("animegraph sql: --format parquet needs --output FILE")
     if args.limit is not None and args.limit < 1:
         raise UsageError(f"animegraph sql: --limit must be at least 1, got {args.limit}")
-    if args.timeout is not None and not args.timeout > 0:
-        raise UsageError(f"animegraph sql: --timeout must be > 0 seconds, got {args.timeout}")
+    if args.timeout is not None and not 0 < args.timeout <= MAX_TIMEOUT_S:
+        raise UsageError(f"animegraph sql: --timeout must be more than 0 and at most "
+                         f"{MAX_TIMEOUT_S:g} seconds, got {args.timeout:g}")
     limit = ROW_LIMIT if args.limit is None else args.limit
     results = run(Database.open(args.db), args.query, row_limit=limit,
                   timeout=TIMEOUT_S if args.timeout is None else args.timeout)
