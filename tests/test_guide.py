@@ -462,7 +462,7 @@ def test_a_kept_reason_from_someone_else_is_read_within_its_bound(tiny_db, tmp_p
 def test_the_path_line_of_a_guide_reads_as_english_and_claims_only_what_was_measured():
     """"the output 0.5 mu-mlp's predicted motion" read as no English, and the default
     guide's "measured best on real speech" was said of --guide-rank too, which
-    docs/results.md found to hurt across speakers."""
+    docs/results/lipsync.md found to hurt across speakers."""
     from animegraph.synthesis.path import guide_line
 
     asked = guide_line("mu-mlp", 0.5, False, known_phones=False, asked=True)

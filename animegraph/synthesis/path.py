@@ -71,10 +71,10 @@ def audio_only_guide(*, known_phones: bool, searched: bool = False) -> str | Non
 def guide_line(name: str | None, share: float, rank: bool, *, known_phones: bool,
                asked: bool) -> str:
     """What the path line adds for a guide (empty without one): the default audio-only
-    guide with why, or the guide as asked. A claim it makes is one docs/results.md
+    guide with why, or the guide as asked. A claim it makes is one the results
     measured: the default blend, not the ranking (``--guide-rank``), which helped within
-    one speaker and hurt across speakers (docs/results.md, "The literature's design,
-    guided ranking, did not hold across speakers")."""
+    one speaker and hurt across speakers (docs/results/lipsync.md,
+    "Options measured against the default")."""
     if name is None:
         return ""
     parts = name.split("+")

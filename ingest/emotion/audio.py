@@ -56,7 +56,7 @@ SILENCE_BELOW_PEAK_DB = 50.0
 SILENCE_DBFS = -110.0
 #: What speech is (:func:`speech_problem`), measured by ``scripts/measure_speech_check.py``
 #: on real speech (EmoDB, RAVDESS, GRID) against generated noise, tones and music
-#: (docs/results.md, "Is it speech?"): least share of sounding frames that are voiced
+#: (docs/results/robustness.md, "Nothing escapes"): least share of sounding frames that are voiced
 #: (periodic: a normalised autocorrelation peak above VOICED_CORRELATION at a pitch lag
 #: of 2.5 to 16 ms, 62-400 Hz) -- noise has none --, most share of them -- a held tone,
 #: a chord, music's notes are voiced throughout, speech's consonants are not --, and the
