@@ -13,6 +13,7 @@ from animegraph.apps.commands.common import (
     UsageError,
     check_motion_suffix,
     check_output,
+    interruptible,
     progress,
     sidecar_labels,
 )
@@ -29,7 +30,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from ingest.speech.heard import remembered
 
     with remembered() as heard:  # a recording's phones found once, whatever options follow
-        return _synth(args, heard)
+        # In a worker thread: a Ctrl-C inside a long compiled call ends synth at once.
+        return interruptible(_synth, args, heard)
 
 
 def _synth(args: argparse.Namespace, heard) -> int:
