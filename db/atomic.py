@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from db.errors import DataError
+from db.layout import is_database
 
 logger = logging.getLogger(__name__)
 
@@ -55,8 +56,6 @@ def check_output_path(path: str | os.PathLike[str], *, folder: bool | None = Fal
     DataError
         One line naming the path and what it is.
     """
-    from db.store import is_database  # deferred: db.store imports this module
-
     target = Path(path)
     try:
         mode = os.lstat(target).st_mode

@@ -49,6 +49,7 @@ import pyarrow.parquet as pq
 from db.arrow import numbers, repeat_string
 from db.atomic import atomic_write, write_error
 from db.errors import DataError
+from db.layout import CURRENT, is_database  # noqa: F401 - is_database: callers' import
 from db.lock import pid_alive, writer_lock
 from db.validate import (
     READ_OPTIONS,
@@ -104,16 +105,11 @@ ANY_VERSION = object()
 
 _VERSION = re.compile(r"^v(\d{6})$")
 _STAGING = re.compile(r"^\.v\d{6}\.partial-(?:(\d+)-)?[0-9a-f]+$")
-_CURRENT = "CURRENT"
+_CURRENT = CURRENT
 #: Largest CURRENT read: a version's name and a newline fit many times over.
 _CURRENT_MAX_BYTES = 64
 #: Tables whose file's SHA-256 the manifest holds (``checksums``), checked when read.
 CHECKSUMMED = ("model_arrays",)
-
-
-def is_database(path: str | os.PathLike) -> bool:
-    """True if ``path`` is a database folder (it has a ``CURRENT`` pointer)."""
-    return (Path(path) / _CURRENT).is_file()
 
 
 def is_staging(name: str) -> bool:

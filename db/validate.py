@@ -167,12 +167,12 @@ def check_channels(db) -> None:
     if len(set(names)) != len(names):
         twice = next(n for n in names if names.count(n) > 1)
         raise db.damaged("channels", f"channel {_shown(twice)} is named twice")
-    for column in ("kind", "units"):
-        if column not in columns:
-            continue
-        values = pc.unique(columns[column]).to_pylist()
+    # One kind of motion a database; its units may differ by channel (an iPhone take's
+    # shapes are unitless and its head angles radians; animation curves mix mm and rad).
+    if "kind" in columns:
+        values = pc.unique(columns["kind"]).to_pylist()
         if len(values) != 1:
-            raise db.damaged("channels", f"{len(values)} {column} ({_shown(values[:3])}), "
+            raise db.damaged("channels", f"{len(values)} kinds ({_shown(values[:3])}), "
                              "not one")
     kind = columns["kind"][0].as_py() if "kind" in columns else None
     if None not in (db.manifest.get("kind"), kind) and db.manifest["kind"] != kind:

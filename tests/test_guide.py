@@ -328,12 +328,14 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
     """Audio only, a stored guide (mu-mlp or ppg-ridge) adds no library to a one-shot
     ``synth``'s imports: not scikit-learn, librosa or pandas (tests/test_startup.py)."""
     import json
+    import os
     import shutil
     import subprocess
     import sys
 
     from test_startup import HEAVY
 
+    from animegraph.apps.cache import CACHE_ENV
     from animegraph.baselines.base import save_model
 
     db = tmp_path / "db"
@@ -351,8 +353,11 @@ def test_one_shot_guided_synth_imports_no_heavy_library(tiny_db, tiny_corpus, ml
             f"{guide!r}, '-o', {str(tmp_path / 'out.npz')!r}])\n"
             f"print(json.dumps([status, [m for m in {HEAVY + ('scipy.special',)!r} "
             "if m in sys.modules]]))\n")
+        # A cache of its own each: the phones a first run heard would spare the next runs
+        # the phone engines (and their imports), which is not the guides' doing.
+        env = {**os.environ, CACHE_ENV: str(tmp_path / f"cache-{guide}")}
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True)
+                             check=True, env=env)
         status, loaded[guide] = json.loads(out.stdout.strip().splitlines()[-1])
         assert status == 0
     assert loaded["mu-mlp"] == loaded["ppg-ridge"] == loaded["none"]

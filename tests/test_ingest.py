@@ -319,7 +319,7 @@ def test_cli_sql_json_is_a_document_strict_readers_open(tiny_db, tmp_path, capsy
     (["sql", "--db", "{tmp}", "SELECT 1"], "not an animegraph database"),
     (["info", "--db", "{tmp}/missing"], "does not exist"),
     (["sql", "--db", "{db}", "SELECT 1", "--limit", "0"], "--limit must be at least 1"),
-    (["sql", "--db", "{db}", "SELECT 1", "--timeout", "-1"], "--timeout must be > 0"),
+    (["sql", "--db", "{db}", "SELECT 1", "--timeout", "-1"], "--timeout must be more than 0"),
 ])
 def test_cli_errors_are_one_line(tiny_db, tmp_path, capsys, argv, needle):
     argv = [a.format(db=tiny_db[0], tmp=tmp_path) for a in argv]
