@@ -22,6 +22,7 @@ the version they are stored under.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -174,10 +175,18 @@ def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *
         runs = [{"k_best": k_best}, {"method": "exact"}, {"method": "paper"}]
     else:
         runs = [{"method": m, "window": w} for m, w in sorted(methods, key=str)]
-    for options in runs:
-        synthesize(model, utt.audio, utt.sample_rate, labels=labels, **options)
-    if align:
-        synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
+    # The warm-up's answers are thrown away: what its searches would warn a user of (the
+    # paper's search stopping at its cap) is not this command's to say.
+    search_log = logging.getLogger("animegraph.search")
+    level = search_log.level
+    search_log.setLevel(logging.ERROR)
+    try:
+        for options in runs:
+            synthesize(model, utt.audio, utt.sample_rate, labels=labels, **options)
+        if align:
+            synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
+    finally:
+        search_log.setLevel(level)
 
 
 def prepare(db: Path, say: Callable[[str], object] = _quiet) -> None:
