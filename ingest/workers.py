@@ -145,6 +145,7 @@ def map_in_processes(
     On any exception (``KeyboardInterrupt`` included) the workers are ended at once and
     the exception propagates; no job is left running.
     """
+    _quiet_resource_tracker()
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                initializer=worker_initializer,
@@ -161,6 +162,24 @@ def map_in_processes(
         raise
     pool.shutdown(wait=True)
     return done
+
+
+#: The warnings filter that quiets multiprocessing's resource tracker (below).
+_TRACKER_QUIET = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def _quiet_resource_tracker() -> None:
+    """Quiet the resource tracker's report of what ended workers left behind.
+
+    Workers ended at a Ctrl-C (:func:`_abandon`) leave named semaphores (their libraries'
+    own) that multiprocessing's resource tracker, a process beside the pool, unlinks once
+    the program is gone: that clean-up is its job here, but it also warned of each
+    "leaked" one on the terminal, after the program had said it was interrupted. The
+    tracker is a process of its own, started with this environment, so the filter goes
+    in ``PYTHONWARNINGS`` (narrowly: that module's ``UserWarning`` only)."""
+    current = os.environ.get("PYTHONWARNINGS", "")
+    if _TRACKER_QUIET not in current.split(","):
+        os.environ["PYTHONWARNINGS"] = ",".join(filter(None, [current, _TRACKER_QUIET]))
 
 
 def _abandon(pool: ProcessPoolExecutor) -> None:
