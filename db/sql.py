@@ -30,8 +30,6 @@ import difflib
 import os
 import re
 import tempfile
-import threading
-import time
 from dataclasses import dataclass
 
 import duckdb
@@ -40,6 +38,7 @@ import pyarrow.dataset as ds
 
 from db.errors import DataError, ParameterError
 from db.store import TABLES, Database
+from db.system import StillRunning, in_worker_thread
 
 #: Rows a statement may return before the rest is dropped (``animegraph sql --limit``).
 ROW_LIMIT = 100_000
@@ -224,8 +223,12 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise DataError(f"database {db.root} could not be opened: {_first_line(exc)}") from None
         stopped = False
         try:
-            return _interruptible(con, lambda: [_fetch(con, statement, row_limit)
-                                                for statement in statements], timeout)
+            # The caller waits, not DuckDB: a Ctrl-C inside DuckDB's execution became its
+            # "Query interrupted" only when the query ended on its own.
+            return in_worker_thread(
+                lambda: [_fetch(con, statement, row_limit) for statement in statements],
+                timeout=timeout, on_timeout=con.interrupt, on_interrupt=con.interrupt,
+                grace=STOP_GRACE_S, poll=POLL_S)
         except duckdb.InterruptException:
             raise ParameterError(f"query stopped after {timeout:g} s (raise the limit with "
                                  f"--timeout)") from None
@@ -236,65 +239,12 @@ def run(db: Database, sql: str, *, row_limit: int = ROW_LIMIT,
             raise ParameterError(f"query failed: {_failure(con, exc)}") from None
         except OSError as exc:
             raise DataError(f"database {db.root} could not be read: {exc}") from exc
-        except _StillRunning:
+        except StillRunning:
             stopped = True  # the query's thread still holds the connection
             raise KeyboardInterrupt from None
         finally:
             if not stopped:
                 con.close()
-
-
-class _StillRunning(Exception):
-    """A Ctrl-C came, and the interrupted query had not stopped within the grace."""
-
-
-def _interruptible(con: duckdb.DuckDBPyConnection, work, timeout: float):
-    """``work()`` (DuckDB's calls on ``con``) in a thread, the caller waiting for it.
-
-    The caller, not DuckDB, waits: Python runs a Ctrl-C's handler in the main thread
-    only between its own instructions, and inside DuckDB's execution the handler's
-    ``KeyboardInterrupt`` was turned into DuckDB's ``RuntimeError: Query interrupted``
-    only when the query ended on its own (after the whole time limit). Waiting here, the
-    ``KeyboardInterrupt`` arrives at once; DuckDB is interrupted (``con.interrupt``) and
-    the interruption goes on. The time limit is this wait's deadline too.
-
-    Raises
-    ------
-    duckdb.InterruptException
-        The time limit passed.
-    KeyboardInterrupt
-        Ctrl-C, once the query stopped; :class:`_StillRunning` if it had not within
-        :data:`STOP_GRACE_S`.
-    """
-    outcome: dict = {}
-    # Waited for through an Event, not Thread.join: a join cut short by Ctrl-C marks the
-    # thread as ended while it still runs (CPython releases its lock, bpo-45274).
-    done = threading.Event()
-
-    def target() -> None:
-        try:
-            outcome["value"] = work()
-        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
-            outcome["error"] = exc
-        finally:
-            done.set()
-
-    # A daemon: a query that ignores its interruption must not keep the process alive.
-    thread = threading.Thread(target=target, name="animegraph-sql", daemon=True)
-    deadline = time.monotonic() + timeout
-    thread.start()
-    try:
-        while not done.wait(POLL_S):
-            if time.monotonic() > deadline:
-                con.interrupt()
-    except KeyboardInterrupt:
-        con.interrupt()
-        if not done.wait(STOP_GRACE_S):
-            raise _StillRunning from None
-        raise
-    if "error" in outcome:
-        raise outcome["error"]
-    return outcome["value"]
 
 
 def _fetch(con: duckdb.DuckDBPyConnection, statement: str, row_limit: int) -> Result:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextvars
 import os
+import threading
+import time
 
-__all__ = ["thread_budget", "usable_cpus"]
+__all__ = ["StillRunning", "in_worker_thread", "thread_budget", "usable_cpus"]
 
 
 def thread_budget() -> int:
@@ -22,3 +25,64 @@ def usable_cpus(cap: int = 8) -> int:
     except AttributeError:  # not on Linux
         n = os.cpu_count() or 1
     return max(1, min(cap, n))
+
+
+class StillRunning(Exception):
+    """A Ctrl-C came, and the interrupted work had not stopped within its grace."""
+
+
+def in_worker_thread(work, *, timeout: float | None = None, on_timeout=None,
+                     on_interrupt=None, grace: float | None = None, poll: float = 0.05):
+    """``work()`` in a daemon thread while this thread waits for it; its value, or its
+    exception.
+
+    Python runs a Ctrl-C's handler in the main thread only between its own instructions:
+    inside a long compiled call (DuckDB's execution, numba's kernels, the phone model) the
+    ``KeyboardInterrupt`` waited for the call to end. Waiting here, it arrives within
+    ``poll`` seconds. The work runs in a copy of the caller's context variables.
+
+    Parameters
+    ----------
+    work : callable
+        Called with no argument.
+    timeout : float, optional
+        Seconds after which ``on_timeout()`` is called (at every look until the work ends).
+    on_timeout, on_interrupt : callable, optional
+        What stops the work: called past ``timeout``, and at a Ctrl-C.
+    grace : float, optional
+        Seconds a Ctrl-C'd work gets to stop before :class:`StillRunning` is raised
+        instead of ``KeyboardInterrupt``; without, ``KeyboardInterrupt`` at once.
+    poll : float
+        Seconds between two looks at the work (and at Ctrl-C).
+    """
+    outcome: dict = {}
+    # Waited for through an Event, not Thread.join: a join cut short by Ctrl-C marks the
+    # thread as ended while it still runs (CPython releases its lock, bpo-45274).
+    done = threading.Event()
+    context = contextvars.copy_context()
+
+    def target() -> None:
+        try:
+            outcome["value"] = context.run(work)
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            outcome["error"] = exc
+        finally:
+            done.set()
+
+    # A daemon: work that ignores its interruption must not keep the process alive.
+    thread = threading.Thread(target=target, name="animegraph-work", daemon=True)
+    deadline = None if timeout is None else time.monotonic() + timeout
+    thread.start()
+    try:
+        while not done.wait(poll):
+            if deadline is not None and time.monotonic() > deadline and on_timeout:
+                on_timeout()
+    except KeyboardInterrupt:
+        if on_interrupt is not None:
+            on_interrupt()
+        if grace is not None and not done.wait(grace):
+            raise StillRunning from None
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]

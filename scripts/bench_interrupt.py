@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from probe_security import CLI, setup  # noqa: E402
+from probe_common import CLI, setup  # noqa: E402
 
 #: Seconds after the start at which Ctrl-C is pressed: past the imports, inside the work.
 DELAY_S = {"sql": 4.0, "batch": 12.0, "ingest": 6.0, "synth": 8.0, "render": 5.0,

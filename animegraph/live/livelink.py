@@ -40,23 +40,13 @@ from ingest.formats.livelink import ARKIT_BLENDSHAPES, ROTATIONS
 PACKET_VERSION = 6
 #: Values per packet.
 N_VALUES = 61
-#: Unreal's EARFaceBlendShape order of the 61 values (lower camel case, as the project's).
-PACKET_ORDER: tuple[str, ...] = (
-    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
-    "eyeSquintLeft", "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight",
-    "eyeLookOutRight", "eyeLookUpRight", "eyeSquintRight", "eyeWideRight",
-    "jawForward", "jawLeft", "jawRight", "jawOpen",
-    "mouthClose", "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight",
-    "mouthSmileLeft", "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight",
-    "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft", "mouthStretchRight",
-    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
-    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight",
-    "mouthUpperUpLeft", "mouthUpperUpRight",
-    "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
-    "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight",
-    "tongueOut",
-) + ROTATIONS
-assert sorted(PACKET_ORDER[:52]) == sorted(ARKIT_BLENDSHAPES)  # the same shapes, reordered
+#: Unreal's EARFaceBlendShape order differs from Live Link Face's CSV columns (the
+#: project's order, :data:`ARKIT_BLENDSHAPES`) in two pairs only.
+_UNREAL_SWAPS = {"jawRight": "jawLeft", "jawLeft": "jawRight",
+                 "mouthRight": "mouthLeft", "mouthLeft": "mouthRight"}
+#: Unreal's order of the 61 values of a packet: the 52 shapes, then the rotations.
+PACKET_ORDER: tuple[str, ...] = tuple(
+    _UNREAL_SWAPS.get(name, name) for name in ARKIT_BLENDSHAPES) + ROTATIONS
 #: Largest packet accepted by :func:`decode` (Unreal's limit).
 MAX_PACKET = 774
 

@@ -21,47 +21,18 @@ def progress(total: int, quiet: bool, unit: str, step: str):
                    dynamic_ncols=True)
 
 
-#: Seconds between two looks of the waiting main thread (at the work, and at Ctrl-C).
-POLL_S = 0.05
-
-
 def interruptible(work, *args):
-    """``work(*args)`` in a worker thread while the main thread waits for it.
-
-    Python runs a Ctrl-C's handler in the main thread only between its own instructions:
-    inside a long compiled call (numba's kernels or their cache being loaded, the phone
-    model's inference) the ``KeyboardInterrupt`` waited for the call to end, seconds
-    after the key. Waiting here, it arrives within :data:`POLL_S`; the program then ends
-    (``cli.entry`` exits at once after a Ctrl-C), the daemon worker with it. The work's
-    own exception, or its value, is the caller's; it runs in a copy of the caller's
-    context variables.
-    """
-    import contextvars
+    """``work(*args)`` in a worker thread while the main thread waits for it
+    (:func:`db.system.in_worker_thread`), so that a Ctrl-C inside a long compiled call
+    ends the command at once (``cli.entry`` exits after a Ctrl-C, the daemon worker with
+    it). From a thread other than the main one, where no Ctrl-C arrives, it just runs."""
     import threading
 
+    from db.system import in_worker_thread
+
     if threading.current_thread() is not threading.main_thread():
-        return work(*args)  # in-process from a thread: no Ctrl-C to wait for
-    outcome: dict = {}
-    # Waited for through an Event, not Thread.join: a join cut short by Ctrl-C marks the
-    # thread as ended while it still runs (CPython releases its lock, bpo-45274).
-    done = threading.Event()
-
-    context = contextvars.copy_context()  # what the caller set (a cache in use) holds there
-
-    def target() -> None:
-        try:
-            outcome["value"] = context.run(work, *args)
-        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
-            outcome["error"] = exc
-        finally:
-            done.set()
-
-    threading.Thread(target=target, name="animegraph-work", daemon=True).start()
-    while not done.wait(POLL_S):
-        pass
-    if "error" in outcome:
-        raise outcome["error"]
-    return outcome["value"]
+        return work(*args)
+    return in_worker_thread(lambda: work(*args))
 
 
 def say(line: str) -> None:
