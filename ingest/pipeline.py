@@ -122,6 +122,7 @@ class IngestReport:
     version: str | None = None
     seconds: float = 0.0
     summary: dict = field(default_factory=dict)
+    resumed: int = 0  # prepared clips an unfinished distributed ingest had kept (resume)
 
     def count(self, status: str) -> int:
         return sum(1 for c in self.clips if c.status == status)
@@ -132,6 +133,9 @@ class IngestReport:
                 f"{self.count('unchanged')} unchanged, {self.count('rejected')} rejected "
                 f"in {self.seconds:.1f} s")
         out = [head]
+        if self.resumed:
+            out.append(f"  {_clips(self.resumed)} prepared by an unfinished ingest, taken "
+                       "from the cache")
         for c in self.clips:
             if c.status == "rejected":
                 out.append(f"  rejected {c.source}: {c.reason}")
@@ -272,6 +276,7 @@ def ingest(
     progress: Callable[[int], Callable] | None = None,
     say: Callable[[str], object] | None = None,
     wait: float = WRITE_WAIT_S,
+    client=None,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -293,6 +298,10 @@ def ingest(
         Seconds to wait for another writer of the database to finish. The database's
         writer lock is held for the whole ingest, so that two ingests into one
         database run one after the other and neither loses the other's clips.
+    client : distributed.Client, optional
+        Prepare the clips on this Dask cluster instead (``workers`` is then unused):
+        resumable, and the clips' bytes travel to the workers (:mod:`ingest.on_dask`).
+        This process alone writes the database.
 
     Raises
     ------
@@ -323,7 +332,8 @@ def ingest(
     made = not db_path.exists()
     try:
         with writer_lock(db_path, wait=wait, what="database"):
-            return _ingest_locked(found, db_path, config, workers, progress, started, say)
+            return _ingest_locked(found, db_path, config, workers, progress, started, say,
+                                  client)
     except BaseException:  # an interrupt too: a first ingest that fails leaves no folder
         if made:
             _remove_unmade(db_path)
@@ -345,8 +355,8 @@ def _remove_unmade(folder: Path) -> None:
 
 
 def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig, workers: int,
-                   progress, started: float,
-                   say: Callable[[str], object] | None) -> IngestReport:
+                   progress, started: float, say: Callable[[str], object] | None,
+                   client=None) -> IngestReport:
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
@@ -378,8 +388,13 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
     if reference is None:
         reference = _head_reference(found, config.limits)
     report = IngestReport(db=db_path)
-    results = _run(found, known, fps, config, workers, progress, reference,
-                   stored_schema(existing) if existing is not None else None)
+    schema = stored_schema(existing) if existing is not None else None
+    kept_keys: list[str] = []
+    if client is None:
+        results = _run(found, known, fps, config, workers, progress, reference, schema)
+    else:
+        results, kept_keys, report.resumed = _run_on_dask(
+            client, found, known, fps, config, progress, reference, schema)
     new: list[PreparedClip] = []
     for clip_report, clip in results:
         report.clips.append(clip_report)
@@ -408,6 +423,10 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
                reference, based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
+    if kept_keys:  # every clip is decided now (in the database, or rejected)
+        from ingest import prepared_cache
+
+        prepared_cache.remove(kept_keys)
     if not report.written and report.count("rejected") == len(report.clips):
         raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
                              f"{report.clips[0].source}: {report.clips[0].reason}")
@@ -465,6 +484,41 @@ def _run(found, known, fps, config, workers, progress, reference, schema=None):
         return list(progress(len(jobs))(results) if progress else results)
     return map_in_processes(_work, jobs, workers=workers, chunksize=4,
                             progress=progress(len(jobs)) if progress else None)
+
+
+def _run_on_dask(client, found, known, fps, config, progress, reference, schema):
+    """:func:`_run` on a Dask cluster (:func:`ingest.on_dask.map_clips`): the clips the
+    database has unchanged are known here, before anything travels. Returns (results,
+    the cache entries of the prepared clips, how many of them an earlier run had kept)."""
+    from ingest.on_dask import map_clips
+
+    results: list = [None] * len(found)
+    jobs, checksums, where = [], [], []
+    for k, source in enumerate(found):
+        checksum, key = _checksum(source), (source.corpus, source.clip_id)
+        if key in known and known[key] == checksum:
+            results[k] = ClipReport(str(source.path), source.clip_id, "unchanged"), None
+            continue
+        jobs.append(ClipJob(source, {key: known[key]} if key in known else {}, fps,
+                            reference, config.phones_engine, config.limits,
+                            config.posteriorgrams, schema))
+        checksums.append(checksum)
+        where.append(k)
+    settings = {"version": _version(), "fps": fps, "engine": config.phones_engine,
+                "limits": config.limits.to_entry() if config.limits else None,
+                "posteriorgrams": config.posteriorgrams,
+                "schema": None if schema is None else asdict(schema)}
+    run = map_clips(client, _work, jobs, checksums=checksums, settings=settings,
+                    reference=reference, report_type=ClipReport,
+                    failed=lambda job, reason: ClipReport(str(job.source.path),
+                                                          job.source.clip_id, "rejected",
+                                                          reason=reason),
+                    progress=progress(len(jobs)) if progress else None)
+    for k, (row, clip) in zip(where, run.results, strict=True):
+        if clip is not None:  # a kept row says what the database held when it was kept
+            row = replace(row, status="replaced" if clip.key in known else "added")
+        results[k] = row, clip
+    return results, run.keys, run.resumed
 
 
 def _drop_copies(new: list[PreparedClip], known: dict[tuple[str, str], str],

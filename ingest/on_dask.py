@@ -1,0 +1,209 @@
+"""Ingest's per-clip work on a Dask cluster (``animegraph ingest --scheduler``).
+
+The client (the one process that writes the database, under its writer lock) submits
+one task a clip and gathers the prepared clips as they finish; the workers never touch
+the database. Two things make this more than ``client.map``:
+
+* **Resume.** Each prepared clip is kept in the cache folder as it arrives
+  (:mod:`ingest.prepared_cache`, by the clip's bytes and the settings); a killed ingest
+  run again takes those from the cache and submits only the others.
+* **The bytes travel.** A clip whose files add up to at most :data:`SHIP_MAX_BYTES` is
+  sent to its worker with its files' bytes, written there into a temporary folder laid
+  out as on the client (so the readers find a clip's side files where they expect them)
+  and removed after; a worker need not see the client's disks. A larger clip travels as
+  its paths, which its worker must be able to read (a shared file system).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, fields, is_dataclass, replace
+from pathlib import Path
+
+from ingest import prepared_cache
+
+logger = logging.getLogger(__name__)
+
+#: Largest clip (the bytes of all its files) sent to a worker; larger clips are read from
+#: their paths by the worker. A few minutes of video are tens of MB; Dask's messages
+#: carry that comfortably.
+SHIP_MAX_BYTES = 64 << 20
+
+
+@dataclass(frozen=True)
+class Shipped:
+    """A clip's files as they travel to a worker.
+
+    ``root``: the client's folder that holds them all; ``files``: (path relative to
+    ``root``, bytes); ``source``: the clip's main path relative to ``root``; ``folder``:
+    the main path is a folder (a landmark clip).
+    """
+
+    root: str
+    files: tuple[tuple[str, bytes], ...]
+    source: str
+    folder: bool
+
+
+@dataclass
+class DaskRun:
+    """What :func:`map_clips` did: ``results`` (report, clip or None) in the jobs' order,
+    ``keys`` the cache entries of the prepared clips, ``resumed`` how many were taken
+    from the cache and ``shipped`` how many travelled as bytes."""
+
+    results: list
+    keys: list[str]
+    resumed: int = 0
+    shipped: int = 0
+
+
+def ship(source, max_bytes: int = SHIP_MAX_BYTES) -> Shipped | None:
+    """The files of ``source`` (a :class:`ingest.readers.ClipSource`) with their bytes,
+    or None when they add up to more than ``max_bytes`` or one cannot be read (its
+    worker then reads the paths, and says what is wrong with them)."""
+    paths = [Path(p) for p in source.paths]
+    main = Path(source.source)
+    try:
+        if not paths or sum(p.stat().st_size for p in paths) > max_bytes:
+            return None
+        is_folder = main.is_dir()
+        root = Path(os.path.commonpath([p.parent.absolute() for p in paths]
+                                       + [main.absolute() if is_folder
+                                          else main.parent.absolute()]))
+        files = tuple((str(p.absolute().relative_to(root)), p.read_bytes()) for p in paths)
+    except (OSError, ValueError):
+        return None
+    return Shipped(str(root), files, str(main.absolute().relative_to(root)), is_folder)
+
+
+def run_shipped(func: Callable, job, shipped: Shipped | None):
+    """Worker: ``func(job)``, with the clip's files written from ``shipped`` into a
+    temporary folder first (None: read where ``job.source`` says). The temporary folder
+    is then named nowhere in what comes back: the client's paths are put in its place."""
+    if shipped is None:
+        return func(job)
+    with tempfile.TemporaryDirectory(prefix="animegraph-clip-") as tmp:
+        here = Path(tmp)
+        for relative, data in shipped.files:
+            path = _inside(here, relative)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        main = _inside(here, shipped.source)
+        if shipped.folder:
+            main.mkdir(parents=True, exist_ok=True)
+        roles = [role for role, _ in job.source.files]
+        local = replace(job.source, source=main, files=tuple(
+            (role, _inside(here, relative)) for role, (relative, _) in zip(roles, shipped.files,
+                                                                          strict=True)))
+        report, clip = func(replace(job, source=local))
+        return _renamed(report, tmp, shipped.root), _renamed(clip, tmp, shipped.root)
+
+
+def _inside(folder: Path, relative: str) -> Path:
+    """``folder / relative``, refused if ``relative`` leads out of ``folder``."""
+    path = (folder / relative).resolve()
+    if not path.is_relative_to(folder.resolve()):
+        raise ValueError(f"a shipped file's path leaves its folder: {relative!r}")
+    return path
+
+
+def _renamed(record, old: str, new: str):
+    """A report row or prepared clip with the temporary folder's name in its text fields
+    (source, reason, note) replaced by the client's folder."""
+    if record is None or not is_dataclass(record):
+        return record
+    changes = {f.name: getattr(record, f.name).replace(old, new) for f in fields(record)
+               if isinstance(getattr(record, f.name), str) and old in getattr(record, f.name)}
+    return replace(record, **changes) if changes else record
+
+
+def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str | None],
+              settings: dict, reference, report_type: type, failed: Callable,
+              progress: Callable[[Iterator], Iterator] | None = None,
+              max_bytes: int = SHIP_MAX_BYTES) -> DaskRun:
+    """``[func(job) for job in jobs]`` on the Dask cluster of ``client``, resumable.
+
+    Parameters
+    ----------
+    client : distributed.Client
+    func : callable
+        A module-level function of a job returning (report row, prepared clip or None).
+    jobs : sequence
+        One per clip (``job.source`` a ClipSource).
+    checksums : sequence of str or None
+        Each clip's checksum (:func:`ingest.clip.checksum_files`); None: unreadable, never
+        kept.
+    settings, reference
+        What the preparation depends on beyond the bytes (:func:`prepared_cache.entry_key`).
+    report_type : type
+        The report row's dataclass (a kept row is rebuilt with it).
+    failed : callable
+        ``failed(job, reason)``: the row of a clip whose task failed (a bug, or its worker
+        died); the other clips go on.
+    progress : callable, optional
+        Wraps the iterator of finished clips.
+    max_bytes : int
+        Largest clip that travels as bytes (:data:`SHIP_MAX_BYTES`).
+
+    Returns
+    -------
+    DaskRun
+
+    Notes
+    -----
+    On any exception (a Ctrl-C above all) the tasks not finished are cancelled and the
+    exception propagates; what was kept stays kept.
+    """
+    from distributed import as_completed
+
+    results: list = [None] * len(jobs)
+    keys = [None if c is None else prepared_cache.entry_key(c, settings, reference)
+            for c in checksums]
+    run = DaskRun(results, [k for k in keys if k is not None])
+    futures = {}
+    try:
+        for index, (job, key) in enumerate(zip(jobs, keys, strict=True)):
+            kept = prepared_cache.load(key) if key is not None else None
+            if kept is not None:
+                clip, row = kept
+                results[index] = (report_type(**row), clip)
+                run.resumed += 1
+                continue
+            shipped = ship(job.source, max_bytes)
+            run.shipped += shipped is not None
+            futures[client.submit(run_shipped, func, job, shipped, pure=False)] = index
+        finished = _finished(futures, run.resumed, as_completed(futures, loop=client.loop))
+        for future in progress(finished) if progress else finished:
+            if future is None:  # one of the clips taken from the cache
+                continue
+            index = futures[future]
+            try:
+                report, clip = future.result()
+            except Exception as exc:  # a bug, or a worker that died on this clip
+                logger.debug("clip %s failed on its worker", jobs[index].source, exc_info=True)
+                reason = f"worker error: {type(exc).__name__}: {exc}"
+                report, clip = failed(jobs[index], reason), None
+            future.release()
+            if clip is not None and keys[index] is not None:
+                prepared_cache.save(keys[index], clip, _row(report))
+            results[index] = (report, clip)
+    except BaseException:
+        with contextlib.suppress(Exception):
+            client.cancel(list(futures))
+        raise
+    return run
+
+
+def _finished(futures: dict, n_kept: int, completed: Iterator) -> Iterator:
+    """None for each clip taken from the cache, then the futures as they finish."""
+    yield from [None] * n_kept
+    yield from completed
+
+
+def _row(report) -> dict:
+    return {f.name: getattr(report, f.name) for f in fields(report)}
+

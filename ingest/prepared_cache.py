@@ -1,0 +1,129 @@
+"""Prepared clips kept in the cache folder while a distributed ingest runs, so that a
+killed one, run again, redoes only the clips it had not finished.
+
+An entry is ``<cache>/prepared/<key>.npz``: the clip's arrays and one JSON document
+(``meta``, UTF-8 bytes), read back with ``allow_pickle=False``. The key is a SHA-256 of
+the clip's bytes (its checksum) and of every setting the preparation depends on
+(:func:`entry_key`), so an entry is used only for the same bytes prepared the same way.
+Entries are written atomically by the one process that writes the database (the Dask
+client), as results arrive, and removed once their clips are in the database.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import logging
+from dataclasses import asdict, fields
+from pathlib import Path
+
+import numpy as np
+
+from db.atomic import atomic_write
+from db.errors import DataError
+from ingest.cache import cache_dir
+from ingest.clip import ChannelSchema
+from ingest.formats.phones_csv import Segment
+from ingest.prepare import PreparedClip
+
+logger = logging.getLogger(__name__)
+
+#: Bumped whenever what an entry holds, or how a clip is prepared, changes.
+FORMAT = 1
+#: The arrays of a :class:`PreparedClip` kept as they are (None ones are left out).
+_ARRAYS = ("motion", "missing", "audio", "prosody", "posteriors", "posterior_blank")
+
+
+def folder() -> Path:
+    """``<cache>/prepared``: where the entries are."""
+    return cache_dir() / "prepared"
+
+
+def entry_key(checksum: str, settings: dict, reference: np.ndarray | None) -> str:
+    """The entry of a clip with these bytes (``checksum``) prepared with ``settings`` (a
+    JSON-able dict: frame rate, phone engine, limits, schema, the package's version: a
+    new one prepares anew) and head ``reference``, shape (n_head_points, 3)."""
+    digest = hashlib.sha256()
+    head = {"format": FORMAT, "checksum": checksum, **settings}
+    digest.update(json.dumps(head, sort_keys=True, default=str).encode())
+    if reference is not None:
+        ref = np.ascontiguousarray(reference, dtype=np.float64)
+        digest.update(repr(ref.shape).encode() + ref.tobytes())
+    return digest.hexdigest()
+
+
+def save(key: str, clip: PreparedClip, report: dict) -> None:
+    """Keep ``clip`` (and its ingest ``report`` row, a dict) under ``key``; a failure to
+    write is logged, not raised: the ingest goes on, only its resume is poorer."""
+    arrays = {name: np.asarray(getattr(clip, name)) for name in _ARRAYS
+              if getattr(clip, name) is not None}
+    meta = {f.name: getattr(clip, f.name) for f in fields(PreparedClip)
+            if f.name not in _ARRAYS and f.name not in ("schema", "phones",
+                                                        "emotion_features")}
+    meta["schema"] = asdict(clip.schema)
+    meta["phones"] = [[p.phone, float(p.start), float(p.end)] for p in clip.phones]
+    meta["report"] = report
+    features = clip.emotion_features
+    if features is None or isinstance(features, str):
+        meta["emotion_features"] = features
+    else:  # SpeechFeatures: the functionals, and the frame descriptors when computed
+        arrays["features_functionals"] = np.asarray(features.functionals)
+        frames = features.frames
+        meta["emotion_features"] = {"frames": None if frames is None else len(frames)}
+        for k, block in enumerate(frames or ()):
+            arrays[f"features_frames_{k}"] = np.asarray(block)
+    arrays["meta"] = np.frombuffer(json.dumps(meta, default=float).encode(), dtype=np.uint8)
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    try:
+        folder().mkdir(parents=True, exist_ok=True)
+        with atomic_write(folder() / f"{key}.npz") as handle:
+            handle.write(buffer.getbuffer())
+    except (OSError, DataError) as exc:
+        logger.warning("cannot keep a prepared clip in %s: %s", folder(), exc)
+
+
+def load(key: str) -> tuple[PreparedClip, dict] | None:
+    """(the clip, its report row) kept under ``key``, or None when there is none, or it
+    cannot be read (it is then prepared again)."""
+    path = folder() / f"{key}.npz"
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+        meta = json.loads(arrays.pop("meta").tobytes().decode())
+        return _clip(meta, arrays), meta["report"]
+    except (OSError, ValueError, KeyError, TypeError, DataError) as exc:
+        logger.warning("a prepared clip in the cache cannot be read (%s); preparing it "
+                       "again: %s", path.name, exc)
+        return None
+
+
+def remove(keys) -> None:
+    """Drop the entries of ``keys`` (their clips are in the database now)."""
+    for key in keys:
+        try:
+            (folder() / f"{key}.npz").unlink(missing_ok=True)
+        except OSError as exc:  # a left entry costs disk only
+            logger.debug("cannot remove %s: %s", key, exc)
+
+
+def _clip(meta: dict, arrays: dict) -> PreparedClip:
+    from ingest.emotion.classifier import SpeechFeatures
+
+    features = meta.pop("emotion_features")
+    if isinstance(features, dict):
+        n = features["frames"]
+        features = SpeechFeatures(
+            arrays.pop("features_functionals"),
+            None if n is None else [arrays.pop(f"features_frames_{k}") for k in range(n)])
+    meta.pop("report")
+    schema = meta.pop("schema")
+    schema = ChannelSchema(kind=schema["kind"], names=tuple(schema["names"]),
+                           groups=tuple(schema["groups"]), units=schema["units"])
+    phones = tuple(Segment(str(p), float(s), float(e)) for p, s, e in meta.pop("phones"))
+    kept = {name: arrays.get(name) for name in _ARRAYS}
+    return PreparedClip(**meta, **kept, schema=schema, phones=phones,
+                        emotion_features=features)
