@@ -94,7 +94,8 @@ def load(key: str) -> tuple[PreparedClip, dict] | None:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
         meta = json.loads(arrays.pop("meta").tobytes().decode())
-        return _clip(meta, arrays), meta["report"]
+        report = meta.pop("report")
+        return _clip(meta, arrays), report
     except (OSError, ValueError, KeyError, TypeError, DataError) as exc:
         logger.warning("a prepared clip in the cache cannot be read (%s); preparing it "
                        "again: %s", path.name, exc)
@@ -119,7 +120,6 @@ def _clip(meta: dict, arrays: dict) -> PreparedClip:
         features = SpeechFeatures(
             arrays.pop("features_functionals"),
             None if n is None else [arrays.pop(f"features_frames_{k}") for k in range(n)])
-    meta.pop("report")
     schema = meta.pop("schema")
     schema = ChannelSchema(kind=schema["kind"], names=tuple(schema["names"]),
                            groups=tuple(schema["groups"]), units=schema["units"])

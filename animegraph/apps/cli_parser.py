@@ -266,7 +266,12 @@ def _add_ingest(sub) -> None:
                      help="clip files or folders")
     ing.add_argument("--db", required=True, type=Path, help="database folder")
     ing.add_argument("--workers", type=_whole_number, default=1,
-                     help="worker processes (default 1)")
+                     help="worker processes (default 1; ignored with --scheduler)")
+    ing.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="prepare the clips on an existing Dask cluster, e.g. "
+                     "tcp://host:8786: clips up to 64 MB travel as bytes, prepared clips "
+                     "are kept in the cache so a killed ingest resumes; this process "
+                     "alone writes the database")
     ing.add_argument("--variance", type=_number, default=0.95,
                      help="share of motion variance PCA keeps (paper: 0.95-0.98)")
     ing.add_argument("--fps", type=_number, default=None,

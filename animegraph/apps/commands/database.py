@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from types import SimpleNamespace
 
 from animegraph.apps.commands.common import UsageError, progress, say
 
@@ -25,10 +26,25 @@ def cmd_ingest(args: argparse.Namespace) -> int:
                           phones_engine=args.phones_engine, limits=limits,
                           posteriorgrams=args.posteriorgrams)
     wait = {} if args.wait is None else {"wait": args.wait}
-    report = ingest(args.sources, args.db, config, workers=args.workers,
-                    progress=lambda total: progress(total, args.quiet, "clip",
-                                                    "ingest: reading clips"),
-                    say=None if args.quiet else say, **wait)
+
+    def run(client=None):
+        return ingest(args.sources, args.db, config, workers=args.workers, client=client,
+                      progress=lambda total: progress(total, args.quiet, "clip",
+                                                      "ingest: reading clips"),
+                      say=None if args.quiet else say, **wait)
+
+    if args.scheduler is None:
+        report = run()
+    else:
+        from animegraph.apps.batch_cluster import CONNECT_TIMEOUT_S, dask_client
+
+        options = SimpleNamespace(scheduler=args.scheduler, workers=args.workers,
+                                  connect_timeout=CONNECT_TIMEOUT_S)
+        with dask_client(options) as (client, n_workers):
+            if not args.quiet:
+                say(f"ingest: preparing the clips on {n_workers} Dask worker"
+                    f"{'s' * (n_workers != 1)} at {args.scheduler}")
+            report = run(client)
     for line in report.lines():
         print(line)
     if not args.no_prepare:

@@ -1,0 +1,176 @@
+"""``animegraph ingest`` on a Dask cluster (:mod:`ingest.on_dask`): the same database as
+the process pool's, resumable after a kill, and clips whose bytes travel to the worker."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from animegraph.apps.cli import main
+from db.store import Database
+from ingest import prepared_cache
+from ingest.on_dask import run_shipped, ship
+from ingest.pipeline import ClipJob, IngestConfig, _work, ingest
+from ingest.readers import discover
+
+distributed = pytest.importorskip("distributed")
+ROOT = Path(__file__).resolve().parents[1]
+TABLES = ("clips", "animes", "frames", "audio", "channels", "components")
+
+
+def _threads_cluster():
+    """A real Dask cluster in this process: one worker thread (its BLAS on one thread,
+    as the pool's workers' are on 2 cores), so that its sums are the pool's."""
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                       dashboard_address=None)
+    return cluster, distributed.Client(cluster, set_as_default=False)
+
+
+def _same_database(a: Path, b: Path) -> None:
+    one, other = Database.open(a), Database.open(b)
+    for name in TABLES:
+        assert one.table(name).equals(other.table(name)), name
+    arrays, others = one.arrays(), other.arrays()
+    assert sorted(arrays) == sorted(others)
+    for name, values in arrays.items():
+        # The model's arrays come from the same clips; the emotion classifier's fit sums
+        # in whatever order the BLAS threads of the process take (a 1e-6 relative spread).
+        np.testing.assert_allclose(values, others[name], rtol=1e-3, atol=1e-2, err_msg=name)
+
+
+def test_a_dask_ingest_writes_the_pools_database(tiny_db, tiny_corpus, tmp_path):
+    from threadpoolctl import threadpool_limits
+
+    path = tmp_path / "dask.db"
+    cluster, client = _threads_cluster()
+    try:
+        with threadpool_limits(1):
+            report = ingest([tiny_corpus], path, IngestConfig(posteriorgrams=True),
+                            client=client)
+    finally:
+        client.close()
+        cluster.close()
+    assert report.count("added") == tiny_db[1].count("added") and report.resumed == 0
+    _same_database(path, tiny_db[0])
+    assert not list(prepared_cache.folder().glob("*.npz"))  # the clips are in: cleared
+
+
+def _subset(corpus: Path, out: Path, sentences: tuple[str, ...]) -> Path:
+    """A copy of the corpus with only some sentences' clips."""
+    shutil.copytree(corpus, out, ignore=lambda folder, names: [
+        n for n in names if Path(folder).name == "clips"
+        and not n.startswith(sentences)])
+    return out
+
+
+KILLED_INGEST = textwrap.dedent("""
+    import sys
+    from distributed import Client, LocalCluster
+    from ingest.pipeline import ingest
+
+    if __name__ == "__main__":
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                          dashboard_address=None) as cluster, Client(cluster) as client:
+            ingest([sys.argv[1]], sys.argv[2], client=client)
+""")
+
+
+def test_a_killed_dask_ingest_redoes_only_the_clips_it_had_not_finished(tiny_corpus,
+                                                                        tmp_path,
+                                                                        monkeypatch):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001", "s0002"))
+    n_clips = len(discover([corpus]))
+    cache = tmp_path / "cache"
+    env = {**os.environ, "ANIMEGRAPH_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
+    kept = cache / "prepared"
+    process = subprocess.Popen([sys.executable, "-c", KILLED_INGEST, str(corpus),
+                                str(tmp_path / "db")], env=env, cwd=tmp_path,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        while process.poll() is None and len(list(kept.glob("*.npz"))) < 3:
+            time.sleep(0.02)
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+    finally:
+        if process.poll() is None:
+            process.kill()
+    finished = len(list(kept.glob("*.npz")))
+    assert 3 <= finished < n_clips
+    assert not (tmp_path / "db" / "manifest.json").exists()
+
+    monkeypatch.setenv("ANIMEGRAPH_CACHE", str(cache))
+    cluster, client = _threads_cluster()
+    try:
+        report = ingest([corpus], tmp_path / "db", client=client)
+    finally:
+        client.close()
+        cluster.close()
+    # The clips kept before the kill are taken as they were; only the others are redone.
+    assert report.resumed == finished and report.count("added") == n_clips
+    assert f"{finished} clips prepared by an unfinished ingest" in "\n".join(report.lines())
+    assert not list(kept.glob("*.npz"))
+
+
+def test_a_worker_without_the_files_gets_their_bytes(tiny_corpus, tmp_path):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001_angry_1",))
+    source = discover([corpus])[0]
+    job = ClipJob(source, {}, None, None, None, None, False)
+    shipped = ship(source)
+    assert shipped is not None and len(shipped.files) == len(source.paths)
+    expected_report, expected = _work(job)
+    shutil.rmtree(corpus)  # the worker has none of the clip's files now
+
+    cluster, client = _threads_cluster()
+    try:
+        report, clip = client.submit(run_shipped, _work, job, shipped, pure=False).result()
+        missing, _ = client.submit(run_shipped, _work, job, None, pure=False).result()
+    finally:
+        client.close()
+        cluster.close()
+    assert report == expected_report and report.status == "added"
+    assert clip.source == expected.source == str(source.path)  # the client's path
+    for name in ("motion", "missing", "audio", "prosody"):
+        np.testing.assert_array_equal(getattr(clip, name), getattr(expected, name))
+    assert clip.phones == expected.phones and clip.extra == expected.extra
+    # The same job without its bytes: the worker looks for the files, and says so.
+    assert missing.status == "rejected" and str(source.path.parent) in missing.reason
+
+
+def test_a_kept_clip_reads_back_as_it_was(tiny_corpus, tmp_path):
+    source = discover([tiny_corpus])[0]
+    report, clip = _work(ClipJob(source, {}, None, None, None, None, False))
+    key = prepared_cache.entry_key(clip.checksum, {"fps": None}, np.zeros((3, 3)))
+    assert key != prepared_cache.entry_key(clip.checksum, {"fps": 30.0}, np.zeros((3, 3)))
+    prepared_cache.save(key, clip, {"source": report.source})
+    back, row = prepared_cache.load(key)
+    assert row == {"source": report.source}
+    for name in ("motion", "missing", "audio", "prosody"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(clip, name))
+    np.testing.assert_array_equal(back.emotion_features.functionals,
+                                  clip.emotion_features.functionals)
+    assert replace(back, motion=None, missing=None, audio=None, prosody=None,
+                   emotion_features=None).__dict__.keys() == clip.__dict__.keys()
+    assert (back.phones, back.schema, back.extra) == (clip.phones, clip.schema, clip.extra)
+    # A damaged entry is prepared again, not trusted.
+    (prepared_cache.folder() / f"{key}.npz").write_bytes(b"not an npz")
+    assert prepared_cache.load(key) is None
+    prepared_cache.remove([key])
+
+
+def test_cli_an_unreachable_scheduler_is_one_line(tiny_corpus, tmp_path, capsys):
+    code = main(["ingest", str(tiny_corpus), "--db", str(tmp_path / "db"), "--quiet",
+                 "--scheduler", "tcp://127.0.0.1:9", "--no-prepare"])
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and len(err.splitlines()) == 1, err
+    assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err
+    assert not (tmp_path / "db").exists()
