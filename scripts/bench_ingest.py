@@ -6,6 +6,7 @@ Usage::
                                    [--keep DB] [--json OUT]
     python scripts/bench_ingest.py --corpus DIR --per-clip-every K
     python scripts/bench_ingest.py --read-back DB
+    python scripts/bench_ingest.py --corpus DIR --subset N --fresh-cache [--dask | --scheduler A]
 
 Generates the corpus into a temporary folder (or uses ``--corpus``), ingests it, and
 prints each corpus-wide step with the wall and CPU time so far (this process, and its
@@ -17,6 +18,14 @@ database size on disk, CPU time of all processes, the load average, and peak mem
 (``ingest.pipeline._work``: read, check, align, features) on every K-th clip of the
 corpus, in this process, once the one-off loads (CMUdict, the aligner) are done: its
 wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip.
+
+``--dask``: the per-clip work on a new local Dask cluster of ``--workers`` processes
+(``animegraph ingest --scheduler``'s path, :mod:`ingest.on_dask`; its start-up counted);
+``--scheduler ADDRESS``: on an existing one. ``--subset N``: copies of the corpus' first
+N clips (by name) are ingested; ``--fresh-cache``: in an empty cache folder, so that face
+tracking and the phone model run again (the cold cost of a clip). The wall time at which
+the clips were all prepared is printed as ``clips_s``, the rest (decomposition, emotion
+model, writing: the one writer's serial part) as ``writer_s``.
 
 ``--read-back DB``: no ingest; the time and peak memory of reading every clip of the
 database back (``ingest.tables.prepared_from_database``, as an ingest into an existing
@@ -108,6 +117,31 @@ def read_back(db: Path) -> int:
     return 0
 
 
+def _subset(corpus: Path, n: int, out: Path) -> Path:
+    """Copies of the files of ``corpus``' first ``n`` clips (in name order), under ``out``
+    (copies, not links: ingest refuses links that leave a clip's folder)."""
+    found = sorted(discover([corpus]), key=lambda s: s.clip_id)[:n]
+    for source in found:
+        for path in source.paths:
+            target = out / Path(path).relative_to(corpus)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, target)
+    return out
+
+
+def _cluster(args):
+    """A Dask client (``--dask``, ``--scheduler``) as ``ingest`` uses it, or None."""
+    import contextlib
+    from types import SimpleNamespace
+
+    if not (args.dask or args.scheduler):
+        return contextlib.nullcontext((None, args.workers))
+    from animegraph.apps.batch_cluster import CONNECT_TIMEOUT_S, dask_client
+
+    return dask_client(SimpleNamespace(scheduler=args.scheduler, workers=args.workers,
+                                       connect_timeout=CONNECT_TIMEOUT_S))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scale", choices=["default", "paper"], default="paper")
@@ -121,6 +155,12 @@ def main() -> int:
                         help="time reading every clip of DB back")
     parser.add_argument("--feature-clips", type=int, default=20,
                         help="clips timed for the emotion features (default 20)")
+    parser.add_argument("--dask", action="store_true",
+                        help="on a local Dask cluster of --workers processes")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="on this Dask cluster")
+    parser.add_argument("--subset", type=int, metavar="N", help="the first N clips only")
+    parser.add_argument("--fresh-cache", action="store_true",
+                        help="in an empty cache folder (tracking, phones computed again)")
     args = parser.parse_args()
     if args.read_back:
         return read_back(args.read_back)
@@ -136,23 +176,36 @@ def main() -> int:
             t0 = time.perf_counter()
             generate_corpus(corpus, CorpusConfig(scale=args.scale), workers=args.workers)
             print(f"# generated the {args.scale} corpus in {time.perf_counter() - t0:.1f} s")
+        if args.subset:
+            corpus = _subset(corpus, args.subset, Path(tmp) / "subset")
+        if args.fresh_cache:
+            os.environ["ANIMEGRAPH_CACHE"] = str(Path(tmp) / "cache")
         db = Path(tmp) / "db"
         t0, (c0, k0) = time.perf_counter(), _cpu()
         load = os.getloadavg()[0]
+        steps: list[float] = []
 
         def say(line: str) -> None:
             me, kids = _cpu()
+            steps.append(time.perf_counter() - t0)
             print(f"# {time.perf_counter() - t0:7.1f} s wall, CPU {me - c0:.1f} s here + "
                   f"{kids - k0:.1f} s workers, load {os.getloadavg()[0]:.1f}: {line}",
                   flush=True)
 
-        report = ingest([corpus], db, workers=args.workers, say=say)
+        with _cluster(args) as (client, n_workers):
+            started = time.perf_counter() - t0
+            report = ingest([corpus], db, workers=args.workers, say=say, client=client)
         wall = time.perf_counter() - t0
         me, kids = _cpu()
         m = Database.open(db).manifest
         row = {
             "scale": args.scale if args.corpus is None else str(args.corpus),
-            "workers": args.workers, "wall_s": round(wall, 1), "clips": m["n_clips"],
+            "workers": n_workers, "on": "dask" if client is not None else (
+                "pool" if args.workers > 1 else "this process"),
+            "wall_s": round(wall, 1), "start_s": round(started, 1),
+            "clips_s": round(steps[0], 1) if steps else None,
+            "writer_s": round(wall - steps[0], 1) if steps else None,
+            "clips": m["n_clips"],
             "rejected": report.count("rejected"), "animes": m["n_animes"],
             "frames": m["n_frames"], "speech_min": round(m["duration_s"] / 60, 1),
             "n_pcs": m["n_pcs"], "variance_kept": round(m["variance_kept"], 4),
