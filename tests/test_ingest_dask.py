@@ -177,3 +177,40 @@ def test_cli_an_unreachable_scheduler_is_one_line(tiny_corpus, tmp_path, capsys)
     assert code != 0 and len(err.splitlines()) == 1, err
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err
     assert not (tmp_path / "db").exists()
+
+
+def test_cli_ctrl_c_on_a_scheduler_leaves_no_database_and_the_next_run_resumes(
+        tiny_corpus, tmp_path):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001", "s0002"))
+    n_clips = len(discover([corpus]))
+    cache, db = tmp_path / "cache", tmp_path / "db"
+    env = {**os.environ, "ANIMEGRAPH_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
+    command = [sys.executable, "-m", "animegraph", "ingest", str(corpus), "--db", str(db),
+               "--quiet", "--no-prepare"]
+    # A real scheduler on a TCP port, its worker a thread of this process.
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                       protocol="tcp", dashboard_address=None)
+    try:
+        command += ["--scheduler", cluster.scheduler_address]
+        process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
+        try:
+            while process.poll() is None and not list((cache / "prepared").glob("*.npz")):
+                time.sleep(0.02)
+            process.send_signal(signal.SIGINT)
+            out, err = process.communicate(timeout=120)
+        finally:
+            if process.poll() is None:
+                process.kill()
+        assert process.returncode == 130, err
+        assert err.strip().splitlines() == ["animegraph: interrupted"], err
+        assert not db.exists()  # a first ingest interrupted leaves no folder
+        kept = len(list((cache / "prepared").glob("*.npz")))
+        assert 1 <= kept < n_clips
+
+        again = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
+    finally:
+        cluster.close()
+    assert again.returncode == 0, again.stderr
+    assert f"{n_clips} added" in again.stdout
+    assert f"{kept} clip{'s' * (kept != 1)} prepared by an unfinished ingest" in again.stdout
