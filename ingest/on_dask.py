@@ -32,6 +32,10 @@ logger = logging.getLogger(__name__)
 #: their paths by the worker. A few minutes of video are tens of MB; Dask's messages
 #: carry that comfortably.
 SHIP_MAX_BYTES = 64 << 20
+#: Clips submitted a worker thread at a time: enough that no worker waits for its next
+#: clip, few enough that the clips' bytes in flight stay a handful per worker (all of a
+#: 100-hour archive submitted at once would sit in the scheduler's memory).
+IN_FLIGHT_PER_THREAD = 3
 
 
 @dataclass(frozen=True)
@@ -155,8 +159,9 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
 
     Notes
     -----
-    On any exception (a Ctrl-C above all) the tasks not finished are cancelled and the
-    exception propagates; what was kept stays kept.
+    At most :data:`IN_FLIGHT_PER_THREAD` clips a worker thread are submitted at a time, the
+    next as one finishes. On any exception (a Ctrl-C above all) the tasks not finished are
+    cancelled and the exception propagates; what was kept stays kept.
     """
     from distributed import as_completed
 
@@ -164,19 +169,34 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
     keys = [None if c is None else prepared_cache.entry_key(c, settings, reference)
             for c in checksums]
     run = DaskRun(results, [k for k in keys if k is not None])
-    futures = {}
+    futures: dict = {}
+    completed = as_completed(loop=client.loop)
+    waiting: Iterator[int] = iter([])
+
+    def submit_next() -> None:
+        index = next(waiting, None)
+        if index is None:
+            return
+        shipped = ship(jobs[index].source, max_bytes)
+        run.shipped += shipped is not None
+        future = client.submit(run_shipped, func, jobs[index], shipped, pure=False)
+        futures[future] = index
+        completed.add(future)
+
     try:
-        for index, (job, key) in enumerate(zip(jobs, keys, strict=True)):
+        todo = []
+        for index, key in enumerate(keys):
             kept = prepared_cache.load(key) if key is not None else None
-            if kept is not None:
-                clip, row = kept
-                results[index] = (report_type(**row), clip)
-                run.resumed += 1
+            if kept is None:
+                todo.append(index)
                 continue
-            shipped = ship(job.source, max_bytes)
-            run.shipped += shipped is not None
-            futures[client.submit(run_shipped, func, job, shipped, pure=False)] = index
-        finished = _finished(futures, run.resumed, as_completed(futures, loop=client.loop))
+            clip, row = kept
+            results[index] = (report_type(**row), clip)
+            run.resumed += 1
+        waiting = iter(todo)
+        for _ in range(IN_FLIGHT_PER_THREAD * _threads(client)):
+            submit_next()
+        finished = _finished(run.resumed, completed)
         for future in progress(finished) if progress else finished:
             if future is None:  # one of the clips taken from the cache
                 continue
@@ -188,6 +208,7 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
                 reason = f"worker error: {type(exc).__name__}: {exc}"
                 report, clip = failed(jobs[index], reason), None
             future.release()
+            submit_next()
             if clip is not None and keys[index] is not None:
                 prepared_cache.save(keys[index], clip, _row(report))
             results[index] = (report, clip)
@@ -198,7 +219,13 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
     return run
 
 
-def _finished(futures: dict, n_kept: int, completed: Iterator) -> Iterator:
+def _threads(client) -> int:
+    """The threads of the cluster's workers (at least 1)."""
+    workers = client.scheduler_info().get("workers", {})
+    return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+
+
+def _finished(n_kept: int, completed: Iterator) -> Iterator:
     """None for each clip taken from the cache, then the futures as they finish."""
     yield from [None] * n_kept
     yield from completed

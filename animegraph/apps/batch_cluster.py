@@ -1,5 +1,6 @@
-"""The Dask cluster ``animegraph batch`` (:mod:`animegraph.apps.batch`) runs its lines on:
-a new local one, or an existing one at a scheduler's address."""
+"""The Dask cluster ``animegraph batch`` (:mod:`animegraph.apps.batch`) runs its lines on
+(a new local one, or an existing one at a scheduler's address), and ``animegraph ingest
+--scheduler`` prepares its clips on (:mod:`ingest.on_dask`)."""
 
 from __future__ import annotations
 
