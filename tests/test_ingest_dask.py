@@ -214,3 +214,20 @@ def test_cli_ctrl_c_on_a_scheduler_leaves_no_database_and_the_next_run_resumes(
     assert again.returncode == 0, again.stderr
     assert f"{n_clips} added" in again.stdout
     assert f"{kept} clip{'s' * (kept != 1)} prepared by an unfinished ingest" in again.stdout
+
+
+def test_a_bad_clip_is_rejected_on_its_worker_and_the_others_go_in(tiny_corpus, tmp_path):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001",))
+    victim = sorted((corpus / "clips").glob("*.wav"))[0]
+    victim.write_bytes(victim.read_bytes()[:100])  # truncated
+    cluster, client = _threads_cluster()
+    try:
+        report = ingest([corpus], tmp_path / "db", client=client)
+    finally:
+        client.close()
+        cluster.close()
+    rejected = [c for c in report.clips if c.status == "rejected"]
+    assert len(rejected) == 1 and rejected[0].source.startswith(str(corpus))
+    # The reason names the file where the user has it, not the worker's copy.
+    assert str(victim) in rejected[0].reason and "animegraph-clip-" not in rejected[0].reason
+    assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added") > 0
