@@ -67,12 +67,15 @@ class DaskRun:
 
 def ship(source, max_bytes: int = SHIP_MAX_BYTES) -> Shipped | None:
     """The files of ``source`` (a :class:`ingest.readers.ClipSource`) with their bytes,
-    or None when they add up to more than ``max_bytes`` or one cannot be read (its
-    worker then reads the paths, and says what is wrong with them)."""
+    or None when they add up to more than ``max_bytes``, one cannot be read, or one is a
+    symbolic link (its worker then reads the paths, and the reader says what is wrong
+    with them: a link's bytes sent as a plain file would pass the readers' refusal of
+    links that leave the clip's folder)."""
     paths = [Path(p) for p in source.paths]
     main = Path(source.source)
     try:
-        if not paths or sum(p.stat().st_size for p in paths) > max_bytes:
+        if (not paths or any(p.is_symlink() for p in paths)
+                or sum(p.stat().st_size for p in paths) > max_bytes):
             return None
         is_folder = main.is_dir()
         root = Path(os.path.commonpath([p.parent.absolute() for p in paths]
@@ -91,7 +94,7 @@ def run_shipped(func: Callable, job, shipped: Shipped | None):
     if shipped is None:
         return func(job)
     with tempfile.TemporaryDirectory(prefix="animegraph-clip-") as tmp:
-        here = Path(tmp)
+        here = Path(tmp).resolve()
         for relative, data in shipped.files:
             path = _inside(here, relative)
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -104,7 +107,8 @@ def run_shipped(func: Callable, job, shipped: Shipped | None):
             (role, _inside(here, relative)) for role, (relative, _) in zip(roles, shipped.files,
                                                                           strict=True)))
         report, clip = func(replace(job, source=local))
-        return _renamed(report, tmp, shipped.root), _renamed(clip, tmp, shipped.root)
+        return (_renamed(report, str(here), shipped.root),
+                _renamed(clip, str(here), shipped.root))
 
 
 def _inside(folder: Path, relative: str) -> Path:

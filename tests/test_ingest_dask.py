@@ -149,6 +149,18 @@ def test_a_worker_without_the_files_gets_their_bytes(tiny_corpus, tmp_path):
     assert missing.status == "rejected" and str(source.path.parent) in missing.reason
 
 
+def test_a_clip_with_a_link_travels_as_its_paths(tiny_corpus, tmp_path):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001_angry_1",))
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not for the database")
+    text = next((corpus / "clips").glob("*.phones.csv"))
+    text.unlink()
+    text.symlink_to(secret)
+    # Its bytes would arrive as a plain file: the reader's refusal of the link would not
+    # see it. Sent as paths, the worker's reader refuses it as on one machine.
+    assert ship(discover([corpus])[0]) is None
+
+
 def test_a_kept_clip_reads_back_as_it_was(tiny_corpus, tmp_path):
     source = discover([tiny_corpus])[0]
     report, clip = _work(ClipJob(source, {}, None, None, None, None, False))
