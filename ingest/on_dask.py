@@ -56,13 +56,12 @@ class Shipped:
 @dataclass
 class DaskRun:
     """What :func:`map_clips` did: ``results`` (report, clip or None) in the jobs' order,
-    ``keys`` the cache entries of the prepared clips, ``resumed`` how many were taken
-    from the cache and ``shipped`` how many travelled as bytes."""
+    ``keys`` the cache entries of the prepared clips and ``resumed`` how many were taken
+    from the cache."""
 
     results: list
     keys: list[str]
     resumed: int = 0
-    shipped: int = 0
 
 
 def ship(source, max_bytes: int = SHIP_MAX_BYTES) -> Shipped | None:
@@ -181,9 +180,8 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
         index = next(waiting, None)
         if index is None:
             return
-        shipped = ship(jobs[index].source, max_bytes)
-        run.shipped += shipped is not None
-        future = client.submit(run_shipped, func, jobs[index], shipped, pure=False)
+        future = client.submit(run_shipped, func, jobs[index],
+                               ship(jobs[index].source, max_bytes), pure=False)
         futures[future] = index
         completed.add(future)
 
