@@ -4,7 +4,7 @@ Usage::
 
     python scripts/bench_scale.py [--db BASE] [--sizes 10000 100000 1000000 4000000]
                                   [--work DIR] [--keep] [--max-rss-gb 8] [--repeats 2]
-                                  [--json OUT]
+                                  [--json OUT] [--after JSON]
 
 For each size, a database is written on disk (``--work``, a temporary folder by default,
 removed at the end unless ``--keep``) whose animes and clips replicate those of BASE (the
@@ -192,6 +192,9 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--after", type=Path,
+                        help="the --json of an earlier run: its sizes project the peak "
+                             "memory of these (to measure 4M alone, after the smaller ones)")
     parser.add_argument("--measure", type=Path, help=argparse.SUPPRESS)  # the child's part
     args = parser.parse_args()
     if args.measure:
@@ -209,7 +212,9 @@ def main() -> int:
     print(f"{'animes':>9s} {'hours':>6s} {'disk_GB':>7s} {'build_s':>7s} {'load_s':>7s} "
           f"{'rss_load':>8s} {'peak_GB':>7s} {'kbest_s':>7s} {'kbest_x':>7s} {'exact_s':>7s} "
           f"{'search_s':>8s} {'exact_cpu':>9s}")
-    rows, measured = [], []
+    rows = []
+    measured = ([r for r in json.loads(args.after.read_text()) if "peak_rss_gb" in r]
+                if args.after else [])
     try:
         for size in args.sizes:
             out = work / f"db-{size}"
