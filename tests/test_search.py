@@ -524,9 +524,9 @@ def replicated_graph(rng: np.random.Generator, copies: int, noise: float) -> Ani
 @pytest.mark.parametrize("noise", [0.0, 1e-3, 0.3])
 @pytest.mark.parametrize("threads", [False, True])
 def test_exact_matches_dp_on_near_duplicate_sources(noise, threads, monkeypatch):
-    # Many queries per layer (the k-d tree, its queries in k-d order each starting from
-    # the answer before), sources of equal or nearly equal D and frames (exact ties when
-    # noise is 0 and the audio costs repeat), and the threaded split of the queries.
+    # Many queries per layer (the k-d tree and the dominance test), sources of equal or
+    # nearly equal D and frames (exact ties when noise is 0 and the audio costs repeat),
+    # and the threaded split of the queries.
     if threads:
         monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
     rng = np.random.default_rng(900)

@@ -79,13 +79,8 @@ def exact_layers(p: Problem, cn: np.ndarray, off: np.ndarray, u: np.ndarray,
        ``D(a') + s ||x_a' - x_a|| < D(a)`` (by a 1e-9 relative margin), for then, by
        the triangle inequality, ``a'`` beats ``a`` for every target; dominance is
        checked among neighbours in the tree (subtrees of <= ``_DOMINANCE_RANGE``
-       states), and the tree is rebuilt when many states go. The tree splits on ``D / s``
-       as on the frames (an extra coordinate the distances ignore), so a subtree's least
-       ``D`` is tight where ``D`` varies as much as the jump costs. The queries are
-       answered in the k-d order of their first frames, each starting from the value of
-       the source that answered the one before (a real transition's cost: the minimum
-       is unchanged), which prunes most of the tree at once among similar takes.
-       Queries of a large layer run on several threads (numba releases the GIL).
+       states), and the tree is rebuilt when many states go. Queries of a large layer
+       run on several threads (numba releases the GIL).
 
     Exactness: let π be an optimal sequence, cost OPT <= UB. For each of its states,
     (prefix cost of π) + h <= (prefix cost) + H <= OPT <= UB. By induction over layers,
@@ -206,22 +201,17 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True)
-def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, first, w1, scale, ub,
+def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
                    pos):  # pragma: no cover
     """The kept states of layer [lo, hi) as a k-d tree over their last frames, weighted
-    by D; ``pos[node]`` set to each kept state (for the consecutive test); and the order
-    in which to answer the next layer [lo1, hi1): the states that query the tree last, in
-    the k-d order of their first frames, so that consecutive queries are alike (each
-    starts from the answer of the one before, :func:`_query_layer`)."""
+    by D; ``pos[node]`` set to each kept state (for the consecutive test)."""
     npc = last.shape[1]
     m = 0
     for q in range(lo, hi):
         if D[q] < np.inf:
             m += 1
     alive = np.empty(m, dtype=np.int64)
-    # One more coordinate, D / s: the tree splits on the weight as on the frames, so a
-    # subtree's least D bounds its points tightly when D varies as much as s x distance.
-    xa = np.empty((m, npc + 1))
+    xa = np.empty((m, npc))
     da = np.empty(m)
     k = 0
     dmin = np.inf
@@ -235,8 +225,6 @@ def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, first, w1, scale, ub,
             for j in range(npc):
                 xa[k, j] = last[cn[q], j]
             k += 1
-    for k in range(m):
-        xa[k, npc] = (da[k] - dmin) / scale if scale > 0.0 else 0.0
     n_query = 0
     for q in range(lo1, hi1):
         if w1 + dmin <= ub - h[q] - u[q]:
@@ -258,24 +246,7 @@ def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, first, w1, scale, ub,
             xs, ds, ids = xs[sel], ds[sel], ids[sel]
             perm, start, end, left, right, tlo, thi, mind = build_tree(xs, ds, leaf)
             xs, ds, ids = xs[perm], ds[perm], ids[perm]
-    order = np.arange(lo1, hi1)
-    if leaf == LEAF:
-        queriers = np.empty(n_query, dtype=np.int64)
-        xq = np.empty((n_query, npc))
-        k = 0
-        others = 0
-        for q in range(lo1, hi1):
-            if w1 + dmin <= ub - h[q] - u[q]:
-                queriers[k] = q
-                for j in range(npc):
-                    xq[k, j] = first[cn[q], j]
-                k += 1
-            else:
-                order[others] = q
-                others += 1
-        qperm = build_tree(xq, np.zeros(n_query), LEAF)[0]
-        order[others:] = queriers[qperm]
-    return (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query, order)
+    return (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -290,7 +261,7 @@ def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
     most ``_DOMINANCE_RANGE`` points); leaves are compacted and bounds recomputed.
     """
     n_nodes = len(start)
-    npc = xs.shape[1] - 1  # the frames; the last column is D / s
+    npc = xs.shape[1]
     keep = np.ones(len(ds), dtype=np.bool_)
     stack = np.empty(n_nodes + 1, dtype=np.int64)
     stack[0] = 0
@@ -318,7 +289,6 @@ def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
                 if d2 < room * room:
                     keep[r] = False
                     break
-    width = xs.shape[1]  # compacted and boxed with the D / s column
     for node in range(n_nodes - 1, -1, -1):
         if left[node] < 0:
             k = start[node]
@@ -327,25 +297,25 @@ def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
                     if k != r:
                         ds[k] = ds[r]
                         ids[k] = ids[r]
-                        for j in range(width):
+                        for j in range(npc):
                             xs[k, j] = xs[r, j]
                         keep[k] = True
                     k += 1
             end[node] = k
-            for j in range(width):
+            for j in range(npc):
                 lo[node, j] = np.inf
                 hi[node, j] = -np.inf
             mind[node] = np.inf
             for r in range(start[node], end[node]):
                 if ds[r] < mind[node]:
                     mind[node] = ds[r]
-                for j in range(width):
+                for j in range(npc):
                     lo[node, j] = min(lo[node, j], xs[r, j])
                     hi[node, j] = max(hi[node, j], xs[r, j])
         else:
             l, rr = left[node], right[node]
             mind[node] = min(mind[l], mind[rr])
-            for j in range(width):
+            for j in range(npc):
                 lo[node, j] = min(lo[l, j], lo[rr, j])
                 hi[node, j] = max(hi[l, j], hi[rr, j])
     n_kept = 0
@@ -356,21 +326,16 @@ def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
 
 
 @numba.njit(cache=True, nogil=True)
-def _query_layer(cn, order, k_from, k_to, D, pred, u, h, prv, last, first, w1, scale, ub,
-                 pos, xs, ds, ids, start, end, left, right, tlo, thi, mind):  # pragma: no cover
-    """D and pred of the states ``order[k_from:k_to]`` of the next layer; returns
-    distances. A tree query starts from the value of the source that answered the query
-    before (a real transition's cost, so the minimum found is unchanged): queries in
-    k-d order are alike, and a near answer prunes most of the tree at once."""
+def _query_layer(cn, q_from, q_to, D, pred, u, h, prv, last, first, w1, scale, ub, pos,
+                 xs, ds, ids, start, end, left, right, tlo, thi, mind):  # pragma: no cover
+    """D and pred of the states [q_from, q_to) of the next layer; returns distances."""
     npc = last.shape[1]
     y = np.empty(npc)
     stack = np.empty(256, dtype=np.int64)
     bounds = np.empty(256)
     n_dist = 0
     has_tree = len(ds) > 0
-    warm = -1  # the row of the source that answered the last query
-    for k in range(k_from, k_to):
-        q = order[k]
+    for q in range(q_from, q_to):
         b = cn[q]
         thr = ub - h[q] - u[q]
         best = np.inf
@@ -385,23 +350,12 @@ def _query_layer(cn, order, k_from, k_to, D, pred, u, h, prv, last, first, w1, s
         if has_tree and w1 + mind[0] < best and w1 + mind[0] <= thr:
             for j in range(npc):
                 y[j] = first[b, j]
-            if warm >= 0:
-                d2 = 0.0
-                for j in range(npc):
-                    t = xs[warm, j] - y[j]
-                    d2 += t * t
-                n_dist += 1
-                v = w1 + ds[warm] + scale * np.sqrt(d2)
-                if v < best:
-                    best = v
-                    arg = ids[warm]
             v, r, nd = query(xs, ds, start, end, left, right, tlo, thi, mind, y, w1, scale,
                               best, thr, stack, bounds)
             n_dist += nd
             if r >= 0:
                 best = v
                 arg = ids[r]
-                warm = r
         if best <= thr:
             D[q] = best + u[q]
             pred[q] = arg
@@ -419,14 +373,14 @@ def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
     n_dist = 0
     for i in range(n - 1):
         lo, hi, lo1, hi1 = off[i], off[i + 1], off[i + 1], off[i + 2]
-        (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query,
-         order) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, first, w1, scale, ub,
-                                 pos)
+        (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind,
+         n_query) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
+                                    pos)
         if len(alive) == 0:
             break
         args = (D, pred, u, h, prv, last, first, w1, scale, ub, pos, xs, ds, ids, start, end,
                 left, right, tlo, thi, mind)
-        n_dist += _run_queries(cn, order, n_query, args)
+        n_dist += _run_queries(cn, lo1, hi1, n_query, args)
         pos[cn[alive]] = -1
         kept += int(np.count_nonzero(D[lo1:hi1] < np.inf))
     last_layer = D[off[n - 1]:off[n]]
@@ -441,14 +395,13 @@ def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
     return path, float(last_layer[q]), kept, n_dist
 
 
-def _run_queries(cn, order, n_query, args) -> int:
+def _run_queries(cn, lo1, hi1, n_query, args) -> int:
     """The queries of one layer, split over threads when there are many (numba releases
-    the GIL): the tree's queries, last in ``order``, shared evenly."""
+    the GIL)."""
     threads = usable_cpus(8)  # the CPUs this process may use, at most 8
     if threads == 1 or n_query < _PARALLEL_MIN:
-        return _query_layer(cn, order, 0, len(order), *args)
-    cuts = len(order) - n_query + np.linspace(0, n_query, threads + 1).astype(np.int64)
-    cuts[0] = 0
-    futures = [_pool(threads).submit(_query_layer, cn, order, int(a), int(b), *args)
+        return _query_layer(cn, lo1, hi1, *args)
+    cuts = np.linspace(lo1, hi1, threads + 1).astype(np.int64)
+    futures = [_pool(threads).submit(_query_layer, cn, int(a), int(b), *args)
                for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     return sum(f.result() for f in futures)
