@@ -505,3 +505,39 @@ def test_k_best_with_context_ranks_matching_neighbours_before_audio_cost():
         S.k_best(g, lone, [np.array([0.0, 0.0, 0.0, 1.0])], [1], 2, context=True)[0], [1, 9])
     with pytest.raises(ParameterError, match="context needs the input phones"):
         problem.context_match(g, Candidates(nodes=cands.nodes, backoff=cands.backoff))
+
+
+def replicated_graph(rng: np.random.Generator, copies: int, noise: float) -> AnimeGraph:
+    """A random graph repeated ``copies`` times, each copy's frames moved by ``noise`` x
+    Gaussian: many near-ties between sources, as in a large database of similar takes."""
+    phones = ("AA", "B", "S", "IY", "K")
+    base = random_graph(rng, 40, phones, length=(4, 12), n_pcs=5, scale=30.0)
+    recs = [[PHONES[p] for p in base.node_phone[recording(base, c)]]
+            for c in range(len(base.clip_ids))]
+    first = np.vstack([base.first_pcs + noise * rng.standard_normal(base.first_pcs.shape)
+                       for _ in range(copies)])
+    last = np.vstack([base.last_pcs + noise * rng.standard_normal(base.last_pcs.shape)
+                      for _ in range(copies)])
+    return make_graph(recs * copies, first, last)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-3, 0.3])
+@pytest.mark.parametrize("threads", [False, True])
+def test_exact_matches_dp_on_near_duplicate_sources(noise, threads, monkeypatch):
+    # Many queries per layer (the k-d tree and the dominance test), sources of equal or
+    # nearly equal D and frames (exact ties when noise is 0 and the audio costs repeat),
+    # and the threaded split of the queries.
+    if threads:
+        monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
+    rng = np.random.default_rng(900)
+    g = replicated_graph(rng, 12, noise)
+    phones = ("AA", "B", "S", "IY", "K")
+    for trial in range(3):
+        cands = candidates(g, [str(x) for x in rng.choice(phones, size=14)])
+        audio = (random_audio(rng, cands, high=30.0) if trial else
+                 [np.full(len(c), 1.0) for c in cands.nodes])
+        exact = search(g, cands, audio)
+        dp = search(g, cands, audio, method="dp")
+        assert exact.cost == pytest.approx(dp.cost, abs=1e-9)
+        assert path_cost(g, cands, audio, nodes=exact.nodes).cost == pytest.approx(
+            exact.cost, abs=1e-9)

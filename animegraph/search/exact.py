@@ -176,11 +176,19 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
         best = np.inf
         tb = 0.0
         qb = off[i + 1]
+        # The consecutive successor first: its value then spares the distances of the
+        # jumps that cannot beat it (w1 + u + h >= best); the value chosen is the same.
+        for q in range(off[i + 1], off[i + 2]):
+            if cn[q] == nxt[a]:
+                tb = scale * row_dist(last, a, first, cn[q])
+                best = tb + u[q] + h[q]
+                qb = q
+                break
         for q in range(off[i + 1], off[i + 2]):
             b = cn[q]
-            t = scale * row_dist(last, a, first, b)
-            if nxt[a] != b:
-                t += w1
+            if nxt[a] == b or w1 + u[q] + h[q] >= best:
+                continue
+            t = scale * row_dist(last, a, first, b) + w1
             v = t + u[q] + h[q]
             if v < best:
                 best = v

@@ -251,30 +251,52 @@ def _ints(t: pa.Table, name: str, dtype) -> np.ndarray:
 
 
 def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Flattened list column -> (values of shape (total_rows, width), row offsets)."""
-    flat = column.combine_chunks()
-    if flat.null_count:
+    """Flattened list column -> (values of shape (total_rows, width), row offsets).
+
+    Copied chunk by chunk into the one float32 array returned: the whole column is never
+    combined nor converted at once (at 1M animes the motion column is about a gigabyte,
+    and each whole copy of it was one more gigabyte at the load's peak)."""
+    if column.null_count:
         raise ValueError(f"{column.type} column has nulls")
-    values = numbers(flat.flatten()).astype(np.float32)
     rows = rows_per_node.astype(np.int64)
     if (rows < 1).any():
         raise ValueError("a node with no frames")
     total = int(rows.sum())
-    width = values.size // total if total else 0
-    if width < 1 or total * width != values.size:
-        raise ValueError(f"{values.size} values do not fill {total} frames")
-    lengths = np.diff(numbers(flat.offsets))
+    lengths = _list_lengths(column)
+    size = int(lengths.sum())
+    width = size // total if total else 0
+    if width < 1 or total * width != size:
+        raise ValueError(f"{size} values do not fill {total} frames")
     if not np.array_equal(lengths, rows * width):
         raise ValueError("a node's list does not hold its frames")
     offsets = np.zeros(len(rows) + 1, dtype=np.int64)
     np.cumsum(rows, out=offsets[1:])
-    return values.reshape(total, width), offsets
+    return _list_values(column, size).reshape(total, width), offsets
+
+
+def _list_lengths(column: pa.ChunkedArray) -> np.ndarray:
+    """Length of every row of a list column, shape (n_rows,)."""
+    if not (pa.types.is_list(column.type) or pa.types.is_large_list(column.type)):
+        raise TypeError(f"a list column was expected, not {column.type}")
+    parts = [np.diff(numbers(chunk.offsets)) for chunk in column.chunks]
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
+def _list_values(column: pa.ChunkedArray, size: int) -> np.ndarray:
+    """The values of a list column's rows end to end, as float32 (size,), chunk by chunk
+    (``flatten`` honours a chunk's slice of its values)."""
+    values = np.empty(size, dtype=np.float32)
+    k = 0
+    for chunk in column.chunks:
+        part = numbers(chunk.flatten())
+        values[k:k + part.size] = part
+        k += part.size
+    return values
 
 
 def _fixed(column: pa.ChunkedArray, n: int) -> np.ndarray:
-    flat = column.combine_chunks()
-    values = numbers(flat.flatten())
-    lengths = np.diff(numbers(flat.offsets))
-    if flat.null_count or (len(lengths) and (lengths != lengths[0]).any()) or values.size == 0:
+    lengths = _list_lengths(column)
+    if column.null_count or (len(lengths) and (lengths != lengths[0]).any()) or \
+            lengths.sum() == 0:
         raise ValueError("rows of unequal length")
-    return values.astype(np.float32).reshape(n, -1)
+    return _list_values(column, int(lengths.sum())).reshape(n, -1)
