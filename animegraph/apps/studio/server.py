@@ -37,7 +37,6 @@ from aiohttp import web
 from animegraph.apps.studio import api, synth
 from animegraph.apps.studio.face import FaceBuilder
 from db.errors import AnimeGraphError
-from db.store import Database
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +45,7 @@ COOKIE = "animegraph_studio_token"
 TOKEN_KEY = web.AppKey("token", str)
 STATIC_KEY = web.AppKey("static", dict)
 POLICY_KEY = web.AppKey("policy", str)
+WARM_KEY = web.AppKey("warm", asyncio.Future)
 #: Content types of the page's files, by suffix (ES modules must be served as JavaScript).
 CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css",
                  ".txt": "text/plain", ".md": "text/plain", ".svg": "image/svg+xml"}
@@ -162,7 +162,7 @@ def make_app(db_path: Path, token: str) -> web.Application:
     DataError
         If ``db_path`` is not a readable database.
     """
-    db = Database.open(db_path)
+    db = api.StudioDatabase.open(db_path)
     names = tuple(ch["name"] for ch in db.table("channels", columns=["name"]).to_pylist())
     app = web.Application(middlewares=[headers, errors, token_guard],
                           client_max_size=synth.MAX_UPLOAD_BYTES + (1 << 20))
@@ -176,12 +176,17 @@ def make_app(db_path: Path, token: str) -> web.Application:
     async def cleanup(app: web.Application) -> None:
         state.synth_dir.cleanup()
 
+    async def start_warming(app: web.Application) -> None:
+        app[WARM_KEY] = asyncio.ensure_future(api.warm(state))
+
+    app.on_startup.append(start_warming)
     app.on_cleanup.append(cleanup)
     app.router.add_get("/", index)
     app.router.add_get("/static/{name:.+}", static)
     app.router.add_get("/api/overview", api.overview)
     app.router.add_get("/api/clips", api.clips)
     app.router.add_get("/api/mesh", api.mesh)
+    app.router.add_get("/api/mesh/arkit", api.arkit_shapes)
     app.router.add_get("/api/clip/face", api.clip_face)
     app.router.add_get("/api/clip/audio", api.clip_audio)
     app.router.add_post("/api/sql", api.sql)
