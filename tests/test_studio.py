@@ -252,6 +252,18 @@ def test_page_overview_and_clip_table(page):
     wait_until(page, f"window.studio.clipsLoaded > {loads}")
 
 
+#: The phone strip's labels that spill out of their phone, and phones that overlap the next.
+PHONE_STRIP_FAULTS = """(() => {
+  const spans = [...document.querySelectorAll('#view-a .phone')];
+  const faults = spans.filter((s) => s.scrollWidth > s.clientWidth).map((s) => s.title);
+  const boxes = spans.map((s) => [s.getBoundingClientRect(), s.title])
+    .sort((a, b) => a[0].left - b[0].left);
+  for (let i = 1; i < boxes.length; i++) {
+    if (boxes[i][0].left < boxes[i - 1][0].right - 0.5) faults.push(boxes[i][1]);
+  }
+  return faults; })()"""
+
+
 def _mouth_over_time(page, n: int = 12) -> list[float]:
     values = []
     for _ in range(n):
@@ -268,6 +280,8 @@ def test_clip_plays_on_the_face(page, tmp_path_factory):
     assert np.ptp(mouth) > 1.0, mouth  # millimetres: the lips move while it plays
     assert page.evaluate("window.studio.face.frameTimes.length") > 3
     assert page.locator("[data-role=phones] .phone").count() > 5
+    # The phone strip: no label spills out of its phone, no phone overlaps the next.
+    assert page.evaluate(PHONE_STRIP_FAULTS) == [], page.inner_text("#view-a .phones")
     wait_until(page, "!window.studio.face.playing")
     page.evaluate("window.studio.face.seek(window.studio.face.duration() / 2)")
     shot = tmp_path_factory.mktemp("studio-artefacts") / "face.png"
@@ -353,6 +367,43 @@ def test_your_own_gltf_head_plays_its_arkit_morphs(page, tmp_path):
     assert error.startswith("not a glTF head") and "\n" not in error
 
 
+def test_the_live_tab_draws_the_live_command_s_frames(page, tiny_db):
+    """The live command's WebSocket server (its own class, on a free port) sends a clip's
+    frames as it would a live line; the page, through the studio, draws each: the mouth
+    moves, and the end of the stream is said."""
+    pytest.importorskip("websockets", reason="needs websockets (pip install -e '.[dev]')")
+    from animegraph.apps.query import load_clip
+    from animegraph.live.websocket import FrameServer
+    from db.store import Database
+
+    db = Database.open(tiny_db[0])
+    first = db.table("clips", columns=["corpus", "clip_id"]).to_pylist()[1]
+    clip = load_clip(db, first["corpus"], first["clip_id"], speech=False)
+    step = max(1, round(clip.fps / 30))
+    server = FrameServer(0, clip.names, clip.fps / step)
+    try:
+        page.click("nav button[data-tab=live]")
+        page.fill("#live-form [name=port]", str(server.port))
+        page.click("#live-form button[type=submit]")
+        wait_until(page, "/^live: /.test(document.querySelector('#live-status').textContent)")
+        mouths = []
+        for index, frame in enumerate(clip.motion[::step]):
+            server.send(index, frame)
+            page.wait_for_timeout(1000 / 30)
+            mouths.append(page.evaluate("window.studio.face.mouth"))
+        server.close(len(mouths))
+        wait_until(page, "window.studio.live.ended")
+    finally:
+        server.close()
+    assert page.evaluate("window.studio.live.frames") > 5
+    assert np.ptp(mouths) > 1.0, mouths
+    assert page.inner_text("#live-status").startswith("the live stream ended: ")
+    # Nothing listens on the port now: one line says so.
+    page.click("#live-form button[type=submit]")
+    wait_until(page, "window.studio.live.ended")
+    assert page.inner_text("#live-status").startswith("cannot read ws://127.0.0.1:")
+
+
 def test_sql_console(page):
     page.click("nav button[data-tab=sql]")
     page.fill("#sql-form [name=sql]", "SELECT phoneme, count(*) AS n FROM animes GROUP BY 1 "
@@ -385,6 +436,7 @@ def test_synthesized_line_plays(page, tiny_corpus, tmp_path_factory):
     wait_until(page, "window.studio.lastPlay.started")
     mouth = _mouth_over_time(page)
     assert np.ptp(mouth) > 1.0, mouth
+    assert page.evaluate(PHONE_STRIP_FAULTS) == []
     # Beside it, the recorded clip the search took most of its phones from, in step.
     nearest = page.evaluate("window.studio.nearest")
     assert nearest and nearest["phones_from_it"] >= 1 and page.is_visible("#view-b canvas")

@@ -10,6 +10,8 @@ Safe by default:
 * no path from the browser reaches the file system: the page's files are a fixed list
   made when the server starts (:func:`static_files`), clips are named by their ids in
   the database, outputs by random ids and their own list of files;
+* the live tab names a port, never a host: the studio reads WebSocket frames from
+  127.0.0.1 only (:mod:`animegraph.apps.studio.live`);
 * SQL runs only in :mod:`db.sql`'s sandbox; uploads are bounded in size and go to the
   studio's own temporary folder, deleted when it stops;
 * every error is one line: JSON ``{"error": ...}`` for the API, a small page otherwise;
@@ -34,7 +36,7 @@ from pathlib import Path
 
 from aiohttp import web
 
-from animegraph.apps.studio import api, synth
+from animegraph.apps.studio import api, live, synth
 from animegraph.apps.studio.face import FaceBuilder
 from db.errors import AnimeGraphError
 
@@ -192,6 +194,7 @@ def make_app(db_path: Path, token: str) -> web.Application:
     app.router.add_post("/api/sql", api.sql)
     app.router.add_post("/api/sql.csv", api.sql_csv)
     app.router.add_post("/api/synth", synth.synth)
+    app.router.add_get("/api/live", live.live)
     app.router.add_get("/api/outputs/{out_id}/face", synth.output_face)
     app.router.add_get("/api/outputs/{out_id}/files/{name}", synth.output_file)
     return app

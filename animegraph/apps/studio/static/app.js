@@ -299,6 +299,39 @@ async function loadHead() {
   }
 }
 
+// The live tab: the studio relays `animegraph live --websocket PORT` as face frames.
+let liveSocket = null;
+
+function connectLive(event) {
+  event.preventDefault();
+  if (liveSocket) liveSocket.close();
+  const port = new FormData($("#live-form")).get("port");
+  const status = $("#live-status");
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  const socket = new WebSocket(`${scheme}://${location.host}/api/live?port=${encodeURIComponent(port)}`);
+  socket.binaryType = "arraybuffer";
+  liveSocket = socket;
+  state.live = { frames: 0, status: "connecting", ended: false };
+  status.className = "status";
+  status.textContent = "connecting ...";
+  $("#live-stop").disabled = false;
+  socket.onmessage = (message) => {
+    if (typeof message.data === "string") {
+      const data = JSON.parse(message.data);
+      status.className = data.type === "error" ? "error" : "status";
+      status.textContent = data.text;
+      state.live.status = data.type;
+      return;
+    }
+    state.face.showLive(unpack(message.data));
+    state.live.frames += 1;
+  };
+  socket.onclose = () => {
+    state.live.ended = true;
+    if (liveSocket === socket) { liveSocket = null; $("#live-stop").disabled = true; }
+  };
+}
+
 async function main() {
   document.querySelectorAll("nav button").forEach((b) => b.addEventListener("click", () => showTab(b.dataset.tab)));
   $("#clip-filters").addEventListener("submit", searchClips);
@@ -308,6 +341,8 @@ async function main() {
   });
   $("#sql-csv").addEventListener("click", exportCsv);
   $("#synth-form").addEventListener("submit", synthesize);
+  $("#live-form").addEventListener("submit", connectLive);
+  $("#live-stop").addEventListener("click", () => { if (liveSocket) liveSocket.close(); });
   $("#record").addEventListener("click", toggleRecording);
   // A file chosen after a recording is what is sent.
   $("#synth-form [name=audio]").addEventListener("change", () => { recorded = null; });

@@ -551,6 +551,20 @@ export class Player {
     if (play) this.play();
   }
 
+  // One live frame (an animation of one frame) on the first view, at once.
+  showLive(anim) {
+    if (this.playing) this.pause();
+    const view = this.views[0];
+    if (!view.anim || view.anim.header.kind !== "live") {
+      view.title.textContent = "live";
+      view._layoutPhones([]);
+      view.audio.removeAttribute("src");
+    }
+    view.anim = anim;
+    view.apply(0);
+    view.showText();
+  }
+
   play() {
     if (!this.active().some((v) => v.anim)) return;
     if (this.time >= this.duration() - 1e-3) this.time = 0;
