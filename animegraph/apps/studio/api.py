@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import io
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -82,6 +83,7 @@ class Studio:
     #: Packed clip animations by (database version, corpus, clip id), oldest first. The
     #: database is a read-only view of one version, so a key never goes stale.
     faces: OrderedDict = field(default_factory=OrderedDict)
+    faces_lock: threading.Lock = field(default_factory=threading.Lock)  # worker threads
     #: JSON answers that depend only on the database version (the overview, clip lists
     #: by their query), as futures: a request that comes while one is computed waits on it.
     answers: OrderedDict = field(default_factory=OrderedDict)
@@ -128,12 +130,16 @@ async def warm(state: Studio) -> None:
 
 def _ready_to_load(db: StudioDatabase) -> None:
     """What a clip's first load would pay once: the tables' footers checked, the model
-    arrays read, the query module imported (3.3 s of the first click under load)."""
+    arrays read, the modules it uses imported, the ARKit fit's matrix made (3 s of the
+    first click under load)."""
     import animegraph.apps.query  # noqa: F401
+    import animegraph.synthesis  # noqa: F401 (load_clip's to_world: 1 s of imports)
+    from animegraph.apps.studio.face import _arkit_solver
 
     for name in ("channels", "clips", "frames", "audio"):
         db.check_rows(name)
     db.arrays()
+    _arkit_solver()
 
 
 def _clips_key(query) -> tuple:
@@ -243,18 +249,20 @@ def clip_face_bytes(state: Studio, corpus: str, clip_id: str) -> bytes:
     from animegraph.apps.query import load_clip
 
     key = (state.db.version_dir.name, corpus, clip_id)
-    if (body := state.faces.get(key)) is not None:
-        state.faces.move_to_end(key)
-        return body
+    with state.faces_lock:
+        if (body := state.faces.get(key)) is not None:
+            state.faces.move_to_end(key)
+            return body
     clip = load_clip(state.db, corpus, clip_id, speech=False)
     blocks = state.face.blocks(clip.motion, clip.fps)
     phones = [{"phone": p["phone"], "start": p["start"], "end": p["end"]} for p in clip.phones]
     body = pack(blocks, state.face.mesh.n_vertices,
                 {"kind": "clip", "corpus": corpus, "clip_id": clip_id,
                  "duration": len(clip.motion) / clip.fps, "phones": phones})
-    state.faces[key] = body
-    while len(state.faces) > FACE_CACHE_CLIPS:
-        state.faces.popitem(last=False)
+    with state.faces_lock:
+        state.faces[key] = body
+        while len(state.faces) > FACE_CACHE_CLIPS:
+            state.faces.popitem(last=False)
     return body
 
 
