@@ -134,12 +134,12 @@ def _ready_to_load(db: StudioDatabase) -> None:
     first click under load)."""
     import animegraph.apps.query  # noqa: F401
     import animegraph.synthesis  # noqa: F401 (load_clip's to_world: 1 s of imports)
-    from animegraph.apps.studio.face import _arkit_solver
+    from animegraph.apps.studio.face import arkit_fit_matrix
 
     for name in ("channels", "clips", "frames", "audio"):
         db.check_rows(name)
     db.arrays()
-    _arkit_solver()
+    arkit_fit_matrix()
 
 
 def _clips_key(query) -> tuple:

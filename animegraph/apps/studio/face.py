@@ -116,13 +116,13 @@ def fit_arkit(displacement: np.ndarray) -> np.ndarray:
     the ridge least squares of :mod:`animegraph.live.arkit_map` over every vertex, clipped
     to [0, 1]. It drives a glTF head's ARKit morph targets from marker motion; like the
     Live Link mapping, it is a generic face's reading of the points, not a fit to the actor."""
-    solve = _arkit_solver()
+    solve = arkit_fit_matrix()
     n = len(displacement)
     return np.clip(displacement.reshape(n, -1) @ solve.T, 0.0, 1.0)
 
 
 @lru_cache(maxsize=1)
-def _arkit_solver() -> np.ndarray:
+def arkit_fit_matrix() -> np.ndarray:
     from animegraph.live.arkit_map import RIDGE
 
     basis = arkit_shapes().reshape(len(ARKIT_BLENDSHAPES), -1).T  # (3 * 468, 52)

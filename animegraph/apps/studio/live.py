@@ -22,6 +22,7 @@ from aiohttp import web
 
 from animegraph.apps.studio.api import in_thread, studio
 from animegraph.apps.studio.face import pack
+from db.errors import AnimeGraphError
 
 
 def _port(request: web.Request) -> int:
@@ -61,6 +62,10 @@ async def _relay(state, source, page: web.WebSocketResponse) -> None:
             blocks = await in_thread(state.face.blocks, values[None], fps)
             await page.send_bytes(pack(blocks, state.face.mesh.n_vertices,
                                        {"kind": "live", "index": index, "phones": []}))
+        except (AnimeGraphError, ValueError, ConnectionError) as exc:  # frame, or page gone
+            if not page.closed:
+                await page.send_json({"type": "error",
+                                      "text": f"live frame {index} not drawn: {exc}"})
         finally:
             busy = False
 

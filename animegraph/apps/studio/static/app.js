@@ -290,6 +290,7 @@ async function loadHead() {
     const buffer = await file.arrayBuffer();
     let head = null;
     for (const v of state.face.views) head = await v.loadHead(buffer.slice(0));
+    state.headBuffer = buffer;
     status.textContent = `${file.name}: ${head.matched} ARKit morph targets`;
     $("#head-drop").hidden = false;
     state.head = { name: file.name, matched: head.matched };
@@ -359,11 +360,16 @@ async function main() {
   if (face.error) showFaceError(new Error(face.error));
   else {
     const view = (id) => new FaceView($(id), face.mesh, face.shapes);
-    state.face = new Player($("#controls"), view("#view-a"), () => view("#view-b"));
+    state.face = new Player($("#controls"), view("#view-a"), () => {
+      const second = view("#view-b"); // made on first use: it wears the head chosen before
+      if (state.headBuffer) second.loadHead(state.headBuffer.slice(0)).catch(showFaceError);
+      return second;
+    });
     $("#compare-close").addEventListener("click", () => { state.face.pause(); state.face.setCompare(false); });
     $("#head-file").addEventListener("change", loadHead);
     $("#head-drop").addEventListener("click", () => {
       state.face.views.forEach((v) => v.dropHead());
+      state.headBuffer = null;
       $("#head-drop").hidden = true;
       $("#head-status").textContent = "";
       $("#head-file").value = "";

@@ -14,7 +14,7 @@ const PX_PER_S = 400; // phone strip: pixels per second
 const FRAME_LOG = 1200; // display frame timestamps kept (the page's fps)
 const TEXT_EVERY_MS = 100; // the clock and mouth readouts change at most this often
 // Teeth rows: [upper?, edge, root]: mm along the face's up axis from the lip's contour.
-const TEETH = [[true, -1.2, 6.0], [false, 1.2, -6.0]];
+const TEETH = [[true, -3.0, 6.0], [false, 2.4, -6.0]];
 // Tongue rows: [mm back, fraction of the cavity's depth back, mm down, narrowing].
 const TONGUE = [[4.5, 0, -3.0, 0.7], [0, 0.55, -1.0, 0.75], [0, 1.0, -4.0, 0.6]];
 
