@@ -643,3 +643,34 @@ def test_a_line_recorded_from_the_microphone_plays(studio, playwright, tiny_corp
         assert np.ptp(_mouth_over_time(page)) > 1.0
     finally:
         browser.close()
+
+
+def test_the_studio_checks_a_version_s_files_once(tiny_db, monkeypatch):
+    """The studio's database view hashes the model arrays and checks each table's
+    footers once (a version's files do not change), and gives the same arrays as a
+    fresh view, read-only."""
+    import db.store
+    from animegraph.apps.query import load_clip
+    from animegraph.apps.studio.api import StudioDatabase
+    from db.store import Database
+
+    hashed, footers = [], []
+    real_hash, real_check = db.store.file_sha256, Database.check_rows
+    monkeypatch.setattr(db.store, "file_sha256", lambda path: hashed.append(path)
+                        or real_hash(path))
+    monkeypatch.setattr(Database, "check_rows", lambda self, name: footers.append(name)
+                        or real_check(self, name))
+    view = StudioDatabase.open(tiny_db[0])
+    clips = view.table("clips", columns=["corpus", "clip_id"]).to_pylist()[:3]
+    load_clip(view, clips[0]["corpus"], clips[0]["clip_id"], speech=False)
+    first = list(footers)
+    assert len(hashed) == 1 and {"clips", "frames", "model_arrays"} <= set(first)
+    for clip in clips[1:]:  # the next clips check nothing again
+        load_clip(view, clip["corpus"], clip["clip_id"], speech=False)
+    assert len(hashed) == 1 and footers == first
+    fresh = Database.open(tiny_db[0]).arrays()
+    kept = view.arrays()
+    assert kept.keys() == fresh.keys()
+    for name, array in kept.items():
+        np.testing.assert_array_equal(array, fresh[name])
+        assert not array.flags.writeable
