@@ -264,13 +264,14 @@ export class FaceView {
       const cols = lip.length;
       for (let i = 0; i < cols; i++) {
         const s = 2 * i / (cols - 1) - 1; // -1 .. 1 across the mouth
-        const back = 2.5 + 7.0 * s * s;
+        const back = 2.5 + 10.0 * s * s; // an arch: the side teeth deeper in the mouth
+        const show = 1 - 0.8 * s * s; // and less of them below the lip
         const v = lip[i];
-        for (let k = 0; k < 3; k++) { // across and depth drawn in by 18 %, height kept
+        for (let k = 0; k < 3; k++) { // across and depth drawn in by 22 %, height kept
           const centre = ctr[k];
-          const at = k === 1 ? p[3 * v + 1] : centre + 0.82 * (p[3 * v + k] - centre);
+          const at = k === 1 ? p[3 * v + 1] : centre + 0.78 * (p[3 * v + k] - centre);
           const off = -back * forward.getComponent(k);
-          t[3 * i + k] = at + off + edge * up.getComponent(k);
+          t[3 * i + k] = at + off + show * edge * up.getComponent(k);
           t[3 * (cols + i) + k] = at + off + root * up.getComponent(k);
         }
       }
