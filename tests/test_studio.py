@@ -74,6 +74,19 @@ class Studio:
         return self.proc.returncode
 
 
+def unpack(body: bytes) -> tuple[dict, dict]:
+    """The page's binary animation message: its header and its float32 blocks by name."""
+    length = int.from_bytes(body[:4], "little")
+    header = json.loads(body[4:4 + length])
+    blocks, offset = {}, 4 + length
+    for name, shape in header["blocks"]:
+        size = int(np.prod(shape))
+        blocks[name] = np.frombuffer(body, dtype="<f4", count=size, offset=offset).reshape(shape)
+        offset += 4 * size
+    assert offset == len(body)
+    return header, blocks
+
+
 @pytest.fixture(scope="module")
 def studio(tiny_db, tmp_path_factory):
     server = Studio(tiny_db[0], tmp_path_factory.mktemp("studio"))
@@ -138,14 +151,22 @@ def test_clip_face_is_render_s_deformation(studio, tiny_db):
     corpus = db.table("clips", columns=["corpus"]).column("corpus")[0].as_py()
     status, body, _ = studio.get(f"/api/clip/face?corpus={corpus}&clip_id={clip_id}")
     assert status == 200
-    length = int.from_bytes(body[:4], "little")
-    header = json.loads(body[4:4 + length])
-    vertices = np.frombuffer(body[4 + length:], dtype="<f4").reshape(
-        header["n_frames"], header["n_vertices"], 3)
+    header, blocks = unpack(body)
     clip = load_clip(db, corpus, clip_id)
-    expected = animate(Motion(values=clip.motion, names=clip.names, fps=clip.fps),
-                       deformer_for(clip.names), fps=PAGE_FPS).vertices
-    np.testing.assert_allclose(vertices, expected, atol=1e-3)
+    animation = animate(Motion(values=clip.motion, names=clip.names, fps=clip.fps),
+                        deformer_for(clip.names), fps=PAGE_FPS)
+    np.testing.assert_allclose(blocks["vertices"], animation.vertices, atol=1e-3)
+    # The ARKit weights fitted for a glTF head: the shapes they weigh give the mesh's
+    # motion better than the rest pose does (its jaw and lips, at least).
+    from animegraph.face.arkit import arkit_shapes
+
+    weights = blocks["arkit"]
+    assert weights.shape == (header["n_frames"], 52) and 0 <= weights.min() <= weights.max() <= 1
+    moved = animation.local - animation.mesh.vertices
+    fitted = np.tensordot(weights, arkit_shapes(), axes=1)
+    assert np.linalg.norm(moved - fitted) < 0.8 * np.linalg.norm(moved)
+    # Asked again, the answer comes from the studio's cache: the same bytes.
+    assert studio.get(f"/api/clip/face?corpus={corpus}&clip_id={clip_id}")[1] == body
     assert [p["phone"] for p in header["phones"]] == [p["phone"] for p in clip.phones]
     status, wav, headers = studio.get(f"/api/clip/audio?corpus={corpus}&clip_id={clip_id}")
     assert status == 200 and wav[:4] == b"RIFF" and headers["Content-Type"] == "audio/wav"
@@ -231,6 +252,18 @@ def test_page_overview_and_clip_table(page):
     wait_until(page, f"window.studio.clipsLoaded > {loads}")
 
 
+#: The phone strip's labels that spill out of their phone, and phones that overlap the next.
+PHONE_STRIP_FAULTS = """(() => {
+  const spans = [...document.querySelectorAll('#view-a .phone')];
+  const faults = spans.filter((s) => s.scrollWidth > s.clientWidth).map((s) => s.title);
+  const boxes = spans.map((s) => [s.getBoundingClientRect(), s.title])
+    .sort((a, b) => a[0].left - b[0].left);
+  for (let i = 1; i < boxes.length; i++) {
+    if (boxes[i][0].left < boxes[i - 1][0].right - 0.5) faults.push(boxes[i][1]);
+  }
+  return faults; })()"""
+
+
 def _mouth_over_time(page, n: int = 12) -> list[float]:
     values = []
     for _ in range(n):
@@ -247,13 +280,128 @@ def test_clip_plays_on_the_face(page, tmp_path_factory):
     assert np.ptp(mouth) > 1.0, mouth  # millimetres: the lips move while it plays
     assert page.evaluate("window.studio.face.frameTimes.length") > 3
     assert page.locator("[data-role=phones] .phone").count() > 5
+    # The phone strip: no label spills out of its phone, no phone overlaps the next.
+    assert page.evaluate(PHONE_STRIP_FAULTS) == [], page.inner_text("#view-a .phones")
     wait_until(page, "!window.studio.face.playing")
     page.evaluate("window.studio.face.seek(window.studio.face.duration() / 2)")
     shot = tmp_path_factory.mktemp("studio-artefacts") / "face.png"
-    page.locator(".canvas-wrap").screenshot(path=str(shot))
+    page.locator("#view-a .canvas-wrap").screenshot(path=str(shot))
     assert shot.stat().st_size > 10_000
     # Kept for a look: pytest's temporary folder (printed with -rA).
     print(f"face screenshot: {shot}")
+
+
+def _play_row(page, selector: str) -> None:
+    page.click("nav button[data-tab=clips]")
+    page.evaluate("window.studio.lastPlay = null")
+    page.click(selector)
+    wait_until(page, "window.studio.lastPlay && window.studio.lastPlay.started")
+
+
+def _over_time(page, expression: str, n: int = 12) -> np.ndarray:
+    values = []
+    for _ in range(n):
+        values.append(page.evaluate(expression))
+        page.wait_for_timeout(120)
+    return np.array(values)
+
+
+def test_the_mouth_inside_moves_with_the_jaw(page):
+    """Teeth, tongue and a dark cavity behind the lips: the lower teeth rise and fall
+    with the lower lip while a clip plays, and stay below the upper teeth's roots."""
+    _play_row(page, "#clip-table tbody tr:nth-child(3)")
+    view = "window.studio.face.views[0]"
+    teeth = _over_time(page, f"[{view}.lowerTeethY, {view}.mouth, "
+                             f"{view}.teeth[0].attributes.position.array[3 * (11 + 5) + 1]]")
+    lower, mouth, upper_root = teeth.T
+    assert np.ptp(lower) > 1.0 and np.ptp(mouth) > 1.0, teeth
+    assert np.all(lower < upper_root)
+    wait_until(page, "!window.studio.face.playing")
+
+
+def test_two_takes_play_side_by_side(page):
+    """Clip B (its row's B button) plays in a second view beside clip A, both from the
+    start on one clock: both mouths move."""
+    _play_row(page, "#clip-table tbody tr:nth-child(4)")
+    page.evaluate("window.studio.lastPlay = null")
+    page.click("#clip-table tbody tr:nth-child(9) .compare-b")
+    wait_until(page, "window.studio.lastPlay && window.studio.lastPlay.started")
+    assert page.is_visible("#view-b canvas") and page.is_visible("#view-a canvas")
+    ids = page.evaluate("window.studio.face.views.map(v => v.anim.header.clip_id)")
+    assert len(set(ids)) == 2
+    mouths = _over_time(page, "window.studio.face.views.map(v => v.mouth)")
+    assert np.ptp(mouths[:, 0]) > 1.0 and np.ptp(mouths[:, 1]) > 1.0, mouths
+    assert page.evaluate("window.studio.face.playing")
+    page.click("#compare-close")
+    assert page.is_hidden("#view-b")
+    assert not page.evaluate("window.studio.face.playing")
+
+
+def test_your_own_gltf_head_plays_its_arkit_morphs(page, tmp_path):
+    """A glTF head with ARKit-named morph targets, chosen in the page (read there, never
+    sent): the clip's ARKit weights drive its morph targets; a file that is not one is
+    refused in one line."""
+    from animegraph.face.arkit import arkit_animation
+    from animegraph.face.gltf import write_arkit_glb
+    from animegraph.motion.files import Motion
+    from ingest.formats.livelink import ARKIT_BLENDSHAPES
+
+    still = Motion(values=np.zeros((3, 52)), names=tuple(ARKIT_BLENDSHAPES), fps=30.0)
+    head = write_arkit_glb(arkit_animation(still), np.zeros((3, 52)), tmp_path / "head.glb")
+    page.set_input_files("#head-file", str(head))
+    wait_until(page, "window.studio.head")
+    assert page.inner_text("#head-status") == "head.glb: 52 ARKit morph targets"
+    _play_row(page, "#clip-table tbody tr:nth-child(2)")
+    head_js = "window.studio.face.views[0].head"
+    morphs = _over_time(page, f"[{head_js}.jawOpen, {head_js}.meshes[0][0]"
+                              ".morphTargetInfluences.reduce((a, b) => a + b, 0)]")
+    assert np.ptp(morphs[:, 0]) > 0.02 and np.ptp(morphs[:, 1]) > 0.02, morphs
+    assert not page.evaluate("window.studio.face.views[0].face.visible")
+    wait_until(page, "!window.studio.face.playing")
+    page.click("#head-drop")
+    assert page.evaluate("window.studio.face.views[0].face.visible")
+    (tmp_path / "notes.glb").write_bytes(b"not a head")
+    page.set_input_files("#head-file", str(tmp_path / "notes.glb"))
+    page.wait_for_selector("#head-status.error")
+    error = page.inner_text("#head-status")
+    assert error.startswith("not a glTF head") and "\n" not in error
+
+
+def test_the_live_tab_draws_the_live_command_s_frames(page, tiny_db):
+    """The live command's WebSocket server (its own class, on a free port) sends a clip's
+    frames as it would a live line; the page, through the studio, draws each: the mouth
+    moves, and the end of the stream is said."""
+    pytest.importorskip("websockets", reason="needs websockets (pip install -e '.[dev]')")
+    from animegraph.apps.query import load_clip
+    from animegraph.live.websocket import FrameServer
+    from db.store import Database
+
+    db = Database.open(tiny_db[0])
+    first = db.table("clips", columns=["corpus", "clip_id"]).to_pylist()[1]
+    clip = load_clip(db, first["corpus"], first["clip_id"], speech=False)
+    step = max(1, round(clip.fps / 30))
+    server = FrameServer(0, clip.names, clip.fps / step)
+    try:
+        page.click("nav button[data-tab=live]")
+        page.fill("#live-form [name=port]", str(server.port))
+        page.click("#live-form button[type=submit]")
+        wait_until(page, "/^live: /.test(document.querySelector('#live-status').textContent)")
+        mouths = []
+        for index, frame in enumerate(clip.motion[::step]):
+            server.send(index, frame)
+            page.wait_for_timeout(1000 / 30)
+            mouths.append(page.evaluate("window.studio.face.mouth"))
+        server.close(len(mouths))
+        wait_until(page, "window.studio.live.ended")
+    finally:
+        server.close()
+    assert page.evaluate("window.studio.live.frames") > 5
+    assert np.ptp(mouths) > 1.0, mouths
+    assert page.inner_text("#live-status").startswith("the live stream ended: ")
+    # Nothing listens on the port now: one line says so.
+    page.click("#live-form button[type=submit]")
+    wait_until(page, "window.studio.live.ended")
+    assert page.inner_text("#live-status").startswith("cannot read ws://127.0.0.1:")
 
 
 def test_sql_console(page):
@@ -288,6 +436,12 @@ def test_synthesized_line_plays(page, tiny_corpus, tmp_path_factory):
     wait_until(page, "window.studio.lastPlay.started")
     mouth = _mouth_over_time(page)
     assert np.ptp(mouth) > 1.0, mouth
+    assert page.evaluate(PHONE_STRIP_FAULTS) == []
+    # Beside it, the recorded clip the search took most of its phones from, in step.
+    nearest = page.evaluate("window.studio.nearest")
+    assert nearest and nearest["phones_from_it"] >= 1 and page.is_visible("#view-b canvas")
+    assert page.evaluate("window.studio.face.views[1].anim.header.clip_id") == \
+        nearest["clip_id"]
     names = page.locator("#synth-files a").all_inner_texts()
     assert {"speech.wav", "motion.c3d", "motion.csv", "motion.npz"} <= set(names)
     with page.expect_download() as download:
@@ -374,7 +528,7 @@ def test_uploads_are_bounded_and_checked(tiny_db, monkeypatch):
 
 
 @pytest.mark.shared
-def test_an_iphone_database_plays_its_arkit_shapes(tmp_path):
+def test_an_iphone_database_plays_its_arkit_shapes(tmp_path, playwright):
     """An ARKit database (a Live Link Face capture) is shown through the ARKit shapes on
     the canonical face, as ``render`` draws it."""
     from conftest import require_shared
@@ -382,6 +536,7 @@ def test_an_iphone_database_plays_its_arkit_shapes(tmp_path):
     from animegraph.apps.query import load_clip
     from animegraph.apps.studio.face import PAGE_FPS
     from animegraph.face.arkit import arkit_animation
+    from animegraph.face.mesh import canonical_mesh
     from animegraph.motion.files import Motion
     from db.store import Database
     from ingest.formats.wav import read_wav, write_wav
@@ -401,21 +556,46 @@ def test_an_iphone_database_plays_its_arkit_shapes(tmp_path):
     try:
         status, body, _ = server.get("/api/mesh")
         assert status == 200 and json.loads(body)["n_vertices"] == 468
+        assert json.loads(body)["arkit"] is True
+        status, shapes_body, _ = server.get("/api/mesh/arkit")
+        assert status == 200 and len(shapes_body) == 52 * 468 * 3 * 4
         db = Database.open(tmp_path / "db")
         corpus_name = db.table("clips", columns=["corpus"]).column("corpus")[0].as_py()
         status, body, _ = server.get(f"/api/clip/face?corpus={corpus_name}&clip_id=take")
         assert status == 200, body
     finally:
         assert server.stop() == 0
-    length = int.from_bytes(body[:4], "little")
-    header = json.loads(body[4:4 + length])
-    vertices = np.frombuffer(body[4 + length:], dtype="<f4").reshape(
-        header["n_frames"], header["n_vertices"], 3)
+    on_page = Studio(tmp_path / "db", tmp_path)
+    header, blocks = unpack(body)
+    assert "vertices" not in blocks  # the page morphs the mesh by the weights itself
     clip = load_clip(db, corpus_name, "take")
     expected = arkit_animation(Motion(values=clip.motion, names=clip.names, fps=clip.fps),
                                fps=PAGE_FPS).vertices
-    np.testing.assert_allclose(vertices, expected, atol=1e-3)
-    assert np.ptp(vertices[:, 14, 1]) > 1.0  # the lower lip moves (mm)
+    # What the page computes (face.js, FaceView.apply): rest + weights @ shapes, then
+    # the head's rotation and translation.
+    shapes = np.frombuffer(shapes_body, dtype="<f4").reshape(52, 468, 3)
+    local = canonical_mesh().vertices[None] + np.tensordot(blocks["arkit"], shapes, axes=1)
+    rotation = blocks["rigid"][:, :9].reshape(-1, 3, 3)
+    world = np.einsum("nij,nvj->nvi", rotation, local) + blocks["rigid"][:, None, 9:]
+    np.testing.assert_allclose(world, expected, atol=2e-3)
+    assert np.ptp(world[:, 14, 1]) > 1.0  # the lower lip moves (mm)
+    # And in the browser: the frame on screen is that one.
+    browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+    try:
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(on_page.url)
+        wait_until(page, "document.body.dataset.ready === '1'")
+        page.click("nav button[data-tab=clips]")
+        page.click("#clip-table tbody tr:nth-child(1)")
+        wait_until(page, "window.studio.lastPlay && window.studio.lastPlay.started")
+        page.evaluate("window.studio.face.pause()")
+        k = header["n_frames"] // 2
+        drawn = page.evaluate(f"window.studio.face.seek({k} / {header['fps']}), "
+                              "Array.from(window.studio.face.views[0].positions.array)")
+    finally:
+        browser.close()
+        on_page.stop()
+    np.testing.assert_allclose(np.reshape(drawn, (468, 3)), expected[k], atol=2e-3)
 
 
 def test_it_opens_the_browser_named_by_BROWSER(tiny_db, tmp_path):  # noqa: N802
@@ -463,3 +643,34 @@ def test_a_line_recorded_from_the_microphone_plays(studio, playwright, tiny_corp
         assert np.ptp(_mouth_over_time(page)) > 1.0
     finally:
         browser.close()
+
+
+def test_the_studio_checks_a_version_s_files_once(tiny_db, monkeypatch):
+    """The studio's database view hashes the model arrays and checks each table's
+    footers once (a version's files do not change), and gives the same arrays as a
+    fresh view, read-only."""
+    import db.store
+    from animegraph.apps.query import load_clip
+    from animegraph.apps.studio.api import StudioDatabase
+    from db.store import Database
+
+    hashed, footers = [], []
+    real_hash, real_check = db.store.file_sha256, Database.check_rows
+    monkeypatch.setattr(db.store, "file_sha256", lambda path: hashed.append(path)
+                        or real_hash(path))
+    monkeypatch.setattr(Database, "check_rows", lambda self, name: footers.append(name)
+                        or real_check(self, name))
+    view = StudioDatabase.open(tiny_db[0])
+    clips = view.table("clips", columns=["corpus", "clip_id"]).to_pylist()[:3]
+    load_clip(view, clips[0]["corpus"], clips[0]["clip_id"], speech=False)
+    first = list(footers)
+    assert len(hashed) == 1 and {"clips", "frames", "model_arrays"} <= set(first)
+    for clip in clips[1:]:  # the next clips check nothing again
+        load_clip(view, clip["corpus"], clip["clip_id"], speech=False)
+    assert len(hashed) == 1 and footers == first
+    fresh = Database.open(tiny_db[0]).arrays()
+    kept = view.arrays()
+    assert kept.keys() == fresh.keys()
+    for name, array in kept.items():
+        np.testing.assert_array_equal(array, fresh[name])
+        assert not array.flags.writeable

@@ -704,7 +704,9 @@ def _add_studio(sub) -> None:
         "studio", help="browse a database in the browser: clips on a 3D face, SQL, synthesis",
         description="Start a local web app on the database: an overview (what 'info' "
         "shows, with plots), the clips ('query' filters) playing on a 3D face with their "
-        "speech, a SQL console (the 'sql' sandbox) and synthesis of an uploaded recording. "
+        "speech (two side by side), a SQL console (the 'sql' sandbox), synthesis of an "
+        "uploaded recording beside its nearest recorded clip, and the face driven by "
+        "'animegraph live --websocket'. "
         "It listens on 127.0.0.1 only and prints its URL, which carries a random token "
         "every request needs; Ctrl-C stops it.",
     )

@@ -8,8 +8,9 @@ It sits in :mod:`animegraph.apps` (what users run): it serves what the commands 
 * :mod:`.api` -- overview, clips, a clip's face and speech, SQL (the command line's own
   functions behind each);
 * :mod:`.synth` -- a recording uploaded, synthesized, its outputs downloaded;
-* :mod:`.face` -- motion carried onto the canonical face as ``render`` does, packed for
-  the page;
-* ``static/`` -- the page: plain ES modules, no build step, three.js shipped in
-  ``static/vendor`` with its licence.
+* :mod:`.live` -- ``animegraph live``'s WebSocket frames relayed to the page as faces;
+* :mod:`.face` -- motion carried onto the canonical face as ``render`` does (and ARKit
+  weights for the page's morph targets), packed for the page;
+* ``static/`` -- the page: plain ES modules, three.js shipped in ``static/vendor`` with
+  its licence (one module minified from npm's r187 by ``scripts/build_studio_three.sh``).
 """

@@ -15,13 +15,15 @@ from __future__ import annotations
 import asyncio
 import io
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
 from aiohttp import web
 
-from animegraph.apps.studio.face import FaceBuilder, mesh_json, pack
+from animegraph.apps.studio.face import FaceBuilder, arkit_shapes_bytes, mesh_json, pack
 from db.errors import ParameterError
 from db.store import Database
 
@@ -31,6 +33,41 @@ SQL_PAGE_ROWS = 5000
 SQL_TIMEOUT_S = 30.0
 #: Most clips the table lists at once.
 MAX_CLIP_ROWS = 5000
+#: Clip animations kept in memory, the most recently asked for (a few MB each at most).
+FACE_CACHE_CLIPS = 64
+
+
+@dataclass(frozen=True)
+class StudioDatabase(Database):
+    """The studio's view of one database version: its model arrays read and checked, and
+    each table's footers checked (:meth:`db.store.Database.check_rows`), once.
+    :class:`db.store.Database` does both at every read: hashing the arrays and reading
+    the frames' footers were 0.4 s and 0.1 s of every clip the studio loaded from the
+    demo database (0.5 s in all); a version's files are written once."""
+
+    def check_rows(self, name: str) -> None:
+        checked = self.__dict__.setdefault("_checked", set())  # frozen: a set, grown here
+        if name not in checked:
+            super().check_rows(name)
+            checked.add(name)
+
+    @classmethod
+    def open(cls, path) -> StudioDatabase:
+        db = Database.open(path)
+        return cls(root=db.root, version_dir=db.version_dir, manifest=db.manifest)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        cached = self.__dict__.get("_arrays")
+        if cached is None:
+            cached = super().arrays()
+            object.__setattr__(self, "_arrays", cached)  # frozen: set once, here
+        return {name: _read_only(array) for name, array in cached.items()}
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    view = array.view()
+    view.flags.writeable = False  # shared by every call: a caller may not change it
+    return view
 
 
 @dataclass
@@ -43,6 +80,70 @@ class Studio:
     synth_dir: object = None  # the TemporaryDirectory of uploads and outputs
     model: object = None  # the synthesis Model, loaded on first use
     lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    #: Packed clip animations by (database version, corpus, clip id), oldest first. The
+    #: database is a read-only view of one version, so a key never goes stale.
+    faces: OrderedDict = field(default_factory=OrderedDict)
+    faces_lock: threading.Lock = field(default_factory=threading.Lock)  # worker threads
+    #: JSON answers that depend only on the database version (the overview, clip lists
+    #: by their query), as futures: a request that comes while one is computed waits on it.
+    answers: OrderedDict = field(default_factory=OrderedDict)
+
+
+#: Clip lists kept by query (the overview is kept too).
+ANSWERS_KEPT = 32
+#: The clip list the page asks for first (app.js: the table's rows, no filter).
+FIRST_CLIPS = {"limit": "500"}
+
+
+async def remembered(state: Studio, key: tuple, func, *args) -> bytes:
+    """``func(*args)`` as JSON bytes, computed in a worker thread once per ``key``; a
+    failure is not kept (the next request tries again)."""
+    future = state.answers.get(key)
+    if future is None:
+        future = asyncio.ensure_future(in_thread(lambda: json_bytes(func(*args))))
+        state.answers[key] = future
+        while len(state.answers) > ANSWERS_KEPT:
+            state.answers.popitem(last=False)
+        future.add_done_callback(lambda f: f.cancelled() or f.exception() is None
+                                 or state.answers.pop(key, None))
+    return await asyncio.shield(future)
+
+
+def json_bytes(value) -> bytes:
+    import json
+
+    return json.dumps(value, allow_nan=False).encode()
+
+
+async def warm(state: Studio) -> None:
+    """What the first page asks for, made when the server starts (the overview, the
+    first clip list, the mesh's deformer), so that the page finds it ready."""
+    try:
+        await asyncio.gather(remembered(state, ("overview",), _overview, state.db),
+                             remembered(state, _clips_key(FIRST_CLIPS), _clips, state.db,
+                                        FIRST_CLIPS),
+                             in_thread(lambda: state.face.mesh),
+                             in_thread(_ready_to_load, state.db))
+    except Exception:  # noqa: BLE001 (a request shows the error; warming is best effort)
+        pass
+
+
+def _ready_to_load(db: StudioDatabase) -> None:
+    """What a clip's first load would pay once: the tables' footers checked, the model
+    arrays read, the modules it uses imported, the ARKit fit's matrix made (3 s of the
+    first click under load)."""
+    import animegraph.apps.query  # noqa: F401
+    import animegraph.synthesis  # noqa: F401 (load_clip's to_world: 1 s of imports)
+    from animegraph.apps.studio.face import arkit_fit_matrix
+
+    for name in ("channels", "clips", "frames", "audio"):
+        db.check_rows(name)
+    db.arrays()
+    arkit_fit_matrix()
+
+
+def _clips_key(query) -> tuple:
+    return ("clips", *sorted((k, v) for k, v in query.items() if k != "token"))
 
 
 STUDIO = web.AppKey("studio", Studio)
@@ -90,7 +191,9 @@ def _overview(db: Database) -> dict:
 
 
 async def overview(request: web.Request) -> web.Response:
-    return web.json_response(await in_thread(_overview, studio(request).db))
+    state = studio(request)
+    return web.Response(body=await remembered(state, ("overview",), _overview, state.db),
+                        content_type="application/json")
 
 
 def _clips(db: Database, query) -> dict:
@@ -115,7 +218,9 @@ def _clips(db: Database, query) -> dict:
 
 
 async def clips(request: web.Request) -> web.Response:
-    return web.json_response(await in_thread(_clips, studio(request).db, request.query))
+    state, query = studio(request), dict(request.query)
+    return web.Response(body=await remembered(state, _clips_key(query), _clips, state.db,
+                                              query), content_type="application/json")
 
 
 def _clip_key(request: web.Request) -> tuple[str, str]:
@@ -126,21 +231,43 @@ def _clip_key(request: web.Request) -> tuple[str, str]:
 
 
 async def mesh(request: web.Request) -> web.Response:
-    return web.json_response(await in_thread(lambda: mesh_json(studio(request).face.mesh)))
+    face = studio(request).face
+    return web.json_response(await in_thread(lambda: mesh_json(face.mesh, face.arkit)))
 
 
-def _clip_face(state: Studio, corpus: str, clip_id: str) -> bytes:
+async def arkit_shapes(request: web.Request) -> web.Response:
+    """The canonical mesh's 52 ARKit shapes, float32 (52, 468, 3): an iPhone database's
+    morph targets, applied by the page."""
+    return web.Response(body=await in_thread(arkit_shapes_bytes),
+                        content_type="application/octet-stream",
+                        headers={"Cache-Control": "max-age=3600"})
+
+
+def clip_face_bytes(state: Studio, corpus: str, clip_id: str) -> bytes:
+    """A clip's page animation (:func:`animegraph.apps.studio.face.pack`), from the cache
+    when it was asked for before."""
     from animegraph.apps.query import load_clip
 
+    key = (state.db.version_dir.name, corpus, clip_id)
+    with state.faces_lock:
+        if (body := state.faces.get(key)) is not None:
+            state.faces.move_to_end(key)
+            return body
     clip = load_clip(state.db, corpus, clip_id, speech=False)
-    animation = state.face.animation(clip.motion, clip.fps)
+    blocks = state.face.blocks(clip.motion, clip.fps)
     phones = [{"phone": p["phone"], "start": p["start"], "end": p["end"]} for p in clip.phones]
-    return pack(animation, {"kind": "clip", "corpus": corpus, "clip_id": clip_id,
-                            "duration": len(clip.motion) / clip.fps, "phones": phones})
+    body = pack(blocks, state.face.mesh.n_vertices,
+                {"kind": "clip", "corpus": corpus, "clip_id": clip_id,
+                 "duration": len(clip.motion) / clip.fps, "phones": phones})
+    with state.faces_lock:
+        state.faces[key] = body
+        while len(state.faces) > FACE_CACHE_CLIPS:
+            state.faces.popitem(last=False)
+    return body
 
 
 async def clip_face(request: web.Request) -> web.Response:
-    body = await in_thread(_clip_face, studio(request), *_clip_key(request))
+    body = await in_thread(clip_face_bytes, studio(request), *_clip_key(request))
     return web.Response(body=body, content_type="application/octet-stream")
 
 

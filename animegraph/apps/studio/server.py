@@ -10,6 +10,8 @@ Safe by default:
 * no path from the browser reaches the file system: the page's files are a fixed list
   made when the server starts (:func:`static_files`), clips are named by their ids in
   the database, outputs by random ids and their own list of files;
+* the live tab names a port, never a host: the studio reads WebSocket frames from
+  127.0.0.1 only (:mod:`animegraph.apps.studio.live`);
 * SQL runs only in :mod:`db.sql`'s sandbox; uploads are bounded in size and go to the
   studio's own temporary folder, deleted when it stops;
 * every error is one line: JSON ``{"error": ...}`` for the API, a small page otherwise;
@@ -34,10 +36,9 @@ from pathlib import Path
 
 from aiohttp import web
 
-from animegraph.apps.studio import api, synth
+from animegraph.apps.studio import api, live, synth
 from animegraph.apps.studio.face import FaceBuilder
 from db.errors import AnimeGraphError
-from db.store import Database
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +47,7 @@ COOKIE = "animegraph_studio_token"
 TOKEN_KEY = web.AppKey("token", str)
 STATIC_KEY = web.AppKey("static", dict)
 POLICY_KEY = web.AppKey("policy", str)
+WARM_KEY = web.AppKey("warm", asyncio.Future)
 #: Content types of the page's files, by suffix (ES modules must be served as JavaScript).
 CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css",
                  ".txt": "text/plain", ".md": "text/plain", ".svg": "image/svg+xml"}
@@ -162,7 +164,7 @@ def make_app(db_path: Path, token: str) -> web.Application:
     DataError
         If ``db_path`` is not a readable database.
     """
-    db = Database.open(db_path)
+    db = api.StudioDatabase.open(db_path)
     names = tuple(ch["name"] for ch in db.table("channels", columns=["name"]).to_pylist())
     app = web.Application(middlewares=[headers, errors, token_guard],
                           client_max_size=synth.MAX_UPLOAD_BYTES + (1 << 20))
@@ -176,17 +178,23 @@ def make_app(db_path: Path, token: str) -> web.Application:
     async def cleanup(app: web.Application) -> None:
         state.synth_dir.cleanup()
 
+    async def start_warming(app: web.Application) -> None:
+        app[WARM_KEY] = asyncio.ensure_future(api.warm(state))
+
+    app.on_startup.append(start_warming)
     app.on_cleanup.append(cleanup)
     app.router.add_get("/", index)
     app.router.add_get("/static/{name:.+}", static)
     app.router.add_get("/api/overview", api.overview)
     app.router.add_get("/api/clips", api.clips)
     app.router.add_get("/api/mesh", api.mesh)
+    app.router.add_get("/api/mesh/arkit", api.arkit_shapes)
     app.router.add_get("/api/clip/face", api.clip_face)
     app.router.add_get("/api/clip/audio", api.clip_audio)
     app.router.add_post("/api/sql", api.sql)
     app.router.add_post("/api/sql.csv", api.sql_csv)
     app.router.add_post("/api/synth", synth.synth)
+    app.router.add_get("/api/live", live.live)
     app.router.add_get("/api/outputs/{out_id}/face", synth.output_face)
     app.router.add_get("/api/outputs/{out_id}/files/{name}", synth.output_file)
     return app

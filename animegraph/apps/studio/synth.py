@@ -100,13 +100,33 @@ def _synthesize(state: Studio, folder: Path, audio_path: Path, fields: dict) -> 
         path = folder / f"motion{suffix}"
         write_motion(out, model, path)
         files[path.name] = path
-    animation = state.face.animation(out.motion, out.fps)
     phones = [{"phone": p.phone, "start": p.start, "end": p.end} for p in out.phones]
     header = {"kind": "synthesis", "duration": len(audio) / rate, "phones": phones,
               "segmentation": out.segmentation, "warnings": list(out.warnings),
               "emotion": str(out.emotion.target) if out.emotion.target else None,
-              "method": method}
-    return Output(files=files, face=pack(animation, header))
+              "method": method, "nearest": nearest_clip(state, out.explain)}
+    return Output(files=files, face=pack(state.face.blocks(out.motion, out.fps),
+                                         state.face.mesh.n_vertices, header))
+
+
+def nearest_clip(state: Studio, explain: list[dict]) -> dict | None:
+    """The recorded clip nearest the line by the search: the one whose animes the search
+    picked for most of its phones (silences left out; ties to the earliest picked). Its
+    corpus is looked up by the clip id (the first, if two corpora share the id)."""
+    import pyarrow.compute as pc
+
+    picks = [row["clip_id"] for row in explain if row["phone"] != "SIL"] or \
+        [row["clip_id"] for row in explain]
+    if not picks:
+        return None
+    counts = {c: picks.count(c) for c in dict.fromkeys(picks)}
+    clip_id = max(counts, key=counts.get)
+    rows = state.db.table("clips", columns=["corpus", "emotion"],
+                          filter=pc.field("clip_id") == clip_id).to_pylist()
+    if not rows:
+        return None
+    return {"corpus": rows[0]["corpus"], "clip_id": clip_id, "emotion": rows[0]["emotion"],
+            "phones_from_it": counts[clip_id], "phones": len(picks)}
 
 
 async def synth(request: web.Request) -> web.Response:

@@ -2,7 +2,7 @@
 // window.studio exposes the state the tests and scripts/bench_studio.py read.
 
 import { barChart, histogram } from "./charts.js";
-import { FaceView, unpack } from "./face.js";
+import { FaceView, Player, unpack } from "./face.js";
 
 const $ = (sel) => document.querySelector(sel);
 const CLIP_ROWS = 500; // rows the clip table asks for
@@ -25,10 +25,11 @@ function showTab(name) {
   document.querySelectorAll(".panel").forEach((p) => p.classList.toggle("active", p.id === `tab-${name}`));
 }
 
-function fillTable(table, data, onRow, onHover) {
+function fillTable(table, data, onRow, onHover, extra) {
   const head = document.createElement("thead");
   const tr = document.createElement("tr");
   for (const c of data.columns) { const th = document.createElement("th"); th.textContent = c; tr.append(th); }
+  if (extra) tr.append(document.createElement("th"));
   head.append(tr);
   const body = document.createElement("tbody");
   for (const row of data.rows) {
@@ -38,6 +39,7 @@ function fillTable(table, data, onRow, onHover) {
       td.textContent = cell === null ? "" : typeof cell === "object" ? JSON.stringify(cell) : String(cell);
       r.append(td);
     }
+    if (extra) { const td = document.createElement("td"); td.append(extra(row, r)); r.append(td); }
     if (onRow) r.addEventListener("click", () => onRow(row, r));
     if (onHover) r.addEventListener("pointerenter", () => onHover(row));
     body.append(r);
@@ -98,17 +100,21 @@ function clipFace(query) {
   return faces.get(query);
 }
 
-async function playClip(row, tr, columns) {
+// Play a clip in view `slot` (0; 1 is the side-by-side view, started with the first
+// from the beginning, on one clock).
+async function playClip(row, tr, columns, slot = 0) {
   const clicked = performance.now();
-  document.querySelectorAll("#clip-table tr.playing").forEach((r) => r.classList.remove("playing"));
-  tr.classList.add("playing");
+  if (slot === 0) {
+    document.querySelectorAll("#clip-table tr.playing").forEach((r) => r.classList.remove("playing"));
+    tr.classList.add("playing");
+  }
   const query = clipQuery(row, columns);
-  const key = { clip_id: row[columns.indexOf("clip_id")] };
+  const clipId = row[columns.indexOf("clip_id")];
   const anim = await clipFace(query);
-  state.lastPlay = { clicked, fetched: performance.now(), started: null, clip: key.clip_id };
+  state.lastPlay = { clicked, fetched: performance.now(), started: null, clip: clipId, slot };
   state.face.onPlayStarted = (t) => { state.lastPlay.started = t; };
   const emotion = row[columns.indexOf("emotion")];
-  await state.face.show(anim, `api/clip/audio?${query}`, `${key.clip_id} (${emotion})`);
+  state.face.show(slot, anim, `api/clip/audio?${query}`, `${slot ? "B: " : ""}${clipId} (${emotion})`);
 }
 
 async function searchClips(event) {
@@ -120,8 +126,20 @@ async function searchClips(event) {
   status.className = "status";
   try {
     const data = await (await api(`api/clips?${query}`)).json();
+    const compare = (row, tr) => {
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = "compare-b";
+      button.textContent = "B";
+      button.title = "play beside the clip in the first view (side by side, in step)";
+      button.addEventListener("click", (e) => {
+        e.stopPropagation();
+        playClip(row, tr, data.columns, 1).catch(showFaceError);
+      });
+      return button;
+    };
     fillTable($("#clip-table"), data, (row, tr) => playClip(row, tr, data.columns).catch(showFaceError),
-              (row) => clipFace(clipQuery(row, data.columns)).catch(() => {}));
+              (row) => clipFace(clipQuery(row, data.columns)).catch(() => {}), compare);
     const n = data.rows.length;
     status.textContent = n >= CLIP_ROWS ? `the first ${n} clips (narrow the filters to see others)`
       : `${n} clip${n === 1 ? "" : "s"}`;
@@ -134,7 +152,7 @@ async function searchClips(event) {
 }
 
 function showFaceError(e) {
-  document.querySelector("[data-role=title]").textContent = `error: ${e.message}`;
+  document.querySelector("#view-a [data-role=title]").textContent = `error: ${e.message}`;
 }
 
 async function runSql(event) {
@@ -237,10 +255,22 @@ async function synthesize(event) {
       li.append(a);
       files.append(li);
     }
+    // Beside it, the recorded clip nearest by the search: the one it took most phones from.
+    const near = h.nearest;
+    let nearAnim = null;
+    if (near) {
+      const query = new URLSearchParams({ corpus: near.corpus, clip_id: near.clip_id }).toString();
+      nearAnim = await clipFace(query).catch(() => null);
+      if (nearAnim) {
+        state.face.show(1, nearAnim, `api/clip/audio?${query}`, `B: nearest recorded clip ` +
+          `${near.clip_id} (${near.emotion}; ${near.phones_from_it} of ${near.phones} phones from it)`, false);
+      }
+    }
     state.lastPlay = { clicked: performance.now(), started: null, clip: made.id };
     state.face.onPlayStarted = (t) => { state.lastPlay.started = t; };
-    await state.face.show(anim, `${base}/files/speech.wav?inline=1`, "synthesized line");
+    state.face.show(0, anim, `${base}/files/speech.wav?inline=1`, "synthesized line");
     state.synthesized = made.id;
+    state.nearest = nearAnim ? near : null;
   } catch (e) {
     status.textContent = "";
     error.textContent = e.message;
@@ -248,6 +278,59 @@ async function synthesize(event) {
   } finally {
     button.disabled = false;
   }
+}
+
+// The user's own head, read from the chosen file in the page (it never goes to the server).
+async function loadHead() {
+  const file = $("#head-file").files[0];
+  const status = $("#head-status");
+  if (!file) return;
+  status.className = "hint";
+  try {
+    const buffer = await file.arrayBuffer();
+    let head = null;
+    for (const v of state.face.views) head = await v.loadHead(buffer.slice(0));
+    state.headBuffer = buffer;
+    status.textContent = `${file.name}: ${head.matched} ARKit morph targets`;
+    $("#head-drop").hidden = false;
+    state.head = { name: file.name, matched: head.matched };
+  } catch (e) {
+    status.className = "error";
+    status.textContent = e.message;
+  }
+}
+
+// The live tab: the studio relays `animegraph live --websocket PORT` as face frames.
+let liveSocket = null;
+
+function connectLive(event) {
+  event.preventDefault();
+  if (liveSocket) liveSocket.close();
+  const port = new FormData($("#live-form")).get("port");
+  const status = $("#live-status");
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  const socket = new WebSocket(`${scheme}://${location.host}/api/live?port=${encodeURIComponent(port)}`);
+  socket.binaryType = "arraybuffer";
+  liveSocket = socket;
+  state.live = { frames: 0, status: "connecting", ended: false };
+  status.className = "status";
+  status.textContent = "connecting ...";
+  $("#live-stop").disabled = false;
+  socket.onmessage = (message) => {
+    if (typeof message.data === "string") {
+      const data = JSON.parse(message.data);
+      status.className = data.type === "error" ? "error" : "status";
+      status.textContent = data.text;
+      state.live.status = data.type;
+      return;
+    }
+    state.face.showLive(unpack(message.data));
+    state.live.frames += 1;
+  };
+  socket.onclose = () => {
+    state.live.ended = true;
+    if (liveSocket === socket) { liveSocket = null; $("#live-stop").disabled = true; }
+  };
 }
 
 async function main() {
@@ -259,18 +342,39 @@ async function main() {
   });
   $("#sql-csv").addEventListener("click", exportCsv);
   $("#synth-form").addEventListener("submit", synthesize);
+  $("#live-form").addEventListener("submit", connectLive);
+  $("#live-stop").addEventListener("click", () => { if (liveSocket) liveSocket.close(); });
   $("#record").addEventListener("click", toggleRecording);
   // A file chosen after a recording is what is sent.
   $("#synth-form [name=audio]").addEventListener("change", () => { recorded = null; });
   // The three answers are asked for at once; the clip table fills while the face is built.
   const clipsShown = searchClips();
-  const [info, mesh] = await Promise.all([
-    api("api/overview").then((r) => r.json()),
-    api("api/mesh").then((r) => r.json()).catch((e) => ({ error: e.message })),
-  ]);
+  const meshLoaded = api("api/mesh").then((r) => r.json()).then(async (mesh) => {
+    // An iPhone database's clips are ARKit weights: the page morphs the mesh by its shapes.
+    const shapes = mesh.arkit ? new Float32Array(await (await api("api/mesh/arkit")).arrayBuffer())
+      : null;
+    return { mesh, shapes };
+  }).catch((e) => ({ error: e.message }));
+  const [info, face] = await Promise.all([api("api/overview").then((r) => r.json()), meshLoaded]);
   overview(info);
-  if (mesh.error) showFaceError(new Error(mesh.error));
-  else state.face = new FaceView($("#viewer"), mesh);
+  if (face.error) showFaceError(new Error(face.error));
+  else {
+    const view = (id) => new FaceView($(id), face.mesh, face.shapes);
+    state.face = new Player($("#controls"), view("#view-a"), () => {
+      const second = view("#view-b"); // made on first use: it wears the head chosen before
+      if (state.headBuffer) second.loadHead(state.headBuffer.slice(0)).catch(showFaceError);
+      return second;
+    });
+    $("#compare-close").addEventListener("click", () => { state.face.pause(); state.face.setCompare(false); });
+    $("#head-file").addEventListener("change", loadHead);
+    $("#head-drop").addEventListener("click", () => {
+      state.face.views.forEach((v) => v.dropHead());
+      state.headBuffer = null;
+      $("#head-drop").hidden = true;
+      $("#head-status").textContent = "";
+      $("#head-file").value = "";
+    });
+  }
   await clipsShown;
   state.readyAt = performance.now(); // ms since navigation began (scripts/bench_studio.py)
   state.ready = true;
