@@ -131,21 +131,11 @@ def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
         No classifier in the database (:func:`no_classifier`); audio too short (< 0.25 s),
         silent, not speech, or non-finite.
     """
-    from ingest.emotion.audio import check_speech
-    from ingest.emotion.timeline import MAX_UTTERANCE_S, mean_probabilities
+    from ingest.emotion.timeline import utterance_probabilities
 
     if model.classifier is None:
         raise DataError(no_classifier(model, auto=auto))
-    if np.shape(audio)[0] / float(sample_rate) > MAX_UTTERANCE_S:
-        from ingest.emotion.timeline import WINDOW_S
-
-        # The mean needs no overlap: windows side by side, a third of the work.
-        return mean_probabilities(classify_timeline(model, audio, sample_rate, auto=auto,
-                                                    hop=WINDOW_S))
-    check_speech(audio, sample_rate)
-    proba = model.classifier.predict_proba([(audio, sample_rate)])[0]
-    order = np.argsort(-proba)
-    return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
+    return utterance_probabilities(model.classifier, audio, sample_rate)
 
 
 def classify_timeline(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,

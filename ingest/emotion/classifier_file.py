@@ -6,8 +6,9 @@ The file is a NumPy ``.npz`` archive of plain arrays (never pickles: read with
 <ingest.emotion.classifier.EmotionClassifier.to_arrays>` plus ``animegraph_file`` (what
 the file is), ``animegraph_file_version`` (:data:`FILE_VERSION`) and ``trained_on`` (a JSON
 object: recordings, speakers, emotions). Reading checks each of them, then the classifier's
-arrays as a database's are checked (:func:`ingest.emotion.classifier_arrays.classifier_from_arrays`):
-a damaged or foreign file is one line.
+arrays as a database's are checked
+(:func:`ingest.emotion.classifier_arrays.classifier_from_arrays`): a damaged or foreign file
+is one line.
 """
 
 from __future__ import annotations

@@ -161,3 +161,16 @@ def weights_over_time(windows: list[Window], times) -> tuple[list[str], np.ndarr
     t = np.asarray(times, dtype=np.float64)
     out = np.column_stack([np.interp(t, centres, p[:, k]) for k in range(len(names))])
     return names, out / out.sum(axis=1, keepdims=True)
+
+
+def utterance_probabilities(classifier, audio, sample_rate) -> dict[str, float]:
+    """The classes' probabilities for a recording, most likely first: one utterance
+    classified whole (speech only, :func:`ingest.emotion.audio.check_speech`), a recording
+    over :data:`MAX_UTTERANCE_S` as the mean of its speech windows (side by side: the mean
+    needs no overlap, and it is a third of the work of the timeline's hop)."""
+    if np.shape(audio)[0] / float(sample_rate) > MAX_UTTERANCE_S:
+        return mean_probabilities(classify_windows(classifier, audio, sample_rate,
+                                                   hop=WINDOW_S))
+    check_speech(audio, sample_rate)
+    p = classifier.predict_proba([(audio, sample_rate)])[0]
+    return {str(classifier.classes_[k]): float(p[k]) for k in np.argsort(-p)}

@@ -66,16 +66,19 @@ def _labelled(args: argparse.Namespace, command: str):
 def cmd_classify(args: argparse.Namespace) -> int:
     from ingest.formats.media import read_audio
 
-    if args.json:
-        if args.format not in (None, "json"):
-            raise UsageError("animegraph classify: --json is --format json; give one")
-        args.format = "json"
+    if args.json and args.format not in (None, "json"):
+        raise UsageError("animegraph classify: --json is --format json; give one")
+    one = len(args.inputs) == 1 and args.inputs[0].is_file()
     if args.timeline or args.plot is not None:
-        if len(args.inputs) != 1 or not args.inputs[0].is_file():
+        if not one:
             raise UsageError("animegraph classify: --timeline and --plot take one recording")
         classifier, _ = _classifier(args)
         audio, sample_rate = read_audio(args.inputs[0])  # mono, whatever the file holds
         return _timeline(args, classifier, audio, sample_rate)
+    if one and args.format is None and args.output is None and args.speaker is None \
+            and args.labels is None and args.preset is None:
+        return _classify_one(args, read_audio)
+    args.format = "json" if args.json else args.format
     labelled = _labelled(args, "classify")
     for line in labelled.rejected[:10]:
         say(f"left out {line}")
@@ -91,6 +94,24 @@ def cmd_classify(args: argparse.Namespace) -> int:
     return 0 if any(r["label"] for r in rows) else 1
 
 
+def _classify_one(args, read_audio) -> int:
+    """One recording: each emotion's probability, a line each (or a JSON object); speech
+    that is not (noise, a tone) is an error."""
+    import json
+
+    from ingest.emotion.timeline import utterance_probabilities
+
+    classifier, _ = _classifier(args)
+    audio, rate = read_audio(args.inputs[0])
+    probabilities = interruptible(utterance_probabilities, classifier, audio, rate)
+    if args.json:
+        print(json.dumps(probabilities, indent=1))
+    else:
+        for name, p in probabilities.items():
+            print(f"{name:<12s} {p:6.3f}")
+    return 0
+
+
 def _classify_many(classifier, labelled, read_audio, quiet: bool) -> list[dict]:
     """A row per recording: its features computed one by one (progress bar), then all
     classified together, each speaker's takes normalised by their own statistics."""
@@ -99,7 +120,7 @@ def _classify_many(classifier, labelled, read_audio, quiet: bool) -> list[dict]:
     from db.errors import AnimeGraphError
     from ingest.emotion.audio import check_speech
     from ingest.emotion.classifier import SpeechFeatures
-    from ingest.emotion.timeline import MAX_UTTERANCE_S, classify_windows, mean_probabilities
+    from ingest.emotion.timeline import MAX_UTTERANCE_S, utterance_probabilities
 
     rows, described, who, at = [], [], [], []
     bar = progress(len(labelled.paths), quiet, "file", "features")
@@ -110,8 +131,8 @@ def _classify_many(classifier, labelled, read_audio, quiet: bool) -> list[dict]:
         rows.append(row)
         try:
             audio, rate = read_audio(path)
-            if len(audio) / rate > MAX_UTTERANCE_S:  # a long one: its windows' mean
-                probabilities = mean_probabilities(classify_windows(classifier, audio, rate))
+            if len(audio) / rate > MAX_UTTERANCE_S:  # a long one: its windows' mean, alone
+                probabilities = utterance_probabilities(classifier, audio, rate)
                 row.update(label=next(iter(probabilities)), probabilities=probabilities)
                 continue
             check_speech(audio, rate)
@@ -173,8 +194,13 @@ def _say_accuracy(rows: list[dict]) -> None:
 def _timeline(args, classifier, audio, sample_rate) -> int:
     import json
 
-    from ingest.emotion.timeline import classify_windows, mean_probabilities
+    from db.errors import ParameterError
+    from ingest.emotion.timeline import classify_windows, mean_probabilities, spans
 
+    try:
+        spans(0.0, args.window, args.hop)  # the command line's values, said as such
+    except ParameterError as exc:
+        raise UsageError(f"animegraph classify: {exc}") from None
     windows = interruptible(lambda: classify_windows(classifier, audio, sample_rate,
                                                      window=args.window, hop=args.hop))
     overall = mean_probabilities(windows)
