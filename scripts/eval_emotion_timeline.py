@@ -69,6 +69,8 @@ def main() -> None:
     ap.add_argument("--hops", default="0.5,1,2", help="hops, seconds")
     ap.add_argument("--run", type=int, default=3, help="utterances per run of one emotion")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--one-speaker", action="store_true",
+                    help="normalise each recording's windows together (one speaker)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     from ingest.emotion.model import database_classifier
@@ -107,7 +109,8 @@ def main() -> None:
             right = n = one_right = n_windows = 0
             t1 = time.perf_counter()
             for audio, rate, ends, labels in recordings:
-                windows = classify_windows(clf, audio, rate, window=window, hop=hop)
+                windows = classify_windows(clf, audio, rate, window=window, hop=hop,
+                                           one_speaker=args.one_speaker)
                 n_windows += len(windows)
                 times = np.arange(0.05, len(audio) / rate, 0.1)
                 truth = labels[np.minimum(np.searchsorted(ends, times), len(labels) - 1)]

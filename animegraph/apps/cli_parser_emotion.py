@@ -15,7 +15,7 @@ from animegraph.apps.commands.emotion_fit import cmd_emotion_fit
 PRESETS = ("ravdess", "emodb", "tess", "crema-d")
 #: ``classify --window`` and ``--hop`` defaults, seconds
 #: (:data:`ingest.emotion.timeline.WINDOW_S`, ``HOP_S``; checked the same by the tests).
-WINDOW_S, HOP_S = 3.0, 1.0
+WINDOW_S, HOP_S = 4.0, 2.0
 
 
 def add_emotion_commands(sub, *, db_option, output_file, number, parser_class, speech) -> None:

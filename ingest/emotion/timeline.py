@@ -20,8 +20,8 @@ from ingest.emotion.audio import as_float_pcm, check_speech
 #: Seconds of a window, and between the starts of two (``classify --timeline``, and
 #: ``synth --emotion auto`` over a long line): measured by ``scripts/eval_emotion_timeline.py``
 #: (docs/results/emotion.md, "Emotion over a long recording").
-WINDOW_S = 3.0
-HOP_S = 1.0
+WINDOW_S = 4.0
+HOP_S = 2.0
 #: Window lengths accepted, seconds (the classifier is trained on utterances of a few s).
 MIN_WINDOW_S, MAX_WINDOW_S = 1.0, 10.0
 #: A recording longer than this is classified in windows, its probabilities their mean
@@ -76,9 +76,22 @@ def spans(seconds: float, window: float = WINDOW_S, hop: float = HOP_S
     return out
 
 
+#: With ``one_speaker``: most windows normalised together (about 4 minutes at a 1 s hop;
+#: bounded memory for any length, each group by its own statistics).
+GROUP = 256
+#: The speaker name of a recording's windows (no training speaker's name: a control
+#: character starts it).
+_THIS_RECORDING = "\x01this recording"
+
+
 def classify_windows(classifier, audio, sample_rate, *, window: float = WINDOW_S,
-                     hop: float = HOP_S) -> list[Window]:
+                     hop: float = HOP_S, one_speaker: bool = False) -> list[Window]:
     """Each window of ``audio`` (shape (n,) or (n, channels)) classified, or why not.
+
+    With ``one_speaker`` the windows are one speaker's takes: normalised together by their
+    own statistics (the estimator's per-speaker normalisation, from
+    :data:`ingest.emotion.speakers.MIN_SPEAKER_UTTERANCES` windows up), up to
+    :data:`GROUP` at a time, rather than each alone by the training population's.
 
     Parameters
     ----------
@@ -88,6 +101,8 @@ def classify_windows(classifier, audio, sample_rate, *, window: float = WINDOW_S
     sample_rate : int or float
     window, hop : float, optional
         Seconds (:func:`spans`).
+    one_speaker : bool, optional
+        Normalise the windows together (above).
 
     Returns
     -------
@@ -102,8 +117,12 @@ def classify_windows(classifier, audio, sample_rate, *, window: float = WINDOW_S
     pending: list[tuple[int, np.ndarray]] = []
     spanned = spans(len(x) / rate, window, hop)
 
+    batch = GROUP if one_speaker else BATCH
+
     def flush():
-        proba = classifier.predict_proba([(piece, rate) for _, piece in pending])
+        X = [(piece, rate) for _, piece in pending]
+        proba = (classifier.predict_proba(X, speakers=np.full(len(X), _THIS_RECORDING))
+                 if one_speaker else classifier.predict_proba(X))
         for (k, _), p in zip(pending, proba, strict=True):
             order = np.argsort(-p)
             start, end = spanned[k]
@@ -120,7 +139,7 @@ def classify_windows(classifier, audio, sample_rate, *, window: float = WINDOW_S
             out[k] = Window(start, end, None, str(exc))
             continue
         pending.append((k, piece))
-        if len(pending) == BATCH:
+        if len(pending) == batch:
             flush()
     if pending:
         flush()
