@@ -69,6 +69,8 @@ def main() -> None:
     ap.add_argument("--hops", default="0.5,1,2", help="hops, seconds")
     ap.add_argument("--run", type=int, default=3, help="utterances per run of one emotion")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--single", action="store_true",
+                    help="one recording per actor and emotion (no change of emotion)")
     ap.add_argument("--one-speaker", action="store_true",
                     help="normalise each recording's windows together (one speaker)")
     ap.add_argument("--json", type=Path, default=None)
@@ -97,7 +99,12 @@ def main() -> None:
     recordings = []
     for actor in actors(args.test):
         items = [it for it in test if it[3] == actor]
-        recordings.append(_long_recording(items, args.run, rng))
+        if args.single:
+            for emotion in sorted(wanted):
+                same = [it for it in items if it[2] == emotion]
+                recordings.append(_long_recording(same, len(same), rng))
+        else:
+            recordings.append(_long_recording(items, args.run, rng))
     total_s = sum(len(a) / r for a, r, _, _ in recordings)
     print(f"{len(recordings)} held-out recordings, {total_s:.0f} s, runs of {args.run} "
           f"utterances (mean run {total_s / sum(len(e) for *_, e, _ in recordings):.1f} s)")

@@ -270,6 +270,12 @@ def test_classify_timeline_table_and_plot(tiny_db, tiny_corpus, tmp_path, capsys
     windows = json.loads(capsys.readouterr().out)
     assert len(windows) == int((total - 2) / 0.5) + 1
     assert windows[1]["start"] == 0.5 and windows[1]["end"] == 2.5
+    # One speaker's windows normalised together: other probabilities, the same windows.
+    assert main(["classify", str(wav), "--db", str(tiny_db[0]), "--timeline", "--window",
+                 "2", "--hop", "0.5", "--format", "json", "--speaker", "me"]) == 0
+    together = json.loads(capsys.readouterr().out)
+    assert [w["start"] for w in together] == [w["start"] for w in windows]
+    assert together[1]["probabilities"] != windows[1]["probabilities"]
     for bad, needle in ((["--window", "0.2"], "the window must last"),
                         (["--hop", "9"], "the hop must be")):
         assert main(["classify", str(wav), "--db", str(tiny_db[0]), "--timeline",

@@ -61,7 +61,8 @@ def _add_classify(sub, db_option, output_file, number, speech) -> None:
                      help="a classifier file written by 'animegraph emotion fit' (instead "
                      "of the database's)")
     cls.add_argument("--speaker", default=None, metavar="NAME",
-                     help="every recording is this one speaker's")
+                     help="every recording is this one speaker's (with --timeline: the "
+                     "windows are normalised together, docs/results/emotion.md)")
     _labels_options(cls, train=False)
     cls.add_argument("--format", choices=("table", "csv", "json"), default=None,
                      help="output format (default: table, or as -o's suffix says)")

@@ -201,8 +201,10 @@ def _timeline(args, classifier, audio, sample_rate) -> int:
         spans(0.0, args.window, args.hop)  # the command line's values, said as such
     except ParameterError as exc:
         raise UsageError(f"animegraph classify: {exc}") from None
-    windows = interruptible(lambda: classify_windows(classifier, audio, sample_rate,
-                                                     window=args.window, hop=args.hop))
+    # --speaker: the windows are that one speaker's takes, normalised together.
+    windows = interruptible(lambda: classify_windows(
+        classifier, audio, sample_rate, window=args.window, hop=args.hop,
+        one_speaker=args.speaker is not None))
     overall = mean_probabilities(windows)
     if args.plot is not None:
         from animegraph.emotion.plots import plot_timeline
