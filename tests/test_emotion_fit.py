@@ -344,3 +344,18 @@ def test_ravdess_fit_and_classify_a_speakers_takes(tmp_path, capsys):
     lines = captured.out.strip().splitlines()
     assert len(lines) == 1 + len(test) and all('"03"' in line for line in lines[1:])
     assert "classified as labelled" in captured.err
+
+
+def test_weights_over_time_interpolate_between_window_centres():
+    from ingest.emotion.timeline import Window, spans, weights_over_time
+
+    windows = [Window(0.0, 4.0, {"happy": 0.8, "sad": 0.2}),
+               Window(2.0, 6.0, None, "not speech"),
+               Window(4.0, 8.0, {"sad": 1.0, "happy": 0.0})]
+    names, w = weights_over_time(windows, [0.0, 2.0, 4.0, 6.0, 9.0])
+    assert names == ["sad", "happy"]  # the more probable over the windows first
+    np.testing.assert_allclose(w[:, 1], [0.8, 0.8, 0.4, 0.0, 0.0])
+    np.testing.assert_allclose(w.sum(axis=1), 1.0)
+    with pytest.raises(DataError, match="no window"):
+        weights_over_time([Window(0.0, 4.0, None, "silence")], [1.0])
+    assert spans(10.0, 4.0, 2.0) == [(0.0, 4.0), (2.0, 6.0), (4.0, 8.0), (6.0, 10.0)]

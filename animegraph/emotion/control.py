@@ -241,13 +241,15 @@ def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str])
 
 
 def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[str],
-                    audio: np.ndarray | None = None, sample_rate: int | None = None
-                    ) -> EmotionChoice:
+                    audio: np.ndarray | None = None, sample_rate: int | None = None, *,
+                    timeline: bool = False) -> EmotionChoice:
     """Make an emotion request concrete for a database (and the speech, for ``"auto"``).
 
-    ``"auto"`` on speech longer than one window (:data:`ingest.emotion.timeline.WINDOW_S`)
-    with two speech windows or more gives a :class:`EmotionTimeline` too; ``spec`` may be
-    an :class:`EmotionChoice` already made (returned as it is).
+    With ``timeline`` (what a synthesis asks; a check or the live loop, which use only the
+    target, need not), ``"auto"`` on speech longer than one window
+    (:data:`ingest.emotion.timeline.WINDOW_S`) with two speech windows or more gives an
+    :class:`EmotionTimeline` too; ``spec`` may be an :class:`EmotionChoice` already made
+    (returned as it is).
 
     Raises
     ------
@@ -261,13 +263,13 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
     spec = check_names(parse_emotion(spec), model, graph_emotions)
     if spec is None:
         return EmotionChoice(None, None)
-    probabilities = timeline = None
+    follow, probabilities, timeline = timeline, None, None
     if spec == AUTO:
         if model is None:
             raise DataError(no_classifier(None))
         if audio is None or sample_rate is None:
             raise ParameterError("emotion 'auto' needs the speech to classify")
-        timeline = _timeline(model, audio, sample_rate)
+        timeline = _timeline(model, audio, sample_rate) if follow else None
         if timeline is None:
             probabilities = classify_speech(model, audio, sample_rate)
         else:

@@ -171,7 +171,7 @@ def synthesize(
     if posteriorgram:
         require_posteriorgrams(model.graph, model.db.root)
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
-                             sample_rate)
+                             sample_rate, timeline=True)
     emotion = choice.search
     fallback: list[str] = []  # why a transcript was not aligned: the first warning
     with ctc.doubts() as doubted:  # ... or why it was, with doubt

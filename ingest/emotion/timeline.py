@@ -165,7 +165,7 @@ def weights_over_time(windows: list[Window], times) -> tuple[list[str], np.ndarr
     Returns
     -------
     (names, weights)
-        The classes (in the first speech window's order) and an array of shape
+        The classes (the most probable over the windows first) and an array of shape
         (n, n_classes) whose rows sum to 1.
 
     Raises

@@ -94,7 +94,7 @@ def _synth(args: argparse.Namespace, heard) -> int:
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
-                             sample_rate)
+                             sample_rate, timeline=True)
     t_guide = time.perf_counter()
     guide = load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
