@@ -1,7 +1,8 @@
 """The ``animegraph`` argument parser: every sub-command, its options and their help.
 
 Each sub-command's function (``func``) is in :mod:`animegraph.apps.commands`; a
-left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`."""
+left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`. The emotion
+commands' arguments are in :mod:`animegraph.apps.cli_parser_emotion`."""
 
 from __future__ import annotations
 
