@@ -170,19 +170,71 @@ def _write_version(root: Path, tables: dict[str, pa.Table], manifest: dict,
     if based_on is not ANY_VERSION and previous != based_on:
         raise DataError(f"database {root} changed while this write was prepared (it is now "
                         f"{previous or 'empty'}, was {based_on or 'empty'}); nothing written")
+
+    def fill(staging: Path) -> dict:
+        for table_name, table in tables.items():
+            _write_table(staging, table_name, table)
+        return {**manifest, "schema_version": SCHEMA_VERSION,
+                "tables": {t: int(tables[t].num_rows) for t in TABLES}}
+
+    return _new_version(root, previous, fill)
+
+
+def write_model_arrays(path: str | os.PathLike, arrays: dict[str, np.ndarray], manifest: dict,
+                       *, based_on: str, wait: float = WRITE_WAIT_S) -> Path:
+    """A new version of the database at ``path`` equal to its live version ``based_on`` but
+    for the model arrays and the manifest (e.g. a classifier trained apart and stored in it).
+
+    The other tables' files are hard-linked from the live version (copied where the file
+    system has no links): they are never changed once written. Atomic, under the writer
+    lock, refused if the live version moved away from ``based_on`` (as
+    :func:`write_version`).
+
+    ``arrays`` (every model array of the new version) and ``manifest`` (the live one's,
+    changed; its version number and checksums are set here) were built from ``based_on``;
+    ``wait``: seconds to wait for another writer.
+    """
+    root = Path(path)
+    with writer_lock(root, wait=wait, what="database"):
+        previous = current_version(root)
+        if previous != based_on:
+            raise DataError(f"database {root} changed while this write was prepared (it is "
+                            f"now {previous}, was {based_on}); nothing written")
+
+        def fill(staging: Path) -> dict:
+            source = root / previous
+            for child in source.iterdir():
+                if child.name in ("manifest.json", "model_arrays.parquet"):
+                    continue
+                if child.is_dir():
+                    shutil.copytree(child, staging / child.name, copy_function=_link_or_copy)
+                else:
+                    _link_or_copy(child, staging / child.name)
+            _write_table(staging, "model_arrays", arrays_to_table(arrays))
+            return dict(manifest)
+
+        return _new_version(root, previous, fill)
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _new_version(root: Path, previous: str | None, fill) -> Path:
+    """Build the next version in a staging folder (``fill(staging)`` writes its tables and
+    returns its manifest), then make it the live one (see the module docstring)."""
     number = 1 + max([_number(p.name) for p in root.iterdir() if _VERSION.match(p.name)],
                      default=0)
     name = f"v{number:06d}"
     staging = root / f".{name}.partial-{os.getpid()}-{secrets.token_hex(4)}"
     try:
         staging.mkdir()
-        for table_name, table in tables.items():
-            _write_table(staging, table_name, table)
         info = {
-            **manifest,
-            "schema_version": SCHEMA_VERSION,
+            **fill(staging),
             "db_version": number,
-            "tables": {t: int(tables[t].num_rows) for t in TABLES},
             "checksums": {t: file_sha256(staging / f"{t}.parquet") for t in CHECKSUMMED},
         }
         (staging / "manifest.json").write_text(json.dumps(info, indent=1, default=_json))

@@ -60,8 +60,11 @@ def test_user_errors(capsys, tmp_path, monkeypatch, argv, code, needle):
     (["synth", "x.wav", "-o", "y.c3d", "--emotin", "happy"],
      "synth: unrecognized arguments: --emotin happy; did you mean --emotion? "
      "(see 'animegraph synth --help')"),
-    (["classify", "a.wav", "b.wav"],
-     "classify: unrecognized arguments: b.wav (see 'animegraph classify --help')"),
+    (["map-emotion", "a.c3d", "b.c3d", "--to", "happy", "-o", "y.c3d"],  # classify takes many
+     "map-emotion: unrecognized arguments: b.c3d (see 'animegraph map-emotion --help')"),
+    (["emotion", "fit", "d", "--preset", "tess", "-o", "m.npz", "--emotionz", "sad"],
+     "emotion fit: unrecognized arguments: --emotionz sad; did you mean --emotions? "
+     "(see 'animegraph emotion fit --help')"),
     (["corpus", "synth", "--out", "x", "--sentense", "3"],
      "corpus synth: unrecognized arguments: --sentense 3; did you mean --sentences? "
      "(see 'animegraph corpus synth --help')"),

@@ -298,3 +298,35 @@ def test_long_distinct_strings_in_a_dictionary_are_read(tmp_path):
     assert "RLE_DICTIONARY" in chunk.encodings
     assert 100 * chunk.total_uncompressed_size > 64 * part.stat().st_size
     assert Database.open(tmp_path / "db").table("audio").column("pcm16").to_pylist() == pcm
+
+
+def test_a_new_version_of_model_arrays_links_the_rest_and_fails_whole(tmp_path, monkeypatch):
+    """write_model_arrays (a classifier stored by 'emotion fit --db'): a new version with
+    the other tables' files linked, atomic, refused if the database moved on."""
+    import db.store as store
+    from db.store import write_model_arrays
+
+    root = tmp_path / "db"
+    write_version(root, _tables(), {"fps": 30.0})
+    db = Database.open(root)
+    before = current_version(root)
+    new = write_model_arrays(root, {"m": np.ones((2, 2))}, {**db.manifest, "note": "x"},
+                             based_on=before)
+    db2 = Database.open(root)
+    assert db2.version_dir == new and db2.manifest["note"] == "x"
+    np.testing.assert_array_equal(db2.arrays()["m"], np.ones((2, 2)))
+    assert db2.table("clips").num_rows == 2 and db2.manifest["db_version"] == 2
+    assert (new / "channels.parquet").stat().st_ino == \
+        (root / before / "channels.parquet").stat().st_ino  # linked, not copied
+    with pytest.raises(DataError, match="changed while this write was prepared"):
+        write_model_arrays(root, {"m": np.zeros(1)}, db2.manifest, based_on=before)
+
+    def broken(folder, name, table):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(store, "_write_table", broken)
+    with pytest.raises(OSError):
+        write_model_arrays(root, {"m": np.zeros(1)}, db2.manifest, based_on=new.name)
+    assert current_version(root) == new.name
+    assert not [p for p in root.iterdir() if ".partial-" in p.name]  # no staging left
+    np.testing.assert_array_equal(Database.open(root).arrays()["m"], np.ones((2, 2)))

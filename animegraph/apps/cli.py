@@ -138,12 +138,13 @@ def _main(argv: Sequence[str] | None) -> int:
         if args.command is None:
             raise UsageError("animegraph: choose a command: corpus, demo, ingest, synth, "
                              "batch, live, fit, warmup, sql, query, render, plot, classify, "
-                             "map-emotion, info, studio "
+                             "map-emotion, emotion, info, studio "
                              "(see 'animegraph --help')")
         if not hasattr(args, "func"):
             raise UsageError(f"animegraph {args.command}: choose an action "
                              f"(see 'animegraph {args.command} --help')")
-        if getattr(args, "default_db", False):
+        # classify --model reads no database.
+        if getattr(args, "default_db", False) and getattr(args, "model", None) is None:
             _resolve_db(args)
         return int(args.func(args) or 0)
     except UsageError as exc:

@@ -1,7 +1,8 @@
 """The ``animegraph`` argument parser: every sub-command, its options and their help.
 
 Each sub-command's function (``func``) is in :mod:`animegraph.apps.commands`; a
-left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`."""
+left-out ``--db`` (``default_db``) is filled in by :mod:`animegraph.apps.cli`. The emotion
+commands' arguments are in :mod:`animegraph.apps.cli_parser_emotion`."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import math
 from pathlib import Path
 
 from animegraph import __version__
+from animegraph.apps.cli_parser_emotion import add_emotion_commands
 from animegraph.apps.commands.common import UsageError
 from animegraph.apps.commands.corpus import cmd_corpus_synth, cmd_demo
 from animegraph.apps.commands.database import (
@@ -21,7 +23,6 @@ from animegraph.apps.commands.database import (
     cmd_sql,
     cmd_warmup,
 )
-from animegraph.apps.commands.emotion import cmd_classify, cmd_map_emotion
 from animegraph.apps.commands.live import cmd_live
 from animegraph.apps.commands.render import cmd_plot, cmd_render
 from animegraph.apps.commands.studio import cmd_studio
@@ -192,8 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_query(sub)
     _add_render(sub)
     _add_plot(sub)
-    _add_classify(sub)
-    _add_map_emotion(sub)
+    add_emotion_commands(sub, db_option=_db_option, output_file=_output_file,
+                         number=_number, parser_class=_Parser, speech=SPEECH_FORMATS)
     _add_fit(sub)
     _add_warmup(sub)
     _add_info(sub)
@@ -572,51 +573,6 @@ def _add_plot(sub) -> None:
                      help="the speech (a WAV, or a video: its audio track)")
     plo.add_argument("--title", default="", help="title")
     plo.set_defaults(func=cmd_plot)
-
-
-def _add_classify(sub) -> None:
-    """``classify``: the emotion of speech."""
-    cls = sub.add_parser(
-        "classify", help="the emotion of speech, by the database's classifier",
-        description="Print the probability of each of the database's emotions for the "
-        "speech (any rate, mono or stereo), by the classifier trained on the database's "
-        "clips at ingest: prosodic and spectral features, 50 frame-averaged cepstrum "
-        "coefficients and a bag of audio words (five pairs of 500-word codebooks), normalised per "
-        "speaker (an unknown speaker by the training population), a linear SVM and "
-        "probabilities by Platt scaling (Cao et al. 2005 §6 uses an SVM on the signal's "
-        "mean, variance, RMS and first 500 real-cepstrum coefficients).",
-    )
-    cls.add_argument("audio", type=Path, metavar="AUDIO", help=SPEECH_FORMATS)
-    _db_option(cls)
-    cls.add_argument("--json", action="store_true", help="the probabilities as JSON")
-    cls.add_argument("--timeline", action="store_true",
-                     help="classify the recording window by window (4 s every 4 s) and print "
-                     "each window's start, end, label and probabilities, or why it is not "
-                     "classified (silence, not speech); a recording over 15 s is always "
-                     "classified so, its probabilities their mean")
-    cls.set_defaults(func=cmd_classify)
-
-
-def _add_map_emotion(sub) -> None:
-    """``map-emotion``: a motion mapped into another emotion."""
-    mp = sub.add_parser(
-        "map-emotion", help="change the emotion of a facial motion",
-        description="Map the emotion components of a motion (as written by 'synth': .c3d, "
-        ".csv or .npz, in the database's channels) from one emotion to another with the "
-        "database's RBF mapping (Cao et al. 2005 §5.2); speech components are kept.",
-    )
-    mp.add_argument("motion", type=Path, metavar="IN", help="motion file (.c3d, .csv, .npz)")
-    _db_option(mp)
-    mp.add_argument("--to", required=True, metavar="E|E=W,...",
-                    help="target emotion, or a mix such as happy=0.7,neutral=0.3")
-    mp.add_argument("--from", dest="source", default="auto", metavar="E|auto",
-                    help="emotion of IN; 'auto' (default): classify --audio if given, else "
-                    "the emotion whose mean emotion components are nearest IN's")
-    mp.add_argument("--audio", type=Path, default=None,
-                    help="the speech of IN, for --from auto")
-    mp.add_argument("-o", "--output", required=True, type=_output_file,
-                    help="motion file to write (.c3d, .csv or .npz)")
-    mp.set_defaults(func=cmd_map_emotion)
 
 
 def _add_fit(sub) -> None:

@@ -131,28 +131,55 @@ def classify_speech(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
         No classifier in the database (:func:`no_classifier`); audio too short (< 0.25 s),
         silent, not speech, or non-finite.
     """
-    from ingest.emotion.audio import check_speech
-    from ingest.emotion.timeline import MAX_UTTERANCE_S, mean_probabilities
+    from ingest.emotion.timeline import utterance_probabilities
 
     if model.classifier is None:
         raise DataError(no_classifier(model, auto=auto))
-    if np.shape(audio)[0] / float(sample_rate) > MAX_UTTERANCE_S:
-        return mean_probabilities(classify_timeline(model, audio, sample_rate, auto=auto))
-    check_speech(audio, sample_rate)
-    proba = model.classifier.predict_proba([(audio, sample_rate)])[0]
-    order = np.argsort(-proba)
-    return {str(model.classifier.classes_[k]): float(proba[k]) for k in order}
+    return utterance_probabilities(model.classifier, audio, sample_rate)
 
 
 def classify_timeline(model: EmotionModel, audio: np.ndarray, sample_rate: int, *,
-                      auto: bool = True) -> list:
-    """The recording's windows (:func:`ingest.emotion.timeline.classify_windows`), each
-    classified, or why it is not (silence, not speech)."""
-    from ingest.emotion.timeline import classify_windows
+                      auto: bool = True, window: float | None = None,
+                      hop: float | None = None) -> list:
+    """The recording's windows (:func:`ingest.emotion.timeline.classify_windows`; ``window``
+    and ``hop`` in seconds, None: its defaults), each classified, or why it is not (silence,
+    not speech)."""
+    from ingest.emotion.timeline import HOP_S, WINDOW_S, classify_windows
 
     if model.classifier is None:
         raise DataError(no_classifier(model, auto=auto))
-    return classify_windows(model.classifier, audio, sample_rate)
+    return classify_windows(model.classifier, audio, sample_rate,
+                            window=WINDOW_S if window is None else window,
+                            hop=HOP_S if hop is None else hop)
+
+
+@dataclass(frozen=True)
+class EmotionTimeline:
+    """The emotion of a long line over time: its windows' probabilities
+    (:func:`ingest.emotion.timeline.classify_windows`), which ``synth --emotion auto``
+    follows (:func:`map_frames_over_time`)."""
+
+    windows: tuple
+
+    def weights(self, times) -> tuple[list[str], np.ndarray]:
+        """(names, weights of shape (len(times), n_names)) at ``times`` in seconds:
+        :func:`ingest.emotion.timeline.weights_over_time`."""
+        from ingest.emotion.timeline import weights_over_time
+
+        return weights_over_time(list(self.windows), times)
+
+    def describe(self) -> str:
+        """The leading emotion of each speech window, runs joined: ``angry 0-6 s, sad 6-12 s``."""
+        runs: list[list] = []
+        for w in self.windows:
+            if w.probabilities is None:
+                continue
+            top = next(iter(w.probabilities))
+            if runs and runs[-1][0] == top:
+                runs[-1][2] = w.end
+            else:
+                runs.append([top, w.start, w.end])
+        return ", ".join(f"{name} {a:.0f}-{b:.0f} s" for name, a, b in runs)
 
 
 @dataclass(frozen=True)
@@ -167,12 +194,16 @@ class EmotionChoice:
         Emotion whose animes the search prefers (the mix's heaviest, or the nearest one
         the database has animes of).
     probabilities : dict of str to float or None
-        The classifier's output for ``"auto"``.
+        The classifier's output for ``"auto"`` (over a long line, its windows' mean).
+    timeline : EmotionTimeline or None
+        For ``"auto"`` on speech longer than a window: the emotion over time, which the
+        motion follows instead of ``target``.
     """
 
     target: str | dict | None
     search: str | None
     probabilities: dict | None = None
+    timeline: EmotionTimeline | None = None
 
     def describe(self) -> str:
         if self.target is None:
@@ -210,9 +241,15 @@ def check_names(spec, model: EmotionModel | None, graph_emotions: Sequence[str])
 
 
 def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[str],
-                    audio: np.ndarray | None = None, sample_rate: int | None = None
-                    ) -> EmotionChoice:
+                    audio: np.ndarray | None = None, sample_rate: int | None = None, *,
+                    timeline: bool = False) -> EmotionChoice:
     """Make an emotion request concrete for a database (and the speech, for ``"auto"``).
+
+    With ``timeline`` (what a synthesis asks; a check or the live loop, which use only the
+    target, need not), ``"auto"`` on speech longer than one window
+    (:data:`ingest.emotion.timeline.WINDOW_S`) with two speech windows or more gives an
+    :class:`EmotionTimeline` too; ``spec`` may be an :class:`EmotionChoice` already made
+    (returned as it is).
 
     Raises
     ------
@@ -221,16 +258,24 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
     DataError
         ``"auto"`` without a classifier or with unusable audio.
     """
+    if isinstance(spec, EmotionChoice):
+        return spec
     spec = check_names(parse_emotion(spec), model, graph_emotions)
     if spec is None:
         return EmotionChoice(None, None)
-    probabilities = None
+    follow, probabilities, timeline = timeline, None, None
     if spec == AUTO:
         if model is None:
             raise DataError(no_classifier(None))
         if audio is None or sample_rate is None:
             raise ParameterError("emotion 'auto' needs the speech to classify")
-        probabilities = classify_speech(model, audio, sample_rate)
+        timeline = _timeline(model, audio, sample_rate) if follow else None
+        if timeline is None:
+            probabilities = classify_speech(model, audio, sample_rate)
+        else:
+            from ingest.emotion.timeline import mean_probabilities
+
+            probabilities = mean_probabilities(list(timeline.windows))
         spec = next(iter(probabilities))
     spec = check_names(spec, model, graph_emotions)
     names = [spec] if isinstance(spec, str) else list(spec)
@@ -241,7 +286,21 @@ def resolve_emotion(spec, model: EmotionModel | None, graph_emotions: Sequence[s
     if isinstance(spec, dict) and model is not None:
         for name in names:  # every part of a mix must be reachable from the search's emotion
             model.mapping(search, name)
-    return EmotionChoice(spec, search, probabilities)
+    return EmotionChoice(spec, search, probabilities, timeline)
+
+
+def _timeline(model: EmotionModel, audio, sample_rate) -> EmotionTimeline | None:
+    """The emotion over time of speech longer than one window with two speech windows or
+    more, else None (one label for all of it)."""
+    from ingest.emotion.timeline import MAX_RECORDING_S, WINDOW_S
+
+    seconds = np.shape(audio)[0] / float(sample_rate)
+    if seconds <= WINDOW_S or seconds > MAX_RECORDING_S:
+        return None
+    windows = classify_timeline(model, audio, sample_rate)
+    if sum(w.probabilities is not None for w in windows) < 2:
+        return None
+    return EmotionTimeline(tuple(windows))
 
 
 def map_frames(model: EmotionModel, ics: np.ndarray, frame_emotions: Sequence[str],
@@ -274,6 +333,56 @@ def map_frames(model: EmotionModel, ics: np.ndarray, frame_emotions: Sequence[st
             out[rows] = model.map_components(out[rows], source, weights)
         except (DataError, ParameterError) as exc:
             notes.append(f"{int(rows.sum())} frames of {source} animes kept as found: {exc}")
+    return out, notes
+
+
+def map_frames_over_time(model: EmotionModel, ics: np.ndarray, frame_emotions: Sequence[str],
+                         names: Sequence[str], weights: np.ndarray
+                         ) -> tuple[np.ndarray, list[str]]:
+    """:func:`map_frames` with a mix whose weights change from frame to frame (an
+    :class:`EmotionTimeline`'s): frame t's emotion components are the blend, with
+    ``weights[t]``, of their mappings into each of ``names``.
+
+    Parameters
+    ----------
+    model : EmotionModel
+    ics : np.ndarray, shape (n_frames, n_ics)
+    frame_emotions : sequence of str, length n_frames
+        Emotion of the anime each frame came from.
+    names : sequence of str, length n_names
+        Emotions (the database's; others are left out, the rest renormalised).
+    weights : np.ndarray, shape (n_frames, n_names)
+
+    Returns
+    -------
+    (ics, notes)
+    """
+    out = np.array(ics, dtype=np.float64, copy=True)
+    weights = np.asarray(weights, dtype=np.float64)
+    notes: list[str] = []
+    known = [k for k, n in enumerate(names) if n in model.emotions]
+    if len(known) < len(names):
+        notes.append("emotions the database lacks are left out of the timeline: "
+                     + ", ".join(n for k, n in enumerate(names) if k not in known))
+    if not known:
+        return out, notes
+    w = weights[:, known]
+    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+    e = model.split.emotion_components
+    frame_emotions = np.asarray(frame_emotions)
+    for source in dict.fromkeys(frame_emotions.tolist()):
+        rows = frame_emotions == source
+        mixed = np.zeros((int(rows.sum()), e.size))
+        for j, k in enumerate(known):
+            try:
+                f = model.mapping(source, names[k])
+            except (DataError, ParameterError) as exc:
+                notes.append(f"{int(rows.sum())} frames of {source} animes kept as found "
+                             f"for {names[k]}: {exc}")
+                f = None
+            part = out[rows][:, e]
+            mixed += w[rows, j:j + 1] * (part if f is None else f.transform(part))
+        out[np.ix_(rows, e)] = mixed
     return out, notes
 
 

@@ -120,3 +120,33 @@ def plot_mapping(held, names: Sequence[str], path: Path, *, rms: dict | None = N
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)
+
+
+def plot_timeline(windows: Sequence, path: Path, *, title: str = "") -> Path:
+    """Each emotion's probability over time, one line per emotion at the windows' centres
+    (:class:`ingest.emotion.timeline.Window`), the leading emotion shaded below; windows
+    not classified (silence, not speech) are gaps."""
+    plt = _pyplot()
+    speech = [w for w in windows if w.probabilities is not None]
+    names = sorted({n for w in speech for n in w.probabilities})
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    centres = np.array([(w.start + w.end) / 2 for w in windows])
+    colours = plt.get_cmap("tab10")
+    for k, name in enumerate(names):
+        p = np.array([np.nan if w.probabilities is None else w.probabilities.get(name, 0.0)
+                      for w in windows])
+        ax.plot(centres, p, marker=".", color=colours(k % 10), label=name)
+    for w in speech:
+        top = next(iter(w.probabilities))
+        ax.axvspan(w.start, w.end, ymin=0, ymax=0.04, color=colours(names.index(top) % 10),
+                   alpha=0.6, lw=0)
+    ax.set_xlim(0, max((w.end for w in windows), default=1.0))
+    ax.set_ylim(0, 1)
+    ax.set_xlabel("time (s), each point a window's centre")
+    ax.set_ylabel("probability")
+    ax.set_title(title or "emotion over time")
+    ax.legend(loc="upper right", fontsize="small", ncols=min(len(names), 4) or 1)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

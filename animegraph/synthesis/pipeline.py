@@ -22,7 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from animegraph.emotion.control import map_frames, resolve_emotion
+from animegraph.emotion.control import map_frames, map_frames_over_time, resolve_emotion
 from animegraph.search import SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
 from animegraph.synthesis.assemble import (
@@ -90,7 +90,10 @@ def synthesize(
         blend of their mappings into each emotion (beyond the paper). When the database
         has no animes of the wanted emotion, the search prefers the nearest emotion it has
         and the motion is mapped from there. Databases without an emotion model (built by
-        an older animegraph) only steer the search.
+        an older animegraph) only steer the search. ``"auto"`` on speech longer than a
+        window follows the emotion over time (``result.emotion.timeline``,
+        :func:`animegraph.emotion.control.map_frames_over_time`); an
+        :class:`~animegraph.emotion.control.EmotionChoice` already resolved is used as is.
     method, window, tolerance
         The search (:func:`animegraph.search.search`): ``"exact"`` (default), ``"window"``
         with ``window`` K (the paper's look-ahead), ``"paper"`` or ``"dp"``; ``tolerance``
@@ -168,7 +171,7 @@ def synthesize(
     if posteriorgram:
         require_posteriorgrams(model.graph, model.db.root)
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions, audio,
-                             sample_rate)
+                             sample_rate, timeline=True)
     emotion = choice.search
     fallback: list[str] = []  # why a transcript was not aligned: the first warning
     with ctc.doubts() as doubted:  # ... or why it was, with doubt
@@ -219,7 +222,7 @@ def synthesize(
     notes: list[str] = []
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
-                                 options=options)
+                                 options=options, timeline=choice.timeline)
     if guide_ics is not None and guide_blend > 0:
         ics = blend_guide(ics, guide_ics, guide_blend)
     motion = model.to_channels(ics)
@@ -256,8 +259,11 @@ def input_warnings(audio: np.ndarray, sample_rate: int, phone_rate: bool, *,
 
 
 def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
-                options: PostOptions | None = None) -> tuple[np.ndarray, list[str]]:
-    """Map the frames of each anime whose emotion is not ``target`` into it (Fig. 6).
+                options: PostOptions | None = None, timeline=None
+                ) -> tuple[np.ndarray, list[str]]:
+    """Map the frames of each anime whose emotion is not ``target`` into it (Fig. 6), or,
+    given an :class:`~animegraph.emotion.control.EmotionTimeline`, into the emotion its
+    windows find at each frame's time.
 
     ``ics`` (n_frames, n_ics) is the rendered motion of ``nodes`` over ``phones``. The
     mapped emotion components are low-passed again (with the learned cutoffs, when
@@ -269,7 +275,12 @@ def map_emotion(model: Model, phones, nodes, ics: np.ndarray, target, *,
     frame_emotion = np.empty(len(ics), dtype=object)
     for node, (a, b) in zip(nodes, ranges, strict=True):
         frame_emotion[a:b] = graph.emotions[graph.node_emotion[int(node)]]
-    mapped, notes = map_frames(model.emotion_model, ics, frame_emotion.astype(str), target)
+    if timeline is None:
+        mapped, notes = map_frames(model.emotion_model, ics, frame_emotion.astype(str), target)
+    else:
+        names, weights = timeline.weights(np.arange(len(ics)) / graph.fps)
+        mapped, notes = map_frames_over_time(model.emotion_model, ics,
+                                             frame_emotion.astype(str), names, weights)
     e = model.emotion_model.split.emotion_components
     if (options is None or options.smooth) and e.size and not np.array_equal(mapped, ics):
         mapped[:, e] = smooth(mapped[:, e], model.cutoffs[e], graph.fps)

@@ -303,13 +303,8 @@ class EmotionModel:
             arrays[f"{PREFIX}centroid/{name}"] = c
         classifier = None
         if self.classifier is not None:
-            raw = self.classifier.to_arrays()
-            classifier = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS if k in raw}
-            # Readable without the arrays: a cached database can tell it predates a format.
-            classifier["format"] = int(np.asarray(raw["format"]))
-            for key, value in raw.items():
-                if key not in _CLASSIFIER_STRINGS:
-                    arrays[f"{PREFIX}classifier/{key}"] = np.asarray(value, dtype=np.float64)
+            stored, classifier = classifier_entry(self.classifier)
+            arrays.update(stored)
         manifest = {
             "emotions": list(self.emotions),
             "emotion_components": self.split.emotion_components.tolist(),
@@ -374,6 +369,18 @@ class EmotionModel:
                    offsets=offsets, centroids=centroids,
                    parallel=dict(entry["parallel_sentences"]), classifier=classifier,
                    notes=tuple(entry.get("notes", ())))
+
+
+def classifier_entry(classifier: EmotionClassifier) -> tuple[dict[str, np.ndarray], dict]:
+    """A fitted classifier as a database stores it: its numeric arrays (named
+    ``emotion/classifier/<key>``) and its manifest entry (the strings, and the format)."""
+    raw = classifier.to_arrays()
+    entry = {k: np.asarray(raw[k]).tolist() for k in _CLASSIFIER_STRINGS if k in raw}
+    # Readable without the arrays: a cached database can tell it predates a format.
+    entry["format"] = int(np.asarray(raw["format"]))
+    arrays = {f"{PREFIX}classifier/{key}": np.asarray(value, dtype=np.float64)
+              for key, value in raw.items() if key not in _CLASSIFIER_STRINGS}
+    return arrays, entry
 
 
 def fit_mapping(data: ParallelData, src: str, dst: str, sentences: Sequence[str],

@@ -5,7 +5,7 @@ its command line (:mod:`animegraph.apps.cli_parser`) and chosen it.
   :mod:`.synth_plan` -- which path ``synth`` takes (k-best or the paper's search, the
   guiding baseline) and the path line that says so;
 * :mod:`.render` -- ``render`` and ``plot``;
-* :mod:`.emotion` -- ``classify`` and ``map-emotion``;
+* :mod:`.emotion` -- ``classify`` and ``map-emotion``; :mod:`.emotion_fit` -- ``emotion fit``;
 * :mod:`.corpus` -- ``corpus synth`` and ``demo``;
 * :mod:`.database` -- ``ingest``, ``sql``, ``query``, ``fit`` and ``info``;
 * :mod:`.studio` -- ``studio`` (the web app, :mod:`animegraph.apps.studio`);

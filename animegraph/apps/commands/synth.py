@@ -94,7 +94,7 @@ def _synth(args: argparse.Namespace, heard) -> int:
     # Classify ("auto") before any progress line, so that a failure is one line.
     choice = resolve_emotion(emotion, model.emotion_model, model.graph.emotions,
                              audio if np.ndim(audio) == 1 else np.mean(audio, axis=1),
-                             sample_rate)
+                             sample_rate, timeline=True)
     t_guide = time.perf_counter()
     guide = load_guide(args.db, guide_name, asked=args.guide is not None)
     t0 += time.perf_counter() - t_guide  # a first use's fit is not loading the database
@@ -105,7 +105,10 @@ def _synth(args: argparse.Namespace, heard) -> int:
     options = PostOptions(time_warp=not args.no_time_warp, blend=not args.no_blend,
                           smooth=not args.no_smooth, helper=args.helper or PostOptions.helper,
                           recentre=args.recentre)
-    if choice.probabilities is not None:
+    if choice.timeline is not None:
+        print(f"animegraph: emotion auto: the face follows the emotion over time, window by "
+              f"window ({choice.timeline.describe()})", file=sys.stderr)
+    elif choice.probabilities is not None:
         probs = ", ".join(f"{k} {v:.2f}" for k, v in choice.probabilities.items())
         print(f"animegraph: emotion auto: the speech sounds {choice.target} ({probs})",
               file=sys.stderr)
@@ -115,7 +118,7 @@ def _synth(args: argparse.Namespace, heard) -> int:
     if notice:
         print(f"animegraph: {notice}", file=sys.stderr)
     out = synthesize(model, audio, sample_rate, text=args.text, labels=labels,
-                     emotion=choice.target, method=method, window=args.window,
+                     emotion=choice, method=method, window=args.window,
                      tolerance=args.tolerance or 0.0, options=options, k_best=k_best,
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
