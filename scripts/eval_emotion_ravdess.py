@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
+from ingest.emotion.audio import speed_perturb
 from ingest.emotion.boaw import CODEBOOK_SIZE, ENSEMBLE, BagOfAudioWords
 from ingest.emotion.classifier import EmotionClassifier, load_emodb
 
@@ -157,6 +158,8 @@ SYSTEMS = {
                         "(normalize='speaker+population')"),
     "default, nested C": dict(grid=(0.001, 0.01, 0.1), doc="the default, C in {0.001, "
                               "0.01, 0.1} chosen by inner leave-2-actors-out"),
+    "default, speed": dict(speed=(0.9, 1.1), doc="the default, training folds with "
+                           "copies at 0.9 and 1.1 times the speed (each a new speaker)"),
     "default, prior": dict(prior=True, doc="the default, its calibrated probabilities "
                            "divided by the class priors (every class equally likely)"),
 }
@@ -228,26 +231,61 @@ def corpora(ravdess: Path, emodb: Path, cache: Path) -> Corpora:
                 spk=np.array([f"r{a}" for a in r_actor] + [f"e{s}" for s in e_spk]),
                 ravdess=np.arange(len(r_utt) + len(e_utt)) < len(r_utt), cache=cache)
     c["name"] = f"ravdess+emodb-{r_F.shape[0]}-{e_F.shape[0]}"
+    c["r_utt"] = r_utt
     return c
 
 
-def matrix(c: Corpora, system: dict, train: np.ndarray):
-    """The system's features for every utterance, words learned on ``train``."""
+def speed_copies(c: Corpora, factors) -> tuple:
+    """Speed-perturbed copies of the RAVDESS utterances (:func:`speed_perturb`, as
+    ``scripts/eval_emotion_augment.py``), described and cached.
+
+    Returns
+    -------
+    F : np.ndarray, shape (len(factors) * 720, n_functionals)
+    frames : list of np.ndarray
+    y, spk : np.ndarray, shape (len(factors) * 720,)
+        Labels, and speakers named ``r01@0.9``: a perturbed actor is another speaker.
+    """
+    parts = []
+    for f in factors:
+        utt = [(speed_perturb(a, sr, f).astype(np.float32), sr) for a, sr in c["r_utt"]]
+        parts.append(described(f"ravdess-speed{f}", utt, c["cache"]))
+    rav = c["ravdess"]
+    return (np.vstack([F for F, _ in parts]), [x for _, fr in parts for x in fr],
+            np.tile(c["y"][rav], len(factors)),
+            np.concatenate([[f"{s}@{f}" for s in c["spk"][rav]] for f in factors]))
+
+
+def matrix(c: Corpora, system: dict, train: np.ndarray, extra=None):
+    """The system's features for every utterance (then ``extra``'s, a
+    :func:`speed_copies`), words learned on ``train``."""
+    F, frames, name = c["F"], c["frames"], c["name"]
+    if extra is not None:
+        F, frames, name = np.vstack([F, extra[0]]), frames + extra[1], name + "-speed"
     if not system.get("words", True):
-        return c["F"], None
-    W = fold_words(c["name"], c["frames"], train, c["cache"])
-    return np.hstack([c["F"], W]), (c["F"].shape[1], W.shape[1])
+        return F, None
+    W = fold_words(name, frames, train, c["cache"])
+    return np.hstack([F, W]), (F.shape[1], W.shape[1])
 
 
 def leave_actors_out(c: Corpora, system: dict) -> dict:
     """The six folds, 8 and 4 emotions, one utterance and grouped."""
     y, spk, rav = c["y"], c["spk"], c["ravdess"]
+    extra = speed_copies(c, system["speed"]) if system.get("speed") else None
+    if extra is not None:  # the copies after the corpora; trained on, never tested
+        n = extra[0].shape[0]
+        y, spk = np.concatenate([y, extra[2]]), np.concatenate([spk, extra[3]])
+        rav = np.concatenate([rav, np.zeros(n, dtype=bool)])
     out = {"per_fold": []}
     pooled = {key: ([], []) for key in ("8 one", "8 grouped", "4 one", "4 grouped")}
     for held in FOLDS:
         test = rav & np.isin(spk, [f"r{a}" for a in held])
         train_base = rav & ~test
-        X, widths = matrix(c, system, np.flatnonzero(train_base))
+        X, widths = matrix(c, system, np.flatnonzero(train_base), extra)
+        if extra is not None:
+            actor = np.array([s.split("@")[0] for s in spk])
+            train_base = train_base | (np.char.find(spk.astype(str), "@") >= 0) & np.isin(
+                actor, spk[train_base])
         inner = [[f"r{a}" for a in pair] for pair in FOLDS if pair != held]
         fold = {}
         for n, labels in (("8", None), ("4", FOUR)):
@@ -269,6 +307,9 @@ def leave_actors_out(c: Corpora, system: dict) -> dict:
         out[key + " sd"] = float(np.std([f[key] for f in out["per_fold"]]))
         out[key + " recall"] = {e: float(np.mean(pred[truth == e] == e) * 100)
                                 for e in np.unique(truth)}
+        labels = np.unique(truth)  # rows: truth, columns: predicted, in this order
+        out[key + " confusion"] = [[int(np.sum((truth == t) & (pred == p))) for p in labels]
+                                   for t in labels]
     return out
 
 
