@@ -165,68 +165,75 @@ SYSTEMS = {
 }
 
 
-class Fitted:
-    """One fitted system: ``predict(F, speakers)``, speakers None for lone utterances."""
+def fit_fixed(system: dict, F, y, spk, widths, C=None):
+    """``system`` fitted on (F, y, spk) with C (or its default).
 
-    def __init__(self, system: dict, F, y, spk, widths, C=None):
-        self.system = system
-        params = dict(system.get("params", {}))
-        if C is not None:
-            params["C"] = C
-        if widths is not None:
-            params.update(block_widths=widths, kernel_width=widths[0] + 2 * CODEBOOK_SIZE)
-        if system.get("prior"):
-            params["probability"] = True
-            _, counts = np.unique(y, return_counts=True)
-            self.prior = counts / counts.sum()
-        self.model = EmotionClassifier(**params).fit(F, y, speakers=spk)
+    Returns
+    -------
+    callable
+        ``predict(F, speakers=None)``, shape (n,); speakers None for lone utterances.
+    """
+    params = dict(system.get("params", {}))
+    if C is not None:
+        params["C"] = C
+    if widths is not None:
+        params.update(block_widths=widths, kernel_width=widths[0] + 2 * CODEBOOK_SIZE)
+    prior = None
+    if system.get("prior"):
+        params["probability"] = True
+        _, counts = np.unique(y, return_counts=True)
+        prior = counts / counts.sum()
+    model = EmotionClassifier(**params).fit(F, y, speakers=spk)
+    k = system.get("nearest")
 
-    def predict(self, F, speakers=None) -> np.ndarray:
-        if self.system.get("prior"):
-            p = self.model.predict_proba(F, speakers) / self.prior
-            return self.model.classes_[np.argmax(p, axis=1)]
-        k = self.system.get("nearest")
+    def predict(X, speakers=None) -> np.ndarray:
+        if prior is not None:
+            return model.classes_[np.argmax(model.predict_proba(X, speakers) / prior, axis=1)]
         if k and speakers is None:
-            norm = self.model.normalizer_
+            norm = model.normalizer_
             centres = (norm.means_ - norm.mean_) / norm.scale_    # (n_speakers, n_features)
-            Z = (F - norm.mean_) / norm.scale_
-            d = ((Z[:, None, :] - centres[None]) ** 2).sum(-1)    # (n, n_speakers)
-            near = np.argsort(d, axis=1)[:, :k]
+            d = ((((X - norm.mean_) / norm.scale_)[:, None, :] - centres[None]) ** 2).sum(-1)
+            near = np.argsort(d, axis=1)[:, :k]                   # (n, k)
             mean, scale = norm.means_[near].mean(1), norm.scales_[near].mean(1)
-            return self.model.pipeline_.predict((F - mean) / scale)
-        return self.model.predict(F, speakers)
+            return model.pipeline_.predict((X - mean) / scale)
+        return model.predict(X, speakers)
+    return predict
 
 
-def fit_system(system: dict, F, y, spk, widths, inner_groups=None) -> Fitted:
+def fit_system(system: dict, F, y, spk, widths, inner_groups=None):
     """``system`` fitted on (F, y, spk); with a grid, C chosen by one-utterance accuracy
     over ``inner_groups`` (a list of held-out speaker sets inside this training set)."""
     grid = system.get("grid")
     if not grid or not inner_groups:
-        return Fitted(system, F, y, spk, widths)
+        return fit_fixed(system, F, y, spk, widths)
     scores = []
     for C in grid:
         acc = []
         for held in inner_groups:
             test = np.isin(spk, held)
-            fitted = Fitted(system, F[~test], y[~test], spk[~test], widths, C)
-            acc.append(np.mean(fitted.predict(F[test]) == y[test]))
+            fitted = fit_fixed(system, F[~test], y[~test], spk[~test], widths, C)
+            acc.append(np.mean(fitted(F[test]) == y[test]))
         scores.append(np.mean(acc))
-    return Fitted(system, F, y, spk, widths, grid[int(np.argmax(scores))])
+    return fit_fixed(system, F, y, spk, widths, grid[int(np.argmax(scores))])
 
 
 # --------------------------------------------------------------------------- evaluation
-class Corpora(dict):
-    """RAVDESS then EmoDB, side by side: ``F`` (n, n_functionals), ``frames``, ``y``,
-    ``spk`` (``r01``..., ``e03``...), ``ravdess`` (bool mask), ``name`` (the cache's)."""
+def corpora(ravdess: Path, emodb: Path, cache: Path) -> dict:
+    """RAVDESS then EmoDB, side by side.
 
-
-def corpora(ravdess: Path, emodb: Path, cache: Path) -> Corpora:
+    Returns
+    -------
+    dict
+        ``F`` (n, n_functionals), ``frames``, ``y`` (EmoDB's labels in RAVDESS' names),
+        ``spk`` (``r01``..., ``e03``...), ``ravdess`` (bool mask), ``name`` and ``cache``
+        (the words' cache), ``r_utt`` (RAVDESS' audio).
+    """
     r_utt, r_y, r_actor, _ = load_ravdess(ravdess)
     r_F, r_frames = described("ravdess", r_utt, cache)
     e_utt, e_y, e_spk = load_emodb(emodb)
     e_F, e_frames = described("emodb", e_utt, cache)
     e_y = np.array([EMODB_TO_RAVDESS.get(v, "emodb-" + v) for v in e_y])
-    c = Corpora(F=np.vstack([r_F, e_F]), frames=r_frames + e_frames,
+    c = dict(F=np.vstack([r_F, e_F]), frames=r_frames + e_frames,
                 y=np.concatenate([r_y, e_y]),
                 spk=np.array([f"r{a}" for a in r_actor] + [f"e{s}" for s in e_spk]),
                 ravdess=np.arange(len(r_utt) + len(e_utt)) < len(r_utt), cache=cache)
@@ -235,7 +242,7 @@ def corpora(ravdess: Path, emodb: Path, cache: Path) -> Corpora:
     return c
 
 
-def speed_copies(c: Corpora, factors) -> tuple:
+def speed_copies(c: dict, factors) -> tuple:
     """Speed-perturbed copies of the RAVDESS utterances (:func:`speed_perturb`, as
     ``scripts/eval_emotion_augment.py``), described and cached.
 
@@ -256,7 +263,7 @@ def speed_copies(c: Corpora, factors) -> tuple:
             np.concatenate([[f"{s}@{f}" for s in c["spk"][rav]] for f in factors]))
 
 
-def matrix(c: Corpora, system: dict, train: np.ndarray, extra=None):
+def matrix(c: dict, system: dict, train: np.ndarray, extra=None):
     """The system's features for every utterance (then ``extra``'s, a
     :func:`speed_copies`), words learned on ``train``."""
     F, frames, name = c["F"], c["frames"], c["name"]
@@ -268,7 +275,7 @@ def matrix(c: Corpora, system: dict, train: np.ndarray, extra=None):
     return np.hstack([F, W]), (F.shape[1], W.shape[1])
 
 
-def leave_actors_out(c: Corpora, system: dict) -> dict:
+def leave_actors_out(c: dict, system: dict) -> dict:
     """The six folds, 8 and 4 emotions, one utterance and grouped."""
     y, spk, rav = c["y"], c["spk"], c["ravdess"]
     extra = speed_copies(c, system["speed"]) if system.get("speed") else None
@@ -296,7 +303,7 @@ def leave_actors_out(c: Corpora, system: dict) -> dict:
                 train, te = train & np.isin(y, labels), te & np.isin(y, labels)
             fitted = fit_system(system, X[train], y[train], spk[train], widths, inner)
             for mode, who in (("one", None), ("grouped", spk[te])):
-                pred = fitted.predict(X[te], who)
+                pred = fitted(X[te], who)
                 pooled[f"{n} {mode}"][0].append(y[te])
                 pooled[f"{n} {mode}"][1].append(pred)
                 fold[f"{n} {mode}"] = float(np.mean(pred == y[te]) * 100)
@@ -313,7 +320,7 @@ def leave_actors_out(c: Corpora, system: dict) -> dict:
     return out
 
 
-def across(c: Corpora, system: dict) -> dict:
+def across(c: dict, system: dict) -> dict:
     """Learnt on one corpus (all of it), tested on the other: the shared emotions."""
     y, spk, rav = c["y"], c["spk"], c["ravdess"]
     shared = np.isin(y, list(EMODB_TO_RAVDESS.values()))
@@ -321,16 +328,16 @@ def across(c: Corpora, system: dict) -> dict:
     for name, src in (("ravdess->emodb", rav), ("emodb->ravdess", ~rav)):
         train, test = src & shared, ~src & shared
         X, widths = matrix(c, system, np.flatnonzero(train))
-        fitted = Fitted(system, X[train], y[train], spk[train], widths)
+        fitted = fit_fixed(system, X[train], y[train], spk[train], widths)
         for mode, who in (("one", None), ("grouped", spk[test])):
-            pred = fitted.predict(X[test], who)
+            pred = fitted(X[test], who)
             neutral = y[test] == "neutral"
             out[f"{name} {mode}"] = float(np.mean(pred == y[test]) * 100)
             out[f"{name} {mode} neutral"] = float(np.mean(pred[neutral] == "neutral") * 100)
     return out
 
 
-def emodb_loso(c: Corpora, system: dict) -> dict:
+def emodb_loso(c: dict, system: dict) -> dict:
     """EmoDB's own leave-one-speaker-out, 7 emotions (the results page's protocol with
     this system's fixed C: no nesting), grouped and one utterance."""
     y, spk, emo = c["y"], c["spk"], ~c["ravdess"]
@@ -338,13 +345,15 @@ def emodb_loso(c: Corpora, system: dict) -> dict:
     for s in np.unique(spk[emo]):
         test, train = spk == s, emo & (spk != s)
         X, widths = matrix(c, system, np.flatnonzero(train))
-        fitted = Fitted({k: v for k, v in system.items() if k != "grid"},
-                        X[train], y[train], spk[train], widths)
-        preds["one"].append(np.mean(fitted.predict(X[test]) == y[test]) * 100)
-        preds["grouped"].append(np.mean(fitted.predict(X[test], spk[test]) == y[test]) * 100)
+        fitted = fit_fixed(system, X[train], y[train], spk[train], widths)
+        preds["one"].append(np.mean(fitted(X[test]) == y[test]) * 100)
+        preds["grouped"].append(np.mean(fitted(X[test], spk[test]) == y[test]) * 100)
     # mean and s.d. over the speakers, as the results page's EmoDB figures
-    return {f"emodb loso {m}{stat}": float(f(p)) for m, p in preds.items()
-            for stat, f in (("", np.mean), (" sd", np.std))}
+    out = {f"emodb loso {m}{stat}": float(f(p)) for m, p in preds.items()
+           for stat, f in (("", np.mean), (" sd", np.std))}
+    out.update({f"emodb loso {m} per speaker": [float(v) for v in p]
+                for m, p in preds.items()})
+    return out
 
 
 # --------------------------------------------------------------------------- report
