@@ -19,10 +19,17 @@ Each system is scored
 
 on the 8 emotions, and on 4 (neutral, happy, sad, angry: the model is trained on those
 four only, the usual RAVDESS subset and the one the issue's figure used), with per-class
-recall of the 8-emotion one-utterance run. Cross-corpus rows (TESS is not here, so EmoDB
-stands in): learnt on all 12 RAVDESS actors, tested on EmoDB, and the reverse, on the five
-emotions both have (neutral, happy, sad, angry, disgust and fear -- six), one utterance and
-speakers grouped, with neutral's recall.
+recall and confusion (in the JSON). Cross-corpus rows (TESS is not here, so EmoDB stands
+in): learnt on all 12 RAVDESS actors, tested on EmoDB, and the reverse, on the six
+emotions both have (neutral, happy, sad, angry, disgust, fear), one utterance and speakers
+grouped, with neutral's recall. Then EmoDB's own leave-one-speaker-out (7 emotions, C
+fixed: no nesting), unless ``--no-emodb-loso``.
+
+Systems (``--systems``; :data:`SYSTEMS` says what each is): ``speaker`` (the default
+before), ``functionals``, ``balanced``, ``no-norm``, ``nearest-3``, ``+emodb``,
+``default`` (the estimator's default), ``default, nested C``, ``default, speed`` (speed
+perturbation of the training folds; its copies are described and cached once, about as
+long as the corpus itself), ``default, prior``.
 
 Features are the stored estimator's (:meth:`EmotionClassifier.describe`: the functionals
 and the audio words' frame descriptors), computed once and cached in ``--cache`` as
