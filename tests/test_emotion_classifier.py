@@ -299,3 +299,47 @@ def test_speaker_normalize(rng):
     np.testing.assert_array_equal(Z[:, 3], 0)
     with pytest.raises(ParameterError, match="speakers"):
         speaker_normalize(F, spk[:-1])
+
+
+def test_speaker_and_population_normalisation(rng, tmp_path):
+    # The default SVM learns every training utterance twice: normalised by its speaker's
+    # statistics and by the population's (how a lone utterance is normalised).
+    from ingest.emotion.classifier import DEFAULT_NORMALIZE
+    from ingest.emotion.classifier_arrays import CLASSIFIER_FORMAT
+    from ingest.emotion.speakers import SpeakerNormalizer
+
+    spk = np.repeat(["a", "b", "c", "d"], 12)
+    y = np.tile(np.repeat(["calm", "loud", "sad"], 4), 4)
+    offsets = rng.normal(0, 3, (4, 6))  # speakers move features more than emotions
+    F = (offsets[np.repeat(np.arange(4), 12)] + (y == "loud")[:, None] * 1.5
+         - (y == "sad")[:, None] + rng.standard_normal((48, 6)))
+    test = rng.standard_normal((10, 6)) + 2
+    assert DEFAULT_NORMALIZE == "speaker+population"
+    model = EmotionClassifier(probability=True).fit(F, y, speakers=spk)
+    assert model.normalize == DEFAULT_NORMALIZE
+    norm = SpeakerNormalizer().fit(F, spk)
+    by_hand = EmotionClassifier(normalize="none").fit(
+        np.vstack([norm.transform(F, spk), norm.transform(F)]), np.tile(y, 2))
+    for who in (None, np.repeat(["e", "f"], 5), np.repeat(["a", "b"], 5)):
+        np.testing.assert_allclose(model.decision_function(test, who),
+                                   by_hand.decision_function(norm.transform(test, who)),
+                                   atol=1e-9)
+    # the former default differs, and without speakers both are one normalisation
+    speaker = EmotionClassifier(normalize="speaker").fit(F, y, speakers=spk)
+    assert not np.allclose(speaker.decision_function(test), model.decision_function(test))
+    np.testing.assert_allclose(EmotionClassifier().fit(F, y).decision_function(test),
+                               EmotionClassifier(normalize="speaker").fit(F, y)
+                               .decision_function(test), atol=1e-9)
+    proba = model.predict_proba(test)
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+    # stored as format 7; a format-6 model (normalize="speaker") still reads
+    np.savez(tmp_path / "m.npz", **model.to_arrays())
+    with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
+        assert int(z["format"]) == CLASSIFIER_FORMAT == 7
+        back = EmotionClassifier.from_arrays(z)
+    assert back.normalize == "speaker+population"
+    np.testing.assert_allclose(back.predict_proba(test, np.repeat(["e", "f"], 5)),
+                               model.predict_proba(test, np.repeat(["e", "f"], 5)), atol=1e-12)
+    old = {**speaker.to_arrays(), "format": np.array(6)}
+    np.testing.assert_array_equal(EmotionClassifier.from_arrays(old).predict(test),
+                                  speaker.predict(test))

@@ -332,7 +332,7 @@ def test_classify_silence_and_stereo(tiny_db, tiny_corpus, tmp_path, capsys):
     from ingest.emotion.classifier import EmotionClassifier
 
     clf = Model.load(tiny_db[0]).emotion_model.classifier
-    assert isinstance(clf, EmotionClassifier) and clf.normalize == "speaker"
+    assert isinstance(clf, EmotionClassifier) and clf.normalize == "speaker+population"
     mono = clf.predict_proba([(audio, sr)])
     stereo = clf.predict_proba([(np.stack([audio, audio], 1), float(sr))])
     np.testing.assert_allclose(stereo, mono, atol=1e-6)

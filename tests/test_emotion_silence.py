@@ -96,7 +96,7 @@ def test_silence_floor_stored_and_older_formats_read_without_it(clips, tiny_conf
     labels = np.array([e for _, e in clips])
     model = EmotionClassifier(features="rich").fit(audio, labels)
     arrays = model.to_arrays()
-    assert int(arrays["format"]) == CLASSIFIER_FORMAT == 6
+    assert int(arrays["format"]) == CLASSIFIER_FORMAT == 7
     assert float(arrays["silence_floor"]) == SILENCE_FLOOR
     assert EmotionClassifier.from_arrays(arrays).silence_floor == SILENCE_FLOOR
     # fitted with silence_floor=None: stored without it, read back as None

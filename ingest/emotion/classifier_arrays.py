@@ -31,10 +31,13 @@ logger = logging.getLogger(__name__)
 #: ensemble's codebooks (``boaw_n_codebooks``, ``boaw_codebook0`` ... ``2K - 1``); 6 (what
 #: is written): features with the silence floor, ``silence_floor`` (absent: None).
 #: Formats 2 to 5 were fitted on features without the floor, and are read with
-#: ``silence_floor=None`` (predicting as they did) and a warning.
-CLASSIFIER_FORMAT = 6
+#: ``silence_floor=None`` (predicting as they did) and a warning. 7 (what is written):
+#: ``normalize`` may be ``"speaker+population"`` (the default; read by older animegraph
+#: it would predict without its normalisation, hence the new number); its arrays are
+#: format 6's.
+CLASSIFIER_FORMAT = 7
 #: Formats :meth:`EmotionClassifier.from_arrays` reads.
-READABLE_FORMATS = (2, 3, 4, 5, 6)
+READABLE_FORMATS = (2, 3, 4, 5, 6, 7)
 #: The first format whose features have the silence floor.
 SILENCE_FLOOR_FORMAT = 6
 
@@ -225,7 +228,7 @@ def _restore(cls, arrays, fmt: int):
               "calibration_cv", "random_state", "gamma", "scale_min", "scale_scale",
               "classes", "support_vectors", "support", "n_support", "dual_coef",
               "intercept"]
-    if str(np.asarray(arrays.get("normalize", ""))) == "speaker":
+    if str(np.asarray(arrays.get("normalize", ""))) != "none":
         needed += ["norm_mean", "norm_scale", "norm_speakers", "norm_means",
                    "norm_scales", "norm_min_utterances"]
     try:
@@ -309,7 +312,7 @@ def _restore(cls, arrays, fmt: int):
     svm.n_features_in_ = n_features
     svm.n_iter_ = np.zeros(classes.size * (classes.size - 1) // 2, dtype=np.int32)
     model.pipeline_ = pipe
-    model.normalizer_ = (SpeakerNormalizer.from_arrays(a) if model.normalize == "speaker"
+    model.normalizer_ = (SpeakerNormalizer.from_arrays(a) if model.normalize != "none"
                          else None)
     model.calibrator_ = None
     if probability:
