@@ -407,8 +407,8 @@ def posteriors(audio: np.ndarray, sample_rate: int) -> np.ndarray:
             return found[0]
     samples16 = _resample(samples, sample_rate)
     out = _phone_log_probs(samples16)
-    if key != _key(samples16):
-        _write_alias(alias, _key(samples16))
+    if key != (key16 := _key(samples16)):  # kept once the outputs are
+        _write_alias(alias, key16)
     return out[0]
 
 
