@@ -32,9 +32,12 @@ With ``--kernels`` it measures the search's numba kernels instead
   same curves (the NumPy version only accumulates, a lower bound of its cost).
 
 With ``--heard`` it measures phones heard once (:mod:`ingest.speech.heard`): an
-audio-only ``synth`` of that sentence (no phone labels beside it) in a fresh cache folder,
-then the same recording again with another option (``--k-best 5``), each a new process:
-wall, CPU and the reported segmentation time of both, and the second's share of the first
+audio-only ``synth`` of that sentence (or of the recording ``--audio`` names; no phone
+labels beside it) in a fresh cache folder, then the same recording again with another
+option (``--k-best 5``), each a new process: wall, CPU, the reported segmentation time and
+work (segment + audio cost + search + post; the rest of the wall is the process's start,
+imports, loading the database and guides, and writing) of both, and the second's share of
+the first
 (target: <= 20 %). The database's default guides are used if it has them stored, else
 ``--guide none`` for both (a first fit would be timed, not the phones).
 
@@ -216,27 +219,38 @@ def kernel_report(db: Path, repeats: int) -> None:
           f"{1e6 * numpy_s:.1f} us a pair ({numpy_s / compiled:.0f} x): numba kept")
 
 
-def heard_report(db: Path) -> None:
+def heard_report(db: Path, audio: Path | None = None) -> None:
+    import shutil
+
+    import soundfile
+
     from animegraph.apps.prepare import unfitted_note
 
     guide = [] if unfitted_note(db) is None else ["--guide", "none"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        utt = speak(SENTENCE, Voice())
-        write_wav(tmp / "speech.wav", utt.audio, utt.sample_rate)
+        if audio is None:
+            utt = speak(SENTENCE, Voice())
+            write_wav(tmp / "speech.wav", utt.audio, utt.sample_rate)
+            duration = utt.duration
+        else:  # a copy: no phone labels beside it
+            shutil.copy(audio, tmp / "speech.wav")
+            duration = soundfile.info(str(audio)).duration
         env = {"ANIMEGRAPH_CACHE": str(tmp / "cache")}
         base = ["synth", str(tmp / "speech.wav"), "--db", str(db), *guide]
         rows = []
         for extra in ([], ["--k-best", "5"]):
             wall, cpu, err = _run([*base, *extra, "-o", str(tmp / "m.npz")], env)
-            segment = float(re.search(r"= segment ([\d.]+)", err).group(1))
-            rows.append((wall, cpu, segment, "phones heard before" in err))
-    what = f"{utt.duration:.1f} s" + (", " + " ".join(guide) if guide else "")
-    for (wall, cpu, segment, hit), label in zip(rows, ("first", "again, --k-best 5"),
-                                                strict=True):
+            found = re.search(r"([\d.]+) s = segment ([\d.]+)", err)
+            rows.append((wall, cpu, float(found.group(2)), float(found.group(1)),
+                         "phones heard before" in err))
+    what = f"{duration:.1f} s" + (", " + " ".join(guide) if guide else "")
+    for (wall, cpu, segment, work, hit), label in zip(rows, ("first", "again, --k-best 5"),
+                                                      strict=True):
         print(f"synth from speech alone ({what}), {label}: {wall:.2f} s wall, "
               f"{cpu:.2f} s CPU, segment {segment:.2f} s"
-              f"{' (from the cache)' if hit else ''}")
+              f"{' (from the cache)' if hit else ''} of {work:.2f} s work, "
+              f"{wall - work:.2f} s the rest (start-up, loading, writing)")
     print(f"the second run's share of the first: {rows[1][0] / rows[0][0]:.0%} wall, "
           f"{rows[1][1] / rows[0][1]:.0%} CPU (target <= 20 %)")
 
@@ -250,6 +264,8 @@ def main() -> None:
                         help="measure the numba kernels (fresh and warm cache, NumPy) instead")
     parser.add_argument("--heard", action="store_true",
                         help="measure a second synth of one recording (phones cached) instead")
+    parser.add_argument("--audio", type=Path, default=None,
+                        help="with --heard: this recording instead of the eSpeak NG sentence")
     parser.add_argument("--no-bytecode", action="store_true",
                         help="keep PYTHONDONTWRITEBYTECODE if set (default: drop it)")
     args = parser.parse_args()
@@ -262,7 +278,7 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}; database {db}; median of {args.runs} warm runs; "
           f"bytecode {'not ' if _ENV.get('PYTHONDONTWRITEBYTECODE') else ''}cached")
     if args.heard:
-        heard_report(db)
+        heard_report(db, args.audio)
         return
     if args.kernels:
         kernel_report(db, args.runs)

@@ -115,6 +115,49 @@ def test_ingest_keeps_the_models_outputs_on_disk(spoken, tmp_path, monkeypatch, 
     ctc.forget()
 
 
+def test_kept_outputs_of_other_rates_are_found_without_resampling(spoken, tmp_path):
+    """A recording at 44.1 kHz heard before: its posteriors come from the cache in a new
+    process without importing scipy.signal (the resampler), equal to the first ones; a
+    damaged digest file is ignored and written again."""
+    import subprocess
+    import sys
+
+    from scipy.signal import resample_poly
+
+    from ingest.formats.wav import write_wav
+
+    u = spoken[0]
+    wav = tmp_path / "speech.wav"
+    write_wav(wav, resample_poly(u.audio, 441, 160).astype(np.float32), 44100)
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from ingest.formats.media import read_audio\n"
+        "from ingest.speech import ctc\n"
+        f"audio, rate = read_audio({str(wav)!r})\n"
+        "with ctc.kept_on_disk():\n"
+        "    probs = ctc.posteriors(audio, rate)\n"
+        f"np.save({str(tmp_path)!r} + '/' + sys.argv[1], probs)\n"
+        "print('scipy.signal' in sys.modules)\n")
+    env = {**__import__("os").environ, "ANIMEGRAPH_CACHE": str(tmp_path / "cache")}
+
+    def run(name: str) -> tuple[bool, np.ndarray]:
+        done = subprocess.run([sys.executable, "-c", code, name], env=env, check=True,
+                              capture_output=True, text=True)
+        return done.stdout.split()[-1] == "True", np.load(tmp_path / f"{name}.npy")
+
+    resampled, first = run("first")
+    assert resampled  # the model heard it: resampled to 16 kHz first
+    (alias,) = (tmp_path / "cache" / "phones").glob("*.at16k")
+    resampled, again = run("again")
+    assert not resampled
+    np.testing.assert_array_equal(again, first)
+    alias.write_text("not a digest of anything, not 32")
+    resampled, damaged = run("damaged")
+    assert resampled and len(alias.read_text()) == 32
+    np.testing.assert_array_equal(damaged, first)
+
+
 def test_threads_each_take_a_session_and_get_what_one_thread_gets(spoken):
     """Calls on several threads run on sessions of their own (hama's engine is
     single-threaded), never more than the model allows, with the serial results."""

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from animegraph.apps.cache import default_corpus_dir, default_db_dir
+from animegraph.apps.cache import CACHE_ENV, default_corpus_dir, default_db_dir
 from animegraph.apps.cli import main
 from animegraph.apps.demo import DEMO_SENTENCE
 from db.store import Database, current_version
@@ -21,7 +21,10 @@ def test_demo_sentence_is_held_out_and_pronounceable():
     assert all(w in cmudict() for w in words(DEMO_SENTENCE))
 
 
-def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys):
+def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys, monkeypatch):
+    # A cache folder of its own: the session's is shared by the other tests of this
+    # worker, some of which need the default database absent (test_first_hour.py).
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--quiet"]) == 0
     first = capsys.readouterr().out

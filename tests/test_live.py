@@ -281,7 +281,9 @@ def test_websocket_slow_and_gone_clients_are_counted_not_waited_for():
 
     server = FrameServer(0, [f"c{i}" for i in range(500)], 30.0)
     frame = np.random.default_rng(0).random(500)
-    with connect(f"ws://127.0.0.1:{server.port}/") as ws:
+    # close_timeout: the client, leaving, waits that long for the close handshake, which
+    # the server's full queue holds up (10 s by default); what is tested is the server.
+    with connect(f"ws://127.0.0.1:{server.port}/", close_timeout=1) as ws:
         ws.recv(timeout=5)
         for k in range(3000):  # ~30 MB to a client that reads nothing
             server.send(k, frame)

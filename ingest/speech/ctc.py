@@ -394,7 +394,22 @@ def posteriors(audio: np.ndarray, sample_rate: int) -> np.ndarray:
         If the model cannot be loaded or run.
     """
     samples, sample_rate = check_audio(audio, sample_rate)
-    return _phone_log_probs(_resample(samples, sample_rate))[0]
+    if sample_rate == SAMPLE_RATE or not _ON_DISK.get():
+        return _phone_log_probs(_resample(samples, sample_rate))[0]
+    # Outputs kept for this very input are found without resampling it: importing
+    # scipy.signal for the resampler is about a second of a one-shot synth that has
+    # heard the recording before (its checks and guide ask for the posteriors again).
+    alias = _alias_path(samples, sample_rate)
+    key = _read_alias(alias)
+    if key is not None:
+        found = _kept(key, math.ceil(len(samples) * SAMPLE_RATE / sample_rate))
+        if found is not None:
+            return found[0]
+    samples16 = _resample(samples, sample_rate)
+    out = _phone_log_probs(samples16)
+    if key != (key16 := _key(samples16)):  # kept once the outputs are
+        _write_alias(alias, key16)
+    return out[0]
 
 
 #: The last few model outputs, by a digest of their 16 kHz input: recognition, the
@@ -480,21 +495,56 @@ def _to_disk(path: Path, probs: np.ndarray) -> None:
         logger.warning("%s: cannot keep the phone posteriors (%s)", path, exc)
 
 
-def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
-    key = hashlib.blake2b(np.ascontiguousarray(samples16).tobytes(), digest_size=16).digest()
+def _key(samples16: np.ndarray) -> bytes:
+    """The digest the model's outputs for ``samples16`` are remembered and kept by."""
+    return hashlib.blake2b(np.ascontiguousarray(samples16).tobytes(), digest_size=16).digest()
+
+
+def _alias_path(samples: np.ndarray, sample_rate: int) -> Path:
+    """Where the digest of ``samples``' 16 kHz version (:func:`_resample`) is kept, by a
+    digest of ``samples`` (float32, as :func:`check_audio` gives them) and their rate."""
+    from ingest.cache import cache_dir
+
+    digest = hashlib.blake2b(np.ascontiguousarray(samples).tobytes(), digest_size=16)
+    digest.update(f"/{int(sample_rate)}".encode())
+    return cache_dir() / "phones" / f"{digest.hexdigest()}.at16k"
+
+
+def _read_alias(path: Path) -> bytes | None:
+    """The digest :func:`_write_alias` kept at ``path``, or None (absent or not one)."""
+    try:
+        if not path.is_file() or path.stat().st_size != 32:  # a file of 32 hex digits
+            return None
+        text = path.read_text(encoding="ascii")
+        return bytes.fromhex(text) if len(text) == 32 else None
+    except (OSError, ValueError):
+        return None
+
+
+def _write_alias(path: Path, key: bytes) -> None:
+    from db.atomic import atomic_write
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path) as handle:
+            handle.write(key.hex().encode("ascii"))
+    except (OSError, DataError) as exc:  # a cache that cannot be written costs time, not the result
+        logger.warning("%s: cannot keep the digest of the resampled audio (%s)", path, exc)
+
+
+def _kept(key: bytes, n_samples16: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The outputs for the 16 kHz audio of digest ``key`` (``n_samples16`` samples) as
+    this process remembers them or (:func:`kept_on_disk`) the cache keeps them, or None."""
     with _RECENT_LOCK:
         if key in _RECENT:
             _RECENT.move_to_end(key)
             return _RECENT[key]
     path = _disk_path(key) if _ON_DISK.get() else None
-    probs = _from_disk(path, len(samples16)) if path is not None and path.is_file() else None
-    if probs is None:
-        log_probs = _log_probs(samples16)
-        probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
-        probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
-        if path is not None:
-            _to_disk(path, probs)  # float64: what is read back gives the same results
+    probs = _from_disk(path, n_samples16) if path is not None and path.is_file() else None
+    return None if probs is None else _remember(key, probs)
+
+
+def _remember(key: bytes, probs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     out = probs.astype(np.float32), np.log(np.maximum(probs, 1e-30))
     for a in out:
         a.flags.writeable = False
@@ -503,6 +553,20 @@ def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         while len(_RECENT) > _RECENT_SIZE:
             _RECENT.popitem(last=False)
     return out
+
+
+def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
+    key = _key(samples16)
+    found = _kept(key, len(samples16))
+    if found is not None:
+        return found
+    log_probs = _log_probs(samples16)
+    probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
+    probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+    if _ON_DISK.get():
+        _to_disk(_disk_path(key), probs)  # float64: what is read back gives the same results
+    return _remember(key, probs)
 
 
 # ---------------------------------------------------------------------------------------------
