@@ -155,6 +155,7 @@ def test_fit_into_a_database_for_classify_and_synth(tiny_db, tiny_corpus, tmp_pa
     assert main(["emotion", "fit", str(tiny_corpus / "clips"), "--labels", str(labels),
                  "--db", str(db), "--emotions", "angry,sad,happy", "-q"]) == 0
     assert "stored it into" in capsys.readouterr().err
+    assert not list((db / "baselines").glob(f"{current_version(db)}/*.parquet"))
     opened = Database.open(db)
     assert opened.version_dir.name != before
     entry = opened.manifest["emotion"]["classifier"]
@@ -359,3 +360,26 @@ def test_weights_over_time_interpolate_between_window_centres():
     with pytest.raises(DataError, match="no window"):
         weights_over_time([Window(0.0, 4.0, None, "silence")], [1.0])
     assert spans(10.0, 4.0, 2.0) == [(0.0, 4.0), (2.0, 6.0), (4.0, 8.0), (6.0, 10.0)]
+
+
+def test_fit_into_a_database_keeps_its_fitted_guides(tiny_db, tiny_corpus, tmp_path, capsys):
+    """A classifier stored with --db makes a new version of the same clips and motion: the
+    models fitted on the version before are stored for it too (not fitted again by synth)."""
+    from animegraph.baselines import make_estimator
+    from animegraph.baselines.base import read_model, save_model
+    from animegraph.baselines.stored import model_path
+    from ingest.tables import prepared_from_database
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db)
+    model = make_estimator("hier-pca", n_clusters=8).fit(prepared_from_database(Database.open(db)))
+    save_model(model, db)
+    labels = _labels_csv(tiny_corpus, tmp_path / "labels.csv")
+    assert main(["emotion", "fit", str(tiny_corpus / "clips"), "--labels", str(labels),
+                 "--db", str(db), "--emotions", "angry,sad,happy", "-q"]) == 0
+    assert "kept its fitted hier-pca" in capsys.readouterr().err
+    kept = model_path(db, "hier-pca")
+    assert kept.parent.name == current_version(db) and kept.is_file()
+    again = read_model(kept)
+    for name, value in model.to_arrays().items():
+        np.testing.assert_array_equal(again.to_arrays()[name], value)

@@ -150,6 +150,30 @@ def save_model(model: BaselineModel, db_root) -> Path:
     return path
 
 
+def carry_models(db_root, from_version: str) -> list[str]:
+    """Store again, under the live version of ``db_root``, the models fitted on its version
+    ``from_version``: for a new version whose clips and motion are that one's (e.g. only
+    its emotion classifier replaced), so its first ``synth`` does not fit them again.
+
+    Returns
+    -------
+    list of str
+        The methods carried (a model that can no longer be read is left behind).
+    """
+    from db.store import own_folder
+
+    root = Path(db_root)
+    carried = []
+    for path in sorted(own_folder(root, MODELS_DIR, from_version).glob("*.parquet")):
+        try:
+            model = read_model(path)
+        except DataError:
+            continue
+        save_model(model, root)
+        carried.append(model.method)
+    return carried
+
+
 def read_model(path) -> BaselineModel:
     """Load a stored model file."""
     import pyarrow as pa

@@ -123,11 +123,12 @@ def load_classifier(path):
     return classifier, trained_on
 
 
-def store_in_database(db_path, classifier, trained_on: dict) -> Path:
+def store_in_database(db_path, classifier, trained_on: dict, based_on: str | None = None) -> Path:
     """Store ``classifier`` into the database at ``db_path`` in place of its own (a new
     version, atomic, under the writer lock: :func:`db.store.write_model_arrays`), for
     ``classify --db`` and ``synth --emotion auto``. A later ``ingest`` learns the
-    database's own again.
+    database's own again. ``based_on``: the version the caller read (refused if the
+    database has moved on since).
 
     Raises
     ------
@@ -139,6 +140,9 @@ def store_in_database(db_path, classifier, trained_on: dict) -> Path:
     from ingest.emotion.model import PREFIX, classifier_entry
 
     db = Database.open(db_path)
+    if based_on is not None and db.version_dir.name != based_on:
+        raise DataError(f"database {db.root} changed while the classifier was fitted (it is "
+                        f"now {db.version_dir.name}, was {based_on}); nothing written")
     emotion = db.manifest.get("emotion")
     if emotion is None:
         raise DataError(f"database {db.root} has no emotion model (it was built by an older "

@@ -60,8 +60,15 @@ def cmd_emotion_fit(args: argparse.Namespace) -> int:
     if args.db is not None:
         from ingest.emotion.classifier_file import store_in_database
 
-        where = store_in_database(args.db, classifier, trained_on)
-        done = f"stored it into {args.db} (version {where.name})"
+        from animegraph.baselines.base import carry_models
+        from db.store import current_version
+
+        before = current_version(args.db)
+        where = store_in_database(args.db, classifier, trained_on, based_on=before)
+        # The clips and motion are the previous version's: its fitted guides hold.
+        carried = carry_models(args.db, before)
+        done = (f"stored it into {args.db} (version {where.name})"
+                + (f"; kept its fitted {', '.join(carried)}" if carried else ""))
     else:
         from ingest.emotion.classifier_file import save_classifier
 
