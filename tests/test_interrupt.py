@@ -24,9 +24,9 @@ import pytest
 BOUND_S = 120.0
 
 
-def _start(args: list[str], tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+def _start(args: list[str], tmp_path: Path, **env_vars: str) -> tuple[subprocess.Popen, Path]:
     err = tmp_path / "stderr.txt"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **env_vars}
     proc = subprocess.Popen([sys.executable, "-m", "animegraph", *args], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=err.open("w"), env=env,
                             start_new_session=True)
@@ -183,6 +183,25 @@ def test_ctrl_c_ends_a_synth(tiny_db, tiny_corpus, tmp_path):
     _at_work(proc, err, "synthesizing")
     _interrupt(proc, 1)
     _clean_exit(_ended(proc, _workers(proc)), err)
+    assert not out.exists()
+
+
+def test_ctrl_c_ends_a_synth_while_pocketsphinx_places_the_phones(tiny_db, tiny_corpus,
+                                                                   tmp_path):
+    # PocketSphinx's decoder keeps Python's lock for a whole utterance: the Ctrl-C used
+    # to wait for it (seconds on a long recording). A fresh cache, or the phones heard in
+    # another test are read from it and PocketSphinx never runs.
+    from animegraph.apps.cache import CACHE_ENV
+
+    speech = _long_speech(tiny_corpus, tmp_path)
+    out = tmp_path / "out.c3d"
+    proc, err = _start(["-vv", "synth", str(speech), "--db", str(tiny_db[0]), "-o", str(out)],
+                       tmp_path, **{CACHE_ENV: str(tmp_path / "cache")})
+    _at_work(proc, err, "PocketSphinx places")
+    time.sleep(0.3)  # inside the decoding
+    decoders = _workers(proc)  # the decoding's child process, at least
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, decoders), err)
     assert not out.exists()
 
 
