@@ -108,6 +108,8 @@ def interrupt_once(args: list[str], delay: float, err_path: Path, marker: str | 
         latency = time.monotonic() - t0
     text = err_path.read_text()
     last = (text.strip().splitlines() or [""])[-1]
+    if marker is not None and marker not in text:
+        last = f"pressed without {marker!r} seen; {last}"
     return code, latency, "Traceback" in text, last
 
 
