@@ -7,7 +7,8 @@ import os
 import threading
 import time
 
-__all__ = ["StillRunning", "in_worker_thread", "thread_budget", "usable_cpus"]
+__all__ = ["StillRunning", "in_worker_thread", "interrupt_awaited", "thread_budget",
+           "usable_cpus"]
 
 
 def thread_budget() -> int:
@@ -25,6 +26,21 @@ def usable_cpus(cap: int = 8) -> int:
     except AttributeError:  # not on Linux
         n = os.cpu_count() or 1
     return max(1, min(cap, n))
+
+
+#: True in the work :func:`in_worker_thread` runs (its context): see :func:`interrupt_awaited`.
+_AWAITED = contextvars.ContextVar("animegraph_interrupt_awaited", default=False)
+
+
+def interrupt_awaited() -> bool:
+    """True inside work that :func:`in_worker_thread` runs, where the main thread waits to
+    end the command at a Ctrl-C.
+
+    That wait needs Python's lock: a long compiled call that keeps it (PocketSphinx's
+    decoder does) delays the Ctrl-C until it returns. Such a call asks this and, when
+    true, runs where it can be killed (:func:`ingest.workers.in_forked_child`).
+    """
+    return _AWAITED.get()
 
 
 class StillRunning(Exception):
@@ -60,6 +76,7 @@ def in_worker_thread(work, *, timeout: float | None = None, on_timeout=None,
     # thread as ended while it still runs (CPython releases its lock, bpo-45274).
     done = threading.Event()
     context = contextvars.copy_context()
+    context.run(_AWAITED.set, True)
 
     def target() -> None:
         try:

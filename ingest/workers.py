@@ -16,6 +16,10 @@
   the workers. Left at their default, every worker's BLAS starts a thread per core and
   the threads of all workers spin for the same cores: ingesting GRID's 800 clips on 2
   cores took 90 s to read the clips instead of 45 (``docs/results/speed.md``, "Ingest").
+
+:func:`in_forked_child` runs one call in a forked child that dies at a Ctrl-C and with
+its parent: for a long compiled call that keeps Python's lock, which would otherwise hold
+back the main thread's Ctrl-C until it returned.
 """
 
 from __future__ import annotations
@@ -91,6 +95,90 @@ def _watch_parent(parent: int) -> None:
     while os.getppid() == parent:
         time.sleep(PARENT_POLL_S)
     os._exit(1)
+
+
+class ChildFailed(RuntimeError):
+    """The work of :func:`in_forked_child` raised ``RuntimeError`` (its message kept)."""
+
+
+def in_forked_child(work: Callable[[], object]) -> object:
+    """``work()`` in a forked child process; its value, or its ``RuntimeError``.
+
+    The child is a copy of this process (``os.fork``): ``work`` sees the same objects in
+    the same state (a decoder already built, words already added), so it computes what it
+    would compute here, while the calling thread waits in a ``read`` that lets go of
+    Python's lock. The child dies at a Ctrl-C (SIGINT at its default action: a terminal's
+    Ctrl-C reaches the whole process group) and with its parent
+    (:func:`die_with_parent`). Its value comes back as JSON through a pipe (never a
+    pickle): a number, string, list (tuples become lists), dict or None.
+
+    Parameters
+    ----------
+    work : callable
+        Called with no argument in the child. It must not need another thread of this
+        process (only the calling thread exists in the child) and must not print.
+
+    Returns
+    -------
+    object
+        ``work()``'s value, JSON round-tripped.
+
+    Raises
+    ------
+    ChildFailed
+        ``work`` raised ``RuntimeError`` (a ``RuntimeError``: callers that catch that
+        from a compiled library keep working).
+    DataError
+        ``work`` raised anything else, or the child ended without an answer (killed).
+    """
+    import json
+    import warnings
+
+    from db.errors import DataError
+
+    parent = os.getpid()
+    read_fd, write_fd = os.pipe()
+    with warnings.catch_warnings():
+        # Python 3.12+ warns of fork in a threaded process: the child only runs ``work``
+        # (no lock another thread may hold is taken there) and ends with os._exit.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child (its work is covered by the callers' tests)
+        status = 1
+        try:
+            os.close(read_fd)
+            signal.signal(signal.SIGINT, signal.SIG_DFL)
+            die_with_parent(parent)
+            try:
+                reply = {"value": work()}
+            except RuntimeError as exc:
+                reply = {"runtime_error": str(exc)}
+            except BaseException as exc:  # noqa: BLE001 - reported to the parent
+                reply = {"error": f"{type(exc).__name__}: {exc}"}
+            data = memoryview(json.dumps(reply).encode())
+            while data:
+                data = data[os.write(write_fd, data):]
+            status = 0
+        finally:
+            os._exit(status)
+    os.close(write_fd)
+    chunks = []
+    try:
+        while chunk := os.read(read_fd, 1 << 16):
+            chunks.append(chunk)
+    finally:
+        os.close(read_fd)
+        _, status = os.waitpid(pid, 0)
+    if not chunks:
+        how = (f"was killed by signal {os.WTERMSIG(status)}" if os.WIFSIGNALED(status)
+               else f"exited with status {os.waitstatus_to_exitcode(status)}")
+        raise DataError(f"the child process of a long computation {how} without an answer")
+    reply = json.loads(b"".join(chunks))
+    if "runtime_error" in reply:
+        raise ChildFailed(reply["runtime_error"])
+    if "error" in reply:
+        raise DataError(f"the child process of a long computation failed: {reply['error']}")
+    return reply["value"]
 
 
 def worker_initializer(parent: int, threads: int | None = None) -> None:

@@ -8,7 +8,12 @@ Builds (or reuses) the small synthetic corpus and database of
 ``scripts/probe_security.py`` under ``DIR``, then, for each command, starts it as a
 terminal's foreground job would be (its own process group), waits until it is at work
 (``--delay`` seconds after the start, past the imports), sends SIGINT to the whole group
-(what Ctrl-C does) and times how long the process takes to end. Prints, a line per run:
+(what Ctrl-C does) and times how long the process takes to end. ``synth`` is pressed
+inside its slowest stage for Ctrl-C, PocketSphinx placing the phones of a long recording
+(``--synth-at placement``: half a second after ``-vv``'s line "PocketSphinx places", with
+a fresh phone cache each run, or the phones are read from the cache and PocketSphinx never
+runs), or at a fixed delay, while hama hears the speech (``--synth-at delay``). Prints, a
+line per run:
 the command, its exit status (130 is the one expected), the seconds from the signal to the
 exit, and whether stderr held a traceback; then the median and the worst latency of each
 command. tests/test_interrupt.py checks the status and the absent traceback; the latency
@@ -30,9 +35,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from probe_common import CLI, setup  # noqa: E402
 
+from ingest.cache import CACHE_ENV  # noqa: E402
+
 #: Seconds after the start at which Ctrl-C is pressed: past the imports, inside the work.
 DELAY_S = {"sql": 4.0, "batch": 12.0, "ingest": 6.0, "synth": 8.0, "render": 5.0,
            "fit": 2.5}
+#: ``synth``'s line (with ``-vv``) as PocketSphinx starts placing the phones, and the
+#: seconds after it at which Ctrl-C is pressed (inside the decoding).
+PLACEMENT_LINE, PLACEMENT_DELAY_S = "PocketSphinx places", 0.5
+#: Longest wait for that line (a bound: the load of a shared machine varies).
+MARKER_BOUND_S = 600.0
 
 
 def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
@@ -68,12 +80,20 @@ def commands(corpus: Path, db: Path, work: Path) -> dict[str, list[str]]:
     }
 
 
-def interrupt_once(args: list[str], delay: float, err_path: Path) -> tuple[int, float, bool, str]:
-    """(exit status, seconds from SIGINT to exit, traceback printed, last stderr line)."""
+def interrupt_once(args: list[str], delay: float, err_path: Path, marker: str | None = None,
+                   env: dict | None = None) -> tuple[int, float, bool, str]:
+    """(exit status, seconds from SIGINT to exit, traceback printed, last stderr line).
+
+    Ctrl-C is pressed ``delay`` seconds after the start, or, with ``marker``, ``delay``
+    seconds after that text appears on stderr."""
     with err_path.open("w") as err:
         proc = subprocess.Popen(CLI + args, stdout=subprocess.DEVNULL, stderr=err,
                                 start_new_session=True,
-                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
+        deadline = time.monotonic() + MARKER_BOUND_S
+        while (marker is not None and proc.poll() is None and time.monotonic() < deadline
+               and marker not in err_path.read_text()):
+            time.sleep(0.05)
         time.sleep(delay)
         if proc.poll() is not None:
             text = err_path.read_text()
@@ -88,6 +108,8 @@ def interrupt_once(args: list[str], delay: float, err_path: Path) -> tuple[int, 
         latency = time.monotonic() - t0
     text = err_path.read_text()
     last = (text.strip().splitlines() or [""])[-1]
+    if marker is not None and marker not in text:
+        last = f"pressed without {marker!r} seen; {last}"
     return code, latency, "Traceback" in text, last
 
 
@@ -96,6 +118,9 @@ def main(argv=None) -> int:
     parser.add_argument("--work", type=Path, default=None)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--commands", nargs="*", default=list(DELAY_S), choices=list(DELAY_S))
+    parser.add_argument("--synth-at", choices=["placement", "delay"], default="placement",
+                        help="press Ctrl-C on synth while PocketSphinx places the phones "
+                             "(default) or at its fixed delay, while hama hears the speech")
     args = parser.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-interrupt-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -108,8 +133,14 @@ def main(argv=None) -> int:
             if name == "fit":  # fit stores its model in the database: a copy each time
                 subprocess.run(["rm", "-rf", str(work / "fit.db")], check=True)
                 subprocess.run(["cp", "-r", str(db), str(work / "fit.db")], check=True)
-            code, latency, traceback, last = interrupt_once(runs[name], DELAY_S[name],
-                                                            work / f"{name}.err")
+            command, delay, marker, env = runs[name], DELAY_S[name], None, None
+            if name == "synth" and args.synth_at == "placement":
+                command = ["-vv", *command]
+                delay, marker = PLACEMENT_DELAY_S, PLACEMENT_LINE
+                env = {CACHE_ENV: str(work / f"cache-{k}")}
+                subprocess.run(["rm", "-rf", env[CACHE_ENV]], check=True)
+            code, latency, traceback, last = interrupt_once(command, delay,
+                                                            work / f"{name}.err", marker, env)
             latencies.append(latency)
             print(f"{name} run {k + 1}: exit {code}, {latency:.2f} s after SIGINT, "
                   f"traceback: {'YES' if traceback else 'no'}; {last[:100]}", flush=True)

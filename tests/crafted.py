@@ -116,15 +116,25 @@ def _bytes(path_of: Callable[[Path], Path], data: Callable[[bytes], bytes]):
     return mutate
 
 
+def _first_list(values: list) -> int:
+    """Index of the first list that is not null (a column may hold nulls: clips ingested
+    without a phone model have no posteriors), else 0."""
+    return next((k for k, v in enumerate(values) if v is not None), 0)
+
+
 def _nan_list(t: pa.Table, name: str) -> pa.Array:
     values = t.column(name).to_pylist()
-    values[0] = [float("nan")] * len(values[0])
+    k = _first_list(values)
+    values[k] = [float("nan")] * len(values[k] or [0.0])
     return pa.array(values, t.schema.field(name).type)
 
 
 def _short_list(t: pa.Table, name: str) -> pa.Array:
+    """The first list one value short (a lone value where every one is null: a vector
+    too short for any of the column's shapes)."""
     values = t.column(name).to_pylist()
-    values[0] = values[0][:-1]
+    k = _first_list(values)
+    values[k] = values[k][:-1] if values[k] is not None else [0.0]
     return pa.array(values, t.schema.field(name).type)
 
 

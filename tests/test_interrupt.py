@@ -24,17 +24,17 @@ import pytest
 BOUND_S = 120.0
 
 
-def _start(args: list[str], tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+def _start(args: list[str], tmp_path: Path, **env_vars: str) -> tuple[subprocess.Popen, Path]:
     err = tmp_path / "stderr.txt"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **env_vars}
     proc = subprocess.Popen([sys.executable, "-m", "animegraph", *args], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=err.open("w"), env=env,
                             start_new_session=True)
     return proc, err
 
 
-def _wait_for(condition, what: str) -> None:
-    deadline = time.monotonic() + BOUND_S
+def _wait_for(condition, what: str, bound: float = BOUND_S) -> None:
+    deadline = time.monotonic() + bound
     while not condition():
         if time.monotonic() > deadline:
             pytest.fail(f"gave up waiting for {what}")
@@ -134,7 +134,7 @@ def test_ctrl_c_ends_a_batch(tiny_db, tmp_path):
 
 
 def _at_work(proc: subprocess.Popen, err: Path, marker: str | None = None,
-             cpu_s: float = 3.0) -> None:
+             cpu_s: float = 3.0, bound: float = BOUND_S) -> None:
     """Wait until the command is inside its work: ``marker`` on its stderr, or (without
     one) ``cpu_s`` seconds of CPU spent, past the imports. Fails if it ended before."""
     def busy() -> bool:
@@ -148,7 +148,8 @@ def _at_work(proc: subprocess.Popen, err: Path, marker: str | None = None,
             return True
         return times.user + times.system >= cpu_s
 
-    _wait_for(busy, f"the command at work ({marker or f'{cpu_s} s of CPU'})")
+    _wait_for(busy, f"the command at work ({marker or f'{cpu_s} s of CPU'}): "
+              f"{err.read_text()[-400:]}", bound)
     assert proc.poll() is None, f"it ended before the Ctrl-C: {err.read_text()}"
 
 
@@ -183,6 +184,26 @@ def test_ctrl_c_ends_a_synth(tiny_db, tiny_corpus, tmp_path):
     _at_work(proc, err, "synthesizing")
     _interrupt(proc, 1)
     _clean_exit(_ended(proc, _workers(proc)), err)
+    assert not out.exists()
+
+
+def test_ctrl_c_ends_a_synth_while_pocketsphinx_places_the_phones(tiny_db, tiny_corpus,
+                                                                   tmp_path):
+    # PocketSphinx's decoder keeps Python's lock for a whole utterance: the Ctrl-C used
+    # to wait for it (seconds on a long recording). A fresh cache, or the phones heard in
+    # another test are read from it and PocketSphinx never runs.
+    from animegraph.apps.cache import CACHE_ENV
+
+    speech = _long_speech(tiny_corpus, tmp_path)
+    out = tmp_path / "out.c3d"
+    proc, err = _start(["-vv", "synth", str(speech), "--db", str(tiny_db[0]), "-o", str(out)],
+                       tmp_path, **{CACHE_ENV: str(tmp_path / "cache")})
+    # hama hears the speech first: a minute or more on a loaded machine
+    _at_work(proc, err, "PocketSphinx places", bound=5 * BOUND_S)
+    time.sleep(0.3)  # inside the decoding
+    decoders = _workers(proc)  # the decoding's child process, at least
+    _interrupt(proc, 1)
+    _clean_exit(_ended(proc, decoders), err)
     assert not out.exists()
 
 

@@ -217,6 +217,36 @@ def test_align_is_thread_safe(spoken):
     assert len(results) == 4
 
 
+def test_decoding_in_a_killable_child_gives_the_same_segments(spoken, monkeypatch):
+    # Where the main thread waits for a Ctrl-C (work run by in_worker_thread, as synth's),
+    # each decoding runs in a forked child, which a Ctrl-C kills at once: same result.
+    from db.system import in_worker_thread
+    from ingest.speech.sphinx import align_phones
+
+    u = spoken[0]
+    here = recognize(u.audio, u.sample_rate)
+    phones = [s.phone for s in here]
+    expected = (align(u.audio, u.sample_rate, u.text), here,
+                align_phones(u.audio, u.sample_rate, phones))
+    import ingest.workers
+
+    children = []  # the real in_forked_child, its callers counted
+
+    def counted(work):
+        children.append(work)
+        return in_forked_child(work)
+
+    in_forked_child = ingest.workers.in_forked_child
+    monkeypatch.setattr(ingest.workers, "in_forked_child", counted)
+    decoded = in_worker_thread(lambda: (
+        align(u.audio, u.sample_rate, u.text), recognize(u.audio, u.sample_rate),
+        align_phones(u.audio, u.sample_rate, phones)))
+    assert decoded == expected
+    assert len(children) == 3  # each decoding ran in a child
+    with pytest.raises(DataError, match="no alignment"):  # a failure is the same error
+        in_worker_thread(lambda: align(np.zeros(32000), 16000, "hello world"))
+
+
 # ---------------------------------------------------------------------------------------------
 # recognize
 # ---------------------------------------------------------------------------------------------

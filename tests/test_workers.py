@@ -72,3 +72,41 @@ def test_what_ended_workers_left_is_not_reported_after_the_program_ends(tmp_path
     err = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=env, cwd=tmp_path, check=True).stderr
     assert "resource_tracker" not in err, err
+
+
+def test_a_forked_child_computes_with_this_process_state():
+    from ingest.workers import in_forked_child
+
+    state = {"words": ["a", "b"]}  # what the child sees is a copy of this process
+    value = in_forked_child(lambda: [(w, os.getpid()) for w in state["words"]])
+    assert [w for w, _ in value] == ["a", "b"]
+    assert all(pid != os.getpid() for _, pid in value)  # computed in another process
+
+
+def test_a_forked_childs_errors_come_back():
+    import pytest
+
+    from db.errors import DataError
+    from ingest.workers import ChildFailed, in_forked_child
+
+    def runtime():
+        raise RuntimeError("Final result does not match the grammar")
+
+    with pytest.raises(ChildFailed, match="does not match the grammar") as caught:
+        in_forked_child(runtime)
+    assert isinstance(caught.value, RuntimeError)  # callers catching that keep working
+    with pytest.raises(DataError, match="ValueError: bad"):
+        in_forked_child(lambda: (_ for _ in ()).throw(ValueError("bad")))
+    # A child killed (a Ctrl-C reaches the whole process group) leaves a readable error.
+    import signal
+
+    with pytest.raises(DataError, match=f"killed by signal {int(signal.SIGINT)}"):
+        in_forked_child(lambda: os.kill(os.getpid(), signal.SIGINT))
+
+
+def test_interrupt_awaited_only_in_work_run_in_a_worker_thread():
+    from db.system import in_worker_thread, interrupt_awaited
+
+    assert not interrupt_awaited()
+    assert in_worker_thread(interrupt_awaited)
+    assert not interrupt_awaited()  # the caller's context is left as it was

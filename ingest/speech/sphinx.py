@@ -36,6 +36,14 @@ PocketSphinx quirks handled here
   ``feat.params`` override the same options given to ``Decoder(...)``.)
 * A decoder is built once per process and mode (about 0.15 s each) and shared behind a
   lock; a forked child builds its own.
+* The decoder keeps Python's lock for a whole utterance (its binding never lets go of
+  it): a Ctrl-C on ``synth`` waited for the phones of a long recording to be placed
+  (2.4-5.3 s on 158 s of speech). Where the main thread waits to act on a Ctrl-C
+  (:func:`db.system.interrupt_awaited`), each decoding runs in a forked child instead
+  (:func:`ingest.workers.in_forked_child`), which dies at the Ctrl-C. The child is a copy
+  of this process, decoder and dictionary included, so the result is the same; feeding
+  the decoder in blocks would free the lock too, but it switches PocketSphinx from the
+  utterance's cepstral mean (``-cmn batch``) to a running one, which moves boundaries.
 * The first (word) pass can lose the only path through the transcript with the default
   beams ("Final result does not match the grammar"), seen on slow, low-pitched speech:
   the aligner's beams are widened (:data:`ALIGNER_OPTIONS`), at no measurable cost.
@@ -215,6 +223,19 @@ def _decode(decoder, pcm: bytes) -> None:
     decoder.end_utt()
 
 
+def _decoded(work):
+    """``work()``, a decoding: here, or in a forked child where the main thread waits to
+    act on a Ctrl-C (see the module docstring). Its value JSON round-trips (tuples come
+    back as lists); a decoder's ``RuntimeError`` stays a ``RuntimeError``."""
+    from db.system import interrupt_awaited
+
+    if not interrupt_awaited():
+        return work()
+    from ingest.workers import in_forked_child
+
+    return in_forked_child(work)
+
+
 def _as_phone(name: str) -> str:
     """A PocketSphinx phone or word label -> a PHONE_SET phone (fillers are SIL)."""
     name = name.upper()
@@ -322,7 +343,10 @@ def align(
     start = time.perf_counter()
     with engine.lock:
         words = _dictionary_words(engine, text)
-        entries = _align_phones(engine.decoder, " ".join(words), prepared.pcm)
+        logger.debug("PocketSphinx aligns %d words to %.2f s of audio", len(words),
+                     duration)
+        entries = _decoded(lambda: _align_phones(engine.decoder, " ".join(words),
+                                                 prepared.pcm))
     if entries is None:
         raise DataError(
             f"PocketSphinx found no alignment of the transcript {text[:60]!r} "
@@ -360,6 +384,12 @@ def _align_phones(decoder, words: str, pcm: bytes, *,
         return None
     entries = [(phone.name, phone.start) for phone in alignment.phones()]
     return entries or None
+
+
+def _recognized(decoder, pcm: bytes) -> list[tuple[str, int]]:
+    """Allphone decoding of ``pcm``: ``[(phone, start frame)]``."""
+    _decode(decoder, pcm)
+    return [(seg.word, seg.start_frame) for seg in decoder.seg()]
 
 
 def _phone_word(phone: str) -> str:
@@ -416,8 +446,11 @@ def align_phones(
     with engine.lock:
         _add_words(engine, [(_phone_word(p), p) for p in sorted(set(spoken))
                             if _phone_word(p) not in engine.added])
-        entries = _align_phones(engine.decoder, " ".join(_phone_word(p) for p in spoken),
-                                prepared.pcm, one_phone_words=True)
+        words = " ".join(_phone_word(p) for p in spoken)
+        logger.debug("PocketSphinx places %d phones in %.2f s of audio", len(spoken),
+                     duration)
+        entries = _decoded(lambda: _align_phones(engine.decoder, words, prepared.pcm,
+                                                 one_phone_words=True))
     if entries is None:
         return None
     return _segments(entries, prepared, refine)
@@ -460,8 +493,7 @@ def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> li
     engine = _engine("allphone")
     with engine.lock:
         try:
-            _decode(engine.decoder, prepared.pcm)
-            entries = [(seg.word, seg.start_frame) for seg in engine.decoder.seg()]
+            entries = _decoded(lambda: _recognized(engine.decoder, prepared.pcm))
         except RuntimeError as exc:
             raise DataError(f"PocketSphinx phone recognition failed: {exc}") from exc
     return _segments(entries, prepared, refine)
