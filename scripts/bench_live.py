@@ -228,8 +228,14 @@ def main() -> int:
     parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
     parser.add_argument("--context", type=float, default=None,
                         help="the stream's context (ms)")
+    parser.add_argument("--posterior-context", type=float, default=None,
+                        help="hama's left context before the first unsettled frame (ms)")
+    parser.add_argument("--settle", type=float, default=None,
+                        help="audio after a frame before its posteriors are settled (ms)")
     args = parser.parse_args()
-    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context))
+    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
+                                     ("posterior_context_ms", args.posterior_context),
+                                     ("settle_ms", args.settle))
                    if v is not None})
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
