@@ -633,8 +633,9 @@ def _add_live(sub) -> None:
     live = sub.add_parser(
         "live", help="facial motion in real time for speech as it is spoken",
         description="Hear speech as it arrives (a file at its pace, raw PCM on stdin, the "
-        "microphone) and send the face frame by frame: the synthesis' audio-only default "
-        "re-run on a sliding window, each frame sent once the look-ahead after it is heard.")
+        "microphone) and send the face frame by frame: hama's phone posteriors computed once "
+        "per 20 ms frame, the synthesis' audio-only default re-run on a short sliding "
+        "window, each frame sent once the look-ahead after it is heard.")
     _db_option(live)
     live.add_argument("--source", required=True, metavar="FILE|-|ws:PORT|mic",
                       help="a WAV or video played at real-time pace; - for raw 16-bit "
@@ -650,8 +651,8 @@ def _add_live(sub) -> None:
                       help="play a file as fast as it is synthesized, not at its pace")
     live.add_argument("--lookahead", type=_number, default=120.0, metavar="MS",
                       help="audio heard after a frame before it is sent (120 ms)")
-    live.add_argument("--hop", type=_number, default=80.0, metavar="MS",
-                      help="audio between two updates (80 ms)")
+    live.add_argument("--hop", type=_number, default=40.0, metavar="MS",
+                      help="audio between two updates (40 ms)")
     live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
                       help="the face's emotion: a name, auto, or a mix")
     live.add_argument("--guide", choices=("default", "none"), default="default",

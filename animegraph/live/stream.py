@@ -7,11 +7,16 @@ and k-best cross-fading look at the next phone, the low-pass runs forward and ba
 Live, each update re-synthesizes a bounded *window* with the same code:
 
 * the window runs from ``context_ms`` before the first frame not yet sent to the newest
-  sample (so ``context + hop + lookahead``, 0.8 s by default); older audio is dropped;
-* its phones are recognised by hama on the window alone (the ``hama`` engine: CTC greedy
-  decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
-  PocketSphinx place hama's phones, left out here for its cost); its posteriorgram, which
-  ppg-ridge reads, is the same model call (kept by :mod:`ingest.speech.ctc`);
+  sample (so ``context + hop + lookahead``); older audio is dropped;
+* hama's phone posteriors are not computed on the window: the stream keeps them for
+  every 20 ms of audio, computed once (:class:`animegraph.live.frontend.PosteriorTrack`:
+  each update the model hears only the frames not settled yet and a context before
+  them), and hands the window's rows to :mod:`ingest.speech.ctc`
+  (:func:`~ingest.speech.ctc.remember`); the window's phones are recognised from them
+  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
+  PocketSphinx place hama's phones, left out here for its cost) and ppg-ridge reads
+  them as its posteriorgram. A window starts on a 20 ms frame (when the frame rate
+  allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended 50/50) from those phones given as labels;
@@ -42,10 +47,13 @@ from db.errors import DataError, ParameterError
 
 #: Look-ahead (ms) by default: the audio after a frame that is heard before it is sent.
 DEFAULT_LOOKAHEAD_MS = 120.0
-#: Audio (ms) between two updates by default.
-DEFAULT_HOP_MS = 80.0
-#: Audio (ms) before the first unsent frame that each window re-hears, by default.
-DEFAULT_CONTEXT_MS = 600.0
+#: Audio (ms) between two updates by default: a frame waits up to a hop for its update
+#: (80 ms before the posteriors were computed once per frame; 40 ms now costs less CPU
+#: than 80 ms did, docs/results/live.md).
+DEFAULT_HOP_MS = 40.0
+#: Audio (ms) before the first unsent frame that each window re-synthesizes, by default
+#: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`).
+DEFAULT_CONTEXT_MS = 300.0
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
