@@ -651,8 +651,8 @@ def _add_live(sub) -> None:
                       help="play a file as fast as it is synthesized, not at its pace")
     live.add_argument("--lookahead", type=_number, default=120.0, metavar="MS",
                       help="audio heard after a frame before it is sent (120 ms)")
-    live.add_argument("--hop", type=_number, default=40.0, metavar="MS",
-                      help="audio between two updates (40 ms)")
+    live.add_argument("--hop", type=_number, default=80.0, metavar="MS",
+                      help="audio between two updates (80 ms)")
     live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
                       help="the face's emotion: a name, auto, or a mix")
     live.add_argument("--guide", choices=("default", "none"), default="default",

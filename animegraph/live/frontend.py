@@ -28,15 +28,15 @@ import math
 import numpy as np
 
 #: Audio (s) before the first unsettled frame that the model hears again (its left
-#: context). Measured on three eSpeak NG sentences against the posteriors of the whole
-#: utterance, hop 40 ms, settled after 40 ms (mean total variation per frame; likeliest
-#: phone the same; the model's CPU per second of audio, under load): 0.2 s 0.26, 80 %,
-#: 0.32; 0.3 s 0.22, 83 %, 0.43; 0.4 s 0.20, 84 %, 0.51; 0.6 s 0.17, 86 %, 0.68.
-CONTEXT_S = 0.3
-#: Audio (s) after a frame heard before its posteriors are settled. Measured as above
-#: (context 0.3 s): 0.04 s 0.22, 83 %; 0.08 s 0.22, 83 %; 0.12 s 0.21, 82 %, at 0.07
-#: more CPU per 0.04 s.
-SETTLE_S = 0.04
+#: context), and audio after a frame heard before its posteriors are settled. The model
+#: hears its whole input, so less context costs agreement with the offline posteriors
+#: (three eSpeak NG sentences, hop 40 ms, against the whole utterance's: mean total
+#: variation per frame 0.14 with 600 / 120 ms, 0.22 with 300 / 40 ms) and, more, with the
+#: offline motion: 300 / 40 ms cut the synthetic split's live mouth R by 0.1 at every
+#: look-ahead while saving a third of the CPU (docs/results/live.md). The default keeps
+#: the windowed stream's quality.
+CONTEXT_S = 0.6
+SETTLE_S = 0.12
 #: hama's frame rate (Hz) and rate (Hz) of the audio it hears.
 FRAME_RATE, MODEL_RATE = 50, 16000
 #: The model hears audio scaled so that the loudest sample heard so far is at this level

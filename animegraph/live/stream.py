@@ -47,12 +47,11 @@ from db.errors import DataError, ParameterError
 
 #: Look-ahead (ms) by default: the audio after a frame that is heard before it is sent.
 DEFAULT_LOOKAHEAD_MS = 120.0
-#: Audio (ms) between two updates by default: a frame waits up to a hop for its update
-#: (80 ms before the posteriors were computed once per frame; 40 ms now costs less CPU
-#: than 80 ms did, docs/results/live.md).
-DEFAULT_HOP_MS = 40.0
+#: Audio (ms) between two updates by default.
+DEFAULT_HOP_MS = 80.0
 #: Audio (ms) before the first unsent frame that each window re-synthesizes, by default
-#: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`).
+#: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`;
+#: 300 ms here followed the offline output as closely as 600 ms, docs/results/live.md).
 DEFAULT_CONTEXT_MS = 300.0
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
