@@ -23,6 +23,9 @@ Usage::
   holds the audio it shows to its sending (look-ahead, waiting for the update, compute);
   median, 95th percentile, max. CPU: the stream's updates' process CPU time (all threads)
   over the audio's duration (1.0 = one core), and their wall time likewise.
+* **CPU alone** (``--unpaced``): the same speech pushed in 20 ms chunks as fast as the
+  stream takes it (a second pass, after a warm-up one): CPU per second of audio and
+  each update's CPU time, without the pacing's waits.
 * **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
   frames sent against the audio heard times the frame rate, the latency over its first
   and last tenth, and the updates that had to catch up.
@@ -200,6 +203,31 @@ def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:
             "load": os.getloadavg()}
 
 
+def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
+    """CPU of the stream alone: ``speech`` pushed in 20 ms chunks as fast as it is taken
+    (after one warm-up pass), per second of audio and per update."""
+    runs = []
+    for _ in range(2):  # the first pass warms hama and the kernels
+        cpu = seconds = 0.0
+        updates: list[float] = []
+        for audio, sr in speech:
+            stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
+                            backlog_ms=None, **WINDOW)
+            step = int(CHUNK_S * sr)
+            t = time.process_time()
+            for k in range(0, len(audio), step):
+                stream.push(audio[k:k + step])
+            stream.close()
+            cpu += time.process_time() - t
+            seconds += len(audio) / sr
+            updates += stream.stats.update_cpu
+        runs.append({"seconds": seconds, "cpu_share": cpu / seconds,
+                     "update_cpu_ms": {"median": 1000 * float(np.median(updates)),
+                                       "p95": 1000 * float(np.percentile(updates, 95))},
+                     "load": os.getloadavg()})
+    return runs[-1]
+
+
 def speech_file(speech, seconds: float, path: Path) -> Path:
     """Held-out speech joined (and repeated) to ``seconds``, as a WAV."""
     sr = speech[0][1]
@@ -224,12 +252,20 @@ def main() -> int:
                         help="held-out clips scored at most (every k-th)")
     parser.add_argument("--db", type=Path, default=None,
                         help="with --quality and nothing after it: time this database")
+    parser.add_argument("--unpaced", action="store_true",
+                        help="also the stream's CPU with the speech pushed as fast as taken")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
     parser.add_argument("--context", type=float, default=None,
                         help="the stream's context (ms)")
+    parser.add_argument("--posterior-context", type=float, default=None,
+                        help="hama's left context before the first unsettled frame (ms)")
+    parser.add_argument("--settle", type=float, default=None,
+                        help="audio after a frame before its posteriors are settled (ms)")
     args = parser.parse_args()
-    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context))
+    WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
+                                     ("posterior_context_ms", args.posterior_context),
+                                     ("settle_ms", args.settle))
                    if v is not None})
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
@@ -254,6 +290,9 @@ def main() -> int:
             first = {"speech": [(u.audio.astype(np.float32), u.sample_rate) for u in said]}
         else:
             model, guide = first["model"], first["guide"]
+        if args.unpaced:
+            results["unpaced"] = unpaced(model, guide, first["speech"])
+            print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
             wav = speech_file(first["speech"], args.latency_seconds, tmp / "latency.wav")
             for la in args.lookaheads:

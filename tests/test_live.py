@@ -448,3 +448,122 @@ def test_live_command_sends_livelink_packets(arkit_db, tmp_path):
     for name in ("jawOpen", "jawLeft", "mouthRight", "eyeBlinkLeft"):
         col = take.names.index(name)
         assert packets[k].value(name) == pytest.approx(take.values[k, col], abs=1e-4)
+
+
+# --- the incremental front end ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("rate", [16000, 24000])
+def test_incremental_posteriors_match_the_windowed_ones(speech, rate):
+    """hama's posteriors computed once per frame (PosteriorTrack: 300 ms of context, settled
+    40 ms later) agree with those of the model re-run on a 600 ms window ending at the
+    same sample, as the windowed stream computed them, as well as those agree with the
+    whole utterance's; posteriors shifted by one 20 ms frame do not."""
+    from scipy.signal import resample_poly
+
+    from animegraph.live.frontend import FRAME_RATE, PosteriorTrack
+    from ingest.speech import ctc
+
+    audio, sr = speech
+    if rate != sr:
+        audio = resample_poly(audio, rate, sr).astype(np.float32)
+    full = ctc.posteriors(audio, rate)
+    track = PosteriorTrack(rate, context_s=0.3, settle_s=0.04)
+    hop, peak = int(0.04 * rate), float(np.max(np.abs(audio)))
+    windowed = {}
+    for end in range(hop, len(audio) + 1, hop):
+        track.update(audio, 0, end, peak)
+        first = max(0, track.settled - 36)  # 600 ms + a hop before the newest settled frame
+        rows = ctc.posteriors(audio[int(round(first * rate / FRAME_RATE)): end], rate)
+        for f in range(max(0, track.settled - 2), track.settled):
+            if f - first < len(rows):
+                windowed[f] = rows[f - first]
+    frames = sorted(windowed)
+    assert len(frames) > 0.8 * len(full)
+    win = np.array([windowed[f] for f in frames])
+    inc = track.posteriors(0, track.frames)[frames]
+
+    def tv(p, q):  # total variation per frame, and agreement of the likeliest phone
+        return 0.5 * np.abs(p - q).sum(axis=1).mean(), (p.argmax(1) == q.argmax(1)).mean()
+
+    tv_inc, agree_inc = tv(inc, win)
+    tv_full, agree_full = tv(win, full[frames])
+    assert tv_inc <= 0.2 and agree_inc >= 0.8, (tv_inc, agree_inc)
+    assert tv_inc <= tv_full + 0.05 and agree_inc >= agree_full - 0.05
+    tv_shift, agree_shift = tv(np.roll(inc, 1, axis=0), win)
+    assert tv_shift > tv_inc + 0.1 and agree_shift < agree_inc - 0.1
+
+
+def test_stream_runs_hama_once_per_frame_not_per_window(model, speech):
+    """The model hears each update's unsettled frames and their context, not the window:
+    about (context + settle + hop) / hop seconds per second of audio, far below the
+    window's (context + hop + look-ahead) / hop."""
+    from animegraph.live import Stream
+
+    audio, sr = speech
+    stream = Stream(model, sample_rate=sr, lookahead_ms=120, hop_ms=80, context_ms=600,
+                    posterior_context_ms=300, settle_ms=40, backlog_ms=None)
+    _play(stream, audio)
+    per_second = stream._track.model_s / (len(audio) / sr)
+    assert per_second <= (0.3 + 0.04 + 0.08 + 0.04) / 0.08  # a frame's rounding either side
+    assert per_second < (0.6 + 0.08 + 0.12) / 0.08 * 0.6
+
+
+def test_websocket_source_takes_pcm_split_anywhere_and_ends_with_its_client():
+    pytest.importorskip("websockets")
+    from websockets.exceptions import ConnectionClosed
+    from websockets.sync.client import connect
+
+    from animegraph.live.sources import WebSocketSource
+
+    source = WebSocketSource(0, 16000)
+    samples = (np.sin(np.arange(1000) / 7.0) * 20000).astype("<i2")
+    raw = samples.tobytes()
+    with connect(f"ws://127.0.0.1:{source.port}/") as ws:
+        ws.send(raw[:301])  # a sample split between two messages
+        ws.send("not audio")  # refused, counted
+        ws.send(raw[301:])
+        with connect(f"ws://127.0.0.1:{source.port}/") as second:  # one client at a time
+            with pytest.raises(ConnectionClosed) as closed:
+                second.recv(timeout=5)
+            assert closed.value.rcvd.code == 1013
+    got = np.concatenate(list(source))
+    np.testing.assert_array_equal(got, samples.astype(np.float32) / 32768.0)
+    assert source.refused == 2
+
+
+def test_live_command_hears_pcm_from_a_websocket_client(tiny_db, speech, tmp_path):
+    pytest.importorskip("websockets")
+    from websockets.sync.client import connect
+
+    from ingest.formats.wav import read_wav
+
+    audio, sr = speech
+    with socket.socket() as s:  # a free port
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cmd = [sys.executable, "-m", "animegraph", "live", "--db", str(tiny_db[0]), "--source",
+           f"ws:{port}", "--rate", str(sr), "--hop", "200", "--guide", "none", "--record",
+           str(tmp_path / "take")]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    line = proc.stderr.readline()
+    assert f"waiting for PCM at ws://127.0.0.1:{port}/" in line, line
+    pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2")
+    with connect(f"ws://127.0.0.1:{port}/") as ws:
+        for k in range(0, len(pcm), 1600):
+            ws.send(pcm[k:k + 1600].tobytes())
+    err = proc.communicate(timeout=600)[1]
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "frames for" in err
+    heard, rate = read_wav(tmp_path / "take" / "take.wav")
+    assert rate == sr and len(heard) == len(pcm)
+
+
+def test_websocket_source_needs_a_rate_and_a_port(tiny_db, tmp_path):
+    for args, said in ((["--source", "ws:80x"], "give ws:PORT"),
+                       (["--source", "ws:0"], "needs --rate"),
+                       (["--source", "ws:0", "--rate", "100"], "not supported")):
+        out = _live(["--db", str(tiny_db[0]), "--record", str(tmp_path / "t"), *args])
+        assert out.returncode != 0 and said in out.stderr, out.stderr
+        assert "Traceback" not in out.stderr

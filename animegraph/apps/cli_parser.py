@@ -594,16 +594,20 @@ def _add_live(sub) -> None:
     live = sub.add_parser(
         "live", help="facial motion in real time for speech as it is spoken",
         description="Hear speech as it arrives (a file at its pace, raw PCM on stdin, the "
-        "microphone) and send the face frame by frame: the synthesis' audio-only default "
-        "re-run on a sliding window, each frame sent once the look-ahead after it is heard.")
+        "microphone) and send the face frame by frame: hama's phone posteriors computed once "
+        "per 20 ms frame, the synthesis' audio-only default re-run on a short sliding "
+        "window, each frame sent once the look-ahead after it is heard.")
     _db_option(live)
-    live.add_argument("--source", required=True, metavar="FILE|-|mic",
+    live.add_argument("--source", required=True, metavar="FILE|-|ws:PORT|mic",
                       help="a WAV or video played at real-time pace; - for raw 16-bit "
-                      "little-endian mono PCM on stdin (with --rate); mic for the microphone "
+                      "little-endian mono PCM on stdin (with --rate); ws:PORT to take that "
+                      "PCM as binary messages from a WebSocket client at ws://HOST:PORT/ "
+                      "(with --rate; the stream ends when it closes); mic for the microphone "
                       "(pip install 'animegraph[live]' and the PortAudio library, "
                       "libportaudio2)")
     live.add_argument("--rate", type=_whole_number, default=None, metavar="HZ",
-                      help="sample rate of --source - (and of mic; default 16000)")
+                      help="sample rate of --source - and ws:PORT (and of mic; default "
+                      "16000)")
     live.add_argument("--fast", action="store_true",
                       help="play a file as fast as it is synthesized, not at its pace")
     live.add_argument("--lookahead", type=_number, default=120.0, metavar="MS",
@@ -621,7 +625,7 @@ def _add_live(sub) -> None:
     live.add_argument("--websocket", type=_whole_number, default=None, metavar="PORT",
                       help="serve JSON frames at ws://HOST:PORT/ (0: a free port)")
     live.add_argument("--host", default="127.0.0.1",
-                      help="address the WebSocket server listens on (127.0.0.1)")
+                      help="address the WebSocket servers listen on (127.0.0.1)")
     live.add_argument("--record", type=Path, default=None, metavar="DIR",
                       help="keep what was sent in DIR: take.livelink.csv (or the database's "
                       "motion format) and take.wav")

@@ -1,6 +1,6 @@
-"""Where live speech comes from: a file played at real-time pace, raw PCM on stdin, or the
-microphone. Each source is an iterable of chunks (float32, shape (n,), in [-1, 1]) with
-its ``sample_rate``; :meth:`stop` ends it early (from another thread).
+"""Where live speech comes from: a file played at real-time pace, raw PCM on stdin or from
+a WebSocket client, or the microphone. Each source is an iterable of chunks (float32,
+shape (n,), in [-1, 1]) with its ``sample_rate``; :meth:`stop` ends it early (from another thread).
 """
 
 from __future__ import annotations
@@ -118,6 +118,86 @@ class MicSource:
                     yield self._queue.get(timeout=0.1)
                 except queue.Empty:
                     continue
+
+    def stop(self) -> None:
+        self._stop.set()
+
+
+class WebSocketSource:
+    """Raw PCM from a WebSocket client: a server at ``ws://HOST:PORT/`` that takes one
+    client, whose binary messages are 16-bit signed little-endian mono samples at
+    ``sample_rate`` (any length; a sample split between messages waits for its other
+    byte). The stream ends when that client closes. Text messages are refused (counted in
+    :attr:`refused`), as are clients while one is connected (the ``websockets`` package:
+    ``pip install 'animegraph[live]'``).
+
+    Parameters
+    ----------
+    port : int
+        0 picks a free one (:attr:`port` says which).
+    sample_rate : int
+    host : str
+    """
+
+    def __init__(self, port: int, sample_rate: int, *, host: str = "127.0.0.1") -> None:
+        import queue
+
+        try:
+            from websockets.sync.server import serve
+        except ImportError:
+            raise DataError("--source ws:PORT needs the websockets package: pip install "
+                            "'animegraph[live]'") from None
+        self.sample_rate = int(sample_rate)
+        self.refused = 0
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._busy = threading.Lock()
+        self._stop = threading.Event()
+        try:
+            self._server = serve(self._client, host, int(port), max_size=2**22)
+        except OSError as exc:
+            raise DataError(f"--source ws:{port}: cannot listen there ({exc})") from None
+        self.port = self._server.socket.getsockname()[1]
+        threading.Thread(target=self._server.serve_forever, daemon=True,
+                         name="live-ws-source").start()
+
+    def _client(self, ws) -> None:  # the server's thread for this client
+        from websockets.exceptions import ConnectionClosed
+
+        if not self._busy.acquire(blocking=False):
+            self.refused += 1
+            ws.close(1013, "another client is sending")
+            return
+        odd = b""
+        try:
+            for message in ws:
+                if isinstance(message, str):
+                    self.refused += 1
+                    continue
+                data = odd + message
+                cut = len(data) - len(data) % 2
+                odd = data[cut:]
+                if cut:
+                    self._queue.put(np.frombuffer(data[:cut], dtype="<i2").astype(np.float32)
+                                    / 32768.0)
+        except ConnectionClosed:
+            pass
+        finally:
+            self._queue.put(None)  # the stream ends with its client
+
+    def __iter__(self):
+        import queue
+
+        try:
+            while not self._stop.is_set():
+                try:
+                    chunk = self._queue.get(timeout=0.1)
+                except queue.Empty:
+                    continue
+                if chunk is None:
+                    return
+                yield chunk
+        finally:
+            self._server.shutdown()
 
     def stop(self) -> None:
         self._stop.set()

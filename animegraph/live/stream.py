@@ -7,11 +7,16 @@ and k-best cross-fading look at the next phone, the low-pass runs forward and ba
 Live, each update re-synthesizes a bounded *window* with the same code:
 
 * the window runs from ``context_ms`` before the first frame not yet sent to the newest
-  sample (so ``context + hop + lookahead``, 0.8 s by default); older audio is dropped;
-* its phones are recognised by hama on the window alone (the ``hama`` engine: CTC greedy
-  decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
-  PocketSphinx place hama's phones, left out here for its cost); its posteriorgram, which
-  ppg-ridge reads, is the same model call (kept by :mod:`ingest.speech.ctc`);
+  sample (so ``context + hop + lookahead``); older audio is dropped;
+* hama's phone posteriors are not computed on the window: the stream keeps them for
+  every 20 ms of audio, computed once (:class:`animegraph.live.frontend.PosteriorTrack`:
+  each update the model hears only the frames not settled yet and a context before
+  them), and hands the window's rows to :mod:`ingest.speech.ctc`
+  (:func:`~ingest.speech.ctc.remember`); the window's phones are recognised from them
+  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
+  PocketSphinx place hama's phones, left out here for its cost) and ppg-ridge reads
+  them as its posteriorgram. A window starts on a 20 ms frame (when the frame rate
+  allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended 50/50) from those phones given as labels;
@@ -37,14 +42,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from animegraph.live.frontend import CONTEXT_S, FRAME_RATE, SETTLE_S, PosteriorTrack
 from db.errors import DataError, ParameterError
 
 #: Look-ahead (ms) by default: the audio after a frame that is heard before it is sent.
 DEFAULT_LOOKAHEAD_MS = 120.0
 #: Audio (ms) between two updates by default.
 DEFAULT_HOP_MS = 80.0
-#: Audio (ms) before the first unsent frame that each window re-hears, by default.
-DEFAULT_CONTEXT_MS = 600.0
+#: Audio (ms) before the first unsent frame that each window re-synthesizes, by default
+#: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`;
+#: 300 ms here followed the offline output as closely as 600 ms, docs/results/live.md).
+DEFAULT_CONTEXT_MS = 300.0
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
@@ -139,6 +147,11 @@ class Stream:
         Audio waiting beyond which one update hears all of it (catching up when updates
         take longer than the audio they cover); None: never (each update hears one hop,
         whatever the chunks pushed: the frames do not depend on how the audio was cut).
+    posterior_context_ms, settle_ms : float
+        hama's phone posteriors are computed once per 20 ms frame
+        (:class:`animegraph.live.frontend.PosteriorTrack`): the model hears this much audio
+        before the first unsettled frame, and a frame is settled once this much audio
+        after it has been heard.
 
     Raises
     ------
@@ -150,13 +163,17 @@ class Stream:
                  lookahead_ms: float = DEFAULT_LOOKAHEAD_MS, hop_ms: float = DEFAULT_HOP_MS,
                  context_ms: float = DEFAULT_CONTEXT_MS, emotion=None, guide=None,
                  k_best: int | None = None,
-                 backlog_ms: float | None = DEFAULT_BACKLOG_MS) -> None:
+                 backlog_ms: float | None = DEFAULT_BACKLOG_MS,
+                 posterior_context_ms: float = CONTEXT_S * 1000,
+                 settle_ms: float = SETTLE_S * 1000) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
         check_rate(sample_rate)
         for name, value, low in (("lookahead_ms", lookahead_ms, 0.0), ("hop_ms", hop_ms, 1.0),
-                                 ("context_ms", context_ms, 100.0)):
+                                 ("context_ms", context_ms, 100.0),
+                                 ("posterior_context_ms", posterior_context_ms, 0.0),
+                                 ("settle_ms", settle_ms, 0.0)):
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= low):
                 raise ParameterError(f"{name} must be a number >= {low:g}, got {value!r}")
         self.model = model if isinstance(model, Model) else Model.load(model)
@@ -184,6 +201,8 @@ class Stream:
         self._updated_at = 0  # samples heard at the last update
         self._last = self._rest.copy()  # the last frame sent
         self._tentative: tuple[int, np.ndarray] | None = None  # unsent frames of a window
+        self._track = PosteriorTrack(self.sample_rate, context_s=posterior_context_ms / 1000,
+                                     settle_s=settle_ms / 1000)
         self._closed = False
 
     # -- control ---------------------------------------------------------------------------
@@ -264,7 +283,9 @@ class Stream:
         target = min(target, int(round(end_s * self.fps)))
         if target <= self._sent:
             return self._empty()
-        first = max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps)))
+        first = self._on_posterior_frame(
+            max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps))))
+        self._track.update(self._buffer, self._buffer_start, end, self._peak)
         motion = self._window(first, end)  # frames first, first + 1, ... (may end short)
         if len(motion) < target - first:  # rounding at the end: hold the last frame
             pad = motion[-1:] if len(motion) else self._last[None]
@@ -282,6 +303,16 @@ class Stream:
         self.stats.update_wall.append(wall)
         self.stats.update_cpu.append(cpu)
         return Frames(first_sent, out, self.fps, end_s)
+
+    def _on_posterior_frame(self, first: int) -> int:
+        """The latest motion frame at or before ``first`` that starts a 20 ms posterior
+        frame too (so that the window's posteriors are the track's rows, not shifted),
+        if one lies within a second; else ``first``."""
+        for k in range(first, max(-1, first - int(self.fps) - 1), -1):
+            pos = k * FRAME_RATE / self.fps
+            if abs(pos - round(pos)) < 1e-6:
+                return k
+        return first
 
     def _fade(self, out: np.ndarray) -> np.ndarray:
         """The first frames of ``out`` eased from the previous window's estimate."""
@@ -301,8 +332,9 @@ class Stream:
         peak = float(np.max(np.abs(audio))) if len(audio) else 0.0
         if peak <= self._peak * 10 ** (-QUIET_DB / 20) or peak <= 1e-4:
             return self._pause(n)
+        start_s = max(start, self._buffer_start) / self.sample_rate  # where the audio begins
         try:
-            return self._synthesize(audio, n)
+            return self._synthesize(audio, n, int(round(start_s * FRAME_RATE)))
         except DataError as exc:  # e.g. nothing but silence heard in the window
             self.stats.warnings[str(exc).split(":")[0][:80]] += 1
             return self._pause(n)
@@ -311,10 +343,14 @@ class Stream:
         self.stats.pauses += 1
         return np.repeat(self._rest[None], n, axis=0)
 
-    def _synthesize(self, audio: np.ndarray, n: int) -> np.ndarray:
+    def _synthesize(self, audio: np.ndarray, n: int, first_posterior: int) -> np.ndarray:
+        """The window's motion; its phones and the guide's posteriorgram from the track's
+        posteriors (rows from ``first_posterior``), the model not run again."""
         from animegraph.synthesis import synthesize
         from ingest.speech import ctc
 
+        count = int(np.ceil(len(audio) / self.sample_rate * FRAME_RATE - 1e-9))
+        ctc.remember(audio, self.sample_rate, self._track.posteriors(first_posterior, count))
         segments = ctc.recognize(audio, self.sample_rate)
         if all(s.phone == "SIL" for s in segments):
             return self._pause(n)
@@ -348,6 +384,9 @@ class Stream:
         keep_from = int((self._sent / self.fps - self.context_s - 0.1) * self.sample_rate)
         if self._auto:
             keep_from = min(keep_from, self._heard - int(AUTO_SPAN_S * self.sample_rate))
+        track_from = (self._track.settled / FRAME_RATE - self._track.context_s) - 0.02
+        keep_from = min(keep_from, int(track_from * self.sample_rate))
+        self._track.forget(int((self._sent / self.fps - self.context_s - 0.1) * FRAME_RATE))
         cut = keep_from - self._buffer_start
         if cut > 0:
             self._buffer = self._buffer[cut:]

@@ -104,8 +104,10 @@ __all__ = [
     "check_transcript",
     "doubt",
     "doubts",
+    "phone_probs",
     "phone_share",
     "posteriors",
+    "remember",
     "recognize",
     "transcript_loss",
 ]
@@ -561,12 +563,38 @@ def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     found = _kept(key, len(samples16))
     if found is not None:
         return found
-    log_probs = _log_probs(samples16)
-    probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
-    probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+    probs = phone_probs(samples16)
     if _ON_DISK.get():
         _to_disk(_disk_path(key), probs)  # float64: what is read back gives the same results
     return _remember(key, probs)
+
+
+def phone_probs(samples16: np.ndarray) -> np.ndarray:
+    """The model's output for 16 kHz audio at the level given (not normalised, not
+    remembered), folded onto the project's phones: shape (ceil(n_samples / 320),
+    len(PHONES)), float64, rows summing to 1. :func:`posteriors` is this on audio scaled
+    to one level; a live stream (:mod:`animegraph.live.frontend`) calls it on the audio
+    it has not heard yet and a little before."""
+    log_probs = _log_probs(np.asarray(samples16, dtype=np.float32))
+    probs = np.exp(log_probs.astype(np.float64)) @ _model().merge.astype(np.float64)
+    probs /= np.maximum(probs.sum(axis=1, keepdims=True), 1e-30)
+    return probs
+
+
+def remember(audio: np.ndarray, sample_rate: int, probs: np.ndarray) -> None:
+    """Take ``probs`` (shape (n_frames, len(PHONES)), n_frames as the model would give, within 2)
+    as the posteriors of ``audio``: :func:`recognize` and :func:`posteriors` of this very
+    audio then use them instead of running the model (the two most recent are kept). A
+    live stream computes a window's posteriors piece by piece, reusing those it had."""
+    samples, sample_rate = check_audio(audio, sample_rate)
+    samples16 = _resample(samples, sample_rate)
+    n = math.ceil(len(samples16) / (SAMPLE_RATE // FRAME_RATE))
+    probs = np.asarray(probs, dtype=np.float64)
+    if probs.ndim != 2 or probs.shape[1] != len(PHONES) or abs(len(probs) - n) > 2:
+        raise ValueError(f"posteriors of shape {probs.shape} for audio of {n} frames")
+    if len(probs) != n:  # the model's last frame may fall short of the end, or past it
+        probs = probs[np.minimum(np.arange(n), len(probs) - 1)]
+    _remember(_key(samples16), probs)
 
 
 # ---------------------------------------------------------------------------------------------

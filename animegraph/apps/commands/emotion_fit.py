@@ -58,10 +58,9 @@ def cmd_emotion_fit(args: argparse.Namespace) -> int:
                   "emotions": {str(k): int(v) for k, v in counts.items()},
                   "labels": "preset " + args.preset if args.preset else "labels CSV"}
     if args.db is not None:
-        from ingest.emotion.classifier_file import store_in_database
-
         from animegraph.baselines.base import carry_models
         from db.store import current_version
+        from ingest.emotion.classifier_file import store_in_database
 
         before = current_version(args.db)
         where = store_in_database(args.db, classifier, trained_on, based_on=before)

@@ -88,16 +88,34 @@ def cmd_live(args: argparse.Namespace) -> int:
 
 
 def _source(args: argparse.Namespace):
-    from animegraph.live.sources import FileSource, MicSource, PcmSource
+    from animegraph.live.sources import FileSource, MicSource, PcmSource, WebSocketSource
+    from animegraph.live.stream import check_rate
+    from db.errors import ParameterError
 
+    if args.source.startswith("ws:"):
+        port = args.source[3:]
+        if not port.isdigit() or int(port) > 65535:
+            raise UsageError(f"animegraph live: --source {args.source}: give ws:PORT, a "
+                             "port to listen on (0-65535)")
+        if args.rate is None:
+            raise UsageError("animegraph live: --source ws:PORT (raw 16-bit PCM from a "
+                             "WebSocket client) needs --rate HZ")
+        try:
+            check_rate(args.rate)
+        except ParameterError as exc:
+            raise UsageError(f"animegraph live: {exc}") from None
+        source = WebSocketSource(int(port), args.rate, host=args.host)
+        print(f"animegraph: live: waiting for PCM at ws://{args.host}:{source.port}/",
+              file=sys.stderr, flush=True)
+        return source
     if args.source == "-":
         if args.rate is None:
             raise UsageError("animegraph live: --source - (raw 16-bit PCM on stdin) needs "
                              "--rate HZ")
         return PcmSource(args.rate)
     if args.rate is not None and args.source != "mic":
-        raise UsageError("animegraph live: --rate is for --source - and mic; a file has its "
-                         "own")
+        raise UsageError("animegraph live: --rate is for --source -, ws:PORT and mic; a "
+                         "file has its own")
     if args.source == "mic":
         return MicSource(args.rate or 16000)
     from pathlib import Path
