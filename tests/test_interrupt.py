@@ -194,7 +194,7 @@ def test_ctrl_c_ends_a_synth_while_pocketsphinx_places_the_phones(tiny_db, tiny_
     # another test are read from it and PocketSphinx never runs.
     from animegraph.apps.cache import CACHE_ENV
 
-    speech = _long_speech(tiny_corpus, tmp_path)
+    speech = _long_speech(tiny_corpus, tmp_path, repeats=2)  # about 5 min of speech
     out = tmp_path / "out.c3d"
     proc, err = _start(["-vv", "synth", str(speech), "--db", str(tiny_db[0]), "-o", str(out)],
                        tmp_path, **{CACHE_ENV: str(tmp_path / "cache")})
@@ -202,6 +202,7 @@ def test_ctrl_c_ends_a_synth_while_pocketsphinx_places_the_phones(tiny_db, tiny_
     _at_work(proc, err, "PocketSphinx places", bound=5 * BOUND_S)
     time.sleep(0.3)  # inside the decoding
     decoders = _workers(proc)  # the decoding's child process, at least
+    assert decoders, "PocketSphinx decodes in the synth's own process: a Ctrl-C waits for it"
     _interrupt(proc, 1)
     _clean_exit(_ended(proc, decoders), err)
     assert not out.exists()
