@@ -10,12 +10,12 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import require_shared
 
 from animegraph.apps.cli import main
 from db.errors import DataError
 from db.store import Database, current_version
 from ingest.formats.wav import read_wav, write_wav
-from tests.conftest import require_shared
 
 EMOTIONS = ("angry", "frustrated", "happy", "neutral", "sad")
 
