@@ -25,6 +25,7 @@ back the main thread's Ctrl-C until it returned.
 from __future__ import annotations
 
 import contextlib
+import functools
 import multiprocessing
 import os
 import signal
@@ -234,6 +235,7 @@ def map_in_processes(
     the exception propagates; no job is left running.
     """
     _quiet_resource_tracker()
+    compile_shared_kernels()
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                initializer=worker_initializer,
@@ -250,6 +252,28 @@ def map_in_processes(
         raise
     pool.shutdown(wait=True)
     return done
+
+
+@functools.cache  # once a process: after the first call the kernels load from the cache
+def compile_shared_kernels() -> None:
+    """Compile librosa's numba gufuncs that clip preparation calls (``yin``'s parabolic
+    interpolation and local minima, ``zero_crossing_rate``) into numba's on-disk cache
+    here, before parallel workers start.
+
+    numba writes a gufunc's cache as two files without a lock (numba/numba#10128): two
+    processes compiling the same gufunc at once, as the workers of a fresh install do, can
+    leave a cache that crashes every later call with a segmentation fault. Compiled once
+    here, the workers only read it. Call it in the parent of processes that share this
+    installation (a process pool, a local Dask cluster, test workers).
+    """
+    import numpy as np
+
+    with contextlib.suppress(ImportError):
+        import librosa
+
+        tone = np.sin(np.arange(8000, dtype=np.float32) * (2 * np.pi * 150 / 16000))
+        librosa.yin(tone, fmin=60.0, fmax=400.0, sr=16000)
+        librosa.feature.zero_crossing_rate(tone)
 
 
 #: The warnings filter that quiets multiprocessing's resource tracker (below).

@@ -10,6 +10,16 @@ import pytest
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
+def pytest_configure(config):
+    # In the controller, before pytest-xdist starts its workers: numba writes a gufunc's
+    # on-disk cache without a lock, and two workers compiling librosa's at once in a
+    # fresh environment left a cache that crashed every later call (numba/numba#10128).
+    if not hasattr(config, "workerinput"):
+        from ingest.workers import compile_shared_kernels
+
+        compile_shared_kernels()
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)

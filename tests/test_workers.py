@@ -110,3 +110,19 @@ def test_interrupt_awaited_only_in_work_run_in_a_worker_thread():
     assert not interrupt_awaited()
     assert in_worker_thread(interrupt_awaited)
     assert not interrupt_awaited()  # the caller's context is left as it was
+
+
+def test_librosa_s_gufuncs_are_compiled_into_the_cache_before_workers_start(tmp_path):
+    # numba/numba#10128: workers compiling the same gufunc at once can leave a cache that
+    # crashes every later call; the parent compiles them first, the workers only read.
+    import subprocess
+    import sys
+
+    cache = tmp_path / "numba"
+    code = "from ingest.workers import compile_shared_kernels; compile_shared_kernels()"
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=600,
+                   env={**os.environ, "NUMBA_CACHE_DIR": str(cache)})
+    names = {p.name for p in cache.rglob("*.nbi")}
+    assert any("_pi_wrapper" in n for n in names), names  # yin's parabolic interpolation
+    assert any("_zc_wrapper" in n for n in names), names  # zero crossings
+    assert any("_localmin" in n for n in names), names  # yin's troughs

@@ -85,6 +85,9 @@ def _client(options, prepare: Callable[[], object] | None):
         else:
             if prepare is not None:
                 prepare()
+            from ingest.workers import compile_shared_kernels
+
+            compile_shared_kernels()  # the local workers share this installation's caches
             cluster = LocalCluster(
                 n_workers=0, threads_per_worker=1, processes=True,
                 # CRITICAL: a worker busy in a line when a Ctrl-C closes the scheduler
