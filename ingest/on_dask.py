@@ -196,6 +196,8 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
             results[index] = (report_type(**row), clip)
             run.resumed += 1
         waiting = iter(todo)
+        if todo:
+            _compile_once_per_host(client)
         for _ in range(IN_FLIGHT_PER_THREAD * _threads(client)):
             submit_next()
         finished = _finished(run.resumed, completed)
@@ -219,6 +221,20 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
             client.cancel(list(futures))
         raise
     return run
+
+
+def _compile_once_per_host(client) -> None:
+    """:func:`ingest.workers.compile_shared_kernels` on one worker of each host, before
+    the clips: the workers of one machine share its numba cache, and compiling the same
+    gufunc in several of them at once can leave a cache that crashes every later call
+    (numba/numba#10128); after this they only read it."""
+    from ingest.workers import compile_shared_kernels
+
+    first: dict[str, str] = {}
+    for address, worker in client.scheduler_info().get("workers", {}).items():
+        first.setdefault(str(worker.get("host", address)), address)
+    client.gather([client.submit(compile_shared_kernels, workers=[address], pure=False,
+                                 allow_other_workers=False) for address in first.values()])
 
 
 def _threads(client) -> int:
