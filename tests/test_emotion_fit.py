@@ -383,3 +383,14 @@ def test_fit_into_a_database_keeps_its_fitted_guides(tiny_db, tiny_corpus, tmp_p
     again = read_model(kept)
     for name, value in model.to_arrays().items():
         np.testing.assert_array_equal(again.to_arrays()[name], value)
+
+
+def test_a_folder_of_links_says_links_are_not_followed(tiny_corpus, tmp_path, capsys):
+    # --emotions used to answer first, with "no recording is labelled ... (the labels are none)"
+    folder = tmp_path / "linked"
+    folder.mkdir()
+    (folder / "clips").symlink_to(tiny_corpus / "clips")
+    assert main(["emotion", "fit", str(folder), "--preset", "ravdess", "-o",
+                 str(tmp_path / "m.npz"), "--emotions", "sad,happy", "-q"]) == 1
+    _err_line(capsys, "symbolic links in it are not followed")
+    assert not (tmp_path / "m.npz").exists()

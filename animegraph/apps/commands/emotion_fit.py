@@ -85,6 +85,8 @@ def _keep_emotions(labelled, wanted: str | None) -> None:
     names = {n.strip().lower() for n in wanted.split(",") if n.strip()}
     if not names:
         raise UsageError("animegraph emotion fit: --emotions names no emotion")
+    if not labelled.emotions:  # nothing to choose from: said as such by _check_classes
+        return
     keep = [k for k, e in enumerate(labelled.emotions) if e in names]
     missing = names - {labelled.emotions[k] for k in keep}
     if missing:
@@ -129,9 +131,11 @@ def _check_classes(labels, args, usable: bool = False) -> None:
 
     what = "usable recordings" if usable else "labelled recordings"
     if not labels:
+        links = not usable and any(p.is_symlink() for p in args.folder.rglob("*"))
         raise DataError(f"no {what} in {args.folder}"
                         + (f" ({args.preset} names files as its README says)"
-                           if args.preset and not usable else ""))
+                           if args.preset and not usable else "")
+                        + ("; symbolic links in it are not followed" if links else ""))
     counts: dict[str, int] = {}
     for name in labels:
         counts[name] = counts.get(name, 0) + 1
