@@ -184,11 +184,16 @@ def _write_rows(args, rows: list[dict], classes: list[str]) -> None:
 
 def _say_accuracy(rows: list[dict]) -> None:
     """With the true emotions known (--labels, --preset): the share classified right."""
-    scored = [r for r in rows if r["truth"] and r["label"]]
+    labelled = [r for r in rows if r["truth"] and r["label"]]
+    # an emotion the classifier does not know cannot be classified right: not scored
+    scored = [r for r in labelled if r["truth"] in r["probabilities"]]
     if scored:
         right = sum(r["truth"] == r["label"] for r in scored)
+        unknown = len(labelled) - len(scored)
         say(f"{right} of {len(scored)} classified as labelled "
-            f"({100 * right / len(scored):.1f} %)")
+            f"({100 * right / len(scored):.1f} %)"
+            + (f"; {unknown} labelled with emotions the classifier does not know, not "
+               "scored" if unknown else ""))
 
 
 def _timeline(args, classifier, audio, sample_rate) -> int:
