@@ -415,20 +415,9 @@ def check_rate(sample_rate) -> int:
 def as_mono_float(samples) -> np.ndarray:
     """Samples as float32 in [-1, 1], shape (n,): integer PCM scaled by its full scale;
     NaN or infinite samples refused (ParameterError)."""
-    x = np.asarray(samples)
-    if x.ndim == 2 and 1 in x.shape:
-        x = x.reshape(-1)
-    if x.ndim != 1:
-        raise ParameterError(f"live audio must be mono samples (n,), got shape {x.shape}")
-    if np.issubdtype(x.dtype, np.integer):
-        x = x.astype(np.float32) / (float(np.iinfo(x.dtype).max) + 1.0)
-    elif np.issubdtype(x.dtype, np.floating):
-        x = x.astype(np.float32, copy=False)
-    else:
-        raise ParameterError(f"live audio must be float or integer samples, got {x.dtype}")
-    if x.size and not np.all(np.isfinite(x)):
-        raise ParameterError("live audio contains NaN or infinite samples")
-    return x
+    from ingest.speech.inputs import mono_samples
+
+    return mono_samples(np.asarray(samples), np.float32, "live audio")
 
 
 def rest_pose(model) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from db.errors import ParameterError
 
-__all__ = ["MIN_DURATION", "SILENCE_PEAK", "check_audio", "check_text"]
+__all__ = ["MIN_DURATION", "SILENCE_PEAK", "check_audio", "check_text", "mono_samples"]
 
 #: Clips shorter than this (seconds) hold no phone to find: they give one SIL segment.
 MIN_DURATION = 0.1
@@ -25,20 +25,27 @@ def check_audio(audio: object, sample_rate: object) -> tuple[np.ndarray, int]:
         raise ParameterError(f"sample_rate: expected 1000..384000 Hz, got {sample_rate}")
     if not isinstance(audio, np.ndarray):
         raise ParameterError(f"audio: expected a numpy array, got {type(audio).__name__}")
+    return mono_samples(audio, np.float64), int(sample_rate)
+
+
+def mono_samples(audio: np.ndarray, dtype, what: str = "audio") -> np.ndarray:
+    """``audio`` as ``dtype`` samples of shape (n,) in [-1, 1): a 2-D array of one channel
+    flattened, integer PCM scaled by its full scale; ParameterError (its text starting with
+    ``what``) for more than one channel, another kind of number, NaN or infinite samples."""
     if audio.ndim == 2 and 1 in audio.shape:
         audio = audio.reshape(-1)
     if audio.ndim != 1:
-        raise ParameterError(f"audio: expected mono samples (1-D), got shape {audio.shape}")
+        raise ParameterError(f"{what}: expected mono samples (1-D), got shape {audio.shape}")
     if np.issubdtype(audio.dtype, np.integer):
         scale = float(np.iinfo(audio.dtype).max) + 1.0
-        audio = audio.astype(np.float64) / scale
+        audio = audio.astype(dtype) / dtype(scale)
     elif np.issubdtype(audio.dtype, np.floating):
-        audio = audio.astype(np.float64, copy=False)
+        audio = audio.astype(dtype, copy=False)
     else:
-        raise ParameterError(f"audio: expected float or integer samples, got {audio.dtype}")
+        raise ParameterError(f"{what}: expected float or integer samples, got {audio.dtype}")
     if audio.size and not np.all(np.isfinite(audio)):
-        raise ParameterError("audio: contains NaN or infinite samples")
-    return audio, int(sample_rate)
+        raise ParameterError(f"{what}: contains NaN or infinite samples")
+    return audio
 
 
 def check_text(text: object) -> str:
