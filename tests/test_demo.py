@@ -26,13 +26,14 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys, monkeypat
     # worker, some of which need the default database absent (test_first_hour.py).
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--quiet"]) == 0
+    # --no-prepare: the guides' fit beside the demo is tests/test_prepare.py's
+    assert main(["demo", "--out", str(out), "--quiet", "--no-prepare"]) == 0
     first = capsys.readouterr().out
     assert "generated" in first and "built" in first
     db = Database.open(default_db_dir())
     assert db.manifest["n_clips"] == len(plan_corpus(CorpusConfig()))
     assert "every one has matching animes" in first
-    # the guides of speech alone are not fitted by the demo: it says so, and how to
+    # the guides of speech alone left unfitted: it says so, and how to fit them
     assert "fits its guides first (mu-mlp about" in first and "animegraph warmup" in first
     meta = json.loads((default_corpus_dir() / "corpus.json").read_text())
     assert meta["n_clips"] == len(plan_corpus(CorpusConfig()))
@@ -46,7 +47,7 @@ def test_demo_creates_then_reuses_the_default_corpus(tmp_path, capsys, monkeypat
     assert motion.points.shape[1] >= 60 and np.isfinite(motion.points).mean() > 0.98
 
     stamp = (default_corpus_dir() / "corpus.json").stat().st_mtime_ns
-    assert main(["demo", "--out", str(out), "--quiet", "--emotion", "sad"]) == 0
+    assert main(["demo", "--out", str(out), "--quiet", "--emotion", "sad", "--no-prepare"]) == 0
     second = capsys.readouterr().out
     assert "(reused" in second and "reused;" in second
     assert (default_corpus_dir() / "corpus.json").stat().st_mtime_ns == stamp

@@ -78,3 +78,35 @@ def test_ingest_prepares_the_database_unless_told_not_to(tiny_corpus, tmp_path, 
     # hears only the clips it adds); ingest itself, given the phones, heard none.
     kept = list((tmp_path / "cache" / "phones").glob("*.npy"))
     assert len(kept) == (len(list(src.glob("*.wav"))) if prepare else 0)
+
+
+def test_guides_fitted_beside_this_process_are_stored_then_nothing_is_left(db_copy, capfd):
+    from animegraph.apps.prepare import GuideFit
+
+    assert unfitted_note(db_copy) is not None
+    fit = GuideFit.start(db_copy)  # a spawned process, under the database's writer lock
+    assert fit is not None
+    said = []
+    assert fit.wait(said.append)
+    out = capfd.readouterr().out
+    assert all(f"guides: fitting the {name} guide" in out for name in GUIDES)
+    assert _decided(db_copy) == dict.fromkeys(GUIDES, True)
+    assert unfitted_note(db_copy) is None and GuideFit.start(db_copy) is None
+
+
+def test_guides_fit_stopped_leaves_the_database_as_it_was(db_copy, capfd):
+    import time
+
+    from animegraph.apps.prepare import GuideFit
+
+    fit = GuideFit.start(db_copy)
+    seen = ""
+    while "guides: fitting the" not in seen and fit._process.is_alive():
+        time.sleep(0.05)  # until the child is inside a fit
+        seen += capfd.readouterr().out
+    assert "guides: fitting the" in seen
+    fit.stop()  # a Ctrl-C to the child, whose writes are atomic
+    assert not fit.wait()
+    for name in GUIDES:  # each guide stored whole, or not at all
+        assert load_forward(db_copy, name) is not None or not model_path(db_copy, name).exists()
+    assert not list(db_copy.rglob(".*.tmp"))  # no half-written file left behind

@@ -248,6 +248,9 @@ def _add_demo(sub) -> None:
     demo.add_argument("--workers", type=_whole_number, default=None,
                       help="worker processes for the corpus (default: all cores)")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    demo.add_argument("--no-prepare", action="store_true",
+                      help="do not fit the guides of synth from speech alone beside the demo "
+                      "(the first such synth, or 'animegraph warmup', fits them)")
     demo.set_defaults(func=cmd_demo)
 
 

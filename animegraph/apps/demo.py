@@ -15,6 +15,10 @@
 4. The outputs and a PNG plot (reference and synthesized motion) are written to the
    output folder, and the synthesized motion is rendered on the face mesh with the
    speech as an MP4 (Cao et al. §7).
+5. Meanwhile, from step 3 on, the guides a synthesis from speech alone needs are fitted
+   on the database in a process beside this one (:class:`animegraph.apps.prepare.GuideFit`,
+   as ``ingest`` fits them after it writes), so that the user's first ``synth`` of a
+   recording finds them stored; :meth:`DemoResult.finish` waits for it.
 """
 
 from __future__ import annotations
@@ -60,6 +64,13 @@ class DemoResult:
     candidates: list[tuple[str, int, int]] = field(default_factory=list)
     synthesis: str = ""
     outputs: list[Path] = field(default_factory=list)
+    #: The guides' fit still running beside the demo (None: nothing to fit, or not asked).
+    guides: object | None = None
+
+    def finish(self, say: Callable[[str], object] | None = None) -> bool:
+        """Wait for the guides' fit, if one runs; True unless it failed."""
+        guides, self.guides = self.guides, None
+        return True if guides is None else guides.wait(say or (lambda _line: None))
 
     def report(self) -> list[str]:
         """Lines to show the user."""
@@ -118,8 +129,10 @@ def run_demo(
     workers: int | None = None,
     progress: Callable[..., Callable] | None = None,
     say: Callable[[str], object] | None = None,
+    prepare: bool = True,
 ) -> DemoResult:
-    """Run the demo; see the module docstring.
+    """Run the demo; see the module docstring. With ``prepare`` the caller waits for the
+    guides' fit with :meth:`DemoResult.finish` once it has shown the result.
 
     Parameters
     ----------
@@ -136,6 +149,8 @@ def run_demo(
         labelled with the step.
     say : callable, optional
         Receives a line of news before each long step.
+    prepare : bool
+        Fit the database's missing default guides beside the demo (step 5).
     """
     style(emotion)  # validates the name before any work
     text = DEMO_SENTENCE if text is None else text
@@ -148,6 +163,26 @@ def run_demo(
                                                      say=say)
     db_path, db_created = ensure_default_db(corpus, workers=workers, progress=progress,
                                             say=say)
+    from animegraph.apps.prepare import GuideFit
+
+    guides = GuideFit.start(db_path) if prepare else None
+    if guides is not None:
+        say("fitting the guides of synth from speech alone beside the demo (stored with "
+            "the database; lines 'guides: ...') ...")
+    try:
+        result = _synthesize_demo(db_path, db_created, corpus, created, n_clips, out,
+                                  emotion, text, say)
+    except BaseException:
+        if guides is not None:
+            guides.stop()
+        raise
+    result.guides = guides
+    return result
+
+
+def _synthesize_demo(db_path: Path, db_created: bool, corpus: Path, created: bool,
+                     n_clips: int, out: Path, emotion: str, text: str, say) -> DemoResult:
+    """Steps 2-4 of the module docstring on the built database."""
     db = Database.open(db_path)
 
     try:

@@ -22,6 +22,7 @@ the version they are stored under.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Callable
@@ -29,8 +30,8 @@ from pathlib import Path
 
 from db.errors import AnimeGraphError
 
-__all__ = ["compile_kernels", "fit_estimate", "fit_guides", "prepare", "unfitted_note",
-           "warm_kernels"]
+__all__ = ["GuideFit", "compile_kernels", "fit_estimate", "fit_guides", "prepare",
+           "unfitted_note", "warm_kernels"]
 
 #: The sentence whose synthesis compiles the kernels (short: its phones cost nothing).
 WARM_SENTENCE = "Good morning, class."
@@ -187,6 +188,84 @@ def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *
             synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
     finally:
         search_log.setLevel(level)
+
+
+class GuideFit:
+    """:func:`fit_guides` of a database in a process beside this one, under the database's
+    writer lock: started with :meth:`start`, waited for with :meth:`wait`.
+
+    ``animegraph demo`` fits the guides of speech alone while it synthesizes and renders
+    its own sentence (which has its phones and needs none): mostly one core's work
+    (the search kernels' first compilation, drawing the frames) beside the fit's, so the
+    second core does the fitting; a synth after the demo then finds them stored. The
+    fit's lines are printed by the child, prefixed ``guides:``.
+    """
+
+    #: Seconds a child given a Ctrl-C has to stop (its writes are atomic) before it is
+    #: killed.
+    GRACE_S = 10.0
+
+    def __init__(self, process) -> None:
+        self._process = process
+
+    @classmethod
+    def start(cls, db: Path) -> GuideFit | None:
+        """The fit of ``db``'s missing default guides started in a spawned process; None
+        when none is missing (:func:`unfitted_note`)."""
+        import multiprocessing
+
+        if unfitted_note(db) is None:
+            return None
+        process = multiprocessing.get_context("spawn").Process(
+            target=_fit_guides_child, args=(str(db),), name="animegraph-guides", daemon=True)
+        process.start()
+        return cls(process)
+
+    def wait(self, say: Callable[[str], object] = _quiet) -> bool:
+        """Wait for the fit (saying so if it is still running); True if it ended well.
+        A Ctrl-C meanwhile stops it (:meth:`stop`) and is raised."""
+        if self._process.is_alive():
+            say("waiting for the guides of synth from speech alone, fitted beside the "
+                "demo ...")
+        try:
+            self._process.join()
+        except BaseException:
+            self.stop()
+            raise
+        return self._process.exitcode == 0
+
+    def stop(self) -> None:
+        """End the fit: a Ctrl-C first (what it writes is atomic, the database stays as
+        it was), killed after :attr:`GRACE_S`."""
+        import os
+        import signal
+
+        if self._process.is_alive():
+            with contextlib.suppress(OSError):
+                os.kill(self._process.pid, signal.SIGINT)
+            self._process.join(self.GRACE_S)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+
+
+def _fit_guides_child(db: str) -> None:
+    """:class:`GuideFit`'s process: the fit under the writer lock, its lines printed."""
+    import sys
+
+    from db.lock import writer_lock
+
+    def say(line: str) -> None:
+        print(f"guides: {line}", flush=True)
+
+    try:
+        with writer_lock(db, wait=600.0, what="database"):
+            fit_guides(Path(db), say)
+    except KeyboardInterrupt:
+        sys.exit(130)
+    except (AnimeGraphError, OSError) as exc:
+        say(f"not fitted: {exc}")
+        sys.exit(1)
 
 
 def prepare(db: Path, say: Callable[[str], object] = _quiet) -> None:

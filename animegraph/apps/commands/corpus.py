@@ -43,12 +43,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return progress(total, args.quiet, "clip", step)
 
     result = run_demo(args.out, emotion=args.emotion, text=args.text, workers=args.workers,
-                      progress=demo_progress, say=print)
-    for line in result.report():
+                      progress=demo_progress, say=print, prepare=not args.no_prepare)
+    for line in result.report():  # the answer first, then the wait for the guides
         print(line)
+    result.finish(say=print)
     from animegraph.apps.prepare import unfitted_note
 
-    # the demo's own sentence has its phones and needs no guide: said, not fitted
+    # what is still missing (--no-prepare, or a fit that failed): said, with how
     note = unfitted_note(result.db) if result.db is not None else None
     if note:
         print(note)
