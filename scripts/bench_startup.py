@@ -39,7 +39,13 @@ work (segment + audio cost + search + post; the rest of the wall is the process'
 imports, loading the database and guides, and writing) of both, and the second's share of
 the first
 (target: <= 20 %). The database's default guides are used if it has them stored, else
-``--guide none`` for both (a first fit would be timed, not the phones).
+``--guide none`` for both (a first fit would be timed, not the phones). A third process
+runs the second command again with its parts timed in CPU seconds (every thread's, by
+wrapping the functions each part runs): the interpreter's libraries, numba's import and
+its first cached kernel (numba sets up its CPU target then, importing ``scipy.linalg``
+for its BLAS check), loading the graph and the guides, the phones from the cache and the
+input's features, the audio cost, the guides' predictions, the search, the k-best
+assembly, writing: what a new process cannot skip, and what a cache could.
 
 To compare with another checkout, run this script with ``PYTHONPATH=THAT_CHECKOUT``.
 """
@@ -185,6 +191,65 @@ def _numpy_dtw_cost(x: np.ndarray, y: np.ndarray) -> float:
     return float(prev[-1])
 
 
+_PARTS_CHILD = """
+import json, sys, time
+t0 = time.process_time()
+parts = {}
+
+inner = [0.0]  # CPU of the timed calls inside the running one: each part is its own time
+
+def timed(owner, attr, label):
+    fn = getattr(owner, attr)
+    def wrapped(*args, **kwargs):
+        c, outer = time.process_time(), inner[0]
+        inner[0] = 0.0
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            spent = time.process_time() - c
+            parts[label] = parts.get(label, 0.0) + spent - inner[0]
+            inner[0] = outer + spent
+    setattr(owner, attr, wrapped)
+
+import numpy, pyarrow, pyarrow.parquet
+parts["numpy, pyarrow"] = time.process_time() - t0
+c = time.process_time()
+import numba
+parts["numba's import"] = time.process_time() - c
+import animegraph.apps.commands.synth as command
+import animegraph.baselines.predicting as predicting
+import animegraph.search.dtw as dtw
+import animegraph.synthesis as synthesis
+import animegraph.synthesis.pipeline as pipeline
+from animegraph.synthesis.model import Model
+timed(dtw, "_check_nodes", "numba's first cached kernel (its CPU target, scipy.linalg)")
+timed(Model, "load", "loading the graph")
+timed(command, "load_guide", "loading the guides")
+timed(pipeline, "query_phones", "phones (from the cache) and the input's features")
+timed(pipeline, "score_candidates", "audio cost (DTW)")
+timed(pipeline, "guide_trajectory", "the guides' predictions")
+timed(pipeline, "search", "search")
+timed(pipeline, "render_k_best", "k-best assembly")
+timed(synthesis, "write_motion", "writing")
+from animegraph.apps.cli import main
+code = main(sys.argv[1:])
+parts["the whole process"] = time.process_time()
+print(json.dumps(parts))
+sys.exit(code)
+"""
+
+
+def _parts_run(args: list[str], env: dict) -> dict:
+    """CPU seconds by part of one ``synth`` (:data:`_PARTS_CHILD`)."""
+    import json
+
+    out = subprocess.run([sys.executable, "-c", _PARTS_CHILD, *args], capture_output=True,
+                         text=True, env={**_ENV, **env})
+    if out.returncode != 0:
+        sys.exit(f"bench_startup: the timed run failed: {out.stderr.strip()[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def kernel_report(db: Path, repeats: int) -> None:
     from animegraph.search.dtw import audio_costs
 
@@ -244,6 +309,7 @@ def heard_report(db: Path, audio: Path | None = None) -> None:
             found = re.search(r"([\d.]+) s = segment ([\d.]+)", err)
             rows.append((wall, cpu, float(found.group(2)), float(found.group(1)),
                          "phones heard before" in err))
+        parts = _parts_run([*base, "--k-best", "5", "-o", str(tmp / "m.npz")], env)
     what = f"{duration:.1f} s" + (", " + " ".join(guide) if guide else "")
     for (wall, cpu, segment, work, hit), label in zip(rows, ("first", "again, --k-best 5"),
                                                       strict=True):
@@ -253,6 +319,13 @@ def heard_report(db: Path, audio: Path | None = None) -> None:
               f"{wall - work:.2f} s the rest (start-up, loading, writing)")
     print(f"the second run's share of the first: {rows[1][0] / rows[0][0]:.0%} wall, "
           f"{rows[1][1] / rows[0][1]:.0%} CPU (target <= 20 %)")
+    whole = parts.pop("the whole process")
+    print(f"the second run again, CPU s by part ({whole:.2f} s from the interpreter's start, "
+          f"{rows[0][1]:.2f} s the first run's whole process):")
+    for label, seconds in parts.items():
+        print(f"  {seconds:6.3f}  {seconds / rows[0][1]:4.0%} of the first  {label}")
+    print(f"  {whole - sum(parts.values()):6.3f}  the rest (the project's imports, the "
+          "interpreter, the command's own checks)")
 
 
 def main() -> None:

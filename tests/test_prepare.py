@@ -80,31 +80,30 @@ def test_ingest_prepares_the_database_unless_told_not_to(tiny_corpus, tmp_path, 
     assert len(kept) == (len(list(src.glob("*.wav"))) if prepare else 0)
 
 
-def test_guides_fitted_beside_this_process_are_stored_then_nothing_is_left(db_copy, capfd):
+def test_guides_fitted_beside_this_process_are_stored_then_nothing_is_left(db_copy):
     from animegraph.apps.prepare import GuideFit
 
     assert unfitted_note(db_copy) is not None
-    fit = GuideFit.start(db_copy)  # a spawned process, under the database's writer lock
-    assert fit is not None
     said = []
+    fit = GuideFit.start(db_copy, said.append)  # spawned, under the database's writer lock
+    assert fit is not None
     assert fit.wait(said.append)
-    out = capfd.readouterr().out
-    assert all(f"guides: fitting the {name} guide" in out for name in GUIDES)
+    assert all(any(line.startswith(f"guides: fitting the {name} guide") for line in said)
+               for name in GUIDES)
     assert _decided(db_copy) == dict.fromkeys(GUIDES, True)
     assert unfitted_note(db_copy) is None and GuideFit.start(db_copy) is None
 
 
-def test_guides_fit_stopped_leaves_the_database_as_it_was(db_copy, capfd):
-    import time
+def test_guides_fit_stopped_leaves_the_database_as_it_was(db_copy):
+    import threading
 
     from animegraph.apps.prepare import GuideFit
 
-    fit = GuideFit.start(db_copy)
-    seen = ""
-    while "guides: fitting the" not in seen and fit._process.is_alive():
-        time.sleep(0.05)  # until the child is inside a fit
-        seen += capfd.readouterr().out
-    assert "guides: fitting the" in seen
+    inside = threading.Event()
+    fit = GuideFit.start(db_copy, lambda line: "guides: fitting the" in line and inside.set())
+    while not inside.wait(0.1) and fit._process.is_alive():
+        pass  # until the child is inside a fit
+    assert inside.is_set()
     fit.stop()  # a Ctrl-C to the child, whose writes are atomic
     assert not fit.wait()
     for name in GUIDES:  # each guide stored whole, or not at all

@@ -165,7 +165,7 @@ def run_demo(
                                             say=say)
     from animegraph.apps.prepare import GuideFit
 
-    guides = GuideFit.start(db_path) if prepare else None
+    guides = GuideFit.start(db_path, say) if prepare else None
     if guides is not None:
         say("fitting the guides of synth from speech alone beside the demo (stored with "
             "the database; lines 'guides: ...') ...")

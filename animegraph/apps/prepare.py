@@ -198,28 +198,42 @@ class GuideFit:
     its own sentence (which has its phones and needs none): mostly one core's work
     (the search kernels' first compilation, drawing the frames) beside the fit's, so the
     second core does the fitting; a synth after the demo then finds them stored. The
-    fit's lines are printed by the child, prefixed ``guides:``.
+    fit's lines come back through a pipe and are said here, prefixed ``guides:``.
     """
 
     #: Seconds a child given a Ctrl-C has to stop (its writes are atomic) before it is
     #: killed.
     GRACE_S = 10.0
 
-    def __init__(self, process) -> None:
+    def __init__(self, process, relay) -> None:
         self._process = process
+        self._relay = relay
 
     @classmethod
-    def start(cls, db: Path) -> GuideFit | None:
-        """The fit of ``db``'s missing default guides started in a spawned process; None
-        when none is missing (:func:`unfitted_note`)."""
+    def start(cls, db: Path, say: Callable[[str], object] = _quiet) -> GuideFit | None:
+        """The fit of ``db``'s missing default guides started in a spawned process, its
+        lines passed to ``say``; None when none is missing (:func:`unfitted_note`)."""
         import multiprocessing
+        import threading
 
         if unfitted_note(db) is None:
             return None
-        process = multiprocessing.get_context("spawn").Process(
-            target=_fit_guides_child, args=(str(db),), name="animegraph-guides", daemon=True)
+        context = multiprocessing.get_context("spawn")
+        receive, send = context.Pipe(duplex=False)
+        process = context.Process(target=_fit_guides_child, args=(str(db), send),
+                                  name="animegraph-guides", daemon=True)
         process.start()
-        return cls(process)
+        send.close()  # the child's end: the relay's recv ends when the child's is closed
+
+        def relay() -> None:
+            with contextlib.suppress(EOFError, OSError):
+                while True:
+                    say(f"guides: {receive.recv()}")
+            receive.close()
+
+        thread = threading.Thread(target=relay, name="animegraph-guides-relay", daemon=True)
+        thread.start()
+        return cls(process, thread)
 
     def wait(self, say: Callable[[str], object] = _quiet) -> bool:
         """Wait for the fit (saying so if it is still running); True if it ended well.
@@ -232,6 +246,7 @@ class GuideFit:
         except BaseException:
             self.stop()
             raise
+        self._relay.join()  # every line said before the caller goes on
         return self._process.exitcode == 0
 
     def stop(self) -> None:
@@ -249,23 +264,23 @@ class GuideFit:
             self._process.join()
 
 
-def _fit_guides_child(db: str) -> None:
-    """:class:`GuideFit`'s process: the fit under the writer lock, its lines printed."""
+def _fit_guides_child(db: str, lines) -> None:
+    """:class:`GuideFit`'s process: the fit under the writer lock, its lines sent back
+    through the pipe ``lines``."""
     import sys
 
     from db.lock import writer_lock
 
-    def say(line: str) -> None:
-        print(f"guides: {line}", flush=True)
-
     try:
         with writer_lock(db, wait=600.0, what="database"):
-            fit_guides(Path(db), say)
+            fit_guides(Path(db), lines.send)
     except KeyboardInterrupt:
         sys.exit(130)
     except (AnimeGraphError, OSError) as exc:
-        say(f"not fitted: {exc}")
+        lines.send(f"not fitted: {exc}")
         sys.exit(1)
+    finally:
+        lines.close()
 
 
 def prepare(db: Path, say: Callable[[str], object] = _quiet) -> None:
