@@ -7,6 +7,8 @@ compiled and cached on disk (:mod:`animegraph.search.kernels`). Fitted inside th
 ``synth`` they cost minutes (GRID s1: mu-mlp 121 s, ppg-ridge 277 s, the kernels about
 a minute on two cores). ``animegraph ingest`` does both once the database is written,
 and ``animegraph warmup`` does them on demand; each step is said with its time.
+``animegraph demo`` fits the guides in a process beside its own synthesis
+(:class:`GuideFit`), which compiles the kernels of synth's default path.
 
 The guides are fitted with hama's outputs kept in the cache folder
 (:func:`ingest.speech.ctc.kept_on_disk`), so the refit after the next ingest (a new
