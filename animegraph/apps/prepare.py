@@ -222,8 +222,10 @@ class GuideFit:
             return None
         context = multiprocessing.get_context("spawn")
         receive, send = context.Pipe(duplex=False)
+        # Not a daemon: a fit may start processes of its own (a daemon may not), and a
+        # caller that ends without waiting leaves it to finish what it stores.
         process = context.Process(target=_fit_guides_child, args=(str(db), send),
-                                  name="animegraph-guides", daemon=True)
+                                  name="animegraph-guides")
         process.start()
         send.close()  # the child's end: the relay's recv ends when the child's is closed
 
