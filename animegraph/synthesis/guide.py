@@ -39,10 +39,6 @@ poor target; lipsync.md, "Options measured against the default"), so
 
 from __future__ import annotations
 
-import contextvars
-import time
-from collections.abc import Callable
-
 import numpy as np
 
 from animegraph.synthesis.assemble import output_frames
@@ -96,34 +92,6 @@ def guide_trajectory(model, predictor, audio: np.ndarray, sample_rate: int, phon
     if m != n:  # another frame rate than the graph's: resample linearly
         pred = interpolate(np.arange(m) / fps, pred, np.arange(n) / model.graph.fps)
     return model.decomposer.transform(pred)
-
-
-def start_guide(model, predictor, audio: np.ndarray, sample_rate: int, phones, *,
-                emotion: str | None = None) -> Callable[[], tuple[np.ndarray, float]]:
-    """:func:`guide_trajectory` started on a thread of its own (in a copy of this
-    context); returns a function that waits for it and gives the trajectory and the
-    seconds it took (raising what it raised).
-
-    The prediction needs only the audio and the phones' frame count, and the output
-    needs it only at the end (unless it ranks the animes), so it runs while the
-    candidates are scored, searched and blended: numpy's array work and hama's
-    (remembered) posteriors leave the GIL to the other thread most of the time.
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    context = contextvars.copy_context()
-
-    def run() -> tuple[np.ndarray, float]:
-        start = time.perf_counter()
-        out = context.run(guide_trajectory, model, predictor, audio, sample_rate, phones,
-                          emotion=emotion)
-        return out, time.perf_counter() - start
-
-    pool = ThreadPoolExecutor(1, thread_name_prefix="guide")
-    try:
-        return pool.submit(run).result
-    finally:
-        pool.shutdown(wait=False)  # the thread ends with its one task
 
 
 def target_costs(graph, mixing: np.ndarray, phones, nodes, guide: np.ndarray) -> list[np.ndarray]:

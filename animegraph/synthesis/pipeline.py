@@ -45,8 +45,8 @@ from animegraph.synthesis.guide import (
     blend_guide,
     check_guide_use,
     guide_names,
+    guide_trajectory,
     guided_costs,
-    start_guide,
     target_costs,
 )
 from animegraph.synthesis.model import Model
@@ -190,22 +190,19 @@ def synthesize(
     timings["segment_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    # the guide's prediction on a second thread while the candidates are scored, searched
-    # and blended ("guide_s" is its own time, overlapping theirs)
-    guide_done = None if guide is None else start_guide(model, guide, audio, sample_rate,
-                                                         phones, emotion=emotion)
     cost_name = audio_cost
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
                                          candidates_from=candidates_from)
-    timings["audio_cost_s"] = time.perf_counter() - t1
     guide_ics, target, unary = None, None, audio_cost
-    if guide_done is not None and guide_rank:  # trajectory-guided: C_audio plus target cost
-        guide_ics, timings["guide_s"] = guide_done()
-        t_target = time.perf_counter()
+    if guide is not None:
+        t_guide = time.perf_counter()
+        guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=emotion)
+        timings["guide_s"] = time.perf_counter() - t_guide
+    if guide is not None and guide_rank:  # trajectory-guided: C_audio plus the target cost
         target = target_costs(model.graph, model.decomposer.mixing_, phones, cands.nodes,
                               guide_ics)
         unary = guided_costs(audio_cost, target)
-        timings["audio_cost_s"] += time.perf_counter() - t_target
+    timings["audio_cost_s"] = time.perf_counter() - t1 - timings.get("guide_s", 0.0)
     t2 = time.perf_counter()
     result = search(model.graph, cands, unary, weights=weights or SearchWeights(),
                     emotion=emotion, method=method, window=window, tolerance=tolerance)
@@ -226,8 +223,6 @@ def synthesize(
     if choice.target is not None and model.emotion_model is not None:
         ics, notes = map_emotion(model, phones, result.nodes, ics, choice.target,
                                  options=options, timeline=choice.timeline)
-    if guide_done is not None and guide_ics is None:
-        guide_ics, timings["guide_s"] = guide_done()
     if guide_ics is not None and guide_blend > 0:
         ics = blend_guide(ics, guide_ics, guide_blend)
     motion = model.to_channels(ics)
