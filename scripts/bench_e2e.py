@@ -5,7 +5,7 @@ Usage::
     python scripts/bench_e2e.py [--db DB] [--repeats 3] [--segmentation recognized|aligned|labels]
                                 [--phones-engine auto|hama|pocketsphinx] [--k-best K]
                                 [--guide mu-mlp|av-hmm|ppg-ridge|mu-mlp+ppg-ridge [--guide-blend W]]
-                                [--audio RECORDING]
+                                [--audio RECORDING] [--profile N]
 
 Speaks a 9 s sentence with eSpeak NG, then runs :func:`animegraph.synthesis.synthesize` on it
 ``--repeats`` times in this process (the first run pays numba's cache load), with the
@@ -18,6 +18,10 @@ the same audio: the floor under the ``segment`` phase when phones are recognised
 transcript is checked (hama hears a recording of ``ingest.speech.ctc.SPLIT_SECONDS`` or
 more in pieces, on every core).
 ``--audio`` times a recording instead (a WAV or a video's sound track; phones recognised).
+``--profile N`` then runs ``N`` more syntheses under :mod:`cProfile` timed by the process's
+CPU clock (all threads: hama's pieces and the DTW threads count where they are waited
+for) and prints the functions of most CPU per run: where the time goes on a machine whose
+wall clock other processes share.
 DB defaults to the default database (built on first use, as by ``animegraph demo``).
 """
 
@@ -54,6 +58,9 @@ def main() -> int:
                         help="trajectory-guided selection by this stored baseline")
     parser.add_argument("--guide-blend", type=float, default=0.5,
                         help="with --guide: the guide's share of the output (0.5)")
+    parser.add_argument("--profile", type=int, default=0, metavar="N",
+                        help="then N runs under cProfile (CPU clock): the costliest "
+                             "functions per run")
     args = parser.parse_args()
 
     from animegraph.synthesis import Model, synthesize
@@ -114,6 +121,9 @@ def main() -> int:
         print(f"run {k + 1}: {total:.2f} s, real-time factor {total / seconds:.3f}, CPU "
               f"{cpu:.2f} s ({cpu / seconds:.3f} x real time) "
               f"({phases}; {len(out.phones)} phones, {out.result.n_jumps} jumps)")
+    if args.profile > 0:
+        profile_runs(args.profile, lambda: synthesize(model, utt.audio, utt.sample_rate,
+                                                      **kwargs), ctc)
     if hasattr(ctc, "forget") and args.segmentation != "labels":
         # The floor under "segment": hama's call (its pieces on every core), same audio.
         ctc.forget()
@@ -122,6 +132,27 @@ def main() -> int:
         alone = time.perf_counter() - t
         print(f"hama's call alone: {alone:.2f} s ({alone / seconds:.3f} x real time)")
     return 0
+
+
+def profile_runs(n: int, run, ctc, top: int = 30) -> None:
+    """``n`` runs of ``run()`` under cProfile with the process's CPU clock; prints the
+    ``top`` functions by cumulative and by own CPU seconds per run."""
+    import cProfile
+    import io
+    import pstats
+
+    profiler = cProfile.Profile(time.process_time)
+    for _ in range(n):
+        if hasattr(ctc, "forget"):
+            ctc.forget()
+        profiler.enable()
+        run()
+        profiler.disable()
+    stats = pstats.Stats(profiler, stream=(out := io.StringIO()))
+    print(f"# cProfile, CPU seconds summed over {n} runs (divide by {n} for one run)")
+    for order in ("cumulative", "tottime"):
+        stats.sort_stats(order).print_stats(top)
+    print("\n".join(line for line in out.getvalue().splitlines() if line.strip()))
 
 
 if __name__ == "__main__":

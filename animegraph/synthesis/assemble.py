@@ -144,11 +144,13 @@ def warp_animes(graph: AnimeGraph, nodes: np.ndarray, phone: Phone, n_out: int, 
                 [phone.prosody], graph.prosody_values, graph.prosody_offsets,
                 [nodes[warped]])[0]
         at = u * (n_in - 1)  # each output frame's place among the input's prosody frames
-        for r in warped:
-            src = positions[r].copy()  # the ends pinned, see warp_positions
-            src[0], src[-1] = 0.0, prosody[r] - 1.0
-            v = np.interp(at, np.arange(n_in), src)
-            frac[r] = np.clip(v / (prosody[r] - 1), 0.0, 1.0)
+        src = positions[warped].astype(np.float64)  # a copy: the ends pinned, see warp_positions
+        src[:, 0], src[:, -1] = 0.0, prosody[warped] - 1.0
+        # np.interp on the integer grid 0 .. n_in - 1, every row at once (its arithmetic:
+        # slope times the distance from the left knot, plus the left value)
+        j = np.minimum(np.floor(at).astype(np.int64), n_in - 2)
+        v = (src[:, j + 1] - src[:, j]) * (at - j) + src[:, j]
+        frac[warped] = np.clip(v / (prosody[warped] - 1)[:, None], 0.0, 1.0)
     pos = frac * (frames - 1)[:, None]
     lo = np.floor(pos).astype(np.int64)
     hi = np.minimum(lo + 1, (frames - 1)[:, None])
@@ -156,14 +158,6 @@ def warp_animes(graph: AnimeGraph, nodes: np.ndarray, phone: Phone, n_out: int, 
     values = graph.motion_values
     return ((1 - t) * values[first[:, None] + lo].astype(np.float64)
             + t * values[first[:, None] + hi].astype(np.float64))
-
-
-def _stretch(motion: np.ndarray, n_out: int) -> np.ndarray:
-    """``motion`` (m, n_ics) stretched uniformly onto ``n_out`` frames, each output frame
-    showing the motion at its centre's relative position."""
-    if n_out == 0 or len(motion) == 1:
-        return np.repeat(motion[:1], n_out, axis=0)
-    return _interp_rows(motion, (np.arange(n_out) + 0.5) / n_out * (len(motion) - 1))
 
 
 def warp_positions(c_input: np.ndarray, c_anime: np.ndarray) -> np.ndarray:
@@ -190,13 +184,6 @@ def warp_positions(c_input: np.ndarray, c_anime: np.ndarray) -> np.ndarray:
     if len(src) > 1:
         src[-1] = len(c_anime) - 1.0
     return src
-
-
-def _interp_rows(motion: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, len(motion) - 1)
-    t = (pos - lo)[:, None]
-    return (1 - t) * motion[lo] + t * motion[hi]
 
 
 def find_helper_pair(graph: AnimeGraph, a: int, b: int, *, emotion: int | None = None):
@@ -529,8 +516,8 @@ def _recorded_neighbours(graph: AnimeGraph, nodes: np.ndarray, w: np.ndarray,
                          == PHONE_INDEX.get(phone.phone, -1))
     if n_out == 0 or not shows.any():
         return None, 0.0
-    pieces = np.array([_stretch(graph.motion(int(a)).astype(np.float64), n_out)
-                       for a in nb[shows]]) - own[shows][:, None, :]
+    # every shown anime stretched uniformly onto the neighbour's frames, all at once
+    pieces = warp_animes(graph, nb[shows], phone, n_out, time_warp=False) - own[shows][:, None, :]
     share = float(w[shows].sum())
     return np.tensordot(w[shows] / share, pieces, axes=1), share
 

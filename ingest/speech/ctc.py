@@ -58,8 +58,6 @@ same words' kind land there.
 from __future__ import annotations
 
 import contextvars
-import functools
-import hashlib
 import logging
 import math
 import os
@@ -70,13 +68,23 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from db.errors import DataError
 from db.system import thread_budget, usable_cpus
 from ingest.formats.phones_csv import Segment
+from ingest.speech.ctc_store import (
+    alias_path,
+    audio_key,
+    disk_path,
+    from_disk,
+    kept_on_disk,
+    on_disk,
+    read_alias,
+    to_disk,
+    write_alias,
+)
 from ingest.speech.ctc_timing import (
     FRAME_RATE,
     PAUSE_SMOOTH,
@@ -104,11 +112,13 @@ __all__ = [
     "check_transcript",
     "doubt",
     "doubts",
+    "kept_on_disk",
     "phone_probs",
     "phone_share",
     "posteriors",
     "remember",
     "recognize",
+    "recognized_phones",
     "transcript_loss",
 ]
 
@@ -396,21 +406,21 @@ def posteriors(audio: np.ndarray, sample_rate: int) -> np.ndarray:
         If the model cannot be loaded or run.
     """
     samples, sample_rate = check_audio(audio, sample_rate)
-    if sample_rate == SAMPLE_RATE or not _ON_DISK.get():
+    if sample_rate == SAMPLE_RATE or not on_disk():
         return _phone_log_probs(_resample(samples, sample_rate))[0]
     # Outputs kept for this very input are found without resampling it: importing
     # scipy.signal for the resampler is about a second of a one-shot synth that has
     # heard the recording before (its checks and guide ask for the posteriors again).
-    alias = _alias_path(samples, sample_rate)
-    key = _read_alias(alias)
+    alias = alias_path(samples, sample_rate)
+    key = read_alias(alias)
     if key is not None:
         found = _kept(key, math.ceil(len(samples) * SAMPLE_RATE / sample_rate))
         if found is not None:
             return found[0]
     samples16 = _resample(samples, sample_rate)
     out = _phone_log_probs(samples16)
-    if key != (key16 := _key(samples16)):  # kept once the outputs are
-        _write_alias(alias, key16)
+    if key != (key16 := audio_key(samples16)):  # kept once the outputs are
+        write_alias(alias, key16)
     return out[0]
 
 
@@ -427,113 +437,6 @@ def forget() -> None:
         _RECENT.clear()
 
 
-#: Set (:func:`kept_on_disk`) while ingest prepares clips: the model's outputs are then
-#: also kept in the user's cache, as a video's tracking is, so that a re-ingest does not
-#: run the model again (GRID's 800 clips: about 200 CPU-s).
-_ON_DISK: contextvars.ContextVar[bool] = contextvars.ContextVar("hama_on_disk", default=False)
-
-
-@contextmanager
-def kept_on_disk() -> Iterator[None]:
-    """Within this block, keep the model's outputs in ``<cache>/phones/`` by a digest of
-    their 16 kHz input (and reuse them): ingest's clip preparation, not one-off synthesis."""
-    token = _ON_DISK.set(True)
-    try:
-        yield
-    finally:
-        _ON_DISK.reset(token)
-
-
-def _disk_path(key: bytes) -> Path:
-    from ingest.cache import cache_dir
-
-    return (cache_dir() / "phones"
-            / f"{key.hex()}-hama{_hama_version()}-pieces{PIECE_LAYOUT}.npy")
-
-
-@functools.cache  # read once a process, not once a clip
-def _hama_version() -> str:
-    from importlib.metadata import version
-
-    return version("hama")
-
-
-def _from_disk(path: Path, n_samples: int) -> np.ndarray | None:
-    """Posteriors kept by :func:`_to_disk`, if they are what the model would give for
-    ``n_samples`` of audio (a damaged or foreign file is ignored and replaced)."""
-    most = n_samples // (SAMPLE_RATE // FRAME_RATE) + 2
-    try:
-        # never more than this audio's posteriors (and npy's header) is read into memory
-        if path.stat().st_size > most * len(PHONES) * 8 + 4096:
-            raise ValueError(f"{path.stat().st_size} bytes, more than this audio's")
-        probs = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        logger.warning("%s: unreadable (%s); running the phone model again", path, exc)
-        return None
-    if (probs.dtype != np.float64 or probs.ndim != 2 or probs.shape[1] != len(PHONES)
-            or not 0 < len(probs) <= most or not np.isfinite(probs).all()
-            or np.any(probs < 0) or np.abs(probs.sum(axis=1) - 1).max() > 1e-3):
-        logger.warning("%s: not this audio's phone posteriors; running the model again", path)
-        return None
-    return probs
-
-
-def _to_disk(path: Path, probs: np.ndarray) -> None:
-    import io
-
-    from db.atomic import atomic_write
-
-    buffer = io.BytesIO()
-    np.save(buffer, probs, allow_pickle=False)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(path) as handle:
-            handle.write(buffer.getvalue())
-        # the same audio's posteriors of another hama or piece layout are never read again
-        for stale in path.parent.glob(f"{path.name.split('-', 1)[0]}-*.npy"):
-            if stale != path:
-                stale.unlink(missing_ok=True)
-    except OSError as exc:  # a cache that cannot be written costs time, not the result
-        logger.warning("%s: cannot keep the phone posteriors (%s)", path, exc)
-
-
-def _key(samples16: np.ndarray) -> bytes:
-    """The digest the model's outputs for ``samples16`` are remembered and kept by."""
-    return hashlib.blake2b(np.ascontiguousarray(samples16).tobytes(), digest_size=16).digest()
-
-
-def _alias_path(samples: np.ndarray, sample_rate: int) -> Path:
-    """Where the digest of ``samples``' 16 kHz version (:func:`_resample`) is kept, by a
-    digest of ``samples`` (float32, as :func:`check_audio` gives them) and their rate."""
-    from ingest.cache import cache_dir
-
-    digest = hashlib.blake2b(np.ascontiguousarray(samples).tobytes(), digest_size=16)
-    digest.update(f"/{int(sample_rate)}".encode())
-    return cache_dir() / "phones" / f"{digest.hexdigest()}.at16k"
-
-
-def _read_alias(path: Path) -> bytes | None:
-    """The digest :func:`_write_alias` kept at ``path``, or None (absent or not one)."""
-    try:
-        if not path.is_file() or path.stat().st_size != 32:  # a file of 32 hex digits
-            return None
-        text = path.read_text(encoding="ascii")
-        return bytes.fromhex(text) if len(text) == 32 else None
-    except (OSError, ValueError):
-        return None
-
-
-def _write_alias(path: Path, key: bytes) -> None:
-    from db.atomic import atomic_write
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(path) as handle:
-            handle.write(key.hex().encode("ascii"))
-    except (OSError, DataError) as exc:  # a cache that cannot be written costs time, not the result
-        logger.warning("%s: cannot keep the digest of the resampled audio (%s)", path, exc)
-
-
 def _kept(key: bytes, n_samples16: int) -> tuple[np.ndarray, np.ndarray] | None:
     """The outputs for the 16 kHz audio of digest ``key`` (``n_samples16`` samples) as
     this process remembers them or (:func:`kept_on_disk`) the cache keeps them, or None."""
@@ -541,8 +444,8 @@ def _kept(key: bytes, n_samples16: int) -> tuple[np.ndarray, np.ndarray] | None:
         if key in _RECENT:
             _RECENT.move_to_end(key)
             return _RECENT[key]
-    path = _disk_path(key) if _ON_DISK.get() else None
-    probs = _from_disk(path, n_samples16) if path is not None and path.is_file() else None
+    path = disk_path(key, PIECE_LAYOUT) if on_disk() else None
+    probs = from_disk(path, n_samples16) if path is not None and path.is_file() else None
     return None if probs is None else _remember(key, probs)
 
 
@@ -559,13 +462,14 @@ def _remember(key: bytes, probs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _phone_log_probs(samples16: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(posteriors, log posteriors) over PHONES, each (n_frames, len(PHONES))."""
-    key = _key(samples16)
+    key = audio_key(samples16)
     found = _kept(key, len(samples16))
     if found is not None:
         return found
     probs = phone_probs(samples16)
-    if _ON_DISK.get():
-        _to_disk(_disk_path(key), probs)  # float64: what is read back gives the same results
+    if on_disk():
+        # float64: what is read back gives the same results
+        to_disk(disk_path(key, PIECE_LAYOUT), probs)
     return _remember(key, probs)
 
 
@@ -594,7 +498,7 @@ def remember(audio: np.ndarray, sample_rate: int, probs: np.ndarray) -> None:
         raise ValueError(f"posteriors of shape {probs.shape} for audio of {n} frames")
     if len(probs) != n:  # the model's last frame may fall short of the end, or past it
         probs = probs[np.minimum(np.arange(n), len(probs) - 1)]
-    _remember(_key(samples16), probs)
+    _remember(audio_key(samples16), probs)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -643,6 +547,21 @@ def recognize(audio: np.ndarray, sample_rate: int, *, refine: bool = True) -> li
     last = last_frames(starts, log_probs, labels)
     return timed([PHONES[i] for i in labels], starts, last, samples16, len(log_probs),
                   duration, refine)
+
+
+def recognized_phones(audio: np.ndarray, sample_rate: int) -> list[str]:
+    """The phones :func:`recognize` names, in order, without timing them (no ``SIL``;
+    none for audio too short or too quiet to recognise): for an engine that places
+    them itself (:func:`ingest.speech.engines.recognize_auto`). Timing is most of
+    :func:`recognize`'s work once the model has heard the audio (its boundary
+    refinement: 22 ms of 23 ms for 9.3 s of speech)."""
+    samples, sample_rate = check_audio(audio, sample_rate)
+    peak = float(np.max(np.abs(samples))) if samples.size else 0.0
+    if len(samples) / sample_rate < MIN_DURATION or peak < SILENCE_PEAK:
+        return []
+    _, log_probs = _phone_log_probs(_resample(samples, sample_rate))
+    starts = _best_path_starts(log_probs)
+    return [PHONES[i] for i in np.argmax(log_probs[starts], axis=1)]
 
 
 def transcript_phones(text: str) -> list[str]:

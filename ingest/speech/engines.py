@@ -22,7 +22,6 @@ import logging
 from collections.abc import Callable
 
 from db.errors import ParameterError
-from ingest.speech.phones import SILENCE
 
 logger = logging.getLogger(__name__)
 
@@ -103,14 +102,15 @@ def recognize_auto(audio, sample_rate, *, refine: bool = True) -> list:
     sequence force-aligned by :func:`ingest.speech.sphinx.align_phones`; hama's own
     segments when PocketSphinx finds no path (or nothing was recognised).
     """
-    from ingest.speech.ctc import recognize
+    from ingest.speech.ctc import recognize, recognized_phones
     from ingest.speech.sphinx import align_phones
 
-    named = recognize(audio, sample_rate, refine=refine)
-    placed = align_phones(audio, sample_rate, [s.phone for s in named], refine=refine)
+    # hama's phones untimed: its own timing is worked out only if PocketSphinx fails
+    named = recognized_phones(audio, sample_rate)
+    placed = align_phones(audio, sample_rate, named, refine=refine)
     if placed is None:
-        if any(s.phone != SILENCE for s in named):
-            logger.debug("PocketSphinx found no path through hama's %d segments: hama's "
+        if named:
+            logger.debug("PocketSphinx found no path through hama's %d phones: hama's "
                          "timing kept", len(named))
-        return named
+        return recognize(audio, sample_rate, refine=refine)
     return placed

@@ -60,13 +60,16 @@ def _mel_filterbank() -> np.ndarray:
     return bank
 
 
-def _spectral_change(samples: np.ndarray) -> np.ndarray:
+def _spectral_change(samples: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
     """Spectral change every 2.5 ms: distance of the cepstra 5 ms before and after.
 
     Parameters
     ----------
     samples : numpy.ndarray
         16 kHz audio (the dithered PCM PocketSphinx decodes).
+    near : numpy.ndarray of int, optional
+        The hops whose values are wanted (the others are left 0): refinement looks only
+        within a few hops of each boundary, a fraction of a recording's hops.
 
     Returns
     -------
@@ -79,19 +82,24 @@ def _spectral_change(samples: np.ndarray) -> np.ndarray:
     half = _CHANGE_WINDOW // 2
     x = np.pad(x, (half, half))
     n_hops = max(0, (len(x) - _CHANGE_WINDOW) // _CHANGE_HOP + 1)
-    if n_hops <= 2 * _CHANGE_LAG:
+    lag = _CHANGE_LAG
+    if n_hops <= 2 * lag:
         return np.zeros(n_hops)
-    frames = np.lib.stride_tricks.sliding_window_view(x, _CHANGE_WINDOW)[::_CHANGE_HOP][:n_hops]
+    wanted = (np.arange(lag, n_hops - lag) if near is None else
+              np.unique(np.clip(np.asarray(near, dtype=np.int64), lag, n_hops - lag - 1)))
+    heard = np.union1d(wanted - lag, wanted + lag)  # the hops whose cepstra are compared
+    frames = np.lib.stride_tricks.sliding_window_view(x, _CHANGE_WINDOW)[::_CHANGE_HOP]
     window = np.hanning(_CHANGE_WINDOW)
     bank = _mel_filterbank().T
-    ceps = np.empty((n_hops, _N_CEPS))
-    for a in range(0, n_hops, _CHANGE_BLOCK):  # in blocks: minutes of audio, bounded memory
-        power = np.abs(np.fft.rfft(frames[a : a + _CHANGE_BLOCK] * window, _CHANGE_FFT)) ** 2
+    ceps = np.empty((len(heard), _N_CEPS))
+    for a in range(0, len(heard), _CHANGE_BLOCK):  # in blocks: minutes of audio, bounded memory
+        block = frames[heard[a : a + _CHANGE_BLOCK]]
+        power = np.abs(np.fft.rfft(block * window, _CHANGE_FFT)) ** 2
         logmel = np.log(power @ bank + 1e-12)
         ceps[a : a + _CHANGE_BLOCK] = dct(logmel, type=2, norm="ortho", axis=1)[:, :_N_CEPS]
     change = np.zeros(n_hops)
-    lag = _CHANGE_LAG
-    change[lag:-lag] = np.linalg.norm(ceps[2 * lag:] - ceps[: -2 * lag], axis=1)
+    after, before = np.searchsorted(heard, wanted + lag), np.searchsorted(heard, wanted - lag)
+    change[wanted] = np.linalg.norm(ceps[after] - ceps[before], axis=1)
     return change
 
 
@@ -103,11 +111,12 @@ def refine_onsets(onsets: list[tuple[str, float]], samples: np.ndarray, window: 
     """
     if window <= 0 or len(onsets) < 2:
         return list(onsets)
-    change = _spectral_change(samples)
-    if change.size == 0:
-        return list(onsets)
     hop = _CHANGE_HOP / SAMPLE_RATE
     reach = int(round(window / hop))
+    centres = np.round(np.array([onset for _, onset in onsets[1:]]) / hop).astype(np.int64)
+    change = _spectral_change(samples, (centres[:, None] + np.arange(-reach, reach + 1)).ravel())
+    if change.size == 0:
+        return list(onsets)
     refined = [onsets[0]]
     for k in range(1, len(onsets)):
         phone, onset = onsets[k]
