@@ -46,13 +46,15 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from db.arrow import numbers, repeat_string
+from db.arrow import numbers
 from db.atomic import atomic_write, write_error
 from db.errors import DataError
 from db.footers import decoded_bytes
 from db.layout import CURRENT, is_database  # noqa: F401 - is_database: callers' import
 from db.lock import pid_alive, writer_lock
 from db.memo import Memo, identity
+from db.parts import read_batches
+from db.parts import read_parts as _read_parts
 from db.validate import (
     READ_OPTIONS,
     WRITE_OPTIONS,
@@ -582,6 +584,23 @@ class Database:
         check_values(self, name, table)
         return table
 
+    def batches(self, name: str, columns: list[str], rows: int = MAX_GROUP_ROWS):
+        """Table ``name`` (``columns`` of it) read ``rows`` at a time, as tables, in the
+        order of :meth:`table`, checked as :meth:`table` checks what it reads: the
+        footers first, the pages' checksums and each piece's values as they are read.
+        A reader that keeps a few columns of a large table (the anime graph's arrays)
+        never holds the whole of it."""
+        if name not in TABLES:
+            raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
+        self.check_rows(name)
+        try:
+            for part in read_batches(self.table_path(name), columns, name in PARTITIONED,
+                                     rows):
+                check_values(self, name, part)
+                yield part
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
+
     def dataset(self, name: str, schema: pa.Schema | None = None):
         """Table ``name`` as a ``pyarrow.dataset.Dataset`` whose reads verify the pages'
         checksums (hive-partitioned by emotion if it is), unchecked otherwise: read it
@@ -643,47 +662,6 @@ class Database:
             if ids is not None and ids == (_identity_or_none(path),):  # unchanged while read
                 _ARRAYS.put(key, cached, ids)
         return {name: array.view() for name, array in cached.items()}
-
-
-def _read_parts(path: Path, columns: list[str] | None, partitioned: bool) -> pa.Table | None:
-    """A table read file by file with :mod:`pyarrow.parquet`, as ``pyarrow.dataset`` reads it.
-
-    The same rows in the same order (files in sorted path order), and for a table
-    partitioned by emotion its ``emotion`` column (a string, last unless ``columns``
-    orders it), without importing :mod:`pyarrow.dataset`, which imports pandas. None when
-    the layout is not the one this version writes (no files, another partition key):
-    the caller then asks ``pyarrow.dataset``.
-    """
-    if path.is_file():
-        return _read_file(path, columns)
-    if not partitioned:
-        files = sorted(path.glob("*.parquet"))
-        parts = [_read_file(f, columns) for f in files]
-    else:
-        files = sorted(path.glob("*=*/*.parquet"))
-        parts = []
-        for f in files:
-            key, _, value = f.parent.name.partition("=")
-            if key != "emotion" or "%" in value:
-                return None
-            want = None if columns is None else [c for c in columns if c != key]
-            part = _read_file(f, want)
-            if part is None:
-                return None
-            part = part.append_column(key, repeat_string(value, part.num_rows))
-            parts.append(part if columns is None else part.select(columns))
-    if not parts or any(part is None for part in parts):
-        return None
-    return pa.concat_tables(parts)
-
-
-def _read_file(path: Path, columns: list[str] | None) -> pa.Table | None:
-    """One Parquet file, or None if it lacks a column asked for (``pyarrow.dataset`` then
-    says so)."""
-    file = pq.ParquetFile(path, **READ_OPTIONS)
-    if columns is not None and not set(columns) <= set(file.schema_arrow.names):
-        return None
-    return file.read(columns=columns)
 
 
 def _first_line(exc: Exception) -> str:
