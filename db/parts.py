@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from urllib.parse import unquote
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -73,9 +74,9 @@ def read_batches(path: Path, columns: list[str], partitioned: bool,
         files = []
         for f in sorted(path.glob("*=*/*.parquet")):
             key, _, value = f.parent.name.partition("=")
-            if key != "emotion" or "%" in value:
+            if key != "emotion":
                 raise ValueError(f"{f.parent.name}: not an emotion partition")
-            files.append((f, value))
+            files.append((f, unquote(value)))  # as pyarrow's hive partitioning decodes it
     else:
         files = [(f, None) for f in sorted(path.glob("*.parquet"))]
     for f, emotion in files:

@@ -112,3 +112,26 @@ def test_loaded_graph_equals_the_stored_columns(tiny_db, monkeypatch, batch):
     assert np.array_equal(graph.first_pcs.ravel(), _whole(t.column("first_pcs")))
     assert np.array_equal(graph.last_pcs.ravel(), _whole(t.column("last_pcs")))
     assert np.array_equal(graph.next_node, t.column("next_node").fill_null(-1).to_numpy())
+
+
+def test_batches_read_what_the_whole_table_reads(tmp_path):
+    """Database.batches gives the rows and emotions (percent-decoded partition names, as
+    pyarrow.dataset decodes them) of Database.table, in pieces."""
+    tables = {name: t for name, t in zip(
+        ("clips", "frames", "audio", "channels", "model_arrays", "components"),
+        (pa.table({"clip_id": ["c0"], "emotion": ["a b"]}),
+         pa.table({"clip_id": ["c0"], "emotion": ["a b"], "frame": pa.array([0], pa.int32()),
+                   "jaw": [0.0]}),
+         pa.table({"clip_id": ["c0"], "pcm16": [b"\x00\x01"]}),
+         pa.table({"channel": [0], "name": ["jaw"]}),
+         arrays_to_table({"m": np.zeros(1)}),
+         pa.table({"component": [0], "cutoff_hz": [3.5]})), strict=True)}
+    tables["animes"] = pa.table({"node_id": pa.array(range(9), pa.int64()),
+                                 "emotion": ["très", "a b", "x/y"] * 3,
+                                 "clip_id": [f"c{i}" for i in range(9)]})
+    write_version(tmp_path / "db", tables, {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    whole = db.table("animes", columns=["node_id", "emotion"])
+    pieces = pa.concat_tables(db.batches("animes", ["node_id", "emotion"], 2))
+    assert sorted(pieces.to_pylist(), key=str) == sorted(whole.to_pylist(), key=str)
+    assert set(pieces.column("emotion").to_pylist()) == {"très", "a b", "x/y"}
