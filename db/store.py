@@ -598,6 +598,10 @@ class Database:
                                      rows):
                 check_values(self, name, part)
                 yield part
+                del part
+                # Arrow's allocator keeps freed pages for reuse: without this the pieces
+                # of a whole large table stayed resident until the read was over.
+                pa.default_memory_pool().release_unused()
         except (OSError, ValueError, pa.ArrowException) as exc:
             raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
 
