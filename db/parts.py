@@ -80,7 +80,9 @@ def read_batches(path: Path, columns: list[str], partitioned: bool,
     else:
         files = [(f, None) for f in sorted(path.glob("*.parquet"))]
     for f, emotion in files:
-        file = pq.ParquetFile(f, **READ_OPTIONS)
+        # Without pre-buffering: with it the reader kept every row group's column chunks
+        # read so far until the file's last batch (the whole file's bytes at the end).
+        file = pq.ParquetFile(f, pre_buffer=False, **READ_OPTIONS)
         want = [c for c in columns if not (emotion is not None and c == "emotion")]
         missing = set(want) - set(file.schema_arrow.names)
         if missing:
