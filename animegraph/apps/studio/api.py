@@ -37,7 +37,6 @@ MAX_CLIP_ROWS = 5000
 FACE_CACHE_CLIPS = 64
 
 
-@dataclass(frozen=True)
 @dataclass
 class Studio:
     """What every handler shares: the database, its face builder, the outputs made."""
