@@ -46,11 +46,15 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from db.arrow import numbers, repeat_string
+from db.arrow import numbers
 from db.atomic import atomic_write, write_error
 from db.errors import DataError
+from db.footers import decoded_bytes
 from db.layout import CURRENT, is_database  # noqa: F401 - is_database: callers' import
 from db.lock import pid_alive, writer_lock
+from db.memo import Memo, identity
+from db.parts import read_batches
+from db.parts import read_parts as _read_parts
 from db.validate import (
     READ_OPTIONS,
     WRITE_OPTIONS,
@@ -110,6 +114,17 @@ _CURRENT = CURRENT
 _CURRENT_MAX_BYTES = 64
 #: Tables whose file's SHA-256 the manifest holds (``checksums``), checked when read.
 CHECKSUMMED = ("model_arrays",)
+#: Checks of tables' footers (:meth:`Database.check_rows`) and model arrays read
+#: (:meth:`Database.arrays`) this process remembers, by the identity of their files.
+_CHECKED = Memo(256)
+_ARRAYS = Memo(8)
+
+
+def _identity_or_none(path: Path) -> tuple | None:
+    try:
+        return identity(path)
+    except OSError:
+        return None
 
 
 def is_staging(name: str) -> bool:
@@ -488,7 +503,7 @@ class Database:
         """DataError unless the footers of table ``name``'s files declare the rows the
         manifest counts for it (``tables``), no more than :data:`MAX_ROWS_PER_BYTE` a
         byte of their file, and no more than :data:`MAX_DECODED_PER_BYTE` bytes once
-        read (:func:`_decoded_bytes`).
+        read (:func:`db.footers.decoded_bytes`).
 
         A small file from someone else whose footer declares a hundred million rows, or
         whose one dictionary string every row repeats, is refused before a reader decodes
@@ -498,11 +513,28 @@ class Database:
         understates them is beyond this check). The files are the ones
         ``pyarrow.dataset`` reads (every file below the table's folder but hidden and
         ``_`` ones).
+
+        Remembered for the process while the files stay as they were
+        (:mod:`db.memo`): a version's files are written once.
         """
-        path = self.table_path(name)
         files = self.files(name)
         if not files:
             return  # the read says the table is missing
+        try:
+            ids = tuple(identity(f) for f in files)
+        except OSError:
+            ids = None  # gone meanwhile: the check says so
+        counts = self.manifest.get("tables")
+        key = ("rows", name, repr(counts.get(name) if isinstance(counts, dict) else None), ids)
+        if ids is not None and _CHECKED.get(key):
+            return
+        self._check_footers(name, files)
+        if ids is not None:
+            _CHECKED.put(key, True, ids)
+
+    def _check_footers(self, name: str, files: list[Path]) -> None:
+        """:meth:`check_rows` itself, every time."""
+        path = self.table_path(name)
         try:
             footers = [(f, pq.read_metadata(f), f.stat().st_size) for f in files]
         except (OSError, pa.ArrowException) as exc:
@@ -524,7 +556,7 @@ class Database:
             row_bytes = sum(len(part.partition("=")[2].encode())
                             for part in where.parts[:-1]) if f != path else 0
             try:
-                decoded = _decoded_bytes(f, meta, row_bytes, MAX_DECODED_PER_BYTE * size)
+                decoded = decoded_bytes(f, meta, row_bytes, MAX_DECODED_PER_BYTE * size)
             except (OSError, pa.ArrowException) as exc:
                 raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
             if decoded > MAX_DECODED_PER_BYTE * size:
@@ -551,6 +583,27 @@ class Database:
             raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
         check_values(self, name, table)
         return table
+
+    def batches(self, name: str, columns: list[str], rows: int = MAX_GROUP_ROWS):
+        """Table ``name`` (``columns`` of it) read ``rows`` at a time, as tables, in the
+        order of :meth:`table`, checked as :meth:`table` checks what it reads: the
+        footers first, the pages' checksums and each piece's values as they are read.
+        A reader that keeps a few columns of a large table (the anime graph's arrays)
+        never holds the whole of it."""
+        if name not in TABLES:
+            raise DataError(f"no table {name!r}; tables are {', '.join(TABLES)}")
+        self.check_rows(name)
+        try:
+            for part in read_batches(self.table_path(name), columns, name in PARTITIONED,
+                                     rows):
+                check_values(self, name, part)
+                yield part
+                del part
+                # Arrow's allocator keeps freed pages for reuse: without this the pieces
+                # of a whole large table stayed resident until the read was over.
+                pa.default_memory_pool().release_unused()
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            raise self.damaged(name, f"cannot be read: {_first_line(exc)}") from None
 
     def dataset(self, name: str, schema: pa.Schema | None = None):
         """Table ``name`` as a ``pyarrow.dataset.Dataset`` whose reads verify the pages'
@@ -582,7 +635,9 @@ class Database:
                                "was changed after the database was written")
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...).
+        """The model arrays (PCA/ICA means, components, mixing matrices, cutoffs ...),
+        read-only: checked and read once per process while the file stays as it was
+        (:mod:`db.memo`), and shared by every call.
 
         Raises
         ------
@@ -591,116 +646,26 @@ class Database:
             (name, shape, values) rows whose shapes fit their values, or a value is not
             finite.
         """
-        self._check_sum("model_arrays")
+        path = self.table_path("model_arrays")
         try:
-            return arrays_from_table(self.table("model_arrays"))
-        except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
-            raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
-
-
-#: Bytes a value of a Parquet physical type takes once read (BYTE_ARRAY: its offset).
-_WIDTH = {"BOOLEAN": 1, "INT32": 4, "INT64": 8, "INT96": 12, "FLOAT": 4, "DOUBLE": 8,
-          "BYTE_ARRAY": 4}
-_DICTIONARY = {"PLAIN_DICTIONARY", "RLE_DICTIONARY"}
-#: Most bytes of strings :func:`_decoded_bytes` decodes at once to count them.
-_COUNT_BYTES = 16 << 20
-
-
-def _decoded_bytes(path: Path, meta: pq.FileMetaData, row_bytes: int, limit: int) -> int:
-    """Bytes the Parquet file at ``path`` takes once read, at most: every column chunk's
-    pages uncompressed plus its values decoded, and ``row_bytes`` more a row.
-
-    A value takes its type's width; a string also its bytes, which are in its pages
-    unless the pages share them: a dictionary-encoded string (or one delta-encoded
-    against the one before) can be as long as its chunk's pages, in every row. When that
-    bound passes ``limit``, the dictionary-encoded (top-level) columns are decoded a few
-    rows at a time (at most :data:`_COUNT_BYTES` at once) to count their bytes, until the
-    count passes ``limit``.
-
-    Parameters
-    ----------
-    path : Path
-    meta : pyarrow.parquet.FileMetaData
-        Its footer.
-    row_bytes : int
-        Bytes a row takes beyond its columns (its partition values).
-    limit : int
-        Bytes beyond which the exact count may stop.
-    """
-    total = meta.num_rows * row_bytes
-    shared: dict[str, int] = {}  # column -> bound of its strings whose pages share them
-    longest: dict[str, int] = {}  # ... and the most bytes one of them can take
-    uncountable = set()  # those delta-encoded or nested: not counted without decoding
-    for g in range(meta.num_row_groups):
-        group = meta.row_group(g)
-        for c in range(meta.num_columns):
-            chunk = group.column(c)
-            kind, values = chunk.physical_type, chunk.num_values
-            width = (meta.schema.column(c).length if kind == "FIXED_LEN_BYTE_ARRAY"
-                     else _WIDTH.get(kind, 16))
-            total += chunk.total_uncompressed_size + values * width
-            encodings = set(chunk.encodings)
-            if kind == "BYTE_ARRAY" and encodings & (_DICTIONARY | {"DELTA_BYTE_ARRAY"}):
-                column, most = chunk.path_in_schema, chunk.total_uncompressed_size
-                shared[column] = shared.get(column, 0) + values * most
-                longest[column] = max(longest.get(column, 0), most)
-                if "DELTA_BYTE_ARRAY" in encodings or "." in column:
-                    uncountable.add(column)
-    countable = [c for c in shared if c not in uncountable]
-    if total + sum(shared.values()) <= limit or total > limit or not countable:
-        return total + sum(shared.values())
-    total += sum(shared[c] for c in uncountable)
-    reader = pq.ParquetFile(path, pre_buffer=False, buffer_size=1 << 20)  # page by page
-    for column in countable:
-        # Decoded a few rows at a time, as few as their longest value allows, until the
-        # count passes the limit: never more than _COUNT_BYTES of them at once.
-        rows = max(1, min(MAX_GROUP_ROWS, _COUNT_BYTES // max(longest[column], 1)))
-        for batch in reader.iter_batches(batch_size=rows, columns=[column]):
-            total += pc.sum(pc.binary_length(batch.column(0))).as_py() or 0
-            if total > limit:
-                return total
-    return total
-
-
-def _read_parts(path: Path, columns: list[str] | None, partitioned: bool) -> pa.Table | None:
-    """A table read file by file with :mod:`pyarrow.parquet`, as ``pyarrow.dataset`` reads it.
-
-    The same rows in the same order (files in sorted path order), and for a table
-    partitioned by emotion its ``emotion`` column (a string, last unless ``columns``
-    orders it), without importing :mod:`pyarrow.dataset`, which imports pandas. None when
-    the layout is not the one this version writes (no files, another partition key):
-    the caller then asks ``pyarrow.dataset``.
-    """
-    if path.is_file():
-        return _read_file(path, columns)
-    if not partitioned:
-        files = sorted(path.glob("*.parquet"))
-        parts = [_read_file(f, columns) for f in files]
-    else:
-        files = sorted(path.glob("*=*/*.parquet"))
-        parts = []
-        for f in files:
-            key, _, value = f.parent.name.partition("=")
-            if key != "emotion" or "%" in value:
-                return None
-            want = None if columns is None else [c for c in columns if c != key]
-            part = _read_file(f, want)
-            if part is None:
-                return None
-            part = part.append_column(key, repeat_string(value, part.num_rows))
-            parts.append(part if columns is None else part.select(columns))
-    if not parts or any(part is None for part in parts):
-        return None
-    return pa.concat_tables(parts)
-
-
-def _read_file(path: Path, columns: list[str] | None) -> pa.Table | None:
-    """One Parquet file, or None if it lacks a column asked for (``pyarrow.dataset`` then
-    says so)."""
-    file = pq.ParquetFile(path, **READ_OPTIONS)
-    if columns is not None and not set(columns) <= set(file.schema_arrow.names):
-        return None
-    return file.read(columns=columns)
+            ids = (identity(path),)
+        except OSError:
+            ids = None  # the check says so
+        sums = self.manifest.get("checksums")
+        key = ("arrays", repr(sums.get("model_arrays") if isinstance(sums, dict) else sums),
+               ids)
+        cached = _ARRAYS.get(key) if ids is not None else None
+        if cached is None:
+            self._check_sum("model_arrays")
+            try:
+                cached = arrays_from_table(self.table("model_arrays"))
+            except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
+                raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
+            for array in cached.values():
+                array.flags.writeable = False  # shared by every later call
+            if ids is not None and ids == (_identity_or_none(path),):  # unchanged while read
+                _ARRAYS.put(key, cached, ids)
+        return {name: array.view() for name, array in cached.items()}
 
 
 def _first_line(exc: Exception) -> str:

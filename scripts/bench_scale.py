@@ -16,7 +16,7 @@ by Gaussian noise of 0.1 x the per-component spread, so no two copies coincide. 
 would take 38 GB at 4M animes). 100 hours of speech are about 4M animes (the default
 database: 10,512 animes in 991 s).
 
-Each size is measured in a fresh process: :meth:`animegraph.synthesis.Model.load` (what
+Each size is built, then measured, in a fresh process: :meth:`animegraph.synthesis.Model.load` (what
 ``synth`` loads before it hears the speech), the resident memory after it and the peak of
 the whole process, then :func:`animegraph.synthesis.synthesize` of a 10 s eSpeak NG line
 given its own phone labels (the segmentation's cost does not depend on the database) with
@@ -149,6 +149,7 @@ def measure(db_path: Path, repeats: int) -> dict:
     model = Model.load(db_path)
     row = {"load_s": time.perf_counter() - t, "load_cpu_s": time.process_time() - c,
            "rss_after_load_gb": _rss_gb(), "rss_before_load_gb": rss0,
+           "peak_after_load_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
            "animes": model.graph.n_nodes, "graph_gb": model.graph.nbytes() / 1e9,
            "speech_s": seconds, "phones": len(labels)}
     for name, kwargs in (("kbest", {"k_best": 20}), ("exact", {})):
@@ -195,10 +196,15 @@ def main() -> int:
     parser.add_argument("--after", type=Path,
                         help="the --json of an earlier run: its sizes project the peak "
                              "memory of these (to measure 4M alone, after the smaller ones)")
-    parser.add_argument("--measure", type=Path, help=argparse.SUPPRESS)  # the child's part
+    parser.add_argument("--measure", type=Path, help=argparse.SUPPRESS)  # the children's
+    parser.add_argument("--build", type=Path, nargs=2, help=argparse.SUPPRESS)  # parts
     args = parser.parse_args()
     if args.measure:
         print(json.dumps(measure(args.measure, args.repeats)))
+        return 0
+    if args.build:
+        base, out = args.build
+        print(json.dumps(build(base, args.sizes[0], out, np.random.default_rng(args.seed))))
         return 0
     if args.db is None:
         from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
@@ -219,7 +225,17 @@ def main() -> int:
         for size in args.sizes:
             out = work / f"db-{size}"
             shutil.rmtree(out, ignore_errors=True)
-            row = build(args.db, size, out, rng)
+            # Built in a child process too: the build's tables (gigabytes at 4M animes)
+            # are not held while the database is measured.
+            built = subprocess.run(
+                [sys.executable, __file__, "--build", str(args.db), str(out), "--sizes",
+                 str(size), "--seed", str(int(rng.integers(2**31)))],
+                capture_output=True, text=True, check=False)
+            if built.returncode:
+                print(built.stderr.strip().splitlines()[-1] if built.stderr.strip() else
+                      f"build failed ({built.returncode})")
+                return 1
+            row = json.loads(built.stdout.strip().splitlines()[-1])
             projected = _projected_peak(measured, row["animes"])
             if projected is not None:
                 if projected > args.max_rss_gb:

@@ -330,3 +330,99 @@ def test_a_new_version_of_model_arrays_links_the_rest_and_fails_whole(tmp_path, 
     assert current_version(root) == new.name
     assert not [p for p in root.iterdir() if ".partial-" in p.name]  # no staging left
     np.testing.assert_array_equal(Database.open(root).arrays()["m"], np.ones((2, 2)))
+
+
+def _aged(path, seconds=3600):
+    """Set the file's modification time back: a later change in place (even within one
+    tick of the kernel's clock) then changes it."""
+    past = os.stat(path).st_mtime_ns - seconds * 10**9
+    os.utime(path, ns=(past, past))
+
+
+@pytest.fixture
+def remembered(monkeypatch):
+    """Checks remembered at once (db.memo.SETTLE_NS 0), from an empty memo."""
+    import db.memo
+    import db.store
+
+    monkeypatch.setattr(db.memo, "SETTLE_NS", 0)
+    db.store._CHECKED.clear()
+    db.store._ARRAYS.clear()
+    yield
+    db.store._CHECKED.clear()
+    db.store._ARRAYS.clear()
+
+
+def test_arrays_and_footers_are_checked_once_per_process(tmp_path, monkeypatch, remembered):
+    """Every Database of one version shares the checks of its files: the model arrays are
+    hashed and read once, each table's footers checked once; the arrays are read-only."""
+    import db.store
+
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    hashed, footers = [], []
+    real_hash, real_check = db.store.file_sha256, Database._check_footers
+    monkeypatch.setattr(db.store, "file_sha256", lambda p: hashed.append(p) or real_hash(p))
+    monkeypatch.setattr(Database, "_check_footers", lambda self, name, files:
+                        footers.append(name) or real_check(self, name, files))
+    for _ in range(3):
+        db = Database.open(tmp_path / "db")
+        arrays = db.arrays()
+        db.table("frames")
+    assert len(hashed) == 1 and footers.count("frames") == 1
+    assert footers.count("model_arrays") == 1
+    np.testing.assert_array_equal(arrays["m"], np.arange(6.0).reshape(2, 3))
+    with pytest.raises(ValueError, match="read-only"):
+        arrays["m"][0, 0] = 1.0
+
+
+def test_a_file_changed_after_its_check_is_checked_again(tmp_path, remembered):
+    """A remembered check holds only for the file as it was: one damaged in place (same
+    size, same inode) or swapped for another version's is refused at the next read."""
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    arrays_file = db.table_path("model_arrays")
+    _aged(arrays_file)
+    db.arrays()  # remembered
+    data = bytearray(arrays_file.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    arrays_file.write_bytes(bytes(data))
+    with pytest.raises(DataError, match="SHA-256"):
+        Database.open(tmp_path / "db").arrays()
+    # Swapped: the file of another database (its own checksum differs).
+    write_version(tmp_path / "other", {**_tables(), "model_arrays": arrays_to_table(
+        {"m": np.ones((2, 3))})}, {"fps": 30.0})
+    os.replace(Database.open(tmp_path / "other").table_path("model_arrays"), arrays_file)
+    with pytest.raises(DataError, match="SHA-256"):
+        Database.open(tmp_path / "db").arrays()
+
+
+def test_a_footer_changed_after_its_check_is_checked_again(tmp_path, remembered):
+    """A table whose file is replaced by one declaring other rows is refused although
+    its footers were checked before."""
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db = Database.open(tmp_path / "db")
+    channels = db.table_path("channels")
+    _aged(channels)
+    db.table("channels")  # remembered
+    pq.write_table(pa.table({"channel": [0, 1], "name": ["jaw", "lip"]}), channels)
+    with pytest.raises(DataError, match="declare 2 rows"):
+        Database.open(tmp_path / "db").table("channels")
+
+
+def test_a_file_just_written_is_not_remembered(tmp_path, monkeypatch):
+    """A check of a file changed less than db.memo.SETTLE_NS ago is not remembered: two
+    changes within one tick of the kernel's clock leave its times as they were."""
+    import db.store
+
+    write_version(tmp_path / "db", _tables(), {"fps": 30.0})
+    db.store._ARRAYS.clear()
+    db = Database.open(tmp_path / "db")
+    db.arrays()
+    arrays_file = db.table_path("model_arrays")
+    stat = os.stat(arrays_file)
+    data = bytearray(arrays_file.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    arrays_file.write_bytes(bytes(data))
+    os.utime(arrays_file, ns=(stat.st_atime_ns, stat.st_mtime_ns))  # as if in one tick
+    with pytest.raises(DataError, match="SHA-256"):
+        Database.open(tmp_path / "db").arrays()

@@ -646,21 +646,25 @@ def test_a_line_recorded_from_the_microphone_plays(studio, playwright, tiny_corp
 
 
 def test_the_studio_checks_a_version_s_files_once(tiny_db, monkeypatch):
-    """The studio's database view hashes the model arrays and checks each table's
+    """The studio's database (:class:`db.store.Database`, which remembers its checks by
+    file identity, :mod:`db.memo`) hashes the model arrays and checks each table's
     footers once (a version's files do not change), and gives the same arrays as a
-    fresh view, read-only."""
+    fresh read, read-only."""
+    import db.memo
     import db.store
     from animegraph.apps.query import load_clip
-    from animegraph.apps.studio.api import StudioDatabase
     from db.store import Database
 
+    monkeypatch.setattr(db.memo, "SETTLE_NS", 0)  # the fixture's files are seconds old
+    db.store._CHECKED.clear()
+    db.store._ARRAYS.clear()
     hashed, footers = [], []
-    real_hash, real_check = db.store.file_sha256, Database.check_rows
+    real_hash, real_check = db.store.file_sha256, Database._check_footers
     monkeypatch.setattr(db.store, "file_sha256", lambda path: hashed.append(path)
                         or real_hash(path))
-    monkeypatch.setattr(Database, "check_rows", lambda self, name: footers.append(name)
-                        or real_check(self, name))
-    view = StudioDatabase.open(tiny_db[0])
+    monkeypatch.setattr(Database, "_check_footers", lambda self, name, files:
+                        footers.append(name) or real_check(self, name, files))
+    view = Database.open(tiny_db[0])
     clips = view.table("clips", columns=["corpus", "clip_id"]).to_pylist()[:3]
     load_clip(view, clips[0]["corpus"], clips[0]["clip_id"], speech=False)
     first = list(footers)
@@ -668,8 +672,9 @@ def test_the_studio_checks_a_version_s_files_once(tiny_db, monkeypatch):
     for clip in clips[1:]:  # the next clips check nothing again
         load_clip(view, clip["corpus"], clip["clip_id"], speech=False)
     assert len(hashed) == 1 and footers == first
-    fresh = Database.open(tiny_db[0]).arrays()
     kept = view.arrays()
+    db.store._ARRAYS.clear()
+    fresh = Database.open(tiny_db[0]).arrays()
     assert kept.keys() == fresh.keys()
     for name, array in kept.items():
         np.testing.assert_array_equal(array, fresh[name])

@@ -22,6 +22,8 @@ from ingest.speech.phones import PHONES
 
 #: Index of each phone in :data:`ingest.speech.phones.PHONES`.
 PHONE_INDEX = {p: i for i, p in enumerate(PHONES)}
+#: Animes whose curves are read at once when the graph is loaded (a few tens of MB).
+CURVE_BATCH_ROWS = 64 * 1024
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,27 +138,34 @@ class AnimeGraph:
 
     @classmethod
     def _from_database(cls, db: Database) -> AnimeGraph:
+        # Two passes: the per-node columns whole, then the curves a batch at a time into
+        # their arrays (the whole table, then a sorted copy of it, were 2.3 GB of the
+        # load's peak a million animes: docs/results/speed.md, "A database of 100 hours").
         columns = [
             "node_id", "clip_id", "emotion", "position", "phoneme", "start_frame",
-            "end_frame", "start_time", "end_time", "prosody_frames", "prosody", "n_frames",
-            "motion", "first_pcs", "last_pcs", "prev_node", "next_node",
+            "end_frame", "start_time", "end_time", "prosody_frames", "n_frames",
+            "prev_node", "next_node",
         ]
         # Phone posteriorgrams (beyond the paper) are stored only by ingest --posteriorgrams.
         posteriors = {"posteriors", "posterior_frames"} <= set(db.columns("animes"))
         if posteriors:
-            columns += ["posterior_frames", "posteriors"]
-        t = db.table("animes", columns=columns).sort_by("node_id")
+            columns += ["posterior_frames"]
+        t = db.table("animes", columns=columns)
         n = t.num_rows
         if n == 0:
             raise DataError(f"database {db.root} has no anime nodes")
         node_id = numbers(t.column("node_id"))
-        if not np.array_equal(node_id, np.arange(n)):
+        order = np.argsort(node_id, kind="stable")  # table row of each node
+        if not np.array_equal(node_id[order], np.arange(n)):
             raise DataError(f"database {db.root} is damaged: node ids are not 0..{n - 1}")
 
         def codes(name: str) -> tuple[np.ndarray, tuple[str, ...]]:
             encoded = t.column(name).combine_chunks().dictionary_encode()
-            return (numbers(encoded.indices).astype(np.int32),
+            return (numbers(encoded.indices).astype(np.int32)[order],
                     tuple(encoded.dictionary.to_pylist()))
+
+        def ints(name: str, dtype) -> np.ndarray:
+            return _ints(t, name, dtype)[order]
 
         clip_codes, clip_ids = codes("clip_id")
         emotion_codes, emotions = codes("emotion")
@@ -166,32 +175,28 @@ class AnimeGraph:
         except KeyError as exc:
             raise DataError(f"database {db.root} has an unknown phoneme {exc}") from None
         node_phone = remap[phone_codes]
-
-        prosody_values, prosody_offsets = _ragged(t.column("prosody"),
-                                                   numbers(t.column("prosody_frames")))
-        motion_values, motion_offsets = _ragged(t.column("motion"),
-                                                numbers(t.column("n_frames")))
-        posterior_values = posterior_offsets = None
+        frames = {"prosody": ints("prosody_frames", np.int64),
+                  "motion": ints("n_frames", np.int64)}
         if posteriors:
-            posterior_values, posterior_offsets = _ragged(
-                t.column("posteriors"), numbers(t.column("posterior_frames")))
-        first = _fixed(t.column("first_pcs"), n)
-        last = _fixed(t.column("last_pcs"), n)
-        by_phone = tuple(np.flatnonzero(node_phone == p).astype(np.int64)
-                         for p in range(len(PHONES)))
+            frames["posteriors"] = ints("posterior_frames", np.int64)
+        frames |= {"first_pcs": np.ones(n, np.int64), "last_pcs": np.ones(n, np.int64)}
+        curves = _read_curves(db, frames)
         manifest = db.manifest
+        posterior_values, posterior_offsets = curves.get("posteriors", (None, None))
         graph = cls(
             node_phone=node_phone, node_emotion=emotion_codes.astype(np.int16),
-            node_clip=clip_codes, position=_ints(t, "position", np.int32),
-            next_node=_links(t.column("next_node")), prev_node=_links(t.column("prev_node")),
-            start_frame=_ints(t, "start_frame", np.int32),
-            end_frame=_ints(t, "end_frame", np.int32),
-            start_time=numbers(t.column("start_time")).astype(np.float32),
-            end_time=numbers(t.column("end_time")).astype(np.float32),
-            prosody_offsets=prosody_offsets, prosody_values=prosody_values,
-            motion_offsets=motion_offsets, motion_values=motion_values,
-            first_pcs=first, last_pcs=last, by_phone=by_phone, clip_ids=clip_ids,
-            emotions=emotions, fps=float(manifest["fps"]),
+            node_clip=clip_codes, position=ints("position", np.int32),
+            next_node=_links(t.column("next_node"))[order],
+            prev_node=_links(t.column("prev_node"))[order],
+            start_frame=ints("start_frame", np.int32), end_frame=ints("end_frame", np.int32),
+            start_time=numbers(t.column("start_time")).astype(np.float32)[order],
+            end_time=numbers(t.column("end_time")).astype(np.float32)[order],
+            prosody_offsets=curves["prosody"][1], prosody_values=curves["prosody"][0],
+            motion_offsets=curves["motion"][1], motion_values=curves["motion"][0],
+            first_pcs=curves["first_pcs"][0], last_pcs=curves["last_pcs"][0],
+            by_phone=tuple(np.flatnonzero(node_phone == p).astype(np.int64)
+                           for p in range(len(PHONES))),
+            clip_ids=clip_ids, emotions=emotions, fps=float(manifest["fps"]),
             n_channels=int(manifest["n_channels"]),
             posterior_offsets=posterior_offsets, posterior_values=posterior_values,
         )
@@ -250,28 +255,51 @@ def _ints(t: pa.Table, name: str, dtype) -> np.ndarray:
     return values.astype(dtype)
 
 
-def _ragged(column: pa.ChunkedArray, rows_per_node: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Flattened list column -> (values of shape (total_rows, width), row offsets).
+def _read_curves(db: Database, frames: dict[str, np.ndarray]
+                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The list columns ``frames`` names of the animes table, each as (values of shape
+    (total frames, width) float32, row offsets of shape (n_nodes + 1,)) in node order.
 
-    Copied chunk by chunk into the one float32 array returned: the whole column is never
-    combined nor converted at once (at 1M animes the motion column is about a gigabyte,
-    and each whole copy of it was one more gigabyte at the load's peak)."""
-    if column.null_count:
-        raise ValueError(f"{column.type} column has nulls")
-    rows = rows_per_node.astype(np.int64)
-    if (rows < 1).any():
-        raise ValueError("a node with no frames")
-    total = int(rows.sum())
-    lengths = _list_lengths(column)
-    size = int(lengths.sum())
-    width = size // total if total else 0
-    if width < 1 or total * width != size:
-        raise ValueError(f"{size} values do not fill {total} frames")
-    if not np.array_equal(lengths, rows * width):
-        raise ValueError("a node's list does not hold its frames")
-    offsets = np.zeros(len(rows) + 1, dtype=np.int64)
-    np.cumsum(rows, out=offsets[1:])
-    return _list_values(column, size).reshape(total, width), offsets
+    ``frames[c]``, shape (n_nodes,): the frames of each node in column ``c`` (a list of
+    ``frames * width`` numbers a node). Read a batch at a time (:meth:`Database.batches`)
+    and copied to each node's place: the column is never held whole."""
+    n = len(next(iter(frames.values())))
+    offsets, out, width = {}, {}, {}
+    for c, rows in frames.items():
+        if (rows < 1).any():
+            raise ValueError(f"a node with no frames in {c}")
+        offsets[c] = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(rows, out=offsets[c][1:])
+    seen = np.zeros(n, dtype=np.int64)
+    for part in db.batches("animes", ["node_id", *frames], CURVE_BATCH_ROWS):
+        ids = numbers(part.column("node_id")).astype(np.int64)
+        if ((ids < 0) | (ids >= n)).any():
+            raise ValueError("node ids out of range")
+        np.add.at(seen, ids, 1)
+        for c, rows in frames.items():
+            column = part.column(c)
+            if column.null_count:
+                raise ValueError(f"{c}: {column.type} column has nulls")
+            lengths = _list_lengths(column)
+            need = rows[ids]
+            if c not in width:
+                width[c] = int(lengths.sum()) // max(int(need.sum()), 1)
+                if width[c] < 1:
+                    raise ValueError(f"{c}: no values")
+                out[c] = np.empty(int(offsets[c][-1]) * width[c], dtype=np.float32)
+            if not np.array_equal(lengths, need * width[c]):
+                raise ValueError(f"{c}: a node's list does not hold its frames")
+            values = _list_values(column, int(lengths.sum()))
+            start = offsets[c][ids] * width[c]
+            if ids.size and np.array_equal(ids, np.arange(ids[0], ids[0] + ids.size)):
+                out[c][start[0]:start[0] + values.size] = values  # nodes in order
+            else:
+                src = np.zeros(ids.size, dtype=np.int64)
+                np.cumsum(lengths[:-1], out=src[1:])
+                out[c][np.repeat(start - src, lengths) + np.arange(values.size)] = values
+    if (seen != 1).any():
+        raise ValueError("the curves' node ids differ from the nodes'")
+    return {c: (out[c].reshape(-1, width[c]), offsets[c]) for c in frames}
 
 
 def _list_lengths(column: pa.ChunkedArray) -> np.ndarray:
@@ -292,11 +320,3 @@ def _list_values(column: pa.ChunkedArray, size: int) -> np.ndarray:
         values[k:k + part.size] = part
         k += part.size
     return values
-
-
-def _fixed(column: pa.ChunkedArray, n: int) -> np.ndarray:
-    lengths = _list_lengths(column)
-    if column.null_count or (len(lengths) and (lengths != lengths[0]).any()) or \
-            lengths.sum() == 0:
-        raise ValueError("rows of unequal length")
-    return _list_values(column, int(lengths.sum())).reshape(n, -1)

@@ -37,39 +37,6 @@ MAX_CLIP_ROWS = 5000
 FACE_CACHE_CLIPS = 64
 
 
-@dataclass(frozen=True)
-class StudioDatabase(Database):
-    """The studio's view of one database version: its model arrays read and checked, and
-    each table's footers checked (:meth:`db.store.Database.check_rows`), once.
-    :class:`db.store.Database` does both at every read: hashing the arrays and reading
-    the frames' footers were 0.4 s and 0.1 s of every clip the studio loaded from the
-    demo database (0.5 s in all); a version's files are written once."""
-
-    def check_rows(self, name: str) -> None:
-        checked = self.__dict__.setdefault("_checked", set())  # frozen: a set, grown here
-        if name not in checked:
-            super().check_rows(name)
-            checked.add(name)
-
-    @classmethod
-    def open(cls, path) -> StudioDatabase:
-        db = Database.open(path)
-        return cls(root=db.root, version_dir=db.version_dir, manifest=db.manifest)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        cached = self.__dict__.get("_arrays")
-        if cached is None:
-            cached = super().arrays()
-            object.__setattr__(self, "_arrays", cached)  # frozen: set once, here
-        return {name: _read_only(array) for name, array in cached.items()}
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    view = array.view()
-    view.flags.writeable = False  # shared by every call: a caller may not change it
-    return view
-
-
 @dataclass
 class Studio:
     """What every handler shares: the database, its face builder, the outputs made."""
@@ -128,7 +95,7 @@ async def warm(state: Studio) -> None:
         pass
 
 
-def _ready_to_load(db: StudioDatabase) -> None:
+def _ready_to_load(db: Database) -> None:
     """What a clip's first load would pay once: the tables' footers checked, the model
     arrays read, the modules it uses imported, the ARKit fit's matrix made (3 s of the
     first click under load)."""

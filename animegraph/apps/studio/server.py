@@ -39,6 +39,7 @@ from aiohttp import web
 from animegraph.apps.studio import api, live, synth
 from animegraph.apps.studio.face import FaceBuilder
 from db.errors import AnimeGraphError
+from db.store import Database
 
 logger = logging.getLogger(__name__)
 
@@ -164,7 +165,7 @@ def make_app(db_path: Path, token: str) -> web.Application:
     DataError
         If ``db_path`` is not a readable database.
     """
-    db = api.StudioDatabase.open(db_path)
+    db = Database.open(db_path)
     names = tuple(ch["name"] for ch in db.table("channels", columns=["name"]).to_pylist())
     app = web.Application(middlewares=[headers, errors, token_guard],
                           client_max_size=synth.MAX_UPLOAD_BYTES + (1 << 20))
