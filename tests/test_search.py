@@ -541,3 +541,53 @@ def test_exact_matches_dp_on_near_duplicate_sources(noise, threads, monkeypatch)
         assert exact.cost == pytest.approx(dp.cost, abs=1e-9)
         assert path_cost(g, cands, audio, nodes=exact.nodes).cost == pytest.approx(
             exact.cost, abs=1e-9)
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4, 3e6])
+def test_kdtree_query_equals_a_float64_scan(offset):
+    # The query's first tests run in float32 (boxes and points): they may only skip what an
+    # exact float64 scan would skip. Points far from the origin with differences near
+    # float32's resolution there, equal weights (ties) and a keep threshold.
+    from animegraph.search import kdtree
+
+    rng = np.random.default_rng(31)
+    ulp = float(np.spacing(np.float32(offset))) if offset else 1e-7
+    centres = offset + rng.normal(0.0, 40.0 * ulp, size=(12, 4))
+    x = (np.repeat(centres, 40, axis=0) + rng.normal(0.0, ulp, size=(480, 4)))
+    x = x.astype(np.float32).astype(np.float64)
+    d = np.round(rng.random(480) * 3) * 1e-3 * ulp  # a few weights, many ties
+    perm, start, end, left, right, lo, hi, mind = kdtree.build_tree(x, d, kdtree.LEAF)
+    xs, ds = x[perm], d[perm]
+    lo32, hi32, x32 = lo.astype(np.float32), hi.astype(np.float32), xs.astype(np.float32)
+    stack, bounds = np.empty(256, dtype=np.int64), np.empty(256)
+    w1, scale = 2.0, 0.7
+    for y in (centres[:6] + rng.normal(0.0, ulp, size=(6, 4))).astype(np.float32):
+        y64 = y.astype(np.float64)
+        exact = w1 + ds + scale * np.sqrt(((xs - y64) ** 2).sum(axis=1))
+        best = float(np.min(exact))
+        # The search's keep thresholds carry a relative slack of 1e-9 (exact_layers).
+        for thr in (np.inf, best + 1e-9 * best, best - 1e-9 * best):
+            v, r, _ = kdtree.query(xs, x32, ds, start, end, left, right, lo32, hi32, mind, y64,
+                                   y, w1, scale, np.inf, thr, stack, bounds)
+            if thr < best:
+                assert r == -1  # nothing at or below the threshold
+                continue
+            assert r >= 0 and v == pytest.approx(best, rel=1e-15, abs=0.0)
+            assert exact[r] == pytest.approx(v, rel=1e-15, abs=0.0)
+
+
+@pytest.mark.parametrize("offset", [1e4, 3e6])
+def test_exact_matches_dp_far_from_the_origin(offset, monkeypatch):
+    # Replicas whose frames differ by about float32's resolution at ``offset``: the float32
+    # first tests of the k-d tree must not change the optimum.
+    monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
+    rng = np.random.default_rng(905)
+    g = replicated_graph(rng, 10, 1e-3)
+    g = make_graph([[PHONES[p] for p in g.node_phone[recording(g, c)]]
+                    for c in range(len(g.clip_ids))], g.first_pcs + offset, g.last_pcs + offset)
+    phones = ("AA", "B", "S", "IY", "K")
+    for _ in range(3):
+        cands = candidates(g, [str(x) for x in rng.choice(phones, size=12)])
+        audio = random_audio(rng, cands, high=30.0)
+        exact = search(g, cands, audio)
+        assert exact.cost == pytest.approx(search(g, cands, audio, method="dp").cost, abs=1e-9)
