@@ -529,7 +529,6 @@ def test_exact_matches_dp_on_near_duplicate_sources(noise, threads, monkeypatch)
     # and the threaded split of the queries.
     if threads:
         monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
-        monkeypatch.setattr(exact_module, "_PARALLEL_BUILD", 1)
     rng = np.random.default_rng(900)
     g = replicated_graph(rng, 12, noise)
     phones = ("AA", "B", "S", "IY", "K")
@@ -592,31 +591,3 @@ def test_exact_matches_dp_far_from_the_origin(offset, monkeypatch):
         audio = random_audio(rng, cands, high=30.0)
         exact = search(g, cands, audio)
         assert exact.cost == pytest.approx(search(g, cands, audio, method="dp").cost, abs=1e-9)
-
-
-@pytest.mark.parametrize("m", [5, 17, 300, 1001])  # more than a leaf (4)
-def test_kdtree_built_in_two_halves_is_the_same_tree(m):
-    # exact's layers of many states build the two subtrees of the root on two threads:
-    # joined, they must be build_tree's own tree, up to the numbering of its nodes (points
-    # with many duplicates).
-    from animegraph.search import kdtree
-
-    rng = np.random.default_rng(m)
-    x = np.round(rng.normal(size=(m, 3)), 1)
-    d = np.round(rng.random(m), 2)
-    perm, mid = kdtree.split_root(x)
-    whole = kdtree.build_tree(x, d, 4)
-    joined = kdtree.join_subtrees(perm, mid, kdtree.build_tree(x[perm[:mid]], d[perm[:mid]], 4),
-                                  kdtree.build_tree(x[perm[mid:]], d[perm[mid:]], 4))
-
-    def nodes(tree):
-        perm, start, end, left, right, lo, hi, mind = tree
-        for k in np.flatnonzero(left >= 0):  # children split their parent's rows
-            assert (start[left[k]], end[right[k]]) == (start[k], end[k])
-            assert end[left[k]] == start[right[k]]
-        return sorted((int(start[k]), int(end[k]), bool(left[k] < 0), float(mind[k]),
-                       tuple(lo[k]), tuple(hi[k])) for k in range(len(start)))
-
-    np.testing.assert_array_equal(whole[0], joined[0])
-    assert nodes(whole) == nodes(joined)
-    assert kdtree.split_root(np.ones((5, 2)))[1] == -1  # all points coincide: no split

@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-from animegraph.search.kdtree import LEAF, build_tree, join_subtrees, query, split_root
+from animegraph.search.kdtree import LEAF, build_tree, query
 from animegraph.search.problem import Problem, row_dist
 from db.system import usable_cpus
 
@@ -27,8 +27,6 @@ _DOMINANCE_RANGE = 64
 _REBUILD = 0.7
 #: Queries of a layer below which one thread does them all.
 _PARALLEL_MIN = 2048
-#: States of a layer below which one thread builds their tree.
-_PARALLEL_BUILD = 16384
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 
@@ -203,9 +201,10 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True)
-def _collect_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos):  # pragma: no cover
-    """The kept states of layer [lo, hi): (states, last frames (m, k), D, queries the next
-    layer will make); ``pos[node]`` set to each kept state (for the consecutive test)."""
+def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
+                   pos):  # pragma: no cover
+    """The kept states of layer [lo, hi) as a k-d tree over their last frames, weighted
+    by D; ``pos[node]`` set to each kept state (for the consecutive test)."""
     npc = last.shape[1]
     m = 0
     for q in range(lo, hi):
@@ -230,52 +229,24 @@ def _collect_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub, pos):  # pragma:
     for q in range(lo1, hi1):
         if w1 + dmin <= ub - h[q] - u[q]:
             n_query += 1
-    return alive, xa, da, n_query
-
-
-@numba.njit(cache=True, nogil=True)
-def _leaf_rows(start, end, left, n):  # pragma: no cover
-    """Rows of the tree's leaves, in node order (the states dominance left), shape (n,)."""
-    sel = np.empty(n, dtype=np.int64)
-    k = 0
-    for node in range(len(start)):
-        if left[node] < 0:
-            for r in range(start[node], end[node]):
-                sel[k] = r
-                k += 1
-    return sel
-
-
-def _build(x: np.ndarray, d: np.ndarray, leaf: int) -> tuple:
-    """:func:`build_tree`, its two halves on two threads when the points are many."""
-    threads = usable_cpus(8)
-    if threads == 1 or len(d) < _PARALLEL_BUILD or leaf >= len(d):
-        return build_tree(x, d, leaf)
-    perm, mid = split_root(x)
-    if mid < 0:
-        return build_tree(x, d, leaf)
-    left, right = perm[:mid], perm[mid:]
-    other = _pool(threads).submit(build_tree, x[right], d[right], leaf)
-    return join_subtrees(perm, mid, build_tree(x[left], d[left], leaf), other.result())
-
-
-def _layer_tree(alive: np.ndarray, xa: np.ndarray, da: np.ndarray, n_query: int,
-                scale: float) -> tuple:
-    """The kept states of a layer as a k-d tree over their last frames, weighted by D, the
-    dominated ones dropped: (xs, ds, ids, start, end, left, right, lo, hi, mind)."""
-    m = len(alive)
     # A k-d tree pays off when many states query it; else one leaf in ascending D.
     leaf = LEAF if n_query > 8 * np.log2(m + 1) else max(m, 1)
-    perm, start, end, left, right, tlo, thi, mind = _build(xa, da, leaf)
+    perm, start, end, left, right, tlo, thi, mind = build_tree(xa, da, leaf)
     xs, ds, ids = xa[perm], da[perm], alive[perm]
     if leaf == LEAF:
         n_kept = _drop_dominated(xs, ds, ids, start, end, left, right, tlo, thi, mind, scale)
         if n_kept < _REBUILD * m:  # a smaller tree over the states that remain
-            sel = _leaf_rows(start, end, left, n_kept)
+            sel = np.empty(n_kept, dtype=np.int64)
+            k = 0
+            for node in range(len(start)):
+                if left[node] < 0:
+                    for r in range(start[node], end[node]):
+                        sel[k] = r
+                        k += 1
             xs, ds, ids = xs[sel], ds[sel], ids[sel]
-            perm, start, end, left, right, tlo, thi, mind = _build(xs, ds, leaf)
+            perm, start, end, left, right, tlo, thi, mind = build_tree(xs, ds, leaf)
             xs, ds, ids = xs[perm], ds[perm], ids[perm]
-    return xs, ds, ids, start, end, left, right, tlo, thi, mind
+    return (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -406,12 +377,13 @@ def _forward(cn, off, u, h, nxt, prv, last, first, w1, scale, ub, pos):
     n_dist = 0
     for i in range(n - 1):
         lo, hi, lo1, hi1 = off[i], off[i + 1], off[i + 1], off[i + 2]
-        alive, xa, da, n_query = _collect_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, ub,
-                                                pos)
+        (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind,
+         n_query) = _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
+                                    pos)
         if len(alive) == 0:
             break
-        args = (D, pred, u, h, prv, last, first, w1, scale, ub, pos,
-                *_layer_tree(alive, xa, da, n_query, scale))
+        args = (D, pred, u, h, prv, last, first, w1, scale, ub, pos, xs, ds, ids, start, end,
+                left, right, tlo, thi, mind)
         n_dist += _run_queries(cn, lo1, hi1, n_query, args)
         pos[cn[alive]] = -1
         kept += int(np.count_nonzero(D[lo1:hi1] < np.inf))
