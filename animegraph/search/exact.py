@@ -330,10 +330,7 @@ def _query_layer(cn, q_from, q_to, D, pred, u, h, prv, last, first, w1, scale, u
                  xs, ds, ids, start, end, left, right, tlo, thi, mind):  # pragma: no cover
     """D and pred of the states [q_from, q_to) of the next layer; returns distances."""
     npc = last.shape[1]
-    # float32 copies for the queries' first tests (exact: the frames are float32 already).
-    x32, lo32, hi32 = xs.astype(np.float32), tlo.astype(np.float32), thi.astype(np.float32)
     y = np.empty(npc)
-    y32 = np.empty(npc, dtype=np.float32)
     stack = np.empty(256, dtype=np.int64)
     bounds = np.empty(256)
     n_dist = 0
@@ -353,9 +350,8 @@ def _query_layer(cn, q_from, q_to, D, pred, u, h, prv, last, first, w1, scale, u
         if has_tree and w1 + mind[0] < best and w1 + mind[0] <= thr:
             for j in range(npc):
                 y[j] = first[b, j]
-                y32[j] = first[b, j]
-            v, r, nd = query(xs, x32, ds, start, end, left, right, lo32, hi32, mind, y, y32,
-                             w1, scale, best, thr, stack, bounds)
+            v, r, nd = query(xs, ds, start, end, left, right, tlo, thi, mind, y, w1, scale,
+                              best, thr, stack, bounds)
             n_dist += nd
             if r >= 0:
                 best = v

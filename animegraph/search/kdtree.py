@@ -156,66 +156,23 @@ def build_tree(x, d, leaf):  # pragma: no cover
     return perm, start[:nn], end[:nn], left[:nn], right[:nn], lo[:nn], hi[:nn], mind[:nn]
 
 
-#: Reordering, fused multiply-add and no signed zeros (``max(t, 0)`` as one SIMD max):
-#: numba's full fastmath also assumes no infinity, and the queries compare with ``np.inf``.
-_FAST = {"reassoc", "contract", "arcp", "nsz"}
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
-def _box_dist2_32(lo, hi, node, y):  # pragma: no cover
-    """Squared distance from ``y`` to the box of ``node``, float32 (SIMD): ~8 components in one
-    vector register instead of a loop of float64 conversions."""
-    s = np.float32(0.0)
+@numba.njit(cache=True, nogil=True)
+def _box_dist(lo, hi, node, y):  # pragma: no cover
+    s = 0.0
     for j in range(y.shape[0]):
-        t = max(lo[node, j] - y[j], np.float32(0.0)) + max(y[j] - hi[node, j], np.float32(0.0))
+        t = max(lo[node, j] - y[j], 0.0) + max(y[j] - hi[node, j], 0.0)  # branch-free
         s += t * t
-    return s
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
-def _dist2_32(xs, r, y):  # pragma: no cover
-    s = np.float32(0.0)
-    for j in range(y.shape[0]):
-        t = xs[r, j] - y[j]
-        s += t * t
-    return s
+    return np.sqrt(s)
 
 
 @numba.njit(cache=True, nogil=True)
-def _box_lower(lo, hi, node, y, safe):  # pragma: no cover
-    """A lower bound of the distance from ``y`` to the box (float32, shrunk by ``safe``; 0
-    if float32 overflowed, which coordinates of motion never come near)."""
-    s = _box_dist2_32(lo, hi, node, y)
-    return np.sqrt(s * safe) if s < np.inf else 0.0
-
-
-@numba.njit(cache=True, nogil=True)
-def _float32_margin(k):  # pragma: no cover
-    """``safe`` such that ``safe *`` a float32 squared distance over ``k`` components is at
-    most the exact one: each squared difference carries at most 3 roundings of u = 2**-24
-    and the sum k - 1 more, (k + 2) u in all (non-negative terms, in any order); the
-    margin is four times that."""
-    return 1.0 - (k + 2) * 2.0 ** -22
-
-
-@numba.njit(cache=True, nogil=True)
-def query(xs, x32, ds, start, end, left, right, lo, hi, mind, y, y32, w1, scale, best, thr,
-          stack, bounds):  # pragma: no cover
+def query(xs, ds, start, end, left, right, lo, hi, mind, y, w1, scale, best, thr,
+           stack, bounds):  # pragma: no cover
     """Least ``w1 + ds[r] + scale * ||xs[r] - y||`` below ``min(best, thr)``, branch and
-    bound over the tree: (value, row or -1, distances evaluated).
-
-    ``x32``, ``lo``, ``hi`` and ``y32`` are float32 copies of the points, the boxes and
-    ``y`` (exact: the frames are float32): box bounds and a first test of each point are
-    computed in float32 (8 components in one SIMD register) and made conservative
-    (:func:`_float32_margin`); a point that passes is measured again in float64, so the
-    value found and the points skipped are those of a float64 search (a point is skipped
-    only if its exact distance is too large). 12 % less CPU time than float64 throughout
-    (1M nodes, ``random4`` of ``scripts/bench_search.py``, one thread).
-    """
+    bound over the tree: (value, row or -1, distances evaluated)."""
     arg = -1
     n_dist = 0
-    safe = _float32_margin(y.shape[0])
-    b0 = w1 + mind[0] + scale * _box_lower(lo, hi, 0, y32, safe)
+    b0 = w1 + mind[0] + scale * _box_dist(lo, hi, 0, y)
     if b0 >= best or b0 > thr:
         return best, arg, n_dist
     stack[0] = 0
@@ -236,14 +193,11 @@ def query(xs, x32, ds, start, end, left, right, lo, hi, mind, y, y32, w1, scale,
                 if scale > 0.0:
                     room = (lim - base) / scale
                     room2 = room * room
-                    s32 = _dist2_32(x32, r, y32)
-                    n_dist += 1
-                    if s32 * safe > room2 and s32 < np.inf:  # else float32 overflowed
-                        continue
                     s = 0.0
                     for j in range(npc):
                         t = xs[r, j] - y[j]
                         s += t * t
+                    n_dist += 1
                     if s > room2:
                         continue
                     v = base + scale * np.sqrt(s)
@@ -254,8 +208,8 @@ def query(xs, x32, ds, start, end, left, right, lo, hi, mind, y, y32, w1, scale,
                     arg = r
             continue
         l, rr = left[node], right[node]
-        bl = w1 + mind[l] + scale * _box_lower(lo, hi, l, y32, safe)
-        br = w1 + mind[rr] + scale * _box_lower(lo, hi, rr, y32, safe)
+        bl = w1 + mind[l] + scale * _box_dist(lo, hi, l, y)
+        br = w1 + mind[rr] + scale * _box_dist(lo, hi, rr, y)
         if bl <= br:  # push the worse child first: the better one is explored first
             first_n, first_b, second_n, second_b = rr, br, l, bl
         else:
