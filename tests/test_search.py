@@ -541,3 +541,20 @@ def test_exact_matches_dp_on_near_duplicate_sources(noise, threads, monkeypatch)
         assert exact.cost == pytest.approx(dp.cost, abs=1e-9)
         assert path_cost(g, cands, audio, nodes=exact.nodes).cost == pytest.approx(
             exact.cost, abs=1e-9)
+
+
+@pytest.mark.parametrize("offset", [1e4, 3e6])
+def test_exact_matches_dp_far_from_the_origin(offset, monkeypatch):
+    # Replicas whose frames differ by about float32's resolution at ``offset`` (the frames
+    # are stored in float32): the k-d tree's bounds and dominance must not change the optimum.
+    monkeypatch.setattr(exact_module, "_PARALLEL_MIN", 1)
+    rng = np.random.default_rng(905)
+    g = replicated_graph(rng, 10, 1e-3)
+    g = make_graph([[PHONES[p] for p in g.node_phone[recording(g, c)]]
+                    for c in range(len(g.clip_ids))], g.first_pcs + offset, g.last_pcs + offset)
+    phones = ("AA", "B", "S", "IY", "K")
+    for _ in range(3):
+        cands = candidates(g, [str(x) for x in rng.choice(phones, size=12)])
+        audio = random_audio(rng, cands, high=30.0)
+        exact = search(g, cands, audio)
+        assert exact.cost == pytest.approx(search(g, cands, audio, method="dp").cost, abs=1e-9)
