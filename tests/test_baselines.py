@@ -183,8 +183,11 @@ def test_ppg_ridge_features_are_gain_free_and_in_context(split):
 
 @pytest.mark.shared
 @pytest.mark.parametrize("n, p, t, noise", [(400, 30, 5, 1.0), (1500, 80, 12, 0.1),
-                                             (1500, 80, 12, 30.0)])
-def test_ridge_loo_chooses_and_solves_as_ridge_cv(n, p, t, noise):
+                                             (1500, 80, 12, 30.0), (1200, 40, 90, 3.0)])
+@pytest.mark.parametrize("search", ["local", "all"])
+def test_ridge_loo_chooses_and_solves_as_ridge_cv(n, p, t, noise, search):
+    """Either search, and with more targets than features (residual norms from the
+    targets' products, not the residuals), the penalty and coefficients of RidgeCV."""
     from sklearn.linear_model import RidgeCV
 
     rng = np.random.default_rng(n + p)
@@ -194,10 +197,23 @@ def test_ridge_loo_chooses_and_solves_as_ridge_cv(n, p, t, noise):
     y = x @ (rng.standard_normal((p, t)) * (rng.random((p, 1)) < 0.3))
     y += noise * rng.standard_normal((n, t))
     x, y = x - x.mean(axis=0), y - y.mean(axis=0)
-    alpha, weights = ridge_loo(x, y, ALPHAS)
+    alpha, weights = ridge_loo(x, y, ALPHAS, search=search)
     ridge = RidgeCV(alphas=ALPHAS, gcv_mode="svd").fit(x, y)
-    assert alpha == ridge.alpha_
+    assert alpha == ridge.alpha_ and ALPHAS[0] < alpha < ALPHAS[-1]
     np.testing.assert_allclose(weights, ridge.coef_.T, rtol=0, atol=1e-9 * np.abs(weights).max())
+
+
+def test_ridge_loo_local_search_is_the_full_search_and_refuses_an_unknown_one(split):
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((600, 20))
+    y = x @ rng.standard_normal((20, 30)) + 2.0 * rng.standard_normal((600, 30))
+    x, y = x - x.mean(axis=0), y - y.mean(axis=0)
+    local, everything = ridge_loo(x, y, ALPHAS), ridge_loo(x, y, ALPHAS, search="all")
+    assert local[0] == everything[0] and np.array_equal(local[1], everything[1])
+    with pytest.raises(ParameterError, match="search"):
+        ridge_loo(x, y, ALPHAS, search="some")
+    with pytest.raises(ParameterError, match="alpha_search"):
+        PpgRidge(alpha_search="some").fit(split[0])
 
 
 def test_ppg_ridge_on_real_speech():

@@ -82,6 +82,7 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
     from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
 
     done = {}
+    data = None  # the database's clips, read once for every guide (GRID s1: 30 s a read)
     for name in (AUDIO_ONLY_GUIDE or "").split("+"):
         if not name:
             continue
@@ -97,6 +98,7 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             done[name] = reason
             continue
         from animegraph.baselines.base import fitted_model
+        from animegraph.baselines.data import training_set
         from ingest.speech import ctc
 
         how_long = fit_estimate(db, name)
@@ -107,7 +109,8 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             # hama's outputs kept in the cache as ingest keeps them: the refit after the
             # next ingest (a new version) hears only the clips it added.
             with ctc.kept_on_disk():
-                fitted_model(db, name, refit=True)
+                data = training_set(db) if data is None else data
+                fitted_model(db, name, refit=True, data=data)
         except (AnimeGraphError, OSError) as exc:
             say(f"warning: no {name} guide ({exc})")
             record_unfit(db, name, str(exc))
