@@ -74,11 +74,41 @@ MIN_SUBSET_FRAMES = 40
 #: Ours: MLP training (L2 penalty on standardised data, L-BFGS iterations, tanh units).
 MLP_ALPHA = 1e-2
 MLP_MAX_ITER = 400
+#: Ours: the perceptrons' training precision. float32 halves the products' cost, most of
+#: the fit on a large database; "float64" is the fit before that choice.
+MLP_DTYPE = "float32"
 
 
 def mlp_params(n_in: int, n_hidden: int, n_out: int) -> int:
     """Weights and biases of a three-layer perceptron."""
     return (n_in + 1) * n_hidden + (n_hidden + 1) * n_out
+
+
+def principal_axes(centred: np.ndarray, k: int) -> tuple[np.ndarray, float]:
+    """The first ``k`` principal axes of ``centred`` rows, and the share of the variance
+    they hold.
+
+    From the eigendecomposition of the p x p matrix ``XᵀX``, not an SVD of the n x p
+    data: the same axes (to rounding) at a fraction of the cost on many frames (GRID
+    s1's 72,000 neutral frames of 1,411 channels: 2.7 CPU-s against 21.6). Each axis's
+    sign is fixed so that its largest coordinate is positive (an SVD's is arbitrary).
+
+    Parameters
+    ----------
+    centred : np.ndarray, shape (n_samples, n_features)
+    k : int
+
+    Returns
+    -------
+    axes : np.ndarray, shape (n_features, min(k, n_samples, n_features))
+    share : float
+    """
+    values, vectors = np.linalg.eigh(centred.T @ centred)
+    values, vectors = np.maximum(values[::-1], 0.0), vectors[:, ::-1]
+    k = min(k, *centred.shape)
+    axes = vectors[:, :k]
+    axes = axes * np.where(axes[np.abs(axes).argmax(axis=0), np.arange(k)] < 0, -1.0, 1.0)
+    return axes, float(values[:k].sum() / max(values.sum(), 1e-300))
 
 
 class MuMlp(MuMlpForward, BaselineModel):
@@ -100,6 +130,8 @@ class MuMlp(MuMlpForward, BaselineModel):
         Emotion label of the utterance (neutral) data.
     random_state : int
         Seed of the mixtures and MLPs.
+    mlp_dtype : {"float32", "float64"}
+        Precision the perceptrons are trained in (:data:`MLP_DTYPE`).
     """
 
     method = "mu-mlp"
@@ -109,7 +141,7 @@ class MuMlp(MuMlpForward, BaselineModel):
                  context: int = CONTEXT, frame_rate: float = FRAME_RATE,
                  subset_hidden: tuple[int, int] = SUBSET_HIDDEN,
                  expression_hidden: int = EXPRESSION_HIDDEN, neutral: str = NEUTRAL,
-                 random_state: int = 0):
+                 random_state: int = 0, mlp_dtype: str = MLP_DTYPE):
         self.n_utterance_mus = n_utterance_mus
         self.n_expression_mus = n_expression_mus
         self.n_mfcc = n_mfcc
@@ -119,6 +151,7 @@ class MuMlp(MuMlpForward, BaselineModel):
         self.expression_hidden = expression_hidden
         self.neutral = neutral
         self.random_state = random_state
+        self.mlp_dtype = mlp_dtype
 
     # -- fitting ---------------------------------------------------------------------
     def _samples(self, clips):
@@ -141,6 +174,8 @@ class MuMlp(MuMlpForward, BaselineModel):
         if len(tuple(self.subset_hidden)) != 2 or hi < lo:
             raise ParameterError(f"subset_hidden must be (smallest, largest), got "
                                  f"{self.subset_hidden!r}")
+        if self.mlp_dtype not in ("float32", "float64"):
+            raise ParameterError(f"mlp_dtype must be float32 or float64, got {self.mlp_dtype!r}")
         if not self.frame_rate > 0 or self.context < 0:
             raise ParameterError("frame_rate must be positive and context >= 0")
 
@@ -163,11 +198,11 @@ class MuMlp(MuMlpForward, BaselineModel):
         check_enough(len(d0), a0 + 1, f"{a0} utterance MUs (PCA)")
         # §IV-A: utterance MUs.
         self.m00_ = d0.mean(axis=0)
-        _, s, vt = np.linalg.svd(d0 - self.m00_, full_matrices=False)
-        a0 = min(a0, len(s))
-        self.m0_ = vt[:a0].T  # (n_channels, A0)
-        self.utterance_variance_ = float((s[:a0] ** 2).sum() / max((s**2).sum(), 1e-300))
-        u0 = (d0 - self.m00_) @ self.m0_
+        d0 -= self.m00_  # in place: GRID s1's neutral frames are 0.8 GB
+        self.m0_, self.utterance_variance_ = principal_axes(d0, a0)  # (n_channels, A0)
+        a0 = self.m0_.shape[1]
+        u0 = d0 @ self.m0_
+        del d0
         self.x_mean_, self.x_std_ = x0.mean(axis=0), x0.std(axis=0) + 1e-8
         z0 = (x0 - self.x_mean_) / self.x_std_
         self.u_mean_, self.u_std_ = u0.mean(axis=0), u0.std(axis=0) + 1e-8
@@ -204,9 +239,9 @@ class MuMlp(MuMlpForward, BaselineModel):
             uk = (dk - self.m00_) @ self.m0_
             rk = dk - self.m00_ - uk @ self.m0_.T  # Eq. 1, residual beyond M0
             mk0 = rk.mean(axis=0)
-            _, _, vtk = np.linalg.svd(rk - mk0, full_matrices=False)
-            mk = vtk[:ak].T
-            vk = np.hstack([uk, (rk - mk0) @ mk])
+            rk -= mk0
+            mk, _ = principal_axes(rk, ak)
+            vk = np.hstack([uk, rk @ mk])
             est = self._utterance_mups((xk - self.x_mean_) / self.x_std_)
             v_mean, v_std = vk.mean(axis=0), vk.std(axis=0) + 1e-8
             net = self._fit_mlp((est - self.u_mean_) / self.u_std_, (vk - v_mean) / v_std,
@@ -231,6 +266,7 @@ class MuMlp(MuMlpForward, BaselineModel):
         return out
 
     def _fit_mlp(self, x, y, hidden, rng) -> dict:
+        x, y = x.astype(self.mlp_dtype), y.astype(self.mlp_dtype)
         net = MLPRegressor(hidden_layer_sizes=(int(hidden),), activation="tanh",
                            solver="lbfgs", alpha=MLP_ALPHA, max_iter=MLP_MAX_ITER,
                            random_state=rng.randint(2**31 - 1))

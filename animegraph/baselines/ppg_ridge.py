@@ -228,7 +228,8 @@ def ridge_loo(x: np.ndarray, y: np.ndarray, alphas, *, search: str = "local",
     if search == "all":
         k = int(np.argmin([loo(i) for i in range(len(alphas))]))
     else:
-        k = int(np.argmin([_gcv(s2, zty, float(np.sum(y * y)), n, a) for a in alphas]))
+        yy_all = float(np.einsum("ij,ij->", y, y))
+        k = int(np.argmin([_gcv(s2, zty, yy_all, n, a) for a in alphas]))
         while k > 0 and loo(k - 1) <= loo(k):
             k -= 1
         while k + 1 < len(alphas) and loo(k + 1) < loo(k):
