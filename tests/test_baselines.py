@@ -147,6 +147,20 @@ def test_principal_axes_are_the_svds_with_a_fixed_sign():
     assert principal_axes(x[:3], 7)[0].shape == (12, 3)
 
 
+def test_mu_mlp_fits_its_perceptrons_on_threads_as_one_after_another(fitted, split,
+                                                                    monkeypatch):
+    """The perceptrons fitted on a thread a core are those fitted one after another:
+    each gets the seed it had in that order."""
+    import animegraph.baselines.mu_mlp as mu_mlp
+
+    monkeypatch.setattr(mu_mlp, "usable_cpus", lambda: 1)
+    serial = MuMlp(**SMALL["mu-mlp"]).fit(split[0])
+    arrays, threaded = serial.to_arrays(), fitted["mu-mlp"].to_arrays()
+    assert any(k.startswith("subset/") for k in arrays) and arrays.keys() == threaded.keys()
+    for key, values in arrays.items():
+        np.testing.assert_array_equal(values, threaded[key], err_msg=key)
+
+
 def test_mu_mlp_trained_in_float32_predicts_as_in_float64(fitted, split):
     """The default float32 training (half the cost) against the float64 one on the same
     data and seed: the motion each predicts for held-out speech differs by under a fifth

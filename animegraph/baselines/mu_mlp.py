@@ -39,6 +39,7 @@ neutral set is an error.
 from __future__ import annotations
 
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
@@ -49,6 +50,7 @@ from animegraph.baselines.base import BaselineModel, check_enough, sample_times
 from animegraph.baselines.data import TrainingSet, phone_at
 from animegraph.baselines.mu_mlp_forward import MuMlpForward
 from db.errors import DataError, ParameterError
+from db.system import usable_cpus
 
 #: Utterance MUs kept, A0 (§IV-A: 7, 97.56 % of the neutral deformation variance).
 N_UTTERANCE_MUS = 7
@@ -209,24 +211,36 @@ class MuMlp(MuMlpForward, BaselineModel):
         # §VI-A: subsets by per-phoneme Gaussian mixtures on the current frame's audio.
         self.gmms_ = self._fit_mixtures(self._current(z0), ph0, rng)
         subset = self._classify(z0)
-        self.subset_mlps_ = []
         self.subset_frames_ = np.bincount(subset, minlength=len(self.gmms_))
         u0n = (u0 - self.u_mean_) / self.u_std_
         lo, hi = self.subset_hidden
         check_enough(len(z0), mlp_params(z0.shape[1], lo, a0),
                      f"mu-mlp's speech-to-face network (the paper's pooled audio-to-UMUP "
                      f"MLP) on the {neutral!r} clips", rate=self.frame_rate)
-        self.pooled_mlp_ = self._fit_mlp(z0, u0n, lo, rng)
+        # The pooled MLP and every subset's own, each with the seed it would have had
+        # fitted one after another, on one thread a core: the products release the GIL
+        # (GRID s1: 15 CPU-s of perceptrons, most of the fit).
+        jobs = [(z0, u0n, lo)]
         sizes = self.subset_frames_
         span = np.log(max(sizes.max(), 2)) - np.log(MIN_SUBSET_FRAMES)
+        own = []
         for i, n in enumerate(sizes):
             hidden = lo + int(round((hi - lo) * np.clip(
                 (np.log(max(n, 1)) - np.log(MIN_SUBSET_FRAMES)) / max(span, 1e-9), 0, 1)))
             if n < MIN_SUBSET_FRAMES or n < mlp_params(z0.shape[1], hidden, a0):
-                self.subset_mlps_.append(None)  # documented fallback: the pooled MLP
-                continue
+                continue  # documented fallback: the pooled MLP
             mask = subset == i
-            self.subset_mlps_.append(self._fit_mlp(z0[mask], u0n[mask], hidden, rng))
+            jobs.append((z0[mask], u0n[mask], hidden))
+            own.append(i)
+        seeds = [rng.randint(2**31 - 1) for _ in jobs]
+        with ThreadPoolExecutor(min(usable_cpus(), len(jobs)),
+                                thread_name_prefix="mu-mlp") as pool:
+            nets = list(pool.map(lambda job: self._fit_mlp(*job[0], seed=job[1]),
+                                 zip(jobs, seeds, strict=True)))
+        self.pooled_mlp_ = nets[0]
+        self.subset_mlps_ = [None] * len(sizes)
+        for i, net in zip(own, nets[1:], strict=True):
+            self.subset_mlps_[i] = net
         # §IV-A and §VI-B: expression MUs and the UMUP -> UMUP+EMUP MLPs.
         self.expressions_ = {}
         for emotion in data.emotions:
@@ -245,7 +259,7 @@ class MuMlp(MuMlpForward, BaselineModel):
             est = self._utterance_mups((xk - self.x_mean_) / self.x_std_)
             v_mean, v_std = vk.mean(axis=0), vk.std(axis=0) + 1e-8
             net = self._fit_mlp((est - self.u_mean_) / self.u_std_, (vk - v_mean) / v_std,
-                                self.expression_hidden, rng)
+                                self.expression_hidden, seed=rng.randint(2**31 - 1))
             self.expressions_[emotion] = {"mk0": mk0, "mk": mk, "v_mean": v_mean,
                                           "v_std": v_std, **net}
 
@@ -265,11 +279,11 @@ class MuMlp(MuMlpForward, BaselineModel):
                             f"{MIN_SUBSET_FRAMES} frames at {self.frame_rate:g} fps")
         return out
 
-    def _fit_mlp(self, x, y, hidden, rng) -> dict:
+    def _fit_mlp(self, x, y, hidden, *, seed: int) -> dict:
         x, y = x.astype(self.mlp_dtype), y.astype(self.mlp_dtype)
         net = MLPRegressor(hidden_layer_sizes=(int(hidden),), activation="tanh",
                            solver="lbfgs", alpha=MLP_ALPHA, max_iter=MLP_MAX_ITER,
-                           random_state=rng.randint(2**31 - 1))
+                           random_state=seed)
         with warnings.catch_warnings():  # an iteration cap reached is not an error here
             warnings.simplefilter("ignore", ConvergenceWarning)
             net.fit(x, y if y.shape[1] > 1 else y.ravel())
