@@ -191,6 +191,13 @@ class MuMlp(MuMlpForward, BaselineModel):
                         f"{', '.join(data.emotions)})")
 
     def _fit(self, data: TrainingSet) -> None:
+        # An iteration cap reached is not an error here. Set once around the whole fit:
+        # the perceptrons are fitted on threads, and catch_warnings is not thread-safe.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            self._fit_all(data)
+
+    def _fit_all(self, data: TrainingSet) -> None:
         self._check_params()
         rng = np.random.RandomState(self.random_state)
         neutral = self._neutral_label(data)
@@ -284,9 +291,7 @@ class MuMlp(MuMlpForward, BaselineModel):
         net = MLPRegressor(hidden_layer_sizes=(int(hidden),), activation="tanh",
                            solver="lbfgs", alpha=MLP_ALPHA, max_iter=MLP_MAX_ITER,
                            random_state=seed)
-        with warnings.catch_warnings():  # an iteration cap reached is not an error here
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            net.fit(x, y if y.shape[1] > 1 else y.ravel())
+        net.fit(x, y if y.shape[1] > 1 else y.ravel())  # warnings: see _fit
         return {"W0": net.coefs_[0], "b0": net.intercepts_[0],
                 "W1": net.coefs_[1], "b1": net.intercepts_[1]}
 
