@@ -5,9 +5,10 @@ guides (:data:`animegraph.synthesis.path.AUDIO_ONLY_GUIDE`, fitted on the databa
 stored with its version) and, in a fresh environment, the search's numba kernels
 compiled and cached on disk (:mod:`animegraph.search.kernels`). Fitted inside that
 ``synth`` they cost minutes (GRID s1, before the fits were made fast: mu-mlp 121 s,
-ppg-ridge 277 s, the kernels about a minute on two cores; now 23.5 and 9.3 CPU-s,
-docs/results/speed.md, "The guides' fit on GRID s1"). ``animegraph ingest`` does both once the database is written,
-and ``animegraph warmup`` does them on demand; each step is said with its time.
+ppg-ridge 277 s, the kernels about a minute on two cores; now 18.0 and 10.3 CPU-s,
+docs/results/speed.md, "The guides' fit on GRID s1"). ``animegraph ingest`` does both
+once the database is written, and ``animegraph warmup`` does them on demand; each step
+is said with its time.
 
 The guides are fitted with hama's outputs kept in the cache folder
 (:func:`ingest.speech.ctc.kept_on_disk`), so the refit after the next ingest (a new
