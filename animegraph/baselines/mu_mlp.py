@@ -28,12 +28,13 @@ in the training data (ARPAbet 39 + SIL, not the paper's 44); a class with fewer 
 :data:`MIN_SUBSET_FRAMES` frames gets no mixture of its own; a subset whose MLP would
 have more parameters than it has frames, or fewer than ``MIN_SUBSET_FRAMES`` frames,
 falls back to one MLP fitted on all neutral frames (the *pooled* MLP); the subset's
-hidden units grow from 15 to 25 with its size (log scale); MLPs use tanh units and
-L-BFGS (scikit-learn's ``MLPRegressor``, at most :data:`MLP_MAX_ITER` iterations), inputs
-and outputs standardised. Deformations are the database's channels relative to the
-neutral mean. With no clip labelled :data:`NEUTRAL` but a single emotion label (real
-corpora without labels), that label's clips are the neutral data; otherwise a missing
-neutral set is an error.
+hidden units grow from 15 to 25 with its size (log scale); MLPs use tanh units and L-BFGS
+(scikit-learn's ``MLPRegressor``, at most :data:`MLP_MAX_ITER` iterations, in float32:
+:data:`MLP_DTYPE`), inputs and outputs standardised; the MUs from the eigenvectors of the
+frames' Gram matrix (:func:`principal_axes`). Deformations are the database's channels
+relative to the neutral mean. With no clip labelled :data:`NEUTRAL` but a single emotion
+label (real corpora without labels), that label's clips are the neutral data; otherwise a
+missing neutral set is an error.
 """
 
 from __future__ import annotations
