@@ -146,6 +146,7 @@ def prepare_clip(
     fallback: list[str] = []
     text = raw.text or None  # with a word alignment: its words (ingest.readers.common)
     words = raw.words if raw.words and not raw.phones else None
+    checked = False  # hama heard the clip to check its word alignment's transcript
     with doubts() as doubted:  # a transcript aligned, but perhaps another utterance's
         if words and text:
             # Word times are taken as given, but not that the words are what is said (an
@@ -153,6 +154,7 @@ def prepare_clip(
             # check that guards every alignment, with recognition as the fallback.
             try:
                 check_transcript(audio, raw.sample_rate, text, phones_engine)
+                checked = True
             except DataError as exc:
                 fallback.append(f"word alignment failed: {exc}; fell back to phone "
                                 "recognition")
@@ -177,7 +179,9 @@ def prepare_clip(
     # hama has already heard a clip whose phones it recognised, or whose transcript it
     # aligned or checked (ingest.speech.engines): keeping its outputs is free, and spares
     # ppg-ridge's fit (the audio-only guide) hearing it again.
-    heard = (method in ("recognized", "aligned")
+    # (GRID's 800 clips come with word alignments whose transcripts hama checked: without
+    # their outputs kept, ppg-ridge's fit heard every one of them again.)
+    heard = ((method in ("recognized", "aligned") or checked)
              and check_engine(phones_engine) in ("auto", "hama"))
     posteriors, blank = (clip_posteriors(audio, raw.sample_rate) if posteriorgrams or heard
                          else (None, None))

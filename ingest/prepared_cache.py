@@ -30,7 +30,7 @@ from ingest.prepare import PreparedClip
 logger = logging.getLogger(__name__)
 
 #: Bumped whenever what an entry holds, or how a clip is prepared, changes.
-FORMAT = 1
+FORMAT = 2
 #: The arrays of a :class:`PreparedClip` kept as they are (None ones are left out).
 _ARRAYS = ("motion", "missing", "audio", "prosody", "posteriors", "posterior_blank")
 

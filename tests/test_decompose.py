@@ -7,7 +7,7 @@ import pytest
 
 from db.errors import DataError, ParameterError
 from ingest.decompose import MotionDecomposer, cutoff_frequencies
-from ingest.motion import fill_gaps, resample_motion
+from ingest.motion import fill_gaps, interpolate, resample_motion
 
 
 @pytest.fixture
@@ -71,3 +71,17 @@ def test_resample_motion_keeps_duration():
     x = np.arange(30, dtype=float)[:, None]
     y = resample_motion(x, 30.0, 120.0)
     assert len(y) == 120 and y[4, 0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("n_in, fps_in, fps", [(75, 25, 30), (40, 120, 50), (2, 30, 100),
+                                               (1, 30, 25)])
+def test_interpolate_is_np_interp_of_every_channel(n_in, fps_in, fps):
+    """All channels at once, as np.interp one at a time: held at both ends, exact on the
+    input's own times."""
+    rng = np.random.default_rng(n_in)
+    times_in, values = np.arange(n_in) / fps_in, rng.standard_normal((n_in, 9))
+    times = np.arange(-3, int(n_in * fps / fps_in) + 4) / fps
+    expected = np.stack([np.interp(times, times_in, col) for col in values.T], axis=1)
+    np.testing.assert_allclose(interpolate(times_in, values, times), expected, rtol=0,
+                               atol=1e-12)
+    np.testing.assert_array_equal(interpolate(times_in, values, times_in), values)

@@ -4,11 +4,12 @@ A fresh database lacks two things its first audio-only ``synth`` needs: the defa
 guides (:data:`animegraph.synthesis.path.AUDIO_ONLY_GUIDE`, fitted on the database and
 stored with its version) and, in a fresh environment, the search's numba kernels
 compiled and cached on disk (:mod:`animegraph.search.kernels`). Fitted inside that
-``synth`` they cost minutes (GRID s1: mu-mlp 121 s, ppg-ridge 277 s, the kernels about
-a minute on two cores). ``animegraph ingest`` does both once the database is written,
-and ``animegraph warmup`` does them on demand; each step is said with its time.
-``animegraph demo`` fits the guides in a process beside its own synthesis
-(:class:`GuideFit`), which compiles the kernels of synth's default path.
+``synth`` they cost minutes (GRID s1, before the fits were made fast: mu-mlp 121 s,
+ppg-ridge 277 s, the kernels about a minute on two cores; now 18.0 and 10.3 CPU-s,
+docs/results/speed.md, "The guides' fit on GRID s1"). ``animegraph ingest`` does both
+once the database is written, and ``animegraph warmup`` does them on demand; each step
+is said with its time. ``animegraph demo`` fits the guides in a process beside its own
+synthesis (:class:`GuideFit`), which compiles the kernels of synth's default path.
 
 The guides are fitted with hama's outputs kept in the cache folder
 (:func:`ingest.speech.ctc.kept_on_disk`), so the refit after the next ingest (a new
@@ -37,11 +38,12 @@ __all__ = ["GuideFit", "compile_kernels", "fit_estimate", "fit_guides", "prepare
 
 #: The sentence whose synthesis compiles the kernels (short: its phones cost nothing).
 WARM_SENTENCE = "Good morning, class."
-#: CPU seconds a default guide's fit takes per minute of the database's speech: ``animegraph
-#: fit`` on the demo's database (16.5 min of speech, no stored posteriorgrams, so hama
-#: hears every clip for ppg-ridge, on one thread a core), 2 cores: mu-mlp 12 CPU-s,
-#: ppg-ridge 73 CPU-s (``scripts/bench_guide_fit.py``).
-FIT_CPU_S_PER_MIN = {"mu-mlp": 0.75, "ppg-ridge": 4.5}
+#: CPU seconds a default guide's fit takes per minute of the database's speech, at most:
+#: mu-mlp 23.5 CPU-s on GRID s1 (39.7 min, 1,411 channels); ppg-ridge 73 CPU-s on the
+#: demo's database (16.5 min of speech, no stored posteriorgrams, so hama hears every
+#: clip, on one thread a core; from stored ones, GRID s1's 9.3 CPU-s)
+#: (``scripts/bench_guide_fit.py``).
+FIT_CPU_S_PER_MIN = {"mu-mlp": 0.6, "ppg-ridge": 4.5}
 #: The fits that spread over the cores (ppg-ridge's hama, one clip a thread).
 _THREADED = frozenset({"ppg-ridge"})
 
@@ -85,6 +87,7 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
     from animegraph.synthesis.path import AUDIO_ONLY_GUIDE
 
     done = {}
+    data = None  # the database's clips, read once for every guide (GRID s1: 30 s a read)
     for name in (AUDIO_ONLY_GUIDE or "").split("+"):
         if not name:
             continue
@@ -100,6 +103,7 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             done[name] = reason
             continue
         from animegraph.baselines.base import fitted_model
+        from animegraph.baselines.data import training_set
         from ingest.speech import ctc
 
         how_long = fit_estimate(db, name)
@@ -110,7 +114,8 @@ def fit_guides(db: Path, say: Callable[[str], object] = _quiet) -> dict[str, str
             # hama's outputs kept in the cache as ingest keeps them: the refit after the
             # next ingest (a new version) hears only the clips it added.
             with ctc.kept_on_disk():
-                fitted_model(db, name, refit=True)
+                data = training_set(db) if data is None else data
+                fitted_model(db, name, refit=True, data=data)
         except (AnimeGraphError, OSError) as exc:
             say(f"warning: no {name} guide ({exc})")
             record_unfit(db, name, str(exc))

@@ -123,9 +123,14 @@ def sample_times(clips, rate: float):
     (clip, times (n,), motion (n, n_channels))
     """
     for clip in clips:
-        duration = (clip.n_frames - 1) / clip.fps
-        times = np.arange(0.0, duration + 1e-9, 1.0 / rate)
+        times = clip_times(clip, rate)
         yield clip, times, resample_to(clip.motion, clip.fps, times)
+
+
+def clip_times(clip, rate: float) -> np.ndarray:
+    """The times (s) of a clip's (TrainingClip) frames resampled at ``rate`` frames/s
+    (:func:`sample_times`): shape (n,)."""
+    return np.arange(0.0, (clip.n_frames - 1) / clip.fps + 1e-9, 1.0 / rate)
 
 
 # -- stored models ------------------------------------------------------------------
@@ -237,9 +242,11 @@ def fitting_line(method: str, db_root, purpose: str = "") -> str:
             f"use: stored with the database) ...")
 
 
-def fitted_model(db_root, method: str, *, refit: bool = False, **params) -> BaselineModel:
+def fitted_model(db_root, method: str, *, refit: bool = False, data: TrainingSet | None = None,
+                 **params) -> BaselineModel:
     """The ``method`` model of a database: the stored one if there is one (whatever its
-    parameters) unless ``refit``, else fitted with ``params`` on all its clips and stored."""
+    parameters) unless ``refit``, else fitted with ``params`` on all its clips and stored.
+    ``data``: the database's clips already read (:func:`training_set`), for several fits."""
     from animegraph.baselines import estimator_class
 
     cls = estimator_class(method)
@@ -247,6 +254,6 @@ def fitted_model(db_root, method: str, *, refit: bool = False, **params) -> Base
         model = load_model(db_root, method)
         if model is not None:
             return model
-    model = cls(**params).fit(db_root)
+    model = cls(**params).fit(db_root if data is None else data)
     save_model(model, db_root)
     return model
