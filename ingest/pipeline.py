@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import logging
 import os
@@ -44,6 +45,7 @@ from db.store import (
     own_folder,
     write_version,
 )
+from ingest import prepared_cache
 from ingest.clip import checksum_files, stored_schema
 from ingest.decompose import (
     ENERGY_KEPT,
@@ -197,7 +199,8 @@ class ClipJob:
     ``known``: the database's clips, (corpus, clip id) -> checksum (an unchanged one is
     not read); ``fps``: the frame rate to resample to (None: the clip's own);
     ``reference``: the head-pose reference; ``schema``: the channels a clip must have
-    (the database's), None to take any.
+    (the database's), None to take any; ``db``: the database's folder (a kept clip is
+    taken by an ingest into the same one: the same ingest run again).
     """
 
     source: object
@@ -208,6 +211,7 @@ class ClipJob:
     limits: Limits | None
     posteriorgrams: bool
     schema: object = None
+    db: str = ""  # the database it goes into: its prepared clip is kept for that one
 
 
 def _work(job: ClipJob):
@@ -389,12 +393,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         reference = _head_reference(found, config.limits)
     report = IngestReport(db=db_path)
     schema = stored_schema(existing) if existing is not None else None
-    kept_keys: list[str] = []
-    if client is None:
-        results = _run(found, known, fps, config, workers, progress, reference, schema)
-    else:
-        results, kept_keys, report.resumed = _run_on_dask(
-            client, found, known, fps, config, progress, reference, schema)
+    results, kept_keys, report.resumed = _run(found, known, fps, config, workers, progress,
+                                              reference, schema, client=client, keep=db_path)
     new: list[PreparedClip] = []
     for clip_report, clip in results:
         report.clips.append(clip_report)
@@ -423,10 +423,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
                reference, based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
-    if kept_keys:  # every clip is decided now (in the database, or rejected)
-        from ingest import prepared_cache
-
-        prepared_cache.remove(kept_keys)
+    # Every clip is decided now (in the database, or rejected): what was kept is not needed.
+    prepared_cache.remove(kept_keys)
     if not report.written and report.count("rejected") == len(report.clips):
         raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
                              f"{report.clips[0].source}: {report.clips[0].reason}")
@@ -460,7 +458,7 @@ def prepare_sources(
     config = config or IngestConfig()
     _check_tracker(found)
     reference = _head_reference(list(found), config.limits)
-    results = _run(list(found), {}, config.fps, config, workers, None, reference)
+    results, _, _ = _run(list(found), {}, config.fps, config, workers, None, reference)
     clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
                         pooled=config.pool_lag)
     for r, _ in results:  # what ingest's report would say of each clip
@@ -474,51 +472,103 @@ def prepare_sources(
     return [_at_fps(c, fps) for c in clips], reference
 
 
-def _run(found, known, fps, config, workers, progress, reference, schema=None):
-    """Prepare each clip of ``found`` (see :func:`_prepare_source`); ``schema``: the
-    channels a clip must have (the database's), None to take any."""
-    jobs = [ClipJob(s, known, fps, reference, config.phones_engine, config.limits,
-                    config.posteriorgrams, schema) for s in found]
+def _run(found, known, fps, config, workers, progress, reference, schema=None, *,
+         client=None, keep: Path | None = None):
+    """Prepare each clip of ``found`` (see :func:`_prepare_source`): in this process, in
+    ``workers`` processes, or on the Dask cluster of ``client``. ``schema``: the channels a
+    clip must have (the database's), None to take any. ``keep``: the database's folder,
+    to be resumable: each prepared clip is kept in the cache (:mod:`ingest.prepared_cache`)
+    and those an earlier ingest into it kept are taken from there.
+
+    Returns (one (report, clip or None) a clip, the cache entries of the prepared clips,
+    how many were taken from the cache)."""
+    jobs = [ClipJob(s, {k: known[k] for k in [(s.corpus, s.clip_id)] if k in known}, fps,
+                    reference, config.phones_engine, config.limits, config.posteriorgrams,
+                    schema, str(Path(keep).resolve()) if keep else "") for s in found]
+    wrap = progress(len(jobs)) if progress else None
+    if keep is None and client is None:
+        results = [(*done, None, False) for done in _map(_work, jobs, workers, wrap)]
+    else:
+        bound = prepared_cache.Bound()
+
+        def noted(done):  # in the writer, as each clip is decided: the folder bounded
+            for row in done:
+                if row[2] is not None:
+                    bound.used(row[2])
+                yield row
+
+        def watched(done):
+            return wrap(noted(done)) if wrap else noted(done)
+
+        if client is None:
+            results = _map(_work_kept, jobs, workers, watched)
+        else:
+            from ingest.on_dask import map_clips
+
+            results = map_clips(
+                client, _work, jobs, settle=_settle, keep=_keep, progress=watched,
+                failed=lambda job, reason: ClipReport(str(job.source.path),
+                                                      job.source.clip_id, "rejected",
+                                                      reason=reason))
+    return ([(report, clip) for report, clip, _, _ in results],
+            [key for _, _, key, _ in results if key is not None],
+            sum(resumed for *_, resumed in results))
+
+
+def _map(func, jobs, workers, progress):
     if workers == 1 or len(jobs) == 1:
-        results = map(_work, jobs)
-        return list(progress(len(jobs))(results) if progress else results)
-    return map_in_processes(_work, jobs, workers=workers, chunksize=4,
-                            progress=progress(len(jobs)) if progress else None)
+        results = map(func, jobs)
+        return list(progress(results) if progress else results)
+    return map_in_processes(func, jobs, workers=workers, chunksize=4, progress=progress)
 
 
-def _run_on_dask(client, found, known, fps, config, progress, reference, schema):
-    """:func:`_run` on a Dask cluster (:func:`ingest.on_dask.map_clips`): the clips the
-    database has unchanged are known here, before anything travels. Returns (results,
-    the cache entries of the prepared clips, how many of them an earlier run had kept)."""
-    from ingest.on_dask import map_clips
+def _work_kept(job: ClipJob):
+    """Worker: :func:`_work`, resumable. Returns (report, clip or None, its cache entry or
+    None, True if an earlier run had kept it)."""
+    settled = _settle(job)
+    if settled is not None:
+        return settled
+    report, clip = _work(job)
+    return report, clip, _keep(job, report, clip), False
 
-    results: list = [None] * len(found)
-    jobs, checksums, where = [], [], []
-    for k, source in enumerate(found):
-        checksum, key = _checksum(source), (source.corpus, source.clip_id)
-        if key in known and known[key] == checksum:
-            results[k] = ClipReport(str(source.path), source.clip_id, "unchanged"), None
-            continue
-        jobs.append(ClipJob(source, {key: known[key]} if key in known else {}, fps,
-                            reference, config.phones_engine, config.limits,
-                            config.posteriorgrams, schema))
-        checksums.append(checksum)
-        where.append(k)
-    settings = {"version": _version(), "fps": fps, "engine": config.phones_engine,
-                "limits": config.limits.to_entry() if config.limits else None,
-                "posteriorgrams": config.posteriorgrams,
-                "schema": None if schema is None else asdict(schema)}
-    run = map_clips(client, _work, jobs, checksums=checksums, settings=settings,
-                    reference=reference, report_type=ClipReport,
-                    failed=lambda job, reason: ClipReport(str(job.source.path),
-                                                          job.source.clip_id, "rejected",
-                                                          reason=reason),
-                    progress=progress(len(jobs)) if progress else None)
-    for k, (row, clip) in zip(where, run.results, strict=True):
-        if clip is not None:  # a kept row says what the database held when it was kept
-            row = replace(row, status="replaced" if clip.key in known else "added")
-        results[k] = row, clip
-    return results, run.keys, run.resumed
+
+def _settle(job: ClipJob, checksum: str | None = None):
+    """A clip decided without preparing it, as :func:`_work_kept` returns it: unchanged
+    in the database, or prepared by an earlier run and kept; None otherwise.
+    ``checksum``: of its files, if read already."""
+    source = job.source
+    checksum = checksum or _checksum(source)
+    if checksum is None:  # unreadable: its reader says why
+        return None
+    if job.known.get((source.corpus, source.clip_id)) == checksum:
+        return ClipReport(str(source.path), source.clip_id, "unchanged"), None, None, False
+    key = _entry(job, checksum)
+    kept = prepared_cache.load(key)
+    if kept is None:
+        return None
+    clip, row = kept  # its row says what the database held when it was kept
+    row = replace(ClipReport(**row), status="replaced" if clip.key in job.known else "added")
+    return row, clip, key, True
+
+
+def _keep(job: ClipJob, report: ClipReport, clip: PreparedClip | None) -> str | None:
+    """Keep a prepared clip in the cache, under the entry of the bytes it was read from;
+    returns the entry (None: nothing kept)."""
+    if clip is None:
+        return None
+    key = _entry(job, clip.checksum)
+    prepared_cache.save(key, clip, asdict(report))
+    return key
+
+
+def _entry(job: ClipJob, checksum: str) -> str:
+    """The cache entry of ``job``'s clip with these bytes: every setting its preparation
+    depends on (:func:`ingest.prepared_cache.entry_key`)."""
+    settings = {"version": _version(), "db": job.db, "fps": job.fps, "engine": job.engine,
+                "limits": job.limits.to_entry() if job.limits else None,
+                "posteriorgrams": job.posteriorgrams,
+                "schema": None if job.schema is None else asdict(job.schema)}
+    return prepared_cache.entry_key(checksum, settings, job.reference)
 
 
 def _drop_copies(new: list[PreparedClip], known: dict[tuple[str, str], str],
@@ -712,6 +762,7 @@ def _clips(n: int) -> str:
     return f"{n} clip" if n == 1 else f"{n} clips"
 
 
+@functools.cache  # once a process: asked for every clip's cache entry
 def _version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
