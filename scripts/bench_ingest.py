@@ -15,9 +15,11 @@ database size on disk, CPU time of all processes, the load average, and peak mem
 (this process and its workers).
 
 ``--per-clip-every K``: no database; the per-clip work of an ingest
-(``ingest.pipeline._work``: read, check, align, features) on every K-th clip of the
+(``ingest.per_clip.work``: read, check, align, features) on every K-th clip of the
 corpus, in this process, once the one-off loads (CMUdict, the aligner) are done: its
-wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip.
+wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip; then the cost
+a clip of keeping the prepared clips in the cache (what makes an ingest resumable) and of
+taking them back, and their size.
 
 ``--dask``: the per-clip work on a new local Dask cluster of ``--workers`` processes
 (``animegraph ingest --scheduler``'s path, :mod:`ingest.on_dask`; its start-up counted);
@@ -84,7 +86,8 @@ def _peak_mb() -> float:
 
 
 def per_clip(corpus: Path, every: int) -> int:
-    from ingest.pipeline import ClipJob, IngestConfig, _head_reference, _work
+    from ingest.per_clip import ClipJob, work
+    from ingest.pipeline import IngestConfig, _head_reference
     from ingest.readers import discover
     from ingest.speech.g2p import pronounce
     from ingest.speech.sphinx import _engine
@@ -95,7 +98,7 @@ def per_clip(corpus: Path, every: int) -> int:
     pronounce("bin")
     _engine("align")  # one-off loads left out
     t0, (c0, k0) = time.perf_counter(), _cpu()
-    results = [_work(ClipJob(s, {}, None, reference, config.phones_engine, config.limits,
+    results = [work(ClipJob(s, {}, None, reference, config.phones_engine, config.limits,
                              config.posteriorgrams)) for s in found]
     wall, (c1, k1) = time.perf_counter() - t0, _cpu()
     n = len(found)
@@ -103,7 +106,34 @@ def per_clip(corpus: Path, every: int) -> int:
           f"{1000 * wall / n:.0f} ms wall, {1000 * (c1 - c0) / n:.0f} ms CPU a clip, "
           f"+ {1000 * (k1 - k0) / n:.0f} ms CPU of child processes (ffmpeg); load "
           f"{os.getloadavg()[0]:.1f}")
+    _kept_cost([(r, c) for r, c in results if c is not None])
     return 0
+
+
+def _kept_cost(prepared: list) -> None:
+    """Wall and CPU a clip of keeping the prepared clips in the cache (what makes an ingest
+    resumable: :func:`ingest.prepared_cache.save`) and of taking them back, and their size."""
+    from dataclasses import asdict
+
+    from ingest import prepared_cache
+
+    if not prepared:
+        return
+    keys = [f"bench-{k}" for k in range(len(prepared))]
+    t0, c0 = time.perf_counter(), time.process_time()
+    for key, (report, clip) in zip(keys, prepared, strict=True):
+        prepared_cache.save(key, clip, asdict(report))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    size = sum((prepared_cache.folder() / f"{key}.npz").stat().st_size for key in keys)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for key in keys:
+        prepared_cache.load(key)
+    back_wall, back_cpu = time.perf_counter() - t0, time.process_time() - c0
+    prepared_cache.remove(keys)
+    n = len(prepared)
+    print(f"kept in the cache: {1000 * wall / n:.1f} ms wall, {1000 * cpu / n:.1f} ms CPU, "
+          f"{size / n / 2**20:.2f} MB a clip; taken back: {1000 * back_wall / n:.1f} ms wall, "
+          f"{1000 * back_cpu / n:.1f} ms CPU a clip")
 
 
 def read_back(db: Path) -> int:

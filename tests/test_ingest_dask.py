@@ -21,7 +21,8 @@ from animegraph.apps.cli import main
 from db.store import Database
 from ingest import prepared_cache
 from ingest.on_dask import run_shipped, ship
-from ingest.pipeline import ClipJob, IngestConfig, _work, ingest
+from ingest.per_clip import ClipJob, work
+from ingest.pipeline import IngestConfig, ingest
 from ingest.readers import discover
 
 distributed = pytest.importorskip("distributed")
@@ -130,13 +131,13 @@ def test_a_worker_without_the_files_gets_their_bytes(tiny_corpus, tmp_path):
     job = ClipJob(source, {}, None, None, None, None, False)
     shipped = ship(source)
     assert shipped is not None and len(shipped.files) == len(source.paths)
-    expected_report, expected = _work(job)
+    expected_report, expected = work(job)
     shutil.rmtree(corpus)  # the worker has none of the clip's files now
 
     cluster, client = _threads_cluster()
     try:
-        report, clip = client.submit(run_shipped, _work, job, shipped, pure=False).result()
-        missing, _ = client.submit(run_shipped, _work, job, None, pure=False).result()
+        report, clip = client.submit(run_shipped, work, job, shipped, pure=False).result()
+        missing, _ = client.submit(run_shipped, work, job, None, pure=False).result()
     finally:
         client.close()
         cluster.close()
@@ -163,7 +164,7 @@ def test_a_clip_with_a_link_travels_as_its_paths(tiny_corpus, tmp_path):
 
 def test_a_kept_clip_reads_back_as_it_was(tiny_corpus, tmp_path):
     source = discover([tiny_corpus])[0]
-    report, clip = _work(ClipJob(source, {}, None, None, None, None, False))
+    report, clip = work(ClipJob(source, {}, None, None, None, None, False))
     key = prepared_cache.entry_key(clip.checksum, {"fps": None}, np.zeros((3, 3)))
     assert key != prepared_cache.entry_key(clip.checksum, {"fps": 30.0}, np.zeros((3, 3)))
     prepared_cache.save(key, clip, {"source": report.source})

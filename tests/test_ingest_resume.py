@@ -17,7 +17,8 @@ import psutil
 
 from db.store import Database
 from ingest import prepared_cache
-from ingest.pipeline import ClipJob, _work, ingest
+from ingest.per_clip import ClipJob, work
+from ingest.pipeline import ingest
 from ingest.readers import discover
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,9 +75,9 @@ def test_a_kept_clip_is_for_its_database_only(tiny_corpus, tmp_path, monkeypatch
     monkeypatch.setenv("ANIMEGRAPH_CACHE", str(tmp_path / "cache"))
     source = discover([tiny_corpus])[0]
     job = ClipJob(source, {}, None, None, None, None, False, db=str(tmp_path / "a"))
-    from ingest.pipeline import _entry, _keep, _settle
+    from ingest.per_clip import _entry, _keep, _settle
 
-    report, clip = _work(job)
+    report, clip = work(job)
     key = _keep(job, report, clip)
     assert key == _entry(job, clip.checksum)
     settled = _settle(job)
@@ -91,7 +92,7 @@ def test_the_kept_clips_stay_under_their_bound_least_recently_used_out(tiny_corp
                                                                       monkeypatch):
     monkeypatch.setenv("ANIMEGRAPH_CACHE", str(tmp_path / "cache"))
     source = discover([tiny_corpus])[0]
-    report, clip = _work(ClipJob(source, {}, None, None, None, None, False))
+    report, clip = work(ClipJob(source, {}, None, None, None, None, False))
     row = {"source": report.source}
     prepared_cache.save("old", clip, row)
     size = (prepared_cache.folder() / "old.npz").stat().st_size
