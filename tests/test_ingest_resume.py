@@ -97,12 +97,20 @@ def test_the_kept_clips_stay_under_their_bound_least_recently_used_out(tiny_corp
     prepared_cache.save("old", clip, row)
     size = (prepared_cache.folder() / "old.npz").stat().st_size
     prepared_cache.save("older", clip, row)
-    past = time.time() - 3600
+    past = time.time() - 2 * prepared_cache.STALE_WRITE_S
     os.utime(prepared_cache.folder() / "older.npz", (past, past))
     os.utime(prepared_cache.folder() / "old.npz", (past + 60, past + 60))
+    # What a worker ended as it wrote leaves (atomic_write's temporary file): removed once
+    # old, left while it may be a write going on.
+    stale, writing = (prepared_cache.folder() / f".{n}.npz.0a1b.tmp" for n in ("x", "y"))
+    stale.write_bytes(b"half")
+    os.utime(stale, (past, past))
+    writing.write_bytes(b"half")
 
     bound = prepared_cache.Bound(max_bytes=2 * size)
     assert bound.total == 2 * size and list(bound.sizes) == ["older", "old"]
+    assert not stale.exists() and writing.exists()
+    writing.unlink()
     assert prepared_cache.load("older") is not None  # taken: the newest now
     bound.used("older")
     prepared_cache.save("new", clip, row)
