@@ -7,6 +7,7 @@ Usage::
     python scripts/bench_ingest.py --corpus DIR --per-clip-every K
     python scripts/bench_ingest.py --read-back DB
     python scripts/bench_ingest.py --corpus DIR --subset N --fresh-cache [--dask | --scheduler A]
+    python scripts/bench_ingest.py --dask --workers W --idle SECONDS
 
 Generates the corpus into a temporary folder (or uses ``--corpus``), ingests it, and
 prints each corpus-wide step with the wall and CPU time so far (this process, and its
@@ -28,6 +29,11 @@ N clips (by name) are ingested; ``--fresh-cache``: in an empty cache folder, so 
 tracking and the phone model run again (the cold cost of a clip). The wall time at which
 the clips were all prepared is printed as ``clips_s``, the rest (decomposition, emotion
 model, writing: the one writer's serial part) as ``writer_s``.
+
+``--dask --idle SECONDS``: no ingest; the CPU of a local Dask cluster of ``--workers``
+processes (as ``ingest`` starts it) while it starts and then while it waits for work
+``SECONDS`` seconds, summed over every process of the tree: its heartbeats and event
+loops cost CPU whether or not it has clips, for as long as it is up.
 
 ``--read-back DB``: no ingest; the time and peak memory of reading every clip of the
 database back (``ingest.tables.prepared_from_database``, as an ingest into an existing
@@ -147,6 +153,31 @@ def read_back(db: Path) -> int:
     return 0
 
 
+def idle_cluster(workers: int, seconds: float) -> int:
+    import psutil
+
+    def tree_cpu() -> float:
+        me = psutil.Process()
+        total = sum(me.cpu_times()[:2])
+        for child in me.children(recursive=True):
+            try:
+                times = child.cpu_times()
+            except psutil.Error:  # ended meanwhile
+                continue
+            total += times.user + times.system
+        return total
+
+    t0, c0 = time.perf_counter(), tree_cpu()
+    with _cluster(argparse.Namespace(dask=True, scheduler=None, workers=workers)) as (_, n):
+        t1, c1 = time.perf_counter(), tree_cpu()
+        time.sleep(seconds)
+        t2, c2 = time.perf_counter(), tree_cpu()
+    print(f"local Dask cluster of {n} workers: started in {t1 - t0:.1f} s wall, "
+          f"{c1 - c0:.1f} CPU-s; idle {t2 - t1:.0f} s: {c2 - c1:.2f} CPU-s "
+          f"({(c2 - c1) / (t2 - t1):.3f} CPU-s a second); load {os.getloadavg()[0]:.1f}")
+    return 0
+
+
 def _subset(corpus: Path, n: int, out: Path) -> Path:
     """Copies of the files of ``corpus``' first ``n`` clips (in name order), under ``out``
     (copies, not links: ingest refuses links that leave a clip's folder)."""
@@ -188,12 +219,18 @@ def main() -> int:
     parser.add_argument("--dask", action="store_true",
                         help="on a local Dask cluster of --workers processes")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="on this Dask cluster")
+    parser.add_argument("--idle", type=float, metavar="SECONDS",
+                        help="with --dask: the CPU of an idle local cluster, no ingest")
     parser.add_argument("--subset", type=int, metavar="N", help="the first N clips only")
     parser.add_argument("--fresh-cache", action="store_true",
                         help="in an empty cache folder (tracking, phones computed again)")
     args = parser.parse_args()
     if args.read_back:
         return read_back(args.read_back)
+    if args.idle is not None:
+        if not args.dask:
+            parser.error("--idle needs --dask")
+        return idle_cluster(args.workers, args.idle)
     if args.per_clip_every:
         if args.corpus is None:
             parser.error("--per-clip-every needs --corpus")
