@@ -215,8 +215,12 @@ def _keep(job: ClipJob, report: ClipReport, clip: PreparedClip | None) -> str | 
 
 def _entry(job: ClipJob, checksum: str) -> str:
     """The cache entry of ``job``'s clip with these bytes: every setting its preparation
-    depends on (:func:`ingest.prepared_cache.entry_key`)."""
-    settings = {"version": package_version(), "db": job.db, "fps": job.fps,
+    depends on (:func:`ingest.prepared_cache.entry_key`), and the clip's own name and path
+    (two clips of the same bytes, a copied folder, are two entries: each row says its own
+    clip, and the copy is then rejected as one)."""
+    source = job.source
+    settings = {"version": package_version(), "db": job.db,
+                "clip": [source.corpus, source.clip_id, str(source.path)], "fps": job.fps,
                 "engine": job.engine, "limits": job.limits.to_entry() if job.limits else None,
                 "posteriorgrams": job.posteriorgrams,
                 "schema": None if job.schema is None else asdict(job.schema)}
