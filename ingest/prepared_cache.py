@@ -4,7 +4,8 @@ run again, redoes only the clips it had not finished.
 An entry is ``<cache>/prepared/<key>.npz``: the clip's arrays and one JSON document
 (``meta``, UTF-8 bytes), read back with ``allow_pickle=False``. The key is a SHA-256 of
 the clip's bytes (its checksum) and of every setting the preparation depends on
-(:func:`entry_key`), so an entry is used only for the same bytes prepared the same way.
+(:func:`entry_key`: for an ingest, the clip's name and the database's folder too), so an
+entry is used only for the same clip of the same bytes prepared the same way.
 Entries are written atomically as the clips are prepared (by the process pool's workers,
 which share this machine's cache folder, or by the Dask client, whose workers may not),
 and removed once their clips are in the database.
@@ -57,8 +58,9 @@ def folder() -> Path:
 
 def entry_key(checksum: str, settings: dict, reference: np.ndarray | None) -> str:
     """The entry of a clip with these bytes (``checksum``) prepared with ``settings`` (a
-    JSON-able dict: frame rate, phone engine, limits, schema, the package's version: a
-    new one prepares anew) and head ``reference``, shape (n_head_points, 3)."""
+    JSON-able dict: frame rate, phone engine, limits, schema, the package's version (a
+    new one prepares anew), the clip's name and its database's folder) and head
+    ``reference``, shape (n_head_points, 3)."""
     digest = hashlib.sha256()
     head = {"format": FORMAT, "checksum": checksum, **settings}
     digest.update(json.dumps(head, sort_keys=True, default=str).encode())
