@@ -190,6 +190,15 @@ def checksum_files(paths) -> str:
     return digest.hexdigest()
 
 
+def checksum_bytes(parts) -> str:
+    """:func:`checksum_files` of files holding ``parts`` (bytes), in that order: for a
+    clip's files already read (those that travel to a Dask worker)."""
+    digest = hashlib.sha256()
+    for part in parts:
+        digest.update(part)
+    return digest.hexdigest()
+
+
 def stored_schema(db, channels: list[dict] | None = None) -> ChannelSchema:
     """The channels of ``db``'s motion (its ``channels`` table, or its rows ``channels``
     if already read), as its clips had them; the database's damage (DataError naming the

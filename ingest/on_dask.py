@@ -4,7 +4,7 @@ The client (the one process that writes the database, under its writer lock) sub
 one task a clip and gathers the prepared clips as they finish; the workers never touch
 the database. Two things make this more than ``client.map``:
 
-* **Resume.** Each prepared clip is kept in the cache folder as it arrives
+* **Resume.** Each prepared clip is kept in the client's cache folder as it arrives
   (:mod:`ingest.prepared_cache`, by the clip's bytes and the settings); a killed ingest
   run again takes those from the cache and submits only the others.
 * **The bytes travel.** A clip whose files add up to at most :data:`SHIP_MAX_BYTES` is
@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 
-from ingest import prepared_cache
+from ingest.clip import checksum_bytes
 
 logger = logging.getLogger(__name__)
 
@@ -44,24 +44,15 @@ class Shipped:
 
     ``root``: the client's folder that holds them all; ``files``: (path relative to
     ``root``, bytes); ``source``: the clip's main path relative to ``root``; ``folder``:
-    the main path is a folder (a landmark clip).
+    the main path is a folder (a landmark clip); ``checksum``: the clip's checksum, of
+    these bytes (:func:`ingest.clip.checksum_bytes`: the client reads a clip once).
     """
 
     root: str
     files: tuple[tuple[str, bytes], ...]
     source: str
     folder: bool
-
-
-@dataclass
-class DaskRun:
-    """What :func:`map_clips` did: ``results`` (report, clip or None) in the jobs' order,
-    ``keys`` the cache entries of the prepared clips and ``resumed`` how many were taken
-    from the cache."""
-
-    results: list
-    keys: list[str]
-    resumed: int = 0
+    checksum: str
 
 
 def ship(source, max_bytes: int = SHIP_MAX_BYTES) -> Shipped | None:
@@ -83,7 +74,8 @@ def ship(source, max_bytes: int = SHIP_MAX_BYTES) -> Shipped | None:
         files = tuple((str(p.absolute().relative_to(root)), p.read_bytes()) for p in paths)
     except (OSError, ValueError):
         return None
-    return Shipped(str(root), files, str(main.absolute().relative_to(root)), is_folder)
+    return Shipped(str(root), files, str(main.absolute().relative_to(root)), is_folder,
+                   checksum_bytes(data for _, data in files))
 
 
 def run_shipped(func: Callable, job, shipped: Shipped | None):
@@ -120,18 +112,35 @@ def _inside(folder: Path, relative: str) -> Path:
 
 def _renamed(record, old: str, new: str):
     """A report row or prepared clip with the temporary folder's name in its text fields
-    (source, reason, note) replaced by the client's folder."""
+    (source, reason, note) and in the text of its dicts (a clip's ``extra``: what its
+    reader and the phone alignment noted) replaced by the client's folder."""
     if record is None or not is_dataclass(record):
         return record
-    changes = {f.name: getattr(record, f.name).replace(old, new) for f in fields(record)
-               if isinstance(getattr(record, f.name), str) and old in getattr(record, f.name)}
+    changes = {}
+    for f in fields(record):
+        value = getattr(record, f.name)
+        if isinstance(value, (str, dict)):
+            swapped = _swapped(value, old, new)
+            if swapped != value:
+                changes[f.name] = swapped
     return replace(record, **changes) if changes else record
 
 
-def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str | None],
-              settings: dict, reference, report_type: type, failed: Callable,
+def _swapped(value, old: str, new: str):
+    """``value`` (text, or a dict or list of them, nested) with ``old`` made ``new``."""
+    if isinstance(value, str):
+        return value.replace(old, new)
+    if isinstance(value, dict):
+        return {key: _swapped(item, old, new) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_swapped(item, old, new) for item in value]
+    return value
+
+
+def map_clips(client, func: Callable, jobs: Sequence, *, settle: Callable,
+              keep: Callable, failed: Callable,
               progress: Callable[[Iterator], Iterator] | None = None,
-              max_bytes: int = SHIP_MAX_BYTES) -> DaskRun:
+              max_bytes: int = SHIP_MAX_BYTES) -> list:
     """``[func(job) for job in jobs]`` on the Dask cluster of ``client``, resumable.
 
     Parameters
@@ -141,24 +150,29 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
         A module-level function of a job returning (report row, prepared clip or None).
     jobs : sequence
         One per clip (``job.source`` a ClipSource).
-    checksums : sequence of str or None
-        Each clip's checksum (:func:`ingest.clip.checksum_files`); None: unreadable, never
-        kept.
-    settings, reference
-        What the preparation depends on beyond the bytes (:func:`prepared_cache.entry_key`).
-    report_type : type
-        The report row's dataclass (a kept row is rebuilt with it).
+    settle : callable
+        ``settle(job, checksum)``: the clip's outcome without a worker, (report row,
+        clip or None, cache entry or None, True if taken from the cache), or None to
+        prepare it. ``checksum`` is that of the bytes read to travel (None when they
+        do not: ``settle`` reads the files). Called in order, a clip at a time, as the
+        cluster has room: the client reads each clip's bytes once, and holds only those
+        of the clips in flight.
+    keep : callable
+        ``keep(job, report, clip)``: keeps a prepared clip here (the workers may not
+        share this cache folder) and returns its cache entry (None: not kept).
     failed : callable
         ``failed(job, reason)``: the row of a clip whose task failed (a bug, or its worker
         died); the other clips go on.
     progress : callable, optional
-        Wraps the iterator of finished clips.
+        Wraps the iterator of the clips as they are decided (items as those returned).
     max_bytes : int
         Largest clip that travels as bytes (:data:`SHIP_MAX_BYTES`).
 
     Returns
     -------
-    DaskRun
+    list
+        (report, clip or None, cache entry or None, taken from the cache), in the jobs'
+        order.
 
     Notes
     -----
@@ -169,58 +183,49 @@ def map_clips(client, func: Callable, jobs: Sequence, *, checksums: Sequence[str
     from distributed import as_completed
 
     results: list = [None] * len(jobs)
-    keys = [None if c is None else prepared_cache.entry_key(c, settings, reference)
-            for c in checksums]
-    run = DaskRun(results, [k for k in keys if k is not None])
     futures: dict = {}
     completed = as_completed(loop=client.loop)
-    waiting: Iterator[int] = iter([])
+    room = IN_FLIGHT_PER_THREAD * _threads(client)
 
-    def submit_next() -> None:
-        index = next(waiting, None)
-        if index is None:
-            return
-        future = client.submit(run_shipped, func, jobs[index],
-                               ship(jobs[index].source, max_bytes), pure=False)
-        futures[future] = index
-        completed.add(future)
+    def finish(future) -> tuple:
+        index = futures.pop(future)
+        try:
+            report, clip = future.result()
+        except Exception as exc:  # a bug, or a worker that died on this clip
+            logger.debug("clip %s failed on its worker", jobs[index].source, exc_info=True)
+            report, clip = failed(jobs[index], f"worker error: {type(exc).__name__}: {exc}"), None
+        future.release()
+        results[index] = report, clip, keep(jobs[index], report, clip), False
+        return results[index]
+
+    def decided() -> Iterator[tuple]:
+        compiled = False
+        for index, job in enumerate(jobs):
+            shipped = ship(job.source, max_bytes)
+            settled = settle(job, None if shipped is None else shipped.checksum)
+            if settled is not None:
+                results[index] = settled
+                yield settled
+                continue
+            if not compiled:
+                _compile_once_per_host(client)
+                compiled = True
+            if len(futures) >= room:
+                yield finish(next(completed))
+            future = client.submit(run_shipped, func, job, shipped, pure=False)
+            futures[future] = index
+            completed.add(future)
+        for future in completed:
+            yield finish(future)
 
     try:
-        todo = []
-        for index, key in enumerate(keys):
-            kept = prepared_cache.load(key) if key is not None else None
-            if kept is None:
-                todo.append(index)
-                continue
-            clip, row = kept
-            results[index] = (report_type(**row), clip)
-            run.resumed += 1
-        waiting = iter(todo)
-        if todo:
-            _compile_once_per_host(client)
-        for _ in range(IN_FLIGHT_PER_THREAD * _threads(client)):
-            submit_next()
-        finished = _finished(run.resumed, completed)
-        for future in progress(finished) if progress else finished:
-            if future is None:  # one of the clips taken from the cache
-                continue
-            index = futures[future]
-            try:
-                report, clip = future.result()
-            except Exception as exc:  # a bug, or a worker that died on this clip
-                logger.debug("clip %s failed on its worker", jobs[index].source, exc_info=True)
-                reason = f"worker error: {type(exc).__name__}: {exc}"
-                report, clip = failed(jobs[index], reason), None
-            future.release()
-            submit_next()
-            if clip is not None and keys[index] is not None:
-                prepared_cache.save(keys[index], clip, _row(report))
-            results[index] = (report, clip)
+        for _ in progress(decided()) if progress else decided():
+            pass
     except BaseException:
         with contextlib.suppress(Exception):
             client.cancel(list(futures))
         raise
-    return run
+    return results
 
 
 def _compile_once_per_host(client) -> None:
@@ -241,14 +246,3 @@ def _threads(client) -> int:
     """The threads of the cluster's workers (at least 1)."""
     workers = client.scheduler_info().get("workers", {})
     return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
-
-
-def _finished(n_kept: int, completed: Iterator) -> Iterator:
-    """None for each clip taken from the cache, then the futures as they finish."""
-    yield from [None] * n_kept
-    yield from completed
-
-
-def _row(report) -> dict:
-    return {f.name: getattr(report, f.name) for f in fields(report)}
-

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from db.atomic import atomic_write
-from db.errors import AnimeGraphError, DataError, ParameterError
+from db.errors import DataError, ParameterError
 from db.lock import LOCK_NAME, writer_lock
 from db.store import (
     ANY_VERSION,
@@ -44,6 +44,7 @@ from db.store import (
     own_folder,
     write_version,
 )
+from ingest import prepared_cache
 from ingest.clip import checksum_files, stored_schema
 from ingest.decompose import (
     ENERGY_KEPT,
@@ -54,14 +55,13 @@ from ingest.decompose import (
 )
 from ingest.emotion.model import fit_emotion_model, stored_model_current
 from ingest.lag import decide_lags
-from ingest.motion import fill_gaps, head_points
+from ingest.motion import fill_gaps
+from ingest.per_clip import ClipReport, has_head, package_version, run_clips
 from ingest.plausible import Limits, check_clip
-from ingest.prepare import MIN_LAG_CORRECTED_S, PreparedClip, prepare_clip
+from ingest.prepare import MIN_LAG_CORRECTED_S, PreparedClip
 from ingest.readers import ClipSource, discover, load
 from ingest.readers.sync import MIN_EVIDENCE_S, MIN_PEAK_MARGIN
-from ingest.speech.ctc import kept_on_disk
 from ingest.tables import build_tables, prepared_from_database, stored_limits
-from ingest.workers import map_in_processes
 
 logger = logging.getLogger(__name__)
 
@@ -91,25 +91,6 @@ class IngestConfig:
     # database's, those its clips were added with (ingest.tables.stored_limits), else the
     # defaults. A database keeps the loosest its clips were added with.
     limits: Limits | None = None
-
-
-@dataclass(frozen=True)
-class ClipReport:
-    """What happened to one clip."""
-
-    source: str
-    clip_id: str
-    status: str  # added | replaced | unchanged | rejected
-    reason: str = ""
-    n_animes: int = 0
-    segmentation: str = ""
-    duration_s: float = 0.0
-    note: str = ""  # e.g. implausible samples filled as dropouts (ingest.plausible)
-    lag_estimate_s: float | None = None  # lip-audio lag found (s, + = lips lead), ingest.lag
-    lag_confidence: float | None = None  # correlation at its peak
-    lag_margin: float | None = None  # ... minus the best side peak's
-    lag_basis: str = ""  # pooled over N clips | own | not identifiable
-    lag_applied_s: float | None = None  # the shift applied (0: none)
 
 
 @dataclass
@@ -188,83 +169,6 @@ class IngestReport:
         for c in self.clips:
             writer.writerow(asdict(c))
         return buffer.getvalue()
-
-
-@dataclass(frozen=True)
-class ClipJob:
-    """One clip for a worker to read and prepare (:func:`_work`).
-
-    ``known``: the database's clips, (corpus, clip id) -> checksum (an unchanged one is
-    not read); ``fps``: the frame rate to resample to (None: the clip's own);
-    ``reference``: the head-pose reference; ``schema``: the channels a clip must have
-    (the database's), None to take any.
-    """
-
-    source: object
-    known: dict
-    fps: float | None
-    reference: object
-    engine: str | None
-    limits: Limits | None
-    posteriorgrams: bool
-    schema: object = None
-
-
-def _work(job: ClipJob):
-    """Worker: read one clip and prepare it unless the database already has it (the phone
-    model's outputs kept in the cache, as tracking is: :func:`ingest.speech.ctc.kept_on_disk`)."""
-    with kept_on_disk():
-        return _prepare_source(job)
-
-
-def _prepare_source(job: ClipJob):
-    source, known, fps, reference, engine, limits, posteriorgrams, schema = (
-        job.source, job.known, job.fps, job.reference, job.engine, job.limits,
-        job.posteriorgrams, job.schema)
-    try:
-        # Every reader's checksum is that of the clip's files in role order: an unchanged
-        # clip is known before it is read (a video is not decoded, nor its audio aligned).
-        key = (source.corpus, source.clip_id)
-        if key in known and known[key] == _checksum(source):
-            return ClipReport(str(source.path), source.clip_id, "unchanged"), None
-        raw = load(source)
-        if known.get((raw.corpus, raw.clip_id)) == raw.checksum:
-            return ClipReport(str(source.path), raw.clip_id, "unchanged"), None
-        # Before the checks and the phones (16 s of recognition for a 112 s FACEGOOD clip
-        # that would then be rejected): a clip's channels must be the database's.
-        if schema is not None and raw.schema != schema:
-            raise DataError(raw.schema.difference(schema))
-        raw, note = check_clip(raw, limits)
-        clip = prepare_clip(raw, fps=fps,
-                            head_reference=reference if _has_head(raw.schema) else None,
-                            phones_engine=engine, posteriorgrams=posteriorgrams)
-        status = "replaced" if (raw.corpus, raw.clip_id) in known else "added"
-        note = _note(note, clip)
-        report = ClipReport(str(source.path), raw.clip_id, status, n_animes=len(clip.phones),
-                            segmentation=clip.segmentation, duration_s=round(clip.duration, 3),
-                            note=note)
-        return report, clip
-    except AnimeGraphError as exc:  # bad data or an unusable transcript: reject the clip
-        return ClipReport(str(source.path), source.clip_id, "rejected", reason=str(exc)), None
-
-
-def _note(checked: str, clip: PreparedClip) -> str:
-    """The clip's line in the report: the plausibility check's note, then what the
-    reader and the phone alignment had to make do with."""
-    notes = [checked]
-    gaps = clip.extra.get("frames_without_face", 0)
-    if gaps:
-        notes.append(f"no face in {gaps} frames (filled as gaps)")
-    notes.append(clip.extra.get("transcript_fallback", ""))
-    notes.append(clip.extra.get("transcript_doubt", ""))
-    return "; ".join(n for n in notes if n)
-
-
-def _checksum(source: ClipSource) -> str | None:
-    try:
-        return checksum_files(source.paths)
-    except OSError:
-        return None  # load() says what is wrong with the file
 
 
 def ingest(
@@ -389,12 +293,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
         reference = _head_reference(found, config.limits)
     report = IngestReport(db=db_path)
     schema = stored_schema(existing) if existing is not None else None
-    kept_keys: list[str] = []
-    if client is None:
-        results = _run(found, known, fps, config, workers, progress, reference, schema)
-    else:
-        results, kept_keys, report.resumed = _run_on_dask(
-            client, found, known, fps, config, progress, reference, schema)
+    results, kept_keys, report.resumed = run_clips(found, known, fps, config, workers, progress,
+                                              reference, schema, client=client, keep=db_path)
     new: list[PreparedClip] = []
     for clip_report, clip in results:
         report.clips.append(clip_report)
@@ -423,10 +323,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
                reference, based_on, say)
     report.seconds = time.perf_counter() - started
     _save_report(db_path, report)
-    if kept_keys:  # every clip is decided now (in the database, or rejected)
-        from ingest import prepared_cache
-
-        prepared_cache.remove(kept_keys)
+    # Every clip is decided now (in the database, or rejected): what was kept is not needed.
+    prepared_cache.remove(kept_keys)
     if not report.written and report.count("rejected") == len(report.clips):
         raise ParameterError(f"every clip was rejected ({len(report.clips)}); first: "
                              f"{report.clips[0].source}: {report.clips[0].reason}")
@@ -460,7 +358,7 @@ def prepare_sources(
     config = config or IngestConfig()
     _check_tracker(found)
     reference = _head_reference(list(found), config.limits)
-    results = _run(list(found), {}, config.fps, config, workers, None, reference)
+    results, _, _ = run_clips(list(found), {}, config.fps, config, workers, None, reference)
     clips = decide_lags([c for r, c in results if c is not None], correct=config.correct_lag,
                         pooled=config.pool_lag)
     for r, _ in results:  # what ingest's report would say of each clip
@@ -472,53 +370,6 @@ def prepare_sources(
         raise ParameterError("no usable clips")
     fps = config.fps or max(c.fps for c in clips)
     return [_at_fps(c, fps) for c in clips], reference
-
-
-def _run(found, known, fps, config, workers, progress, reference, schema=None):
-    """Prepare each clip of ``found`` (see :func:`_prepare_source`); ``schema``: the
-    channels a clip must have (the database's), None to take any."""
-    jobs = [ClipJob(s, known, fps, reference, config.phones_engine, config.limits,
-                    config.posteriorgrams, schema) for s in found]
-    if workers == 1 or len(jobs) == 1:
-        results = map(_work, jobs)
-        return list(progress(len(jobs))(results) if progress else results)
-    return map_in_processes(_work, jobs, workers=workers, chunksize=4,
-                            progress=progress(len(jobs)) if progress else None)
-
-
-def _run_on_dask(client, found, known, fps, config, progress, reference, schema):
-    """:func:`_run` on a Dask cluster (:func:`ingest.on_dask.map_clips`): the clips the
-    database has unchanged are known here, before anything travels. Returns (results,
-    the cache entries of the prepared clips, how many of them an earlier run had kept)."""
-    from ingest.on_dask import map_clips
-
-    results: list = [None] * len(found)
-    jobs, checksums, where = [], [], []
-    for k, source in enumerate(found):
-        checksum, key = _checksum(source), (source.corpus, source.clip_id)
-        if key in known and known[key] == checksum:
-            results[k] = ClipReport(str(source.path), source.clip_id, "unchanged"), None
-            continue
-        jobs.append(ClipJob(source, {key: known[key]} if key in known else {}, fps,
-                            reference, config.phones_engine, config.limits,
-                            config.posteriorgrams, schema))
-        checksums.append(checksum)
-        where.append(k)
-    settings = {"version": _version(), "fps": fps, "engine": config.phones_engine,
-                "limits": config.limits.to_entry() if config.limits else None,
-                "posteriorgrams": config.posteriorgrams,
-                "schema": None if schema is None else asdict(schema)}
-    run = map_clips(client, _work, jobs, checksums=checksums, settings=settings,
-                    reference=reference, report_type=ClipReport,
-                    failed=lambda job, reason: ClipReport(str(job.source.path),
-                                                          job.source.clip_id, "rejected",
-                                                          reason=reason),
-                    progress=progress(len(jobs)) if progress else None)
-    for k, (row, clip) in zip(where, run.results, strict=True):
-        if clip is not None:  # a kept row says what the database held when it was kept
-            row = replace(row, status="replaced" if clip.key in known else "added")
-        results[k] = row, clip
-    return results, run.keys, run.resumed
 
 
 def _drop_copies(new: list[PreparedClip], known: dict[tuple[str, str], str],
@@ -556,10 +407,6 @@ def _report_lags(report: IngestReport, clips: list[PreparedClip]) -> None:
                 lag_applied_s=extra["lag_corrected_s"])
 
 
-def _has_head(schema) -> bool:
-    return schema.kind in ("markers", "landmarks") and head_points(schema.groups) >= 3
-
-
 def _head_reference(found: list[ClipSource], limits: Limits | None) -> np.ndarray | None:
     """The head frame of a new database: its first plausible clip's mean head pose.
 
@@ -573,7 +420,7 @@ def _head_reference(found: list[ClipSource], limits: Limits | None) -> np.ndarra
             raw, _ = check_clip(load(source), limits)
         except DataError:
             continue
-        if not _has_head(raw.schema):
+        if not has_head(raw.schema):
             return None
         filled, _ = fill_gaps(raw.motion, raw.schema.names)
         pts = filled.reshape(len(filled), -1, 3)
@@ -666,7 +513,7 @@ def build_database(
     for c in clips:
         emotions[c.emotion] = emotions.get(c.emotion, 0) + 1
     summary = {
-        "animegraph_version": _version(), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "animegraph_version": package_version(), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "kind": clips[0].schema.kind, "fps": fps, "n_channels": clips[0].schema.n_channels,
         "n_clips": len(clips), "n_animes": tables["animes"].num_rows,
         "n_frames": tables["frames"].num_rows,
@@ -711,11 +558,3 @@ def _not_applied(basis: str, rows: list[ClipReport]) -> str:
 def _clips(n: int) -> str:
     return f"{n} clip" if n == 1 else f"{n} clips"
 
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("animegraph")
-    except PackageNotFoundError:
-        return "unknown"

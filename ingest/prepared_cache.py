@@ -1,20 +1,28 @@
-"""Prepared clips kept in the cache folder while a distributed ingest runs, so that a
-killed one, run again, redoes only the clips it had not finished.
+"""Prepared clips kept in the cache folder while an ingest runs, so that a killed one,
+run again, redoes only the clips it had not finished.
 
 An entry is ``<cache>/prepared/<key>.npz``: the clip's arrays and one JSON document
 (``meta``, UTF-8 bytes), read back with ``allow_pickle=False``. The key is a SHA-256 of
 the clip's bytes (its checksum) and of every setting the preparation depends on
-(:func:`entry_key`), so an entry is used only for the same bytes prepared the same way.
-Entries are written atomically by the one process that writes the database (the Dask
-client), as results arrive, and removed once their clips are in the database.
+(:func:`entry_key`: for an ingest, the clip's name and the database's folder too), so an
+entry is used only for the same clip of the same bytes prepared the same way.
+Entries are written atomically as the clips are prepared (by the process pool's workers,
+which share this machine's cache folder, or by the Dask client, whose workers may not),
+and removed once their clips are in the database.
+
+The folder is bounded (:class:`Bound`, :data:`MAX_BYTES`): what an ingest killed and never
+run again left behind, or kept with other settings, is evicted least recently used first.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
 import logging
+import os
+import time
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -33,6 +41,14 @@ logger = logging.getLogger(__name__)
 FORMAT = 2
 #: The arrays of a :class:`PreparedClip` kept as they are (None ones are left out).
 _ARRAYS = ("motion", "missing", "audio", "prosody", "posteriors", "posterior_blank")
+#: Bytes the entries may take in all (:class:`Bound`). A prepared GRID video of 3 s takes
+#: 0.64 MB (its face points at 25 fps, its 16 kHz audio): 8 GiB keep 13,000 of them, 11
+#: hours of such clips. An ingest holds all of its prepared clips in memory before it
+#: writes them, so the bound is of the size of a large ingest's memory.
+MAX_BYTES = 8 << 30
+#: Age (s) after which a half-written entry (``atomic_write``'s temporary file, left by a
+#: worker ended as it wrote) is removed.
+STALE_WRITE_S = 3600.0
 
 
 def folder() -> Path:
@@ -42,8 +58,9 @@ def folder() -> Path:
 
 def entry_key(checksum: str, settings: dict, reference: np.ndarray | None) -> str:
     """The entry of a clip with these bytes (``checksum``) prepared with ``settings`` (a
-    JSON-able dict: frame rate, phone engine, limits, schema, the package's version: a
-    new one prepares anew) and head ``reference``, shape (n_head_points, 3)."""
+    JSON-able dict: frame rate, phone engine, limits, schema, the package's version (a
+    new one prepares anew), the clip's name and its database's folder) and head
+    ``reference``, shape (n_head_points, 3)."""
     digest = hashlib.sha256()
     head = {"format": FORMAT, "checksum": checksum, **settings}
     digest.update(json.dumps(head, sort_keys=True, default=str).encode())
@@ -90,6 +107,8 @@ def load(key: str) -> tuple[PreparedClip, dict] | None:
     path = folder() / f"{key}.npz"
     if not path.is_file():
         return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # used now: the last to be evicted (Bound)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
@@ -109,6 +128,51 @@ def remove(keys) -> None:
             (folder() / f"{key}.npz").unlink(missing_ok=True)
         except OSError as exc:  # a left entry costs disk only
             logger.debug("cannot remove %s: %s", key, exc)
+
+
+class Bound:
+    """Keeps the entries' bytes under ``max_bytes``: the least recently used (written or
+    taken) are removed first.
+
+    Made once an ingest (it reads the folder's entries then); :meth:`used` is called in
+    the process that writes the database for each entry written or taken since, which
+    may evict the oldest. Another ingest sharing the folder at the same time may have
+    it over the bound for a while; an entry evicted under it is prepared again.
+    """
+
+    def __init__(self, max_bytes: int = MAX_BYTES) -> None:
+        self.max_bytes = max_bytes
+        found = []
+        with contextlib.suppress(OSError):  # no folder yet: nothing kept
+            for path in folder().glob("*.npz"):
+                with contextlib.suppress(OSError):
+                    stat = path.stat()
+                    found.append((stat.st_mtime, path.stem, stat.st_size))
+            # A write takes milliseconds: older ones are of workers ended while writing.
+            stale = time.time() - STALE_WRITE_S
+            for path in folder().glob(".*.tmp"):
+                with contextlib.suppress(OSError):
+                    if path.stat().st_mtime < stale:
+                        path.unlink()
+        #: key -> size, oldest first (dicts keep their order of insertion)
+        self.sizes = {key: size for _, key, size in sorted(found)}
+        self.total = sum(self.sizes.values())
+        self.evicted = 0
+
+    def used(self, key: str) -> None:
+        """``key``'s entry was just written or taken: the newest now; then the oldest
+        entries are removed until the folder is under the bound (never this one)."""
+        self.total -= self.sizes.pop(key, 0)
+        try:
+            self.sizes[key] = (folder() / f"{key}.npz").stat().st_size
+        except OSError:  # not written (logged by save): nothing to count
+            return
+        self.total += self.sizes[key]
+        while self.total > self.max_bytes and len(self.sizes) > 1:
+            oldest = next(iter(self.sizes))
+            self.total -= self.sizes.pop(oldest)
+            remove([oldest])
+            self.evicted += 1
 
 
 def _clip(meta: dict, arrays: dict) -> PreparedClip:

@@ -7,6 +7,7 @@ Usage::
     python scripts/bench_ingest.py --corpus DIR --per-clip-every K
     python scripts/bench_ingest.py --read-back DB
     python scripts/bench_ingest.py --corpus DIR --subset N --fresh-cache [--dask | --scheduler A]
+    python scripts/bench_ingest.py --dask --workers W --idle SECONDS
 
 Generates the corpus into a temporary folder (or uses ``--corpus``), ingests it, and
 prints each corpus-wide step with the wall and CPU time so far (this process, and its
@@ -15,9 +16,11 @@ database size on disk, CPU time of all processes, the load average, and peak mem
 (this process and its workers).
 
 ``--per-clip-every K``: no database; the per-clip work of an ingest
-(``ingest.pipeline._work``: read, check, align, features) on every K-th clip of the
+(``ingest.per_clip.work``: read, check, align, features) on every K-th clip of the
 corpus, in this process, once the one-off loads (CMUdict, the aligner) are done: its
-wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip.
+wall and CPU time a clip, and the CPU of child processes (ffmpeg) a clip; then the cost
+a clip of keeping the prepared clips in the cache (what makes an ingest resumable) and of
+taking them back, and their size.
 
 ``--dask``: the per-clip work on a new local Dask cluster of ``--workers`` processes
 (``animegraph ingest --scheduler``'s path, :mod:`ingest.on_dask`; its start-up counted);
@@ -26,6 +29,11 @@ N clips (by name) are ingested; ``--fresh-cache``: in an empty cache folder, so 
 tracking and the phone model run again (the cold cost of a clip). The wall time at which
 the clips were all prepared is printed as ``clips_s``, the rest (decomposition, emotion
 model, writing: the one writer's serial part) as ``writer_s``.
+
+``--dask --idle SECONDS``: no ingest; the CPU of a local Dask cluster of ``--workers``
+processes (as ``ingest`` starts it) while it starts and then while it waits for work
+``SECONDS`` seconds, summed over every process of the tree: its heartbeats and event
+loops cost CPU whether or not it has clips, for as long as it is up.
 
 ``--read-back DB``: no ingest; the time and peak memory of reading every clip of the
 database back (``ingest.tables.prepared_from_database``, as an ingest into an existing
@@ -84,7 +92,8 @@ def _peak_mb() -> float:
 
 
 def per_clip(corpus: Path, every: int) -> int:
-    from ingest.pipeline import ClipJob, IngestConfig, _head_reference, _work
+    from ingest.per_clip import ClipJob, work
+    from ingest.pipeline import IngestConfig, _head_reference
     from ingest.readers import discover
     from ingest.speech.g2p import pronounce
     from ingest.speech.sphinx import _engine
@@ -95,7 +104,7 @@ def per_clip(corpus: Path, every: int) -> int:
     pronounce("bin")
     _engine("align")  # one-off loads left out
     t0, (c0, k0) = time.perf_counter(), _cpu()
-    results = [_work(ClipJob(s, {}, None, reference, config.phones_engine, config.limits,
+    results = [work(ClipJob(s, {}, None, reference, config.phones_engine, config.limits,
                              config.posteriorgrams)) for s in found]
     wall, (c1, k1) = time.perf_counter() - t0, _cpu()
     n = len(found)
@@ -103,7 +112,34 @@ def per_clip(corpus: Path, every: int) -> int:
           f"{1000 * wall / n:.0f} ms wall, {1000 * (c1 - c0) / n:.0f} ms CPU a clip, "
           f"+ {1000 * (k1 - k0) / n:.0f} ms CPU of child processes (ffmpeg); load "
           f"{os.getloadavg()[0]:.1f}")
+    _kept_cost([(r, c) for r, c in results if c is not None])
     return 0
+
+
+def _kept_cost(prepared: list) -> None:
+    """Wall and CPU a clip of keeping the prepared clips in the cache (what makes an ingest
+    resumable: :func:`ingest.prepared_cache.save`) and of taking them back, and their size."""
+    from dataclasses import asdict
+
+    from ingest import prepared_cache
+
+    if not prepared:
+        return
+    keys = [f"bench-{k}" for k in range(len(prepared))]
+    t0, c0 = time.perf_counter(), time.process_time()
+    for key, (report, clip) in zip(keys, prepared, strict=True):
+        prepared_cache.save(key, clip, asdict(report))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    size = sum((prepared_cache.folder() / f"{key}.npz").stat().st_size for key in keys)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for key in keys:
+        prepared_cache.load(key)
+    back_wall, back_cpu = time.perf_counter() - t0, time.process_time() - c0
+    prepared_cache.remove(keys)
+    n = len(prepared)
+    print(f"kept in the cache: {1000 * wall / n:.1f} ms wall, {1000 * cpu / n:.1f} ms CPU, "
+          f"{size / n / 2**20:.2f} MB a clip; taken back: {1000 * back_wall / n:.1f} ms wall, "
+          f"{1000 * back_cpu / n:.1f} ms CPU a clip")
 
 
 def read_back(db: Path) -> int:
@@ -114,6 +150,31 @@ def read_back(db: Path) -> int:
     print(f"{len(clips)} clips read back in {time.perf_counter() - t0:.1f} s wall, "
           f"{_cpu()[0] - c0:.1f} s CPU, peak RSS {_peak_mb():.0f} MB; load "
           f"{os.getloadavg()[0]:.1f}")
+    return 0
+
+
+def idle_cluster(workers: int, seconds: float) -> int:
+    import psutil
+
+    def tree_cpu() -> float:
+        me = psutil.Process()
+        total = sum(me.cpu_times()[:2])
+        for child in me.children(recursive=True):
+            try:
+                times = child.cpu_times()
+            except psutil.Error:  # ended meanwhile
+                continue
+            total += times.user + times.system
+        return total
+
+    t0, c0 = time.perf_counter(), tree_cpu()
+    with _cluster(argparse.Namespace(dask=True, scheduler=None, workers=workers)) as (_, n):
+        t1, c1 = time.perf_counter(), tree_cpu()
+        time.sleep(seconds)
+        t2, c2 = time.perf_counter(), tree_cpu()
+    print(f"local Dask cluster of {n} workers: started in {t1 - t0:.1f} s wall, "
+          f"{c1 - c0:.1f} CPU-s; idle {t2 - t1:.0f} s: {c2 - c1:.2f} CPU-s "
+          f"({(c2 - c1) / (t2 - t1):.3f} CPU-s a second); load {os.getloadavg()[0]:.1f}")
     return 0
 
 
@@ -158,12 +219,18 @@ def main() -> int:
     parser.add_argument("--dask", action="store_true",
                         help="on a local Dask cluster of --workers processes")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="on this Dask cluster")
+    parser.add_argument("--idle", type=float, metavar="SECONDS",
+                        help="with --dask: the CPU of an idle local cluster, no ingest")
     parser.add_argument("--subset", type=int, metavar="N", help="the first N clips only")
     parser.add_argument("--fresh-cache", action="store_true",
                         help="in an empty cache folder (tracking, phones computed again)")
     args = parser.parse_args()
     if args.read_back:
         return read_back(args.read_back)
+    if args.idle is not None:
+        if not args.dask:
+            parser.error("--idle needs --dask")
+        return idle_cluster(args.workers, args.idle)
     if args.per_clip_every:
         if args.corpus is None:
             parser.error("--per-clip-every needs --corpus")

@@ -195,14 +195,14 @@ def test_a_transcript_that_does_not_fit_is_said_in_the_report(tiny_corpus, tmp_p
 def test_a_clips_report_line_says_what_it_made_do_with():
     from types import SimpleNamespace
 
-    from ingest.pipeline import _note
+    from ingest.per_clip import clip_note
 
     clip = SimpleNamespace(extra={"frames_without_face": 9, "transcript_fallback":
                                   "transcript alignment failed: x; fell back to recognition"})
-    assert _note("2 samples filled", clip) == (
+    assert clip_note("2 samples filled", clip) == (
         "2 samples filled; no face in 9 frames (filled as gaps); transcript alignment "
         "failed: x; fell back to recognition")
-    assert _note("", SimpleNamespace(extra={"frames_without_face": 0})) == ""
+    assert clip_note("", SimpleNamespace(extra={"frames_without_face": 0})) == ""
 
 
 def test_adding_clips_refits_the_model_over_everything(tiny_corpus, tmp_path):

@@ -10,7 +10,7 @@ import subprocess
 import sys
 import textwrap
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +20,10 @@ import pytest
 from animegraph.apps.cli import main
 from db.store import Database
 from ingest import prepared_cache
-from ingest.on_dask import run_shipped, ship
-from ingest.pipeline import ClipJob, IngestConfig, _work, ingest
+from ingest.clip import checksum_files
+from ingest.on_dask import _renamed, run_shipped, ship
+from ingest.per_clip import ClipJob, work
+from ingest.pipeline import IngestConfig, ingest
 from ingest.readers import discover
 
 distributed = pytest.importorskip("distributed")
@@ -130,13 +132,15 @@ def test_a_worker_without_the_files_gets_their_bytes(tiny_corpus, tmp_path):
     job = ClipJob(source, {}, None, None, None, None, False)
     shipped = ship(source)
     assert shipped is not None and len(shipped.files) == len(source.paths)
-    expected_report, expected = _work(job)
+    # The clip's checksum from the bytes that travel: the client reads a clip once.
+    assert shipped.checksum == checksum_files(source.paths)
+    expected_report, expected = work(job)
     shutil.rmtree(corpus)  # the worker has none of the clip's files now
 
     cluster, client = _threads_cluster()
     try:
-        report, clip = client.submit(run_shipped, _work, job, shipped, pure=False).result()
-        missing, _ = client.submit(run_shipped, _work, job, None, pure=False).result()
+        report, clip = client.submit(run_shipped, work, job, shipped, pure=False).result()
+        missing, _ = client.submit(run_shipped, work, job, None, pure=False).result()
     finally:
         client.close()
         cluster.close()
@@ -147,6 +151,22 @@ def test_a_worker_without_the_files_gets_their_bytes(tiny_corpus, tmp_path):
     assert clip.phones == expected.phones and clip.extra == expected.extra
     # The same job without its bytes: the worker looks for the files, and says so.
     assert missing.status == "rejected" and str(source.path.parent) in missing.reason
+
+
+def test_the_workers_folder_is_named_nowhere_in_what_comes_back():
+    @dataclass(frozen=True)
+    class Row:
+        source: str
+        extra: dict
+        n: int = 0
+
+    tmp, home = "/tmp/animegraph-clip-x1", "/data/corpus"
+    row = Row(f"{tmp}/a.mp4", {"transcript_doubt": f"read {tmp}/a.txt",
+                               "files": [f"{tmp}/a.txt", {"side": f"{tmp}/a.json"}], "k": 3})
+    back = _renamed(row, tmp, home)
+    assert back.source == f"{home}/a.mp4" and back.n == 0
+    assert back.extra == {"transcript_doubt": f"read {home}/a.txt",
+                          "files": [f"{home}/a.txt", {"side": f"{home}/a.json"}], "k": 3}
 
 
 def test_a_clip_with_a_link_travels_as_its_paths(tiny_corpus, tmp_path):
@@ -163,7 +183,7 @@ def test_a_clip_with_a_link_travels_as_its_paths(tiny_corpus, tmp_path):
 
 def test_a_kept_clip_reads_back_as_it_was(tiny_corpus, tmp_path):
     source = discover([tiny_corpus])[0]
-    report, clip = _work(ClipJob(source, {}, None, None, None, None, False))
+    report, clip = work(ClipJob(source, {}, None, None, None, None, False))
     key = prepared_cache.entry_key(clip.checksum, {"fps": None}, np.zeros((3, 3)))
     assert key != prepared_cache.entry_key(clip.checksum, {"fps": 30.0}, np.zeros((3, 3)))
     prepared_cache.save(key, clip, {"source": report.source})

@@ -509,6 +509,7 @@ def test_a_take_is_refused_by_a_marker_database_before_its_phones(tiny_db, tmp_p
     # for a 112 s FACEGOOD clip that was then rejected.
     import shutil
 
+    import ingest.per_clip as per_clip
     import ingest.pipeline as pipeline
     from db.store import Database
 
@@ -519,7 +520,7 @@ def test_a_take_is_refused_by_a_marker_database_before_its_phones(tiny_db, tmp_p
     take.mkdir()
     _write_take(take)
     prepared = []
-    monkeypatch.setattr(pipeline, "prepare_clip",
+    monkeypatch.setattr(per_clip, "prepare_clip",
                         lambda raw, **kw: prepared.append(raw.clip_id))  # must not be reached
     with pytest.raises(ParameterError, match="its motion is curves, the database's markers"):
         pipeline.ingest([take], db)

@@ -235,7 +235,7 @@ def test_a_look_alike_transcript_is_said_on_the_clips_line(tmp_path):
 
     from ingest.formats.media import read_audio
     from ingest.formats.wav import write_wav
-    from ingest.pipeline import _note
+    from ingest.per_clip import clip_note
     from ingest.prepare import prepare_clip
 
     name, own, other = LOOK_ALIKE
@@ -247,7 +247,7 @@ def test_a_look_alike_transcript_is_said_on_the_clips_line(tmp_path):
         clip = prepare_clip(load(discover([folder])[0]))
         assert clip.segmentation == "aligned" and "transcript_fallback" not in clip.extra
         assert ("transcript_doubt" in clip.extra) == doubted
-        assert ("fits the audio poorly" in _note("", clip)) == doubted
+        assert ("fits the audio poorly" in clip_note("", clip)) == doubted
 
 
 def test_synth_labels_read_a_grid_word_alignment_as_ingest_does():

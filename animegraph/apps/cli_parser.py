@@ -262,7 +262,9 @@ def _add_ingest(sub) -> None:
         "captures: Live Link Face CSV; landmarks tracked from video: NPY, or the video "
         "itself) with their speech, segment them into phonemes and store them as "
         "anime nodes in a Parquet database (created if absent). Unchanged clips are skipped; "
-        "a bad clip is rejected with its reason while the others go in. Then the database "
+        "a bad clip is rejected with its reason while the others go in; prepared clips "
+        "are kept in the cache until they are in, so a killed ingest run again redoes "
+        "only the clips it had not finished. Then the database "
         "is made ready for its first synth: the default guides of audio-only synth fitted "
         "and stored, the search kernels compiled once (see 'animegraph warmup').",
     )
@@ -273,8 +275,7 @@ def _add_ingest(sub) -> None:
                      help="worker processes (default 1; ignored with --scheduler)")
     ing.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="prepare the clips on an existing Dask cluster, e.g. "
-                     "tcp://host:8786: clips up to 64 MB travel as bytes, prepared clips "
-                     "are kept in the cache so a killed ingest resumes; this process "
+                     "tcp://host:8786: clips up to 64 MB travel as bytes; this process "
                      "alone writes the database")
     ing.add_argument("--variance", type=_number, default=0.95,
                      help="share of motion variance PCA keeps (paper: 0.95-0.98)")
