@@ -182,7 +182,7 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
                              recognized_guide=guide).motion
             rows["offline-text"].append(mouth_r(model, off, clip))
             for la in lookaheads:
-                motion, stream = live_motion(model, audio, sr, la, None, text=text)
+                motion, stream = live_motion(model, audio, sr, la, guide, text=text)
                 rows[f"live-text-{la:g}"].append(mouth_r(model, motion, clip))
                 cpu[f"live-text-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
                 misfit += any(k.startswith("the transcript does not fit")

@@ -213,3 +213,38 @@ def test_stream_scores_fewer_phones_than_it_synthesizes(model, speech):
     _play(stream, audio)
     memory = stream._memory
     assert memory.hits > 0.3 * (memory.hits + memory.misses), (memory.hits, memory.misses)
+
+
+# --- the command ----------------------------------------------------------------------------
+
+
+def _live(args, **kw):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    return subprocess.run([sys.executable, "-m", "animegraph", "live", *args],
+                          capture_output=True, text=True, env=env, timeout=600, **kw)
+
+
+def test_live_command_with_a_transcript(tiny_db, speech, tmp_path):
+    from ingest.formats.wav import write_wav
+
+    audio, sr = speech
+    write_wav(tmp_path / "s.wav", audio, sr)
+    base = ["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
+            "--guide", "none", "--record", str(tmp_path / "take")]
+    out = _live([*base, "--text", SAID, "--low-latency"])
+    assert out.returncode == 0, out.stderr
+    assert "frames for" in out.stderr and "transcript" not in out.stderr
+    assert "look-ahead 40 ms, an update every 40 ms" in out.stderr
+    out = _live([*base, "--text", "Seven wizards quietly hex a jolly box of frozen fish."])
+    assert out.returncode == 0, out.stderr
+    assert "warning: the transcript does not fit" in out.stderr
+    for text, words in (("   ", "empty"), ("... !!!", "pronounceable")):
+        out = _live([*base, "--text", text])
+        assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+        assert words in out.stderr.strip().splitlines()[-1], out.stderr

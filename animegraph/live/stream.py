@@ -19,7 +19,12 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
-  blended 50/50) from those phones given as labels;
+  blended 50/50) from those phones given as labels, except that each phone's choice of
+  animes is made once (:mod:`animegraph.live.window`): a phone found again in the next
+  window (same label, boundaries within 20 ms) keeps its k best animes and their
+  time-warps, and only the new phones are scored by DTW and warped;
+* with a transcript (``text``) the window's phones are the transcript's, aligned to the
+  posteriors as the audio arrives (:mod:`animegraph.live.transcript`);
 * the frames of the window up to ``lookahead_ms`` before its end are sent: a frame is
   sent once the audio ``lookahead`` after it has arrived, and it never changes after. The
   first :data:`FADE_FRAMES` frames of an update are cross-faded from what the previous
@@ -55,6 +60,13 @@ DEFAULT_HOP_MS = 80.0
 #: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`;
 #: 300 ms here followed the offline output as closely as 600 ms, docs/results/live.md).
 DEFAULT_CONTEXT_MS = 300.0
+#: ``animegraph live``'s default setting, and ``--low-latency``'s: frames sooner (a 40 ms
+#: look-ahead and hop; hama hearing 300 ms of context, a frame settled 40 ms after it: a
+#: third less CPU) for a mouth that follows the offline output less closely
+#: (docs/results/live.md, "Latency" and "Quality against the offline default").
+DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
+LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
+               "settle_ms": 40.0}
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
@@ -154,11 +166,22 @@ class Stream:
         (:class:`animegraph.live.frontend.PosteriorTrack`): the model hears this much audio
         before the first unsettled frame, and a frame is settled once this much audio
         after it has been heard.
+    text : str, optional
+        What the speech says (a text-to-speech voice knows it): the window's phones are
+        the transcript's, aligned to the posteriors as the audio arrives
+        (:class:`animegraph.live.transcript.TranscriptTrack`), ranked by phonetic context
+        first and not blended with the guide, as offline synthesis with a transcript
+        does (:mod:`animegraph.synthesis.path`). A transcript that stops fitting the
+        speech is said once (``stats.warnings``) and the phones are recognised from
+        there on, with ``guide``.
 
     Raises
     ------
     ParameterError
-        On an unsupported rate or a look-ahead, hop or context out of range.
+        On an unsupported rate or a look-ahead, hop or context out of range, or an
+        empty ``text``.
+    DataError
+        A ``text`` with no pronounceable word.
     """
 
     def __init__(self, model, *, sample_rate: int = 16000,
@@ -384,7 +407,7 @@ class Stream:
         motion, warnings = window_motion(
             self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
             k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
-            guide=self.guide)
+            guide=None if self._transcript is not None else self.guide)
         for warning in warnings:
             self.stats.warnings[warning[:80]] += 1
         return motion
