@@ -66,6 +66,9 @@ CHUNK_S = 0.02
 WINDOW: dict = {}
 #: The database ingested from grid/s1 (``--grid-db``), read for the grid split's clips.
 GRID_DB: list = []
+#: ... and a database already built from its 640 database clips (``--grid-train-db``, e.g.
+#: an ``animegraph ingest`` of their videos, its guides stored), instead of building one.
+GRID_TRAIN_DB: list = []
 #: Also score the live stream and the offline default given each clip's transcript
 #: (``--text``; clips that have one).
 TEXT: list = []
@@ -145,12 +148,21 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     t0 = time.perf_counter()
     train, test, reference = split(name, tmp, facegood_seconds)
     test = test[::max(1, -(-len(test) // max_clips))]  # evenly, at most max_clips
-    db = tmp / f"db-{name}"
-    build_database(db, train, reference=reference)
-    model = Model.load(db)
-    guide, missing = guides(train)
     loud = Loudness().fit(train)
-    print(f"# {name}: {len(train)} clips in the database, {len(test)} held out; guide "
+    if name == "grid" and GRID_TRAIN_DB:  # built already from the split's database clips
+        from animegraph.live import stored_guide
+
+        db = GRID_TRAIN_DB[0]
+        guide, missing = stored_guide(db)
+        missing = [f"{m}: not stored" for m in missing]
+    else:
+        db = tmp / f"db-{name}"
+        build_database(db, train, reference=reference)
+        guide, missing = guides(train)
+    n_train = len(train)
+    del train  # the clips (the grid split's are 2 GB)
+    model = Model.load(db)
+    print(f"# {name}: {n_train} clips in the database, {len(test)} held out; guide "
           f"{AUDIO_ONLY_GUIDE}{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
           f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
     rows = {"offline": [], "offline-hama": [], "loudness": [],
@@ -289,6 +301,9 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--grid-db", type=Path, default=None,
                         help="the grid split's clips: a database ingested from grid/s1 (read)")
+    parser.add_argument("--grid-train-db", type=Path, default=None,
+                        help="the grid split's database, built already from its 640 "
+                        "database clips (e.g. animegraph ingest of their videos)")
     parser.add_argument("--text", action="store_true",
                         help="also live and offline with each held-out clip's transcript")
     parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
@@ -300,6 +315,7 @@ def main() -> int:
                         help="audio after a frame before its posteriors are settled (ms)")
     args = parser.parse_args()
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
+    GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
     TEXT.extend([True] if args.text else [])
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
