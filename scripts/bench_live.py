@@ -2,7 +2,8 @@
 
 Usage::
 
-    python scripts/bench_live.py [--quality synthetic facegood] [--lookaheads 40 80 120 200 300]
+    python scripts/bench_live.py [--quality synthetic facegood grid] [--grid-db DB] [--text]
+                                 [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
 * **Quality** (``--quality``): a database is built from a split's training clips (as
@@ -16,7 +17,12 @@ Usage::
   stored space) is averaged over the clips, beside the loudness reference
   (:class:`animegraph.baselines.reference.Loudness`). ``synthetic``: the last parallel
   sentence and the last two single-emotion ones held out of a generated corpus;
-  ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored).
+  ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored);
+  ``grid``: :func:`animegraph.apps.evaluate.grid_split` of the clips of ``--grid-db`` (an
+  ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
+  given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
+  default with each clip's transcript (k-best, context ranking, no guide: what ``synth``
+  runs) and the live stream given it (``Stream(text=...)``).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
