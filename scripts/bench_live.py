@@ -22,7 +22,7 @@ Usage::
   ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
   given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
   default with each clip's transcript (k-best, context ranking, no guide: what ``synth``
-  runs) and the live stream given it (``Stream(text=...)``).
+  runs) and the live stream given it (``Stream(text=...)``, the guide blended).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that

@@ -169,11 +169,12 @@ class Stream:
     text : str, optional
         What the speech says (a text-to-speech voice knows it): the window's phones are
         the transcript's, aligned to the posteriors as the audio arrives
-        (:class:`animegraph.live.transcript.TranscriptTrack`), ranked by phonetic context
-        first and not blended with the guide, as offline synthesis with a transcript
-        does (:mod:`animegraph.synthesis.path`). A transcript that stops fitting the
-        speech is said once (``stats.warnings``) and the phones are recognised from
-        there on, with ``guide``.
+        (:class:`animegraph.live.transcript.TranscriptTrack`) and ranked by phonetic
+        context first, as offline synthesis with a transcript does
+        (:mod:`animegraph.synthesis.path`); ``guide`` is still blended (offline it is
+        not: live, without it, the mouth followed the recording much less closely). A
+        transcript that stops fitting the speech is said once (``stats.warnings``) and
+        the phones are recognised from there on.
 
     Raises
     ------
@@ -402,12 +403,14 @@ class Stream:
             segments = ctc.recognize(audio, self.sample_rate)
         if all(s.phone == "SIL" for s in segments):
             return self._pause(n)
-        # Known phones are ranked by phonetic context first, as offline (synthesis.path).
+        # Known phones are ranked by phonetic context first, as offline (synthesis.path);
+        # unlike offline the guide stays blended: a short window's animes alone followed
+        # the recording much less closely (docs/results/live.md, "With a transcript").
         context = self._transcript is not None and KNOWN_PHONES_CONTEXT
         motion, warnings = window_motion(
             self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
             k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
-            guide=None if self._transcript is not None else self.guide)
+            guide=self.guide)
         for warning in warnings:
             self.stats.warnings[warning[:80]] += 1
         return motion
