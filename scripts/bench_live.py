@@ -2,7 +2,8 @@
 
 Usage::
 
-    python scripts/bench_live.py [--quality synthetic facegood] [--lookaheads 40 80 120 200 300]
+    python scripts/bench_live.py [--quality synthetic facegood grid] [--grid-db DB] [--text]
+                                 [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
 * **Quality** (``--quality``): a database is built from a split's training clips (as
@@ -16,7 +17,12 @@ Usage::
   stored space) is averaged over the clips, beside the loudness reference
   (:class:`animegraph.baselines.reference.Loudness`). ``synthetic``: the last parallel
   sentence and the last two single-emotion ones held out of a generated corpus;
-  ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored).
+  ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored);
+  ``grid``: :func:`animegraph.apps.evaluate.grid_split` of the clips of ``--grid-db`` (an
+  ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
+  given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
+  default with each clip's transcript (k-best, context ranking, no guide: what ``synth``
+  runs) and the live stream given it (``Stream(text=...)``, the guide blended).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
@@ -53,7 +59,7 @@ from animegraph.live.run import run
 from animegraph.live.sources import FileSource
 from animegraph.motion.measures import mouth_opening, pearson
 from animegraph.synthesis import Model, synthesize
-from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST
+from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST, TRANSCRIPT_K_BEST
 from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.formats.wav import write_wav
@@ -64,6 +70,14 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 CHUNK_S = 0.02
 #: The stream's hop and context (``--hop``, ``--context``; the defaults if not given).
 WINDOW: dict = {}
+#: The database ingested from grid/s1 (``--grid-db``), read for the grid split's clips.
+GRID_DB: list = []
+#: ... and a database already built from its 640 database clips (``--grid-train-db``, e.g.
+#: an ``animegraph ingest`` of their videos, its guides stored), instead of building one.
+GRID_TRAIN_DB: list = []
+#: Also score the live stream and the offline default given each clip's transcript
+#: (``--text``; clips that have one).
+TEXT: list = []
 #: Speech for latency and drift with --db (eSpeak NG).
 SENTENCES = ("Please bring the blue box to the table.",
              "We were away a year ago when the rain came down on the hills.",
@@ -91,6 +105,17 @@ def split(name: str, tmp: Path, facegood_seconds: float):
         held = clips[-1]
         seconds = min(facegood_seconds, held.duration)
         return clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")], reference
+    if name == "grid":
+        if GRID_DB is None:
+            raise SystemExit("the grid split needs --grid-db, a database ingested from grid/s1")
+        from animegraph.apps.evaluate import grid_split
+        from db.store import Database
+        from ingest.tables import prepared_from_database
+
+        clips = prepared_from_database(Database.open(GRID_DB[0]))
+        reference = Database.open(GRID_DB[0]).arrays().get("head_reference")
+        train, test = grid_split(clips)
+        return train, test, reference
     raise SystemExit(f"unknown split {name!r}")
 
 
@@ -105,9 +130,10 @@ def guides(train) -> tuple[object, list[str]]:
     return (None if not got else got[0] if len(got) == 1 else tuple(got)), missing
 
 
-def live_motion(model, audio, sr, lookahead_ms, guide) -> tuple[np.ndarray, Stream]:
+def live_motion(model, audio, sr, lookahead_ms, guide, text=None
+                ) -> tuple[np.ndarray, Stream]:
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
-                    backlog_ms=None, **WINDOW)
+                    backlog_ms=None, text=text, **WINDOW)
     step = int(CHUNK_S * sr)
     parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
     parts.append(stream.close().motion)
@@ -128,17 +154,30 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     t0 = time.perf_counter()
     train, test, reference = split(name, tmp, facegood_seconds)
     test = test[::max(1, -(-len(test) // max_clips))]  # evenly, at most max_clips
-    db = tmp / f"db-{name}"
-    build_database(db, train, reference=reference)
-    model = Model.load(db)
-    guide, missing = guides(train)
     loud = Loudness().fit(train)
-    print(f"# {name}: {len(train)} clips in the database, {len(test)} held out; guide "
+    if name == "grid" and GRID_TRAIN_DB:  # built already from the split's database clips
+        from animegraph.live import stored_guide
+
+        db = GRID_TRAIN_DB[0]
+        guide, missing = stored_guide(db)
+        missing = [f"{m}: not stored" for m in missing]
+    else:
+        db = tmp / f"db-{name}"
+        build_database(db, train, reference=reference)
+        guide, missing = guides(train)
+    n_train = len(train)
+    del train  # the clips (the grid split's are 2 GB)
+    model = Model.load(db)
+    print(f"# {name}: {n_train} clips in the database, {len(test)} held out; guide "
           f"{AUDIO_ONLY_GUIDE}{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
           f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
     rows = {"offline": [], "offline-hama": [], "loudness": [],
             **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
+    if TEXT:
+        rows.update({"offline-text": [], **{f"live-text-{la:g}": [] for la in lookaheads}})
+        cpu.update({f"live-text-{la:g}": [] for la in lookaheads})
+    misfit = 0
     for clip in test:
         audio = clip.audio.astype(np.float32) / 32768.0
         sr = clip.sample_rate
@@ -155,9 +194,20 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
             motion, stream = live_motion(model, audio, sr, la, guide)
             rows[f"live-{la:g}"].append(mouth_r(model, motion, clip))
             cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
+        text = getattr(clip, "text", None) if TEXT else None
+        if TEXT and text:  # as synth with a transcript: k-best, context ranking, no guide
+            off = synthesize(model, audio, sr, text=text, k_best=TRANSCRIPT_K_BEST,
+                             recognized_guide=guide).motion
+            rows["offline-text"].append(mouth_r(model, off, clip))
+            for la in lookaheads:
+                motion, stream = live_motion(model, audio, sr, la, guide, text=text)
+                rows[f"live-text-{la:g}"].append(mouth_r(model, motion, clip))
+                cpu[f"live-text-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
+                misfit += any(k.startswith("the transcript does not fit")
+                              for k in stream.stats.warnings)
         print(f"#   {clip.clip_id}: " + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rows.items()),
               flush=True)
-    out = {"clips": len(test), "fps": model.graph.fps,
+    out = {"clips": len(test), "fps": model.graph.fps, "transcripts_given_up": misfit,
            "mouth_r": {k: float(np.mean(v)) for k, v in rows.items()},
            "cpu_share": {k: float(np.mean(v)) for k, v in cpu.items()}}
     out["model"], out["guide"] = model, guide
@@ -255,6 +305,13 @@ def main() -> int:
     parser.add_argument("--unpaced", action="store_true",
                         help="also the stream's CPU with the speech pushed as fast as taken")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--grid-db", type=Path, default=None,
+                        help="the grid split's clips: a database ingested from grid/s1 (read)")
+    parser.add_argument("--grid-train-db", type=Path, default=None,
+                        help="the grid split's database, built already from its 640 "
+                        "database clips (e.g. animegraph ingest of their videos)")
+    parser.add_argument("--text", action="store_true",
+                        help="also live and offline with each held-out clip's transcript")
     parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
     parser.add_argument("--context", type=float, default=None,
                         help="the stream's context (ms)")
@@ -263,6 +320,9 @@ def main() -> int:
     parser.add_argument("--settle", type=float, default=None,
                         help="audio after a frame before its posteriors are settled (ms)")
     args = parser.parse_args()
+    GRID_DB.extend([args.grid_db] if args.grid_db else [])
+    GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
+    TEXT.extend([True] if args.text else [])
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
                                      ("settle_ms", args.settle))

@@ -614,12 +614,21 @@ def _add_live(sub) -> None:
                       "16000)")
     live.add_argument("--fast", action="store_true",
                       help="play a file as fast as it is synthesized, not at its pace")
-    live.add_argument("--lookahead", type=_number, default=120.0, metavar="MS",
-                      help="audio heard after a frame before it is sent (120 ms)")
-    live.add_argument("--hop", type=_number, default=80.0, metavar="MS",
-                      help="audio between two updates (80 ms)")
+    live.add_argument("--lookahead", type=_number, default=None, metavar="MS",
+                      help="audio heard after a frame before it is sent (120 ms; 40 with "
+                      "--low-latency)")
+    live.add_argument("--hop", type=_number, default=None, metavar="MS",
+                      help="audio between two updates (80 ms; 40 with --low-latency)")
+    live.add_argument("--low-latency", action="store_true",
+                      help="frames sooner, following the offline output less closely: "
+                      "look-ahead 40 ms, an update every 40 ms, hama hearing 300 ms of "
+                      "context and settling a frame 40 ms after it (docs/results/live.md)")
     live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
                       help="the face's emotion: a name, auto, or a mix")
+    live.add_argument("--text", default=None, metavar="TRANSCRIPT",
+                      help="what the speech says (a text-to-speech voice knows it): its "
+                      "phones are aligned to the speech as it arrives instead of "
+                      "recognised; a transcript that does not fit is said and dropped")
     live.add_argument("--guide", choices=("default", "none"), default="default",
                       help="the audio-only default's guide (mu-mlp and ppg-ridge), or none")
     live.add_argument("--livelink", default=None, metavar="HOST:PORT",

@@ -105,7 +105,7 @@ class PosteriorTrack:
             start_frame = int(math.ceil(buffer_start / per_frame))
             a = int(round(start_frame * per_frame))
         audio = buffer[a - buffer_start: heard - buffer_start]
-        x = _to_model_rate(audio, self.sample_rate)
+        x = to_model_rate(audio, self.sample_rate)
         if peak > 0:
             x = x * (LEVEL / peak)
         probs = ctc.phone_probs(x.astype(np.float32))
@@ -136,7 +136,8 @@ class PosteriorTrack:
             self._first += cut
 
 
-def _to_model_rate(audio: np.ndarray, sample_rate: int) -> np.ndarray:
+def to_model_rate(audio: np.ndarray, sample_rate: int) -> np.ndarray:
+    """``audio`` (shape (n,)) resampled to hama's :data:`MODEL_RATE`, float64."""
     if sample_rate == MODEL_RATE:
         return np.asarray(audio, dtype=np.float64)
     from scipy.signal import resample_poly

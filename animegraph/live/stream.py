@@ -19,7 +19,12 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
-  blended 50/50) from those phones given as labels;
+  blended 50/50) from those phones given as labels, except that each phone's choice of
+  animes is made once (:mod:`animegraph.live.window`): a phone found again in the next
+  window (same label, boundaries within 20 ms) keeps its k best animes and their
+  time-warps, and only the new phones are scored by DTW and warped;
+* with a transcript (``text``) the window's phones are the transcript's, aligned to the
+  posteriors as the audio arrives (:mod:`animegraph.live.transcript`);
 * the frames of the window up to ``lookahead_ms`` before its end are sent: a frame is
   sent once the audio ``lookahead`` after it has arrived, and it never changes after. The
   first :data:`FADE_FRAMES` frames of an update are cross-faded from what the previous
@@ -43,6 +48,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from animegraph.live.frontend import CONTEXT_S, FRAME_RATE, SETTLE_S, PosteriorTrack
+from animegraph.live.transcript import TranscriptTrack, window_segments
+from animegraph.live.window import PhoneMemory, window_motion
 from db.errors import DataError, ParameterError
 
 #: Look-ahead (ms) by default: the audio after a frame that is heard before it is sent.
@@ -53,6 +60,13 @@ DEFAULT_HOP_MS = 80.0
 #: (hama's own context is the posterior track's, :data:`animegraph.live.frontend.CONTEXT_S`;
 #: 300 ms here followed the offline output as closely as 600 ms, docs/results/live.md).
 DEFAULT_CONTEXT_MS = 300.0
+#: ``animegraph live``'s default setting, and ``--low-latency``'s: frames sooner (a 40 ms
+#: look-ahead and hop; hama hearing 300 ms of context, a frame settled 40 ms after it: a
+#: third less CPU) for a mouth that follows the offline output less closely
+#: (docs/results/live.md, "Latency" and "Quality against the offline default").
+DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
+LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
+               "settle_ms": 40.0}
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
@@ -152,11 +166,23 @@ class Stream:
         (:class:`animegraph.live.frontend.PosteriorTrack`): the model hears this much audio
         before the first unsettled frame, and a frame is settled once this much audio
         after it has been heard.
+    text : str, optional
+        What the speech says (a text-to-speech voice knows it): the window's phones are
+        the transcript's, aligned to the posteriors as the audio arrives
+        (:class:`animegraph.live.transcript.TranscriptTrack`) and ranked by phonetic
+        context first, as offline synthesis with a transcript does
+        (:mod:`animegraph.synthesis.path`); ``guide`` is still blended (offline it is
+        not: live, without it, the mouth followed the recording much less closely). A
+        transcript that stops fitting the speech is said once (``stats.warnings``) and
+        the phones are recognised from there on.
 
     Raises
     ------
     ParameterError
-        On an unsupported rate or a look-ahead, hop or context out of range.
+        On an unsupported rate or a look-ahead, hop or context out of range, or an
+        empty ``text``.
+    DataError
+        A ``text`` with no pronounceable word.
     """
 
     def __init__(self, model, *, sample_rate: int = 16000,
@@ -165,7 +191,7 @@ class Stream:
                  k_best: int | None = None,
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
-                 settle_ms: float = SETTLE_S * 1000) -> None:
+                 settle_ms: float = SETTLE_S * 1000, text: str | None = None) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
@@ -203,6 +229,8 @@ class Stream:
         self._tentative: tuple[int, np.ndarray] | None = None  # unsent frames of a window
         self._track = PosteriorTrack(self.sample_rate, context_s=posterior_context_ms / 1000,
                                      settle_s=settle_ms / 1000)
+        self._transcript = None if text is None else TranscriptTrack(text, FRAME_RATE)
+        self._memory = PhoneMemory()  # each phone's choice of animes, made once
         self._closed = False
 
     # -- control ---------------------------------------------------------------------------
@@ -286,6 +314,7 @@ class Stream:
         first = self._on_posterior_frame(
             max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps))))
         self._track.update(self._buffer, self._buffer_start, end, self._peak)
+        self._follow_transcript()
         motion = self._window(first, end)  # frames first, first + 1, ... (may end short)
         if len(motion) < target - first:  # rounding at the end: hold the last frame
             pad = motion[-1:] if len(motion) else self._last[None]
@@ -303,6 +332,20 @@ class Stream:
         self.stats.update_wall.append(wall)
         self.stats.update_cpu.append(cpu)
         return Frames(first_sent, out, self.fps, end_s)
+
+    def _follow_transcript(self) -> None:
+        """Extend the transcript's path over the posteriors not fixed on it yet; once it
+        stops fitting the speech, say so (once) and recognise the phones instead."""
+        script = self._transcript
+        if script is None:
+            return
+        if script.failed is None:
+            first = script.fixed
+            rows = self._track.posteriors(first, self._track.frames - first)
+            script.update(np.log(np.maximum(rows, 1e-30)), first)
+        if script.failed is not None:
+            self.stats.warnings[script.failed[:80]] += 1
+            self._transcript = None
 
     def _on_posterior_frame(self, first: int) -> int:
         """The latest motion frame at or before ``first`` that starts a 20 ms posterior
@@ -334,7 +377,7 @@ class Stream:
             return self._pause(n)
         start_s = max(start, self._buffer_start) / self.sample_rate  # where the audio begins
         try:
-            return self._synthesize(audio, n, int(round(start_s * FRAME_RATE)))
+            return self._synthesize(audio, n, start_s)
         except DataError as exc:  # e.g. nothing but silence heard in the window
             self.stats.warnings[str(exc).split(":")[0][:80]] += 1
             return self._pause(n)
@@ -343,23 +386,34 @@ class Stream:
         self.stats.pauses += 1
         return np.repeat(self._rest[None], n, axis=0)
 
-    def _synthesize(self, audio: np.ndarray, n: int, first_posterior: int) -> np.ndarray:
-        """The window's motion; its phones and the guide's posteriorgram from the track's
-        posteriors (rows from ``first_posterior``), the model not run again."""
-        from animegraph.synthesis import synthesize
+    def _synthesize(self, audio: np.ndarray, n: int, start_s: float) -> np.ndarray:
+        """The window's motion (its audio begins at ``start_s``); its phones and the
+        guide's posteriorgram from the track's posteriors, the model not run again."""
+        from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
         from ingest.speech import ctc
 
+        first_posterior = int(round(start_s * FRAME_RATE))
         count = int(np.ceil(len(audio) / self.sample_rate * FRAME_RATE - 1e-9))
-        ctc.remember(audio, self.sample_rate, self._track.posteriors(first_posterior, count))
-        segments = ctc.recognize(audio, self.sample_rate)
+        probs = self._track.posteriors(first_posterior, count)
+        ctc.remember(audio, self.sample_rate, probs)
+        if self._transcript is not None:  # the transcript's phones, placed by its path
+            segments = window_segments(self._transcript, probs, first_posterior, audio,
+                                       self.sample_rate)
+        else:
+            segments = ctc.recognize(audio, self.sample_rate)
         if all(s.phone == "SIL" for s in segments):
             return self._pause(n)
-        out = synthesize(self.model, audio, self.sample_rate, labels=segments,
-                         emotion=self._emotion_for(audio), k_best=self.k_best, context=False,
-                         guide=self.guide)
-        for warning in out.warnings:
+        # Known phones are ranked by phonetic context first, as offline (synthesis.path);
+        # unlike offline the guide stays blended: a short window's animes alone followed
+        # the recording much less closely (docs/results/live.md, "With a transcript").
+        context = self._transcript is not None and KNOWN_PHONES_CONTEXT
+        motion, warnings = window_motion(
+            self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
+            k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
+            guide=self.guide)
+        for warning in warnings:
             self.stats.warnings[warning[:80]] += 1
-        return out.motion
+        return motion
 
     def _emotion_for(self, audio: np.ndarray):
         """The emotion of this update: as set, or (``auto``) the speech's, classified
@@ -386,7 +440,11 @@ class Stream:
             keep_from = min(keep_from, self._heard - int(AUTO_SPAN_S * self.sample_rate))
         track_from = (self._track.settled / FRAME_RATE - self._track.context_s) - 0.02
         keep_from = min(keep_from, int(track_from * self.sample_rate))
-        self._track.forget(int((self._sent / self.fps - self.context_s - 0.1) * FRAME_RATE))
+        rows_from = int((self._sent / self.fps - self.context_s - 0.1) * FRAME_RATE)
+        if self._transcript is not None:  # its path is extended from its fixed frames
+            rows_from = min(rows_from, self._transcript.fixed)
+            self._transcript.forget(rows_from)
+        self._track.forget(rows_from)
         cut = keep_from - self._buffer_start
         if cut > 0:
             self._buffer = self._buffer[cut:]

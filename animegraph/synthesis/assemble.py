@@ -375,7 +375,8 @@ def recording_means(graph: AnimeGraph) -> np.ndarray:
 
 def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequence[Phone], *,
                  cutoffs: np.ndarray | None = None,
-                 options: PostOptions | None = None) -> np.ndarray:
+                 options: PostOptions | None = None,
+                 positions: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
     """Motion that averages several animes per input phone (beyond the paper).
 
     Each phone's frames are the weighted mean of the motions of its ``ranked`` nodes, each
@@ -421,6 +422,10 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
         Needed for smoothing.
     options : PostOptions, optional
         ``time_warp``, ``blend``, ``smooth`` and ``recentre`` apply.
+    positions : sequence of (np.ndarray or None), length n, optional
+        With ``time_warp``: each phone's time-warps of its ranked animes, as
+        :func:`blend_positions` gives them (computed if None; a stream keeps those of
+        the phones it has warped already, :mod:`animegraph.live.window`).
 
     Returns
     -------
@@ -434,7 +439,10 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     means = recording_means(graph) if opts.recentre else None
     offset, used = np.zeros(n_ics), 0.0
     before, after = [], []  # per phone: its animes' recorded neighbours, (mean, weight)
-    positions = _warp_rows(graph, ranked, phones) if opts.time_warp else [None] * len(phones)
+    if not opts.time_warp:
+        positions = [None] * len(phones)
+    elif positions is None:
+        positions = blend_positions(graph, ranked, phones)
     for i, (nodes, phone, (s, b)) in enumerate(zip(ranked, phones, ranges, strict=True)):
         nodes = np.asarray(nodes, dtype=np.int64)
         w = rank_weights(len(nodes))
@@ -462,10 +470,11 @@ def blend_k_best(graph: AnimeGraph, ranked: Sequence[np.ndarray], phones: Sequen
     return motion
 
 
-def _warp_rows(graph: AnimeGraph, ranked: Sequence[np.ndarray],
-               phones: Sequence[Phone]) -> list[np.ndarray | None]:
+def blend_positions(graph: AnimeGraph, ranked: Sequence[np.ndarray],
+                    phones: Sequence[Phone]) -> list[np.ndarray | None]:
     """:func:`warp_animes`'s ``positions`` for every phone's ``ranked`` nodes, in one
-    compiled pass over the utterance (rows of animes that are stretched are zero)."""
+    compiled pass over the utterance (rows of animes that are stretched are zero; None
+    for a phone of one prosody frame or less): shapes (len(ranked[i]), n_prosody_i)."""
     out: list[np.ndarray | None] = [None] * len(phones)
     lengths = np.diff(graph.prosody_offsets)
     use = [i for i, p in enumerate(phones) if len(p.prosody) > 1]

@@ -13,9 +13,14 @@ from animegraph.apps.commands.common import UsageError
 def cmd_live(args: argparse.Namespace) -> int:
     from animegraph.live import Stream
     from animegraph.live.run import run
-    from animegraph.live.stream import DEFAULT_BACKLOG_MS, check_rate
+    from animegraph.live.stream import (
+        DEFAULT_BACKLOG_MS,
+        DEFAULT_SETTING,
+        LOW_LATENCY,
+        check_rate,
+    )
     from animegraph.synthesis import Model
-    from db.errors import ParameterError
+    from db.errors import DataError, ParameterError
 
     if not (args.livelink or args.websocket is not None or args.record):
         raise UsageError("animegraph live: say where the frames go: --livelink HOST:PORT, "
@@ -38,10 +43,14 @@ def cmd_live(args: argparse.Namespace) -> int:
     model = Model.load(args.db)
     guide = _guide(args)
     try:
-        stream = Stream(model, sample_rate=source.sample_rate, lookahead_ms=args.lookahead,
-                        hop_ms=args.hop, emotion=args.emotion, guide=guide,
-                        backlog_ms=None if args.fast else DEFAULT_BACKLOG_MS)
-    except ParameterError as exc:
+        setting = dict(LOW_LATENCY if args.low_latency else DEFAULT_SETTING)
+        for name, given in (("lookahead_ms", args.lookahead), ("hop_ms", args.hop)):
+            if given is not None:
+                setting[name] = given
+        stream = Stream(model, sample_rate=source.sample_rate, **setting,
+                        emotion=args.emotion, guide=guide,
+                        backlog_ms=None if args.fast else DEFAULT_BACKLOG_MS, text=args.text)
+    except (ParameterError, DataError) as exc:
         raise UsageError(f"animegraph live: {exc}") from None
     outputs = []
     try:
@@ -74,7 +83,8 @@ def cmd_live(args: argparse.Namespace) -> int:
             output.close()
         raise
     print(f"animegraph: live: {model.graph.n_nodes} animes at {stream.fps:g} fps; "
-          f"look-ahead {args.lookahead:g} ms, an update every {args.hop:g} ms; "
+          f"look-ahead {stream.lookahead_s * 1000:g} ms, an update every "
+          f"{stream.hop_s * 1000:g} ms; "
           f"{_where(args)} (Ctrl-C ends)", file=sys.stderr)
     try:
         take = run(stream, source, outputs, recorder=recorder)

@@ -1,0 +1,250 @@
+"""Live phones: each phone's choice of animes made once (animegraph.live.window) and a
+known transcript aligned as the audio arrives (animegraph.live.transcript).
+
+eSpeak NG speech, hama's posteriors and the tiny database; no mocks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from db.errors import DataError, ParameterError
+
+SAID = "We were away a year ago when the rain came down on the hills."
+
+
+@pytest.fixture(scope="module")
+def speech():
+    from ingest.speech.espeak import speak
+
+    u = speak(SAID)
+    return u.audio.astype(np.float32), u.sample_rate
+
+
+@pytest.fixture(scope="module")
+def model(tiny_db):
+    from animegraph.synthesis import Model
+
+    return Model.load(tiny_db[0])
+
+
+@pytest.fixture(scope="module")
+def log_probs(speech):
+    from ingest.speech import ctc
+
+    audio, sr = speech
+    return np.log(np.maximum(ctc.posteriors(audio, sr), 1e-30))
+
+
+def _play(stream, audio, chunk_s=0.02):
+    step = int(chunk_s * stream.sample_rate)
+    parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
+    parts.append(stream.close().motion)
+    return np.concatenate(parts)
+
+
+def _follow(track, log_probs, step=4):
+    """The posteriors given to ``track`` ``step`` frames at a time, as a stream does."""
+    for end in range(step, len(log_probs) + step, step):
+        first = track.fixed
+        track.update(log_probs[first:min(end, len(log_probs))], first)
+    return track
+
+
+# --- the transcript, aligned as the audio arrives -----------------------------------------
+
+
+def test_transcript_path_as_it_arrives_is_the_offline_alignment(log_probs):
+    """Fed 80 ms at a time, the free-end, fixed-lag path places every phone of a right
+    transcript where the CTC Viterbi of the whole utterance does (within a frame)."""
+    from animegraph.live.transcript import TranscriptTrack
+    from ingest.speech.ctc_timing import ctc_viterbi
+    from ingest.speech.phones import PHONES, SILENCE
+
+    track = _follow(TranscriptTrack(SAID, 50), log_probs)
+    labels = np.asarray([PHONES.index(p) for p in track.phones])
+    offline, _ = ctc_viterbi(log_probs, labels, PHONES.index(SILENCE))
+    phones, starts = track.phone_starts(0, len(log_probs))
+    assert track.failed is None
+    assert phones == track.phones
+    assert np.max(np.abs(starts - offline)) <= 1, (starts, offline)
+
+
+def test_transcript_of_other_words_or_too_few_is_given_up(log_probs):
+    from animegraph.live.transcript import TranscriptTrack
+
+    wrong = _follow(TranscriptTrack("Seven wizards quietly hex a jolly box of fish.", 50),
+                    log_probs)
+    assert wrong.failed is not None and "does not fit" in wrong.failed
+    short = _follow(TranscriptTrack("We were away.", 50), log_probs)  # the speech goes on
+    assert short.failed is not None
+
+
+def test_transcript_window_segments_are_its_phones(speech, log_probs):
+    """A window's segments tile its audio and name the transcript's phones, in order."""
+    from animegraph.live.transcript import TranscriptTrack, window_segments
+
+    audio, sr = speech
+    track = _follow(TranscriptTrack(SAID, 50), log_probs)
+    first, count = 50, 40  # 1.0 s to 1.8 s
+    window = audio[int(1.0 * sr): int(1.8 * sr)]
+    segments = window_segments(track, np.exp(log_probs[first:first + count]), first, window,
+                               sr)
+    assert segments[0].start == 0.0
+    assert segments[-1].end == pytest.approx(len(window) / sr)
+    assert all(a.end == b.start for a, b in zip(segments, segments[1:], strict=False))
+    named = [s.phone for s in segments if s.phone != "SIL"]
+    said, _ = track.phone_starts(first, count)
+    assert named == said and len(named) >= 4
+    at = track.phones.index(said[0])  # a run of the transcript's phones
+    assert said == track.phones[at:at + len(said)]
+
+
+def test_transcript_refused_when_empty_or_unpronounceable():
+    from animegraph.live.transcript import TranscriptTrack
+
+    with pytest.raises(ParameterError):
+        TranscriptTrack("   ", 50)
+    with pytest.raises(DataError):
+        TranscriptTrack("... !!!", 50)
+
+
+def test_stream_with_its_transcript_or_another_sends_every_frame(model, speech):
+    """With the right transcript nothing is said; with another one the stream says once
+    that it does not fit and recognises the phones from there on."""
+    from animegraph.live import Stream
+
+    audio, sr = speech
+    n = int(round(len(audio) / sr * model.graph.fps))
+    right = Stream(model, sample_rate=sr, backlog_ms=None, text=SAID)
+    motion = _play(right, audio)
+    assert motion.shape == (n, len(model.names)) and np.isfinite(motion).all()
+    assert not any("transcript" in w for w in right.stats.warnings)
+    assert right._transcript is not None and right._memory.misses > 0
+    wrong = Stream(model, sample_rate=sr, backlog_ms=None,
+                   text="Seven wizards quietly hex a jolly box of frozen fish.")
+    assert len(_play(wrong, audio)) == n
+    said = [w for w in wrong.stats.warnings if w.startswith("the transcript does not fit")]
+    assert len(said) == 1 and wrong.stats.warnings[said[0]] == 1
+    assert wrong._transcript is None  # recognising
+
+
+def test_stream_transcript_mouth_follows_offline_with_the_transcript(model, speech):
+    from animegraph.live import Stream
+    from animegraph.motion.measures import mouth_opening, pearson
+    from animegraph.synthesis import synthesize
+
+    audio, sr = speech
+    live = _play(Stream(model, sample_rate=sr, backlog_ms=None, text=SAID,
+                        lookahead_ms=200), audio)
+    offline = synthesize(model, audio, sr, text=SAID, k_best=20).motion
+    n = min(len(live), len(offline))
+    r = pearson(mouth_opening(live[:n], model.names, model.kind),
+                mouth_opening(offline[:n], model.names, model.kind))
+    assert r > 0.5, r
+
+
+# --- each phone's choice made once ----------------------------------------------------------
+
+
+def _segments(speech):
+    from ingest.speech import ctc
+
+    audio, sr = speech
+    window = audio[: int(1.5 * sr)]
+    return window, ctc.recognize(window, sr)
+
+
+def test_window_with_nothing_kept_is_the_offline_synthesis(model, speech):
+    """With an empty memory the window is synthesized exactly as synthesize() does with
+    the same phones as labels (k-best, no context ranking)."""
+    from animegraph.live.window import PhoneMemory, window_motion
+    from animegraph.synthesis import synthesize
+
+    _, sr = speech
+    window, segments = _segments(speech)
+    memory = PhoneMemory()
+    motion, _ = window_motion(model, window, sr, segments, 0.0, memory=memory, k_best=20)
+    offline = synthesize(model, window, sr, labels=segments, k_best=20, context=False).motion
+    np.testing.assert_allclose(motion, offline, atol=1e-9)
+    assert memory.hits == 0 and memory.misses == len(segments) == len(memory)
+
+
+def test_window_keeps_each_phones_choice_across_updates(model, speech):
+    """The same phones in a later window (its start moved by a hop) are not scored
+    again; their ranked animes stay what they were; a phone of another label is."""
+    from animegraph.live.window import PhoneMemory, window_motion
+    from ingest.formats.phones_csv import Segment
+
+    _, sr = speech
+    window, segments = _segments(speech)
+    memory = PhoneMemory()
+    window_motion(model, window, sr, segments, 0.0, memory=memory, k_best=20)
+    kept = {(k.phone, k.start_s): k.ranked.copy() for k in memory._kept}
+    # The same audio seen from 80 ms later: times shift, places in the stream do not,
+    # and the boundaries moved by 3 ms (as refinement on another window does).
+    hop = 0.08
+    later = window[int(hop * sr):]
+    moved = [Segment(s.phone, max(0.0, s.start - hop + 0.003), s.end - hop + 0.003)
+             for s in segments if s.end > hop]
+    moved[0] = Segment(moved[0].phone, 0.0, moved[0].end)
+    moved[-1] = Segment(moved[-1].phone, moved[-1].start, len(later) / sr)
+    before = memory.hits, memory.misses
+    window_motion(model, later, sr, moved, hop, memory=memory, k_best=20)
+    hits, misses = memory.hits - before[0], memory.misses - before[1]
+    assert hits >= len(moved) - 2 and misses <= 2, (hits, misses)
+    for k in memory._kept:
+        if (k.phone, k.start_s) in kept:
+            np.testing.assert_array_equal(k.ranked, kept[(k.phone, k.start_s)])
+    # Another label at a kept place is scored.
+    i = next(j for j, s in enumerate(moved[1:-1], 1) if s.phone not in ("SIL", "AA"))
+    relabelled = list(moved)
+    relabelled[i] = Segment("AA", moved[i].start, moved[i].end)
+    before = memory.misses
+    window_motion(model, later, sr, relabelled, hop, memory=memory, k_best=20)
+    assert memory.misses - before >= 1
+
+
+def test_stream_scores_fewer_phones_than_it_synthesizes(model, speech):
+    from animegraph.live import Stream
+
+    audio, sr = speech
+    stream = Stream(model, sample_rate=sr, backlog_ms=None)
+    _play(stream, audio)
+    memory = stream._memory
+    assert memory.hits > 0.3 * (memory.hits + memory.misses), (memory.hits, memory.misses)
+
+
+# --- the command ----------------------------------------------------------------------------
+
+
+def _live(args, **kw):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    return subprocess.run([sys.executable, "-m", "animegraph", "live", *args],
+                          capture_output=True, text=True, env=env, timeout=600, **kw)
+
+
+def test_live_command_with_a_transcript(tiny_db, speech, tmp_path):
+    from ingest.formats.wav import write_wav
+
+    audio, sr = speech
+    write_wav(tmp_path / "s.wav", audio, sr)
+    base = ["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
+            "--guide", "none", "--record", str(tmp_path / "take")]
+    out = _live([*base, "--text", SAID, "--low-latency"])
+    assert out.returncode == 0, out.stderr
+    assert "frames for" in out.stderr and "transcript" not in out.stderr
+    assert "look-ahead 40 ms, an update every 40 ms" in out.stderr
+    out = _live([*base, "--text", "Seven wizards quietly hex a jolly box of frozen fish."])
+    assert out.returncode == 0, out.stderr
+    assert "warning: the transcript does not fit" in out.stderr
+    for text, words in (("   ", "empty"), ("... !!!", "pronounceable")):
+        out = _live([*base, "--text", text])
+        assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+        assert words in out.stderr.strip().splitlines()[-1], out.stderr
