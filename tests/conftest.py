@@ -25,6 +25,26 @@ def pytest_configure(config):
         compile_shared_kernels()
 
 
+#: The test files that take longest, slowest first (docs/results/speed.md, "The test
+#: suite"). pytest-xdist hands files to its workers in the order collected
+#: (``--no-loadscope-reorder`` in pyproject.toml; by default it orders them by their number
+#: of tests, which put the demo's two long tests last): started first, a long file no
+#: longer runs alone at the end while the other workers have finished.
+SLOW_FILES = (
+    "test_examples.py", "test_docs.py", "test_demo.py", "test_batch.py", "test_workers.py",
+    "test_interrupt.py", "test_ingest.py", "test_live.py", "test_studio.py",
+    "test_ingest_dask.py", "test_fuzz.py", "test_invariants.py", "test_emotion_fit.py",
+    "test_baselines.py", "test_guide.py", "test_writer_lock.py", "test_search.py",
+    "test_emotion_cli.py", "test_posteriorgram.py", "test_lag.py", "test_render.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    # A stable sort: a file's tests keep their order, the other files theirs.
+    rank = {name: i for i, name in enumerate(SLOW_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
