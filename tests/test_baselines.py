@@ -6,7 +6,7 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import require_shared
+from conftest import AS_INGESTED, require_shared
 
 from animegraph.apps.cli import main
 from animegraph.baselines import BASELINES, METHODS, estimator_class, make_estimator
@@ -190,7 +190,7 @@ def test_array_round_trip_and_database_storage(fitted, split, tiny_db, tmp_path,
     np.testing.assert_array_equal(again.predict(clip.audio, clip.sample_rate,
                                                 emotion=clip.emotion), want)
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     assert load_model(db, method) is None
     path = save_model(est, db)
     assert path == model_path(db, method) and path.suffix == ".parquet"
@@ -372,7 +372,7 @@ def test_cli_synth_method_says_what_it_fits_on_first_use(tiny_db, split, tmp_pat
     from ingest.formats.wav import write_wav
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     clip = split[1][0]
     wav = tmp_path / "speech.wav"
     write_wav(wav, clip.audio.astype(np.float32) / 32767, clip.sample_rate)
@@ -390,7 +390,7 @@ def test_cli_synth_method_uses_the_stored_model(fitted, tiny_db, split, tmp_path
     from ingest.formats.wav import write_wav
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     save_model(fitted["hier-pca"], db)
     clip = split[1][0]
     wav = tmp_path / "speech.wav"
@@ -418,7 +418,7 @@ def test_info_lists_the_stored_models(fitted, tiny_db, tmp_path, capsys):
     import json
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     assert main(["info", "--db", str(db)]) == 0
     assert "baselines:  none fitted" in capsys.readouterr().out
     save_model(fitted["hier-pca"], db)
@@ -441,7 +441,7 @@ def test_info_lists_the_stored_models(fitted, tiny_db, tmp_path, capsys):
 
 def test_cli_fit_refuses_too_little_data_in_one_line(tiny_db, tmp_path, capsys):
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     assert main(["fit", "--db", str(db), "--method", "mu-mlp"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "too little data" in err[0]
@@ -460,7 +460,7 @@ def test_stored_model_with_arrays_that_do_not_fit_is_one_line(method, fitted, ti
     from db.store import arrays_from_table, arrays_to_table
 
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     save_model(fitted[method], db)
     path = model_path(db, method)
     table = pq.read_table(path)
@@ -507,7 +507,7 @@ def test_stored_settings_that_do_not_fit_the_arrays_are_one_line(method, params,
     small = SMALL.get(method, {"n_states": 3, "n_mix": 2, "n_iter": 5})  # av-hmm
     est = fitted.get(method) or make_estimator(method, **small).fit(split[0])
     db = tmp_path / "db"
-    shutil.copytree(tiny_db[0], db)
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
     path = save_model(est, db)
     table = pq.read_table(path)
     meta = json.loads(table.schema.metadata[META_KEY])

@@ -32,7 +32,9 @@ def test_variance_kept_and_round_trips(mixed):
     assert model.explained_variance_ratio_.sum() >= 0.95
     u = model.fit_transform(x)
     np.testing.assert_allclose(u, model.transform(x), atol=1e-8)
-    full = MotionDecomposer(variance=1.0).fit(x)
+    # All 20 components: 17 of them noise, on which FastICA never converges; the round trip
+    # holds for any unmixing it stops at, and 20 iterations take 0.5 s, not 1,000's 15 s.
+    full = MotionDecomposer(variance=1.0, max_iter=20).fit(x)
     np.testing.assert_allclose(full.inverse_transform(full.transform(x)), x, atol=1e-6)
     again = MotionDecomposer.from_arrays(model.to_arrays())
     np.testing.assert_array_equal(again.transform(x), model.transform(x))

@@ -6,6 +6,7 @@ import json
 import logging
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -342,8 +343,11 @@ def test_readme_queries_run(tiny_db):
 
 
 def test_cli_ingest_reports_rejections_with_exit_status_1(tiny_corpus, tmp_path, capsys):
+    # One sentence's clips (10 of the 34; one of them damaged) are enough to show a clip
+    # rejected beside clips that go in: the whole corpus made this the slowest ingest test.
     src = tmp_path / tiny_corpus.name
-    shutil.copytree(tiny_corpus, src)
+    shutil.copytree(tiny_corpus, src, ignore=lambda folder, names: [
+        n for n in names if Path(folder).name == "clips" and not n.startswith("s0001_")])
     victim = sorted((src / "clips").glob("*.c3d"))[0]
     victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])  # truncated C3D
     db = tmp_path / "db"
