@@ -109,3 +109,15 @@ def test_guides_fit_stopped_leaves_the_database_as_it_was(db_copy):
     for name in GUIDES:  # each guide stored whole, or not at all
         assert load_forward(db_copy, name) is not None or not model_path(db_copy, name).exists()
     assert not list(db_copy.rglob(".*.tmp"))  # no half-written file left behind
+
+
+def test_ppg_ridge_estimate_counts_only_the_speech_hama_hears_again(db_copy):
+    from animegraph.apps import prepare
+    from db.store import Database
+
+    database = Database.open(db_copy)
+    assert prepare._minutes_without_posteriors(database) == 0  # stored for every clip
+    minutes = float(database.manifest["duration_s"]) / 60
+    stored = prepare.PPG_RIDGE_STORED_CPU_S_PER_MIN * minutes
+    assert prepare.fit_estimate(db_copy, "ppg-ridge") == (
+        f"about {max(stored, 1):.0f} s on a quiet machine")

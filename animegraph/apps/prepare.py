@@ -41,9 +41,12 @@ WARM_SENTENCE = "Good morning, class."
 #: CPU seconds a default guide's fit takes per minute of the database's speech, at most:
 #: mu-mlp 23.5 CPU-s on GRID s1 (39.7 min, 1,411 channels); ppg-ridge 73 CPU-s on the
 #: demo's database (16.5 min of speech, no stored posteriorgrams, so hama hears every
-#: clip, on one thread a core; from stored ones, GRID s1's 9.3 CPU-s)
-#: (``scripts/bench_guide_fit.py``).
+#: clip, on one thread a core) (``scripts/bench_guide_fit.py``).
 FIT_CPU_S_PER_MIN = {"mu-mlp": 0.6, "ppg-ridge": 4.5}
+#: ppg-ridge's CPU seconds per minute of speech whose posteriorgram the database stores
+#: (hama does not hear it again): GRID s1's 10.3 CPU-s for 39.7 min, docs/results/speed.md
+#: "The guides' fit on GRID s1".
+PPG_RIDGE_STORED_CPU_S_PER_MIN = 0.3
 #: The fits that spread over the cores (ppg-ridge's hama, one clip a thread).
 _THREADED = frozenset({"ppg-ridge"})
 
@@ -55,16 +58,28 @@ def fit_estimate(db: Path, name: str) -> str:
     from db.system import usable_cpus
 
     try:
-        minutes = float(Database.open(db).manifest["duration_s"]) / 60
+        database = Database.open(db)
+        minutes = float(database.manifest["duration_s"]) / 60
+        heard = _minutes_without_posteriors(database) if name == "ppg-ridge" else minutes
     except (AnimeGraphError, OSError, KeyError, TypeError, ValueError):
         return ""
-    seconds = FIT_CPU_S_PER_MIN.get(name, 0.0) * minutes
+    seconds = FIT_CPU_S_PER_MIN.get(name, 0.0) * min(heard, minutes)
     if name in _THREADED:
         seconds /= max(1, usable_cpus())
+    if name == "ppg-ridge":  # the ridge itself, on one core, over every clip
+        seconds += PPG_RIDGE_STORED_CPU_S_PER_MIN * max(minutes - heard, 0.0)
     if seconds <= 0:
         return ""
     return (f"about {max(seconds, 1):.0f} s" if seconds < 90
             else f"about {seconds / 60:.0f} min") + " on a quiet machine"
+
+
+def _minutes_without_posteriors(database) -> float:
+    """Minutes of the database's speech whose posteriorgram it does not store: hama hears
+    them again when ppg-ridge is fitted (two small columns of the clips table)."""
+    clips = database.table("clips", columns=["duration", "posterior_frames"]).to_pydict()
+    return sum(float(d or 0.0) for d, n in zip(clips["duration"], clips["posterior_frames"],
+                                               strict=True) if not n) / 60
 
 
 def _quiet(line: str) -> None:
