@@ -22,7 +22,7 @@ import threading
 import time
 from collections import OrderedDict
 
-__all__ = ["Memo", "identity"]
+__all__ = ["Memo", "identities", "identity"]
 
 #: Nanoseconds a file must be left unchanged before a check of it is remembered.
 SETTLE_NS = 2_000_000_000
@@ -34,6 +34,15 @@ def identity(path: str | os.PathLike) -> tuple:
     st = os.stat(path)
     return (os.fspath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
             st.st_ctime_ns)
+
+
+def identities(paths) -> tuple | None:
+    """The :func:`identity` of each file of ``paths``, or None if one is gone (the check
+    that follows then says so, and nothing is remembered)."""
+    try:
+        return tuple(identity(p) for p in paths)
+    except OSError:
+        return None
 
 
 def settled(ids: tuple) -> bool:

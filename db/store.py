@@ -52,7 +52,7 @@ from db.errors import DataError
 from db.footers import decoded_bytes
 from db.layout import CURRENT, is_database  # noqa: F401 - is_database: callers' import
 from db.lock import pid_alive, writer_lock
-from db.memo import Memo, identity
+from db.memo import Memo, identities
 from db.parts import read_batches
 from db.parts import read_parts as _read_parts
 from db.validate import (
@@ -118,13 +118,6 @@ CHECKSUMMED = ("model_arrays",)
 #: (:meth:`Database.arrays`) this process remembers, by the identity of their files.
 _CHECKED = Memo(256)
 _ARRAYS = Memo(8)
-
-
-def _identity_or_none(path: Path) -> tuple | None:
-    try:
-        return identity(path)
-    except OSError:
-        return None
 
 
 def is_staging(name: str) -> bool:
@@ -520,10 +513,7 @@ class Database:
         files = self.files(name)
         if not files:
             return  # the read says the table is missing
-        try:
-            ids = tuple(identity(f) for f in files)
-        except OSError:
-            ids = None  # gone meanwhile: the check says so
+        ids = identities(files)
         counts = self.manifest.get("tables")
         key = ("rows", name, repr(counts.get(name) if isinstance(counts, dict) else None), ids)
         if ids is not None and _CHECKED.get(key):
@@ -647,10 +637,7 @@ class Database:
             finite.
         """
         path = self.table_path("model_arrays")
-        try:
-            ids = (identity(path),)
-        except OSError:
-            ids = None  # the check says so
+        ids = identities([path])
         sums = self.manifest.get("checksums")
         key = ("arrays", repr(sums.get("model_arrays") if isinstance(sums, dict) else sums),
                ids)
@@ -663,7 +650,7 @@ class Database:
                 raise self.damaged("model_arrays", f"unreadable model arrays ({exc})") from None
             for array in cached.values():
                 array.flags.writeable = False  # shared by every later call
-            if ids is not None and ids == (_identity_or_none(path),):  # unchanged while read
+            if ids is not None and ids == identities([path]):  # unchanged while read
                 _ARRAYS.put(key, cached, ids)
         return {name: array.view() for name, array in cached.items()}
 
