@@ -252,7 +252,7 @@ class GuideFit:
         def relay() -> None:
             with contextlib.suppress(EOFError, OSError):
                 while True:
-                    say(f"guides: {receive.recv()}")
+                    say(f"guides: {receive.recv_bytes().decode()}")
             receive.close()
 
         thread = threading.Thread(target=relay, name="animegraph-guides-relay", daemon=True)
@@ -290,18 +290,21 @@ class GuideFit:
 
 def _fit_guides_child(db: str, lines) -> None:
     """:class:`GuideFit`'s process: the fit under the writer lock, its lines sent back
-    through the pipe ``lines``."""
+    through the pipe ``lines`` as UTF-8 bytes."""
     import sys
 
     from db.lock import writer_lock
 
+    def send(line: str) -> None:  # text as bytes: nothing is unpickled on the way back
+        lines.send_bytes(str(line).encode())
+
     try:
         with writer_lock(db, wait=600.0, what="database"):
-            fit_guides(Path(db), lines.send)
+            fit_guides(Path(db), send)
     except KeyboardInterrupt:
         sys.exit(130)
     except (AnimeGraphError, OSError) as exc:
-        lines.send(f"not fitted: {exc}")
+        send(f"not fitted: {exc}")
         sys.exit(1)
     finally:
         lines.close()
