@@ -22,7 +22,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numba
 import numpy as np
@@ -167,9 +166,11 @@ def main() -> int:
     if not args.no_cold:
         _cold_start(10)
         _cold_start(1000)
-        pycache = Path(dtw_module.__file__).parent / "__pycache__"
-        print(f"numba cache files next to animegraph/search/dtw.py: "
-              f"{len(list(pycache.glob('dtw.*.nb*')))} in {pycache}")
+        from animegraph.search.jit import cache_folder
+
+        folder = cache_folder()
+        print(f"numba cache files of animegraph/search/dtw.py: "
+              f"{len(list(folder.rglob('dtw.*.nb*'))) if folder else 0} in {folder}")
     return 0
 
 

@@ -32,10 +32,9 @@ Conventions
   always reachable. ``None`` (the default, and the paper's setting) leaves the warp free.
 
 The kernels are compiled with numba on first use (about 3 s per kernel) and cached on
-disk: in ``$NUMBA_CACHE_DIR`` if set, else in ``__pycache__`` next to this module, else
-(unwritable install) in numba's user-wide cache ``~/.cache/numba``; with none writable
-they are compiled in every process, silently. They assume valid input: every public
-function validates its arguments first.
+disk in the room's kernel cache (:mod:`animegraph.search.jit`: keyed by the kernels'
+sources); with no writable place they are compiled in every process, silently. They
+assume valid input: every public function validates its arguments first.
 """
 
 from __future__ import annotations
@@ -48,6 +47,7 @@ from numbers import Integral
 import numba
 import numpy as np
 
+from animegraph.search.jit import kernel
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
@@ -71,22 +71,8 @@ _DOT_FLOOR = 1e-10
 _PARALLEL_MIN_NODES = 64
 
 
-def _jit(**options):
-    """``numba.njit(cache=True, nogil=True)``, without the cache if no folder is writable.
-
-    numba looks for a writable cache folder when the function is decorated
-    (``$NUMBA_CACHE_DIR``, ``__pycache__`` next to this module, ``~/.cache/numba``) and
-    raises ``RuntimeError`` if there is none (numba 0.68: it does not fall back by itself);
-    compiling in every process is then the only option, and needs no warning.
-    """
-
-    def wrap(func):
-        try:
-            return numba.njit(cache=True, nogil=True, **options)(func)
-        except RuntimeError:
-            return numba.njit(cache=False, nogil=True, **options)(func)
-
-    return wrap
+#: The room's cached kernel decorator (:mod:`animegraph.search.jit`).
+_jit = kernel
 
 
 # --------------------------------------------------------------------------- kernels

@@ -12,9 +12,9 @@ import logging
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-import numba
 import numpy as np
 
+from animegraph.search.jit import kernel
 from animegraph.search.kdtree import LEAF, build_tree, query
 from animegraph.search.problem import Problem, row_dist
 from db.system import usable_cpus
@@ -131,7 +131,7 @@ def lower_bound(p: Problem) -> float:
     return float(np.min(p.u[:p.off[1]] + h[:p.off[1]]))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _relaxed_backward(cn, off, u, nxt, last, first, w1, scale, pos):  # pragma: no cover
     n = len(off) - 1
     h = np.zeros(len(cn))
@@ -158,7 +158,7 @@ def _relaxed_backward(cn, off, u, nxt, last, first, w1, scale, pos):  # pragma: 
     return h
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
     n = len(off) - 1
     path = np.empty(n, dtype=np.int64)
@@ -200,7 +200,7 @@ def _greedy(cn, off, u, h, nxt, last, first, w1, scale):  # pragma: no cover
 
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
                    pos):  # pragma: no cover
     """The kept states of layer [lo, hi) as a k-d tree over their last frames, weighted
@@ -249,7 +249,7 @@ def _prepare_layer(cn, lo, hi, lo1, hi1, D, u, h, last, w1, scale, ub,
     return (alive, xs, ds, ids, start, end, left, right, tlo, thi, mind, n_query)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
                     scale):  # pragma: no cover
     """Remove from the tree's leaves the states that cannot be the best jump source.
@@ -325,7 +325,7 @@ def _drop_dominated(xs, ds, ids, start, end, left, right, lo, hi, mind,
     return n_kept
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _query_layer(cn, q_from, q_to, D, pred, u, h, prv, last, first, w1, scale, ub, pos,
                  xs, ds, ids, start, end, left, right, tlo, thi, mind):  # pragma: no cover
     """D and pred of the states [q_from, q_to) of the next layer; returns distances."""

@@ -18,14 +18,15 @@ cKDTree's per-call GIL release does not give for millions of tiny queries.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from animegraph.search.jit import kernel
 
 #: Points per leaf of the k-d tree over the kept states of a layer.
 LEAF = 16
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _select(perm, x, dim, s, e, kth):  # pragma: no cover
     """Reorder ``perm[s:e]`` so that ``perm[kth]`` holds the point of rank ``kth - s`` along
     ``dim``, smaller ones before it and larger ones after (quickselect)."""
@@ -56,7 +57,7 @@ def _select(perm, x, dim, s, e, kth):  # pragma: no cover
             hi = store - 1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _sort_by(perm, key, s, e):  # pragma: no cover
     """Sort ``perm[s:e]`` by ``key[perm]`` ascending (insertion sort for a leaf, else heap
     sort; numba compiles these far faster than ``np.argsort``)."""
@@ -78,7 +79,7 @@ def _sort_by(perm, key, s, e):  # pragma: no cover
         _sift(perm, key, s, 0, end)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _sift(perm, key, s, root, n):  # pragma: no cover
     while True:
         child = 2 * root + 1
@@ -93,7 +94,7 @@ def _sift(perm, key, s, root, n):  # pragma: no cover
             return
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def build_tree(x, d, leaf):  # pragma: no cover
     """k-d tree over points ``x`` (m, k) weighted by ``d`` (m,); leaves sorted by ``d``.
 
@@ -156,7 +157,7 @@ def build_tree(x, d, leaf):  # pragma: no cover
     return perm, start[:nn], end[:nn], left[:nn], right[:nn], lo[:nn], hi[:nn], mind[:nn]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _box_dist(lo, hi, node, y):  # pragma: no cover
     s = 0.0
     for j in range(y.shape[0]):
@@ -165,7 +166,7 @@ def _box_dist(lo, hi, node, y):  # pragma: no cover
     return np.sqrt(s)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def query(xs, ds, start, end, left, right, lo, hi, mind, y, w1, scale, best, thr,
            stack, bounds):  # pragma: no cover
     """Least ``w1 + ds[r] + scale * ||xs[r] - y||`` below ``min(best, thr)``, branch and

@@ -3,8 +3,8 @@
 The first synthesis in a fresh environment compiles every kernel of the search (28 CPU-s
 for synth's default path, the exact and the paper's search, ``scripts/bench_startup.py
 --kernels``; NumPy is no substitute: its DTW, a vectorised row recurrence, is 14 times slower
-there); later runs load them from numba's cache (``__pycache__/*.nbi`` beside each
-module) in a few seconds. ``animegraph ingest`` and ``animegraph warmup`` compile them
+there); later runs load them from numba's cache (:func:`animegraph.search.jit.cache_folder`)
+in a few seconds. ``animegraph ingest`` and ``animegraph warmup`` compile them
 ahead (:mod:`animegraph.apps.prepare`); a command that meets them uncompiled says so
 before that half minute instead of going silent.
 """

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import logging
 
-import numba
 import numpy as np
 
+from animegraph.search.jit import kernel
 from animegraph.search.problem import Problem, row_dist
 
 log = logging.getLogger(__name__)
@@ -46,7 +46,7 @@ def paper(p: Problem, max_expansions: int,
     return idx - p.off[:-1], float(cost), int(n_exp), int(n_dist), bool(capped), bool(found)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _sift_down(hc, hr, hq, start, size):  # pragma: no cover
     i = start
     c, r, q = hc[i], hr[i], hq[i]
@@ -64,7 +64,7 @@ def _sift_down(hc, hr, hq, start, size):  # pragma: no cover
     hc[i], hr[i], hq[i] = c, r, q
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _push(hc, hr, hq, size, c, r, q):  # pragma: no cover
     i = size
     while i > 0:
@@ -76,7 +76,7 @@ def _push(hc, hr, hq, size, c, r, q):  # pragma: no cover
     hc[i], hr[i], hq[i] = c, r, q
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def _paper_kernel(cn, off, u, nxt, last, first, w1, scale, max_expansions,
                   max_queue):  # pragma: no cover
     n = len(off) - 1

@@ -37,10 +37,10 @@ import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from animegraph.search.graph import PHONE_INDEX, AnimeGraph
+from animegraph.search.jit import kernel
 from db.errors import DataError, ParameterError
 from ingest.speech.phones import PHONES, SILENCE, VISEME_CLASSES, VISEME_OF
 
@@ -590,7 +590,7 @@ class Problem:
 
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel()
 def row_dist(x: np.ndarray, a: int, y: np.ndarray, b: int) -> float:  # pragma: no cover
     s = 0.0
     for j in range(x.shape[1]):
