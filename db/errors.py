@@ -16,3 +16,7 @@ class ParameterError(AnimeGraphError, ValueError):
 
 class DataError(AnimeGraphError):
     """Input data (a file, a clip, a database) is missing, corrupt or inconsistent."""
+
+
+class BusyError(DataError):
+    """A folder (a database) is being written by another process, past the wait allowed."""

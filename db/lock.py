@@ -16,11 +16,11 @@ import os
 import stat
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from db.errors import DataError
+from db.errors import BusyError, DataError
 
 #: Name of the lock file inside the locked folder.
 LOCK_NAME = ".animegraph.lock"
@@ -42,8 +42,8 @@ def lock_path(folder: str | os.PathLike) -> Path:
 
 
 @contextmanager
-def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0,
-                what: str = "folder") -> Iterator[None]:
+def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0, what: str = "folder",
+                on_wait: Callable[[str], object] | None = None) -> Iterator[None]:
     """Hold the exclusive writer lock of ``folder`` (created if absent) for a block.
 
     Parameters
@@ -54,12 +54,16 @@ def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0,
         Seconds to wait for another writer to finish before giving up (0: fail at once).
     what : str
         What the folder is, for the message (``"database"``, ``"output folder"``).
+    on_wait : callable, optional
+        Called once, with the holder (``" (process 123)"`` or ``""``), when the lock is
+        found held and is about to be waited for: a wait of minutes is said, not silent.
 
     Raises
     ------
+    BusyError
+        If another process holds the lock after ``wait`` seconds.
     DataError
-        If another process holds the lock after ``wait`` seconds, or the lock file
-        cannot be created.
+        If the lock file cannot be created.
     """
     root = Path(folder)
     try:
@@ -78,7 +82,7 @@ def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0,
             with _guard:
                 entry[1] -= 1
         return
-    fd = _acquire(root, wait, what)
+    fd = _acquire(root, wait, what, on_wait)
     with _guard:
         _held[key] = [fd, 1]
     try:
@@ -89,7 +93,8 @@ def writer_lock(folder: str | os.PathLike, *, wait: float = 0.0,
         os.close(fd)  # closing the descriptor releases the flock
 
 
-def _acquire(root: Path, wait: float, what: str) -> int:
+def _acquire(root: Path, wait: float, what: str,
+             on_wait: Callable[[str], object] | None = None) -> int:
     # The folder may come from someone else: a lock file that is a symbolic link (to a
     # file of the user's elsewhere) is not followed, and anything but a regular file is
     # refused, since the lock file is truncated and written.
@@ -119,8 +124,11 @@ def _acquire(root: Path, wait: float, what: str) -> int:
                 holder = _holder(fd)
                 os.close(fd)
                 waited = f" after waiting {wait:g} s" if wait > 0 else ""
-                raise DataError(f"{what} {root} is being written by another process"
+                raise BusyError(f"{what} {root} is being written by another process"
                                 f"{holder}{waited}; try again when it has finished") from None
+            if on_wait is not None:
+                on_wait(_holder(fd))
+                on_wait = None
             time.sleep(POLL_S)
     os.ftruncate(fd, 0)
     os.pwrite(fd, str(os.getpid()).encode(), 0)

@@ -121,3 +121,78 @@ def test_ppg_ridge_estimate_counts_only_the_speech_hama_hears_again(db_copy):
     stored = prepare.PPG_RIDGE_STORED_CPU_S_PER_MIN * minutes
     assert prepare.fit_estimate(db_copy, "ppg-ridge") == (
         f"about {max(stored, 1):.0f} s on a quiet machine")
+
+
+_HOLDER = """
+import sys
+from pathlib import Path
+from animegraph.apps.prepare import fit_guides
+from animegraph.baselines.stored import model_path
+from db.lock import writer_lock
+db = Path(sys.argv[1])
+with writer_lock(db, what="database"):
+    print("locked", flush=True)
+    if sys.stdin.readline().strip() == "fit":
+        fit_guides(db)
+        for name in sys.argv[2:]:
+            path = model_path(db, name)
+            print(name, path.stat().st_mtime_ns if path.is_file() else 0, flush=True)
+"""
+
+
+def _hold_lock(db):
+    """A process holding ``db``'s writer lock (as the demo's guide fit does) until told
+    ``fit`` (it fits the guides, prints their files' times) or anything else."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    child = subprocess.Popen([sys.executable, "-c", _HOLDER, str(db), *GUIDES],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                             env={**os.environ, "PYTHONPATH": str(root)})
+    assert child.stdout.readline().strip() == "locked"
+    return child
+
+
+def test_a_synth_meeting_a_guide_fit_under_way_waits_and_takes_its_guides(db_copy, capsys):
+    # The demo fits the guides in a process beside it; a synth started meanwhile fitted
+    # them again itself (no lock), on the same cores, and overwrote them.
+    import threading
+
+    from animegraph.apps.commands.synth_plan import load_guide
+
+    child = _hold_lock(db_copy)
+    got = []
+    synth = threading.Thread(target=lambda: got.append(
+        load_guide(db_copy, AUDIO_ONLY_GUIDE, asked=False)))
+    synth.start()
+    try:
+        while "waiting for another process writing" not in capsys.readouterr().err:
+            assert synth.is_alive()
+            synth.join(0.1)
+    finally:
+        out, _ = child.communicate("fit\n", timeout=600)
+        synth.join()
+    stored = {name: int(ns) for name, ns in (line.split() for line in out.splitlines())}
+    assert {name: model_path(db_copy, name).stat().st_mtime_ns if model_path(
+        db_copy, name).is_file() else 0 for name in GUIDES} == stored  # none fitted again
+    guides = got[0] if isinstance(got[0], tuple) else (got[0],)
+    assert len([g for g in guides if g is not None]) == len([n for n in stored if stored[n]])
+
+
+def test_a_default_guide_not_had_for_a_busy_database_is_not_kept_as_unfit(db_copy, capsys,
+                                                                           monkeypatch):
+    from animegraph.apps.commands.synth_plan import load_guide
+    from animegraph.baselines import base
+
+    monkeypatch.setattr(base, "FIT_WAIT_S", 0.5)
+    child = _hold_lock(db_copy)
+    try:
+        assert load_guide(db_copy, GUIDES[0], asked=False) is None
+    finally:
+        child.communicate("stop\n", timeout=60)
+    err = capsys.readouterr().err
+    assert "is being written by another process" in err
+    assert unfit_reason(db_copy, GUIDES[0]) is None  # the next run tries again

@@ -11,6 +11,12 @@ file's metadata, under the database folder::
 ``<version>`` is the database version the model was fitted on (``v000003``), so a
 re-ingest makes a stale model invisible; folders of versions that no longer exist are
 removed when a model is saved.
+
+A model is fitted and saved under the database's writer lock (:mod:`db.lock`): the
+version cannot change under the fit, and a process needing a model another is fitting
+(a ``synth`` while the demo fits its guides beside it) waits for that fit and takes the
+stored model, rather than fitting the same model again on the same cores, which is
+never sooner and leaves the two to overwrite each other.
 """
 
 from __future__ import annotations
@@ -134,24 +140,32 @@ def clip_times(clip, rate: float) -> np.ndarray:
 
 
 # -- stored models ------------------------------------------------------------------
+#: Seconds a fit waits for another writer of the database (another fit of the guides,
+#: an ingest) before giving up: as long as ``animegraph ingest``'s own fit waits.
+FIT_WAIT_S = 600.0
+
+
 def save_model(model: BaselineModel, db_root) -> Path:
     """Store a fitted model with the database at ``db_root`` (atomic; see module doc)."""
     import pyarrow.parquet as pq
 
     from db.atomic import atomic_write
+    from db.lock import writer_lock
     from db.store import arrays_to_table, current_version, dictionary_columns
 
     root = Path(db_root)
-    path = model_path(root, model.method)
-    path.parent.mkdir(parents=True, exist_ok=True)
     table = arrays_to_table(model.to_arrays())
-    meta = {**model.describe(), "db_version": current_version(root)}
-    table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
-    with atomic_write(path) as handle:
-        pq.write_table(table, handle, use_dictionary=dictionary_columns(table))
-    for stale in (root / MODELS_DIR).iterdir():
-        if stale.is_dir() and not (root / stale.name).is_dir():
-            shutil.rmtree(stale, ignore_errors=True)
+    current_version(root)  # a database, before its folder is locked
+    with writer_lock(root, wait=FIT_WAIT_S, what="database"):
+        path = model_path(root, model.method)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = {**model.describe(), "db_version": current_version(root)}
+        table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
+        with atomic_write(path) as handle:
+            pq.write_table(table, handle, use_dictionary=dictionary_columns(table))
+        for stale in (root / MODELS_DIR).iterdir():
+            if stale.is_dir() and not (root / stale.name).is_dir():
+                shutil.rmtree(stale, ignore_errors=True)
     return path
 
 
@@ -243,17 +257,35 @@ def fitting_line(method: str, db_root, purpose: str = "") -> str:
 
 
 def fitted_model(db_root, method: str, *, refit: bool = False, data: TrainingSet | None = None,
-                 **params) -> BaselineModel:
+                 on_wait=None, **params) -> BaselineModel:
     """The ``method`` model of a database: the stored one if there is one (whatever its
     parameters) unless ``refit``, else fitted with ``params`` on all its clips and stored.
-    ``data``: the database's clips already read (:func:`training_set`), for several fits."""
+    ``data``: the database's clips already read (:func:`training_set`), for several fits.
+
+    The fit holds the database's writer lock (see the module doc), waiting up to
+    :data:`FIT_WAIT_S` for another writer, with ``on_wait(holder)`` called once if it
+    waits; a model stored meanwhile is taken instead of fitted (unless ``refit``).
+
+    Raises
+    ------
+    BusyError
+        If another process still writes the database after :data:`FIT_WAIT_S`.
+    """
     from animegraph.baselines import estimator_class
+    from db.lock import writer_lock
+    from db.store import current_version
 
     cls = estimator_class(method)
+    current_version(db_root)  # a database, before its folder is locked
     if not refit:
         model = load_model(db_root, method)
         if model is not None:
             return model
-    model = cls(**params).fit(db_root if data is None else data)
-    save_model(model, db_root)
+    with writer_lock(db_root, wait=FIT_WAIT_S, what="database", on_wait=on_wait):
+        if not refit:  # fitted by the writer this one waited for
+            model = load_model(db_root, method)
+            if model is not None:
+                return model
+        model = cls(**params).fit(db_root if data is None else data)
+        save_model(model, db_root)
     return model

@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from animegraph.apps.commands.common import UsageError
-from db.errors import AnimeGraphError
+from db.errors import AnimeGraphError, BusyError
 
 
 def _synth_given(args: argparse.Namespace) -> tuple[str, bool, bool]:
@@ -109,10 +109,19 @@ def load_guide(db, name: str | None, *, asked: bool = True):
         print(f"animegraph: fitting {name} on {db} to guide the motion (first use"
               f"{', ' + how_long if how_long else ''}; stored with the database; "
               "'animegraph warmup' or ingest does it ahead) ...", file=sys.stderr)
+
+    def waiting(holder: str) -> None:
+        print(f"animegraph: waiting for another process writing {db}{holder} (the demo "
+              f"fitting its guides, say): a {name} it stores is taken, not fitted twice ...",
+              file=sys.stderr)
+
     if asked:
-        return fitted_model(db, name)
+        return fitted_model(db, name, on_wait=waiting)
     try:
-        return fitted_model(db, name)
+        return fitted_model(db, name, on_wait=waiting)
+    except BusyError as exc:  # not a reason to keep: the next run tries again
+        print(f"animegraph: warning: no {name} guide ({exc})", file=sys.stderr)
+        return None
     except (AnimeGraphError, OSError) as exc:
         print(f"animegraph: warning: no {name} guide ({exc})", file=sys.stderr)
         record_unfit(db, name, str(exc))
