@@ -396,3 +396,34 @@ def test_a_folder_of_links_says_links_are_not_followed(tiny_corpus, tmp_path, ca
                  str(tmp_path / "m.npz"), "--emotions", "sad,happy", "-q"]) == 1
     _err_line(capsys, "symbolic links in it are not followed")
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_fit_into_a_database_keeps_its_guides_as_a_refit_would_make_them(tiny_db, tiny_corpus,
+                                                                         tmp_path, capsys):
+    # The guides are fitted on the clips' speech, motion, labels, phones and posteriors;
+    # emotion fit replaces the classifier alone, so the guides it carries into its new
+    # version are the ones a synth would fit there (and it fits none).
+    from animegraph.baselines.base import fitted_model, load_model, model_path
+    from animegraph.baselines.data import training_set
+
+    db = tmp_path / "db"
+    shutil.copytree(tiny_db[0], db, ignore=AS_INGESTED)
+    fitted = fitted_model(db, "ppg-ridge").to_arrays()
+    before_version, before = current_version(db), training_set(db)
+    labels = _labels_csv(tiny_corpus, tmp_path / "labels.csv")
+    assert main(["emotion", "fit", str(tiny_corpus / "clips"), "--labels", str(labels),
+                 "--db", str(db), "--emotions", "angry,sad,happy", "-q"]) == 0
+    assert "kept its fitted ppg-ridge" in capsys.readouterr().err
+    assert current_version(db) != before_version and model_path(db, "ppg-ridge").is_file()
+    after = training_set(db)
+    assert (after.names, after.fps, after.kind) == (before.names, before.fps, before.kind)
+    for old, new in zip(before.clips, after.clips, strict=True):
+        assert (new.clip_id, new.emotion, new.phones) == (old.clip_id, old.emotion, old.phones)
+        for field in ("audio", "motion", "posteriors"):
+            a, b = getattr(old, field), getattr(new, field)
+            assert (a is None and b is None) or np.array_equal(a, b), field
+    carried = load_model(db, "ppg-ridge").to_arrays()
+    refitted = fitted_model(db, "ppg-ridge", refit=True).to_arrays()
+    for arrays in (carried, refitted):
+        assert arrays.keys() == fitted.keys()
+        assert all(np.array_equal(arrays[k], fitted[k]) for k in fitted)

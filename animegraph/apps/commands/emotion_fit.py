@@ -58,14 +58,21 @@ def cmd_emotion_fit(args: argparse.Namespace) -> int:
                   "emotions": {str(k): int(v) for k, v in counts.items()},
                   "labels": "preset " + args.preset if args.preset else "labels CSV"}
     if args.db is not None:
-        from animegraph.baselines.base import carry_models
+        from animegraph.baselines.base import FIT_WAIT_S, carry_models
+        from db.lock import writer_lock
         from db.store import current_version
         from ingest.emotion.classifier_file import store_in_database
 
         before = current_version(args.db)
-        where = store_in_database(args.db, classifier, trained_on, based_on=before)
-        # The clips and motion are the previous version's: its fitted guides hold.
-        carried = carry_models(args.db, before)
+        # The fitted guides (and every baseline) are kept: a model is a function of the
+        # clips' speech, motion, emotion labels, phones and posteriors and of the channels,
+        # all hard-linked unchanged into the new version; none reads the classifier, the
+        # one thing replaced. A refit would give the same model
+        # (tests/test_emotion_fit.py). One lock over both steps: a synth meanwhile waits
+        # for the carried guides rather than fitting them again (baselines.base).
+        with writer_lock(args.db, wait=FIT_WAIT_S, what="database"):
+            where = store_in_database(args.db, classifier, trained_on, based_on=before)
+            carried = carry_models(args.db, before)
         done = (f"stored it into {args.db} (version {where.name})"
                 + (f"; kept its fitted {', '.join(carried)}" if carried else ""))
     else:
