@@ -271,3 +271,48 @@ def test_synth_labels_read_a_grid_word_alignment_as_ingest_does():
         assert inside and all(p.end <= word.end + 1e-6 for p in inside), word
     with pytest.raises(DataError, match="words end at"):
         read_labels_for(align, audio[: rate], rate)  # an alignment of longer speech
+
+
+@pytest.mark.skipif(not ctc.available(), reason="hama's native library is absent")
+def test_ingest_keeps_hama_s_posteriors_of_the_clips_whose_word_alignment_it_checked(
+        tmp_path):
+    """Checking a word alignment's transcript, hama hears the clip: ingest keeps what it
+    heard (the clips table's posteriors), so ppg-ridge's fit does not hear it again
+    (GRID's 800 word-aligned clips were all heard twice). Given phone labels, hama hears
+    nothing and nothing is kept; a prepared clip resumed from the cache keeps them too."""
+    from animegraph.apps.cli import main
+    from db.store import Database
+    from ingest import prepared_cache
+    from ingest.formats.wav import write_wav
+    from ingest.prepare import prepare_clip
+    from ingest.tables import prepared_from_database
+
+    words = ["open", "window", "bottle", "kitchen", "garden"]
+    utterance = speak(" ".join(words), Voice(word_gap=30))
+    corpus = tmp_path / "corpus"
+    for name in ("aligned", "labelled"):
+        folder = _landmark_folder(corpus, name, seconds=utterance.duration)
+        write_wav(folder / "audio_16k.wav", utterance.audio, utterance.sample_rate)
+    (corpus / "aligned.align").write_text("".join(
+        f"{round(w.start * 25000)} {round(w.end * 25000)} {w.word}\n"
+        for w in _word_intervals(utterance, words)))
+    (corpus / "labelled.phones.csv").write_text("start,end,phone\n" + "".join(
+        f"{p.start},{p.end},{p.phone}\n" for p in utterance.phones))
+    db = tmp_path / "db"
+    assert main(["ingest", str(corpus), "--db", str(db), "--quiet", "--no-prepare"]) == 0
+    clips = {c.clip_id: c for c in prepared_from_database(Database.open(db))}
+    aligned = next(c for k, c in clips.items() if "aligned" in k)
+    labelled = next(c for k, c in clips.items() if "labelled" in k)
+    assert aligned.segmentation == "aligned-words" and labelled.segmentation != "aligned-words"
+    n = round(utterance.duration / 0.02)  # hama's frames: 50 a second
+    assert aligned.posteriors.shape[1] == 39 and abs(len(aligned.posteriors) - n) <= 2
+    assert aligned.posterior_blank.shape == (len(aligned.posteriors),)
+    assert np.allclose(aligned.posteriors.sum(axis=1), 1, atol=0.02)  # phone posteriors
+    assert labelled.posteriors is None
+    clip = prepare_clip(load(discover([corpus / "aligned"])[0]))
+    assert np.allclose(aligned.posteriors, clip.posteriors, atol=0.01)  # this clip's
+    prepared_cache.save("k" * 64, clip, {})
+    again, _ = prepared_cache.load("k" * 64)
+    assert np.array_equal(again.posteriors, clip.posteriors) and clip.posteriors is not None
+    assert np.array_equal(again.posterior_blank, clip.posterior_blank)
+    prepared_cache.remove(["k" * 64])
