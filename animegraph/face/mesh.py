@@ -29,8 +29,6 @@ product.
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 import os
 from dataclasses import dataclass, field
@@ -43,7 +41,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from db.errors import DataError, ParameterError
 from ingest import facemesh
-from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
+from ingest.formats.text import read_csv_records
 from ingest.motion import rigid_fit
 
 logger = logging.getLogger(__name__)
@@ -309,43 +307,33 @@ def read_marker_map(path: str | os.PathLike, mesh: Mesh) -> MarkerMap:
         listed twice, or a custom mesh without a ``region`` column.
     """
     path = Path(path)
-    text = read_utf8(path, "marker map", limit=MAX_SIDE_FILE_BYTES)
-    reader = csv.DictReader(io.StringIO(text))
-    fields = [f.strip().lower() for f in reader.fieldnames or []]
-    if "label" not in fields or "vertex" not in fields:
-        raise DataError(f"{path}:1: marker map needs 'label' and 'vertex' columns, got {fields}")
-    reader.fieldnames = fields
+    fields, rows = read_csv_records(path, "marker map", ("label", "vertex"))
     labels, vertices, regions, groups = [], [], [], []
-    try:
-        for row in reader:
-            label = (row.get("label") or "").strip()
-            if not label:
-                continue
-            where = f"{path}:{reader.line_num}"
-            if label in labels:
-                raise DataError(f"{where}: marker {label!r} listed twice")
-            try:
-                vertex = int((row.get("vertex") or "").strip())
-            except ValueError:
-                raise DataError(f"{where}: vertex of {label!r} is not a whole number: "
-                                f"{row.get('vertex')!r}") from None
-            if not 0 <= vertex < mesh.n_vertices:
-                raise DataError(f"{where}: marker {label!r} names vertex {vertex}, but the "
-                                f"mesh ({mesh.name}) has vertices 0-{mesh.n_vertices - 1}")
-            if "region" in fields:
-                names = tuple(r.strip() for r in (row.get("region") or "").split("|")
-                              if r.strip())
-                bad = [r for r in names if r not in REGIONS + (ANCHOR,)]
-                if not names or bad or (ANCHOR in names and len(names) > 1):
-                    raise DataError(f"{where}: region of {label!r} must be one of "
-                                    f"{', '.join(REGIONS)} (several joined by '|') or "
-                                    f"{ANCHOR}, got {row.get('region')!r}")
-                regions.append(names)
-            labels.append(label)
-            vertices.append(vertex)
-            groups.append((row.get("group") or "").strip())
-    except csv.Error as exc:
-        raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+    for where, row in rows:
+        label = row["label"]
+        if not label:
+            continue
+        if label in labels:
+            raise DataError(f"{where}: marker {label!r} listed twice")
+        try:
+            vertex = int(row["vertex"])
+        except ValueError:
+            raise DataError(f"{where}: vertex of {label!r} is not a whole number: "
+                            f"{row['vertex']!r}") from None
+        if not 0 <= vertex < mesh.n_vertices:
+            raise DataError(f"{where}: marker {label!r} names vertex {vertex}, but the "
+                            f"mesh ({mesh.name}) has vertices 0-{mesh.n_vertices - 1}")
+        if "region" in fields:
+            names = tuple(r.strip() for r in row["region"].split("|") if r.strip())
+            bad = [r for r in names if r not in REGIONS + (ANCHOR,)]
+            if not names or bad or (ANCHOR in names and len(names) > 1):
+                raise DataError(f"{where}: region of {label!r} must be one of "
+                                f"{', '.join(REGIONS)} (several joined by '|') or "
+                                f"{ANCHOR}, got {row['region']!r}")
+            regions.append(names)
+        labels.append(label)
+        vertices.append(vertex)
+        groups.append(row.get("group", ""))
     if not labels:
         raise DataError(f"marker map {path} lists no markers")
     vertices = np.asarray(vertices, dtype=np.int64)

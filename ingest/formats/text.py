@@ -67,3 +67,38 @@ def read_csv_rows(path, what: str, *, limit: int = MAX_MOTION_TABLE_BYTES
         return [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
     except csv.Error as exc:
         raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+
+
+def read_csv_records(path, what: str, columns: tuple[str, ...], *,
+                     limit: int = MAX_SIDE_FILE_BYTES
+                     ) -> tuple[list[str], list[tuple[str, dict[str, str]]]]:
+    """A side file's CSV of named columns (a marker table, a marker map): its header and
+    its rows, as the readers of such files need them.
+
+    Column names are matched stripped and in any case; every row is given as
+    ``(where, cells)``, ``where`` the ``path:line`` its messages start with and ``cells``
+    each column's stripped text (``""`` where a row is short).
+
+    Returns
+    -------
+    (names, rows)
+        The header's names (stripped, lower case), and the rows.
+
+    Raises
+    ------
+    DataError
+        If the file is unreadable, too large or not UTF-8 (:func:`read_utf8`), malformed,
+        or lacks one of ``columns`` (named as ``what`` needs them).
+    """
+    reader = csv.DictReader(io.StringIO(read_utf8(path, what, limit=limit)))
+    try:
+        names = [f.strip().lower() for f in reader.fieldnames or []]
+        if any(c not in names for c in columns):
+            need = " and ".join(repr(c) for c in columns)
+            raise DataError(f"{path}:1: {what} needs {need} columns, got {names}")
+        reader.fieldnames = names
+        rows = [(f"{path}:{reader.line_num}",
+                 {name: (row.get(name) or "").strip() for name in names}) for row in reader]
+    except csv.Error as exc:
+        raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+    return names, rows

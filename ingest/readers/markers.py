@@ -16,15 +16,13 @@ are in group ``"other"``. The transcript file wins over the JSON's ``text``.
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 from pathlib import Path
 
 from db.errors import DataError
 from ingest.clip import ChannelSchema, RawClip, checksum_files
 from ingest.formats import MOTION_READERS
-from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_utf8
+from ingest.formats.text import read_csv_records
 from ingest.formats.wav import read_wav
 from ingest.readers.common import (
     GROUPS,
@@ -49,26 +47,18 @@ def read_marker_table(path: Path) -> dict[str, str]:
         If the file is not UTF-8 CSV with ``label`` and ``group`` columns, a group is not
         one of :data:`ingest.readers.common.GROUPS`, or a label repeats.
     """
-    text = read_utf8(path, "marker table", limit=MAX_SIDE_FILE_BYTES)
-    rows = csv.DictReader(io.StringIO(text))
-    fields = [f.strip().lower() for f in rows.fieldnames or []]
-    if "label" not in fields or "group" not in fields:
-        raise DataError(f"{path}:1: marker table needs 'label' and 'group' columns, got {fields}")
-    rows.fieldnames = fields
+    _, rows = read_csv_records(path, "marker table", ("label", "group"))
     table: dict[str, str] = {}
-    try:
-        for row in rows:
-            label, group = (row.get("label") or "").strip(), (row.get("group") or "").strip()
-            if not label:
-                continue
-            if group not in GROUPS:
-                raise DataError(f"{path}:{rows.line_num}: unknown motion group {group!r} "
-                                f"(expected one of {GROUPS})")
-            if label in table:
-                raise DataError(f"{path}:{rows.line_num}: marker {label!r} listed twice")
-            table[label] = group
-    except csv.Error as exc:
-        raise DataError(f"{path}:{rows.line_num}: malformed CSV: {exc}") from None
+    for where, row in rows:
+        label, group = row["label"], row["group"]
+        if not label:
+            continue
+        if group not in GROUPS:
+            raise DataError(f"{where}: unknown motion group {group!r} (expected one of "
+                            f"{GROUPS})")
+        if label in table:
+            raise DataError(f"{where}: marker {label!r} listed twice")
+        table[label] = group
     return table
 
 
