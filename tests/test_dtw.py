@@ -275,6 +275,36 @@ def test_pairs_of_an_utterance_equal_one_call_per_pair(rng, monkeypatch, paralle
         many_of(inputs[:1], values, offsets, [np.array([200])])
 
 
+def _parallel_costs(values, offsets, inputs, lists):
+    return [c.tolist() for c in audio_costs_many(inputs, values, offsets, lists)]
+
+
+def test_the_kept_pool_gives_the_serial_costs_and_survives_fork(rng, monkeypatch):
+    # One pool of threads, kept from call to call (not started on each), gives the costs
+    # of a serial run bit for bit, and a forked child (which has none of the parent's
+    # threads) makes a pool of its own instead of waiting for ever on the parent's.
+    import numba
+
+    from ingest.workers import in_forked_child
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here: the pool is never used")
+    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1)
+    numba.set_num_threads(2)
+    curves, values, offsets = _graph_like(rng, 120)
+    inputs = [rng.standard_normal((k, 9)) for k in (12, 30, 5)]
+    lists = [rng.permutation(120)[:k] for k in (100, 60, 120)]
+    serial = [[audio_cost(x, curves[a]) for a in nodes] for x, nodes in zip(inputs, lists)]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial
+    pool = dtw_module._POOLS[2]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial
+    assert dtw_module._POOLS[2] is pool  # kept, not started again
+    child = in_forked_child(lambda: (_parallel_costs(values, offsets, inputs, lists),
+                                     2 in dtw_module._POOLS and dtw_module._POOLS[2] is not pool))
+    assert child == [serial, True]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial  # the parent's still works
+
+
 def test_audio_costs_float64_values_and_band(rng):
     curves, values, offsets = _graph_like(rng, 40)
     c_input = rng.standard_normal((8, 9))
