@@ -13,6 +13,7 @@ from animegraph.search.dtw import (
     audio_costs,
     audio_costs_many,
     dtw,
+    mark_finite,
     warp_indices,
     warp_indices_many,
     warp_onto,
@@ -294,7 +295,8 @@ def test_the_kept_pool_gives_the_serial_costs_and_survives_fork(rng, monkeypatch
     curves, values, offsets = _graph_like(rng, 120)
     inputs = [rng.standard_normal((k, 9)) for k in (12, 30, 5)]
     lists = [rng.permutation(120)[:k] for k in (100, 60, 120)]
-    serial = [[audio_cost(x, curves[a]) for a in nodes] for x, nodes in zip(inputs, lists)]
+    serial = [[audio_cost(x, curves[a]) for a in nodes]
+              for x, nodes in zip(inputs, lists, strict=True)]
     assert _parallel_costs(values, offsets, inputs, lists) == serial
     pool = dtw_module._POOLS[2]
     assert _parallel_costs(values, offsets, inputs, lists) == serial
@@ -303,6 +305,39 @@ def test_the_kept_pool_gives_the_serial_costs_and_survives_fork(rng, monkeypatch
                                      2 in dtw_module._POOLS and dtw_module._POOLS[2] is not pool))
     assert child == [serial, True]
     assert _parallel_costs(values, offsets, inputs, lists) == serial  # the parent's still works
+
+
+def test_a_marked_array_is_not_scanned_again_and_others_still_are(rng, monkeypatch):
+    # A graph's curves, checked once when loaded (mark_finite), are not scanned for NaN on
+    # every call; an unmarked array, or a marked one made writeable again, still is.
+    curves, values, offsets = _graph_like(rng, 30)
+    x, nodes = rng.standard_normal((6, 9)), np.arange(30)
+    expected = audio_costs(x, values, offsets, nodes)
+    scans = []
+    real = dtw_module._first_nonfinite
+    monkeypatch.setattr(dtw_module, "_first_nonfinite",
+                        lambda *a: scans.append(1) or real(*a))
+    mark_finite(values)
+    assert not values.flags.writeable
+    np.testing.assert_array_equal(audio_costs(x, values, offsets, nodes), expected)
+    assert scans == []
+    audio_costs(x, values.copy(), offsets, nodes)  # an equal array, not the one checked
+    assert scans == [1]
+    bad = values.copy()
+    bad[offsets[3]] = np.nan
+    with pytest.raises(ParameterError, match="NaN or inf"):
+        mark_finite(bad)
+    assert bad.flags.writeable  # refused, not marked
+    with pytest.raises(ParameterError, match="NaN or inf in node 3"):
+        audio_costs(x, bad, offsets, nodes)
+    values.flags.writeable = True  # writeable again: checked again
+    values[offsets[5]] = np.inf
+    with pytest.raises(ParameterError, match="NaN or inf in node 5"):
+        audio_costs(x, values, offsets, nodes)
+    base = np.zeros((4, 9))
+    view = base[:]
+    mark_finite(view)  # read-only now, but a view of an array still writeable
+    assert not dtw_module._known_finite(view)
 
 
 def test_audio_costs_float64_values_and_band(rng):

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import os
 import threading
+import weakref
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -53,7 +54,7 @@ import numpy as np
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
-           "warp_indices", "warp_indices_many", "warp_onto"]
+           "mark_finite", "warp_indices", "warp_indices_many", "warp_onto"]
 
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
 #: Local distances of Eq. 5's audio cost: the paper's Euclidean norm between RASTA-PLP
@@ -694,6 +695,48 @@ def _split(a: np.ndarray, sizes: np.ndarray) -> list[np.ndarray]:
     return np.split(a, np.cumsum(sizes)[:-1]) if len(sizes) else []
 
 
+#: ``id`` -> weak reference of the values arrays :func:`mark_finite` checked whole.
+_FINITE: dict[int, weakref.ref] = {}
+
+
+def mark_finite(values: np.ndarray) -> None:
+    """Check ``values`` (shape (n_frames, d)) finite once, and make it read-only so that it
+    stays so: the pair functions then skip their per-call check of its curves.
+
+    A graph's curves are checked when it is loaded; without this mark each call of
+    :func:`audio_costs_many` rescanned every candidate's curve (a live stream scores a
+    window's phones every hop). Arrays not marked, or made writeable again, are still
+    checked on every call.
+
+    Raises
+    ------
+    ParameterError
+        ``values`` is not a NumPy array of real numbers, or holds NaN or inf.
+    """
+    if not isinstance(values, np.ndarray) or values.dtype.kind not in "iuf":
+        raise ParameterError("mark_finite takes a NumPy array of real numbers, got "
+                             f"{getattr(values, 'dtype', type(values).__name__)}")
+    if not np.isfinite(values).all():
+        raise ParameterError("values must be finite, got NaN or inf")
+    values.flags.writeable = False
+    key = id(values)
+    _FINITE[key] = weakref.ref(values, lambda _, key=key: _FINITE.pop(key, None))
+
+
+def _known_finite(values: np.ndarray) -> bool:
+    """True if :func:`mark_finite` checked this very array and it is still read-only
+    (through it and every array it views: no one can have written NaN since)."""
+    ref = _FINITE.get(id(values))
+    if ref is None or ref() is not values:
+        return False
+    a = values
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return True
+
+
 def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> None:
     """Nodes in range, each with a non-empty finite curve within ``values``."""
     bad = np.flatnonzero((nodes < 0) | (nodes >= len(offsets) - 1))
@@ -710,6 +753,8 @@ def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> 
             f"offsets must give node {a} a curve within values' {len(values)} frames, "
             f"got [{starts[bad[0]]}, {stops[bad[0]]})"
         )
+    if _known_finite(values):
+        return
     t = _first_nonfinite(values, offsets, nodes)
     if t >= 0:
         raise ParameterError(f"values must be finite, got NaN or inf in node {nodes[t]}'s curve")
