@@ -334,9 +334,11 @@ def test_a_marked_array_is_not_scanned_again_and_others_still_are(rng, monkeypat
     values[offsets[5]] = np.inf
     with pytest.raises(ParameterError, match="NaN or inf in node 5"):
         audio_costs(x, values, offsets, nodes)
-    base = np.zeros((4, 9))
-    view = base[:]
-    mark_finite(view)  # read-only now, but a view of an array still writeable
+    base = np.zeros((8, 9))
+    view = base[2:6]
+    mark_finite(view)  # the array it views made read-only too
+    assert dtw_module._known_finite(view) and not base.flags.writeable
+    base.flags.writeable = True  # the array viewed writeable again: checked again
     assert not dtw_module._known_finite(view)
 
 

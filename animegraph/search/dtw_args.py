@@ -20,8 +20,9 @@ _FINITE: dict[int, weakref.ref] = {}
 
 
 def mark_finite(values: np.ndarray) -> None:
-    """Check ``values`` (shape (n_frames, d)) finite once, and make it read-only so that it
-    stays so: the pair functions then skip their per-call check of its curves.
+    """Check ``values`` (shape (n_frames, d)) finite once, and make it read-only (and the
+    arrays it is a view of) so that it stays so: the pair functions then skip their
+    per-call check of its curves.
 
     A graph's curves are checked when it is loaded; without this mark each call of
     :func:`animegraph.search.dtw.audio_costs_many` rescanned every candidate's curve (a
@@ -38,7 +39,10 @@ def mark_finite(values: np.ndarray) -> None:
                              f"{getattr(values, 'dtype', type(values).__name__)}")
     if not np.isfinite(values).all():
         raise ParameterError("values must be finite, got NaN or inf")
-    values.flags.writeable = False
+    a = values
+    while isinstance(a, np.ndarray):  # a graph's curves are a view of the rows read
+        a.flags.writeable = False
+        a = a.base
     key = id(values)
     _FINITE[key] = weakref.ref(values, lambda _, key=key: _FINITE.pop(key, None))
 
