@@ -319,14 +319,19 @@ def main() -> int:
                         help="hama's left context before the first unsettled frame (ms)")
     parser.add_argument("--settle", type=float, default=None,
                         help="audio after a frame before its posteriors are settled (ms)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="threads an update may run at once (the stream's default if "
+                        "not given; 0: no cap)")
     args = parser.parse_args()
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
     TEXT.extend([True] if args.text else [])
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
-                                     ("settle_ms", args.settle))
+                                     ("settle_ms", args.settle), ("threads", args.threads))
                    if v is not None})
+    if WINDOW.get("threads") == 0:
+        WINDOW["threads"] = None  # no cap
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
     results: dict = {"quality": {}, "latency": [], "drift": None}

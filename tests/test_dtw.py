@@ -13,6 +13,7 @@ from animegraph.search.dtw import (
     audio_costs,
     audio_costs_many,
     dtw,
+    mark_finite,
     warp_indices,
     warp_indices_many,
     warp_onto,
@@ -273,6 +274,72 @@ def test_pairs_of_an_utterance_equal_one_call_per_pair(rng, monkeypatch, paralle
         many_of([inputs[0], np.full((3, 9), np.nan)], values, offsets, lists[:2])
     with pytest.raises(ParameterError, match="nodes must be in"):
         many_of(inputs[:1], values, offsets, [np.array([200])])
+
+
+def _parallel_costs(values, offsets, inputs, lists):
+    return [c.tolist() for c in audio_costs_many(inputs, values, offsets, lists)]
+
+
+def test_the_kept_pool_gives_the_serial_costs_and_survives_fork(rng, monkeypatch):
+    # One pool of threads, kept from call to call (not started on each), gives the costs
+    # of a serial run bit for bit, and a forked child (which has none of the parent's
+    # threads) makes a pool of its own instead of waiting for ever on the parent's.
+    import numba
+
+    from ingest.workers import in_forked_child
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here: the pool is never used")
+    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1)
+    numba.set_num_threads(2)
+    curves, values, offsets = _graph_like(rng, 120)
+    inputs = [rng.standard_normal((k, 9)) for k in (12, 30, 5)]
+    lists = [rng.permutation(120)[:k] for k in (100, 60, 120)]
+    serial = [[audio_cost(x, curves[a]) for a in nodes]
+              for x, nodes in zip(inputs, lists, strict=True)]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial
+    pool = dtw_module._POOLS[2]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial
+    assert dtw_module._POOLS[2] is pool  # kept, not started again
+    child = in_forked_child(lambda: (_parallel_costs(values, offsets, inputs, lists),
+                                     2 in dtw_module._POOLS and dtw_module._POOLS[2] is not pool))
+    assert child == [serial, True]
+    assert _parallel_costs(values, offsets, inputs, lists) == serial  # the parent's still works
+
+
+def test_a_marked_array_is_not_scanned_again_and_others_still_are(rng, monkeypatch):
+    # A graph's curves, checked once when loaded (mark_finite), are not scanned for NaN on
+    # every call; an unmarked array, or a marked one made writeable again, still is.
+    curves, values, offsets = _graph_like(rng, 30)
+    x, nodes = rng.standard_normal((6, 9)), np.arange(30)
+    expected = audio_costs(x, values, offsets, nodes)
+    scans = []
+    real = dtw_module._first_nonfinite
+    monkeypatch.setattr(dtw_module, "_first_nonfinite",
+                        lambda *a: scans.append(1) or real(*a))
+    mark_finite(values)
+    assert not values.flags.writeable
+    np.testing.assert_array_equal(audio_costs(x, values, offsets, nodes), expected)
+    assert scans == []
+    audio_costs(x, values.copy(), offsets, nodes)  # an equal array, not the one checked
+    assert scans == [1]
+    bad = values.copy()
+    bad[offsets[3]] = np.nan
+    with pytest.raises(ParameterError, match="NaN or inf"):
+        mark_finite(bad)
+    assert bad.flags.writeable  # refused, not marked
+    with pytest.raises(ParameterError, match="NaN or inf in node 3"):
+        audio_costs(x, bad, offsets, nodes)
+    values.flags.writeable = True  # writeable again: checked again
+    values[offsets[5]] = np.inf
+    with pytest.raises(ParameterError, match="NaN or inf in node 5"):
+        audio_costs(x, values, offsets, nodes)
+    base = np.zeros((8, 9))
+    view = base[2:6]
+    mark_finite(view)  # the array it views made read-only too
+    assert dtw_module._known_finite(view) and not base.flags.writeable
+    base.flags.writeable = True  # the array viewed writeable again: checked again
+    assert not dtw_module._known_finite(view)
 
 
 def test_audio_costs_float64_values_and_band(rng):

@@ -117,6 +117,44 @@ def test_bad_input_is_refused_in_one_line(model):
         stream.push(np.zeros(10, dtype=np.float32))
 
 
+def test_threads_cap_an_update_and_change_no_frame(model, speech, monkeypatch):
+    """threads=1 (the default): the DTW runs on the updating thread and BLAS on one
+    thread while an update runs, both restored after it; the frames are those of the
+    uncapped stream."""
+    import numba
+
+    import animegraph.live.stream as stream_module
+    import animegraph.search.dtw as dtw_module
+    from animegraph.baselines.predicting import threadpools
+    from animegraph.live import Stream
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here: nothing to cap")
+    monkeypatch.setattr(dtw_module, "_PARALLEL_MIN_NODES", 1)  # the pool for any batch
+    seen = []
+    real = stream_module.window_motion
+
+    def window_motion(*args, **kw):
+        blas = [p["num_threads"] for p in threadpools().info() if p["user_api"] == "blas"]
+        seen.append((numba.get_num_threads(), max(blas, default=1)))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(stream_module, "window_motion", window_motion)
+    audio, sr = speech
+    before = numba.get_num_threads()
+    capped = np.concatenate([b.motion for b in _play(
+        Stream(model, sample_rate=sr, hop_ms=80, backlog_ms=None), audio)[0]])
+    assert seen and set(seen) == {(1, 1)}
+    assert numba.get_num_threads() == before
+    seen.clear()
+    free = np.concatenate([b.motion for b in _play(
+        Stream(model, sample_rate=sr, hop_ms=80, backlog_ms=None, threads=None), audio)[0]])
+    assert seen and all(n == before for n, _ in seen)
+    np.testing.assert_allclose(capped, free, rtol=1e-9, atol=1e-9)
+    with pytest.raises(ParameterError, match="threads must be"):
+        Stream(model, threads=0)
+
+
 # --- Live Link over UDP -----------------------------------------------------------------
 
 

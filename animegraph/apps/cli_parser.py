@@ -623,6 +623,9 @@ def _add_live(sub) -> None:
                       help="frames sooner, following the offline output less closely: "
                       "look-ahead 40 ms, an update every 40 ms, hama hearing 300 ms of "
                       "context and settling a frame 40 ms after it (docs/results/live.md)")
+    live.add_argument("--threads", type=_whole_number, default=1, metavar="N",
+                      help="threads an update may run at once (the DTW's, BLAS's; 1: the "
+                      "stream within one core, docs/results/live.md)")
     live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
                       help="the face's emotion: a name, auto, or a mix")
     live.add_argument("--text", default=None, metavar="TRANSCRIPT",

@@ -45,7 +45,7 @@ def implausible(method: str, where: str, exc: Exception) -> DataError:
 
 
 @functools.lru_cache(maxsize=1)
-def _threadpools():
+def threadpools():
     """The process' thread pools (BLAS, OpenMP), found once: finding them walks the loaded
     libraries (about 20 ms a time, which a live stream predicting ten times a second
     would pay on every update)."""
@@ -104,7 +104,7 @@ class Predicting:
             n_frames = int(round(len(audio) / sample_rate * self.fps_))
         if n_frames < 1:
             raise DataError("the audio is too short for one motion frame")
-        with _threadpools().limit(limits=BLAS_THREADS):
+        with threadpools().limit(limits=BLAS_THREADS):
             try:
                 out = self._predict(audio, int(sample_rate),
                                     frame_times(n_frames, self.fps_), emotion)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,6 +76,10 @@ QUIET_DB = 40.0
 #: Audio waiting (ms) beyond which one update hears all of it at once (the stream has
 #: fallen behind: it catches up, with a longer window, instead of lagging ever more).
 DEFAULT_BACKLOG_MS = 400.0
+#: Threads an update runs at once by default (numba's DTW pool, BLAS). One: with two,
+#: OpenBLAS's threads (which wait spinning) and the DTW's took a quarter more CPU for
+#: little less wall time (docs/results/live.md, "CPU").
+DEFAULT_THREADS = 1
 #: Frames at the start of an update cross-faded from the previous window's estimate.
 FADE_FRAMES = 3
 #: With ``emotion="auto"``: the speech is classified again every this many seconds, over
@@ -175,6 +180,10 @@ class Stream:
         not: live, without it, the mouth followed the recording much less closely). A
         transcript that stops fitting the speech is said once (``stats.warnings``) and
         the phones are recognised from there on.
+    threads : int or None
+        Threads an update may run at once: the DTW's (numba's, for the updating thread)
+        and BLAS's (the whole process' while an update runs). None: as many as the
+        libraries take (the cores). hama hears a window in one piece, on one thread.
 
     Raises
     ------
@@ -191,7 +200,8 @@ class Stream:
                  k_best: int | None = None,
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
-                 settle_ms: float = SETTLE_S * 1000, text: str | None = None) -> None:
+                 settle_ms: float = SETTLE_S * 1000, text: str | None = None,
+                 threads: int | None = DEFAULT_THREADS) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
@@ -202,6 +212,11 @@ class Stream:
                                  ("settle_ms", settle_ms, 0.0)):
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= low):
                 raise ParameterError(f"{name} must be a number >= {low:g}, got {value!r}")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(
+                threads, int | np.integer) or threads < 1):
+            raise ParameterError(f"threads must be a whole number >= 1 or None, got "
+                                 f"{threads!r}")
+        self.threads = None if threads is None else int(threads)
         self.model = model if isinstance(model, Model) else Model.load(model)
         self.sample_rate = int(sample_rate)
         self.lookahead_s = lookahead_ms / 1000.0
@@ -311,6 +326,19 @@ class Stream:
         target = min(target, int(round(end_s * self.fps)))
         if target <= self._sent:
             return self._empty()
+        with capped_threads(self.threads):
+            out, first_sent = self._frames(end, target)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        self.stats.updates += 1
+        self.stats.wall_s += wall
+        self.stats.cpu_s += cpu
+        self.stats.update_wall.append(wall)
+        self.stats.update_cpu.append(cpu)
+        return Frames(first_sent, out, self.fps, end_s)
+
+    def _frames(self, end: int, target: int) -> tuple[np.ndarray, int]:
+        """The frames up to ``target`` not sent yet, from the audio up to sample ``end``,
+        and the index of the first."""
         first = self._on_posterior_frame(
             max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps))))
         self._track.update(self._buffer, self._buffer_start, end, self._peak)
@@ -325,13 +353,7 @@ class Stream:
         self._sent, self._last = target, out[-1].copy()
         first_sent = target - len(out)
         self._drop_old()
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        self.stats.updates += 1
-        self.stats.wall_s += wall
-        self.stats.cpu_s += cpu
-        self.stats.update_wall.append(wall)
-        self.stats.update_cpu.append(cpu)
-        return Frames(first_sent, out, self.fps, end_s)
+        return out, first_sent
 
     def _follow_transcript(self) -> None:
         """Extend the transcript's path over the posteriors not fixed on it yet; once it
@@ -449,6 +471,26 @@ class Stream:
         if cut > 0:
             self._buffer = self._buffer[cut:]
             self._buffer_start += cut
+
+
+@contextmanager
+def capped_threads(threads: int | None):
+    """At most ``threads`` threads for numba's parallel work on this thread (the DTW's
+    pool takes that many) and for BLAS, within the block; None: no cap."""
+    if threads is None:
+        yield
+        return
+    import numba
+
+    from animegraph.baselines.predicting import threadpools
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        with threadpools().limit(limits=threads, user_api="blas"):
+            yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def join(parts: list[Frames], empty: Frames) -> Frames:

@@ -39,19 +39,29 @@ assume valid input: every public function validates its arguments first.
 
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from numbers import Integral
 
 import numba
 import numpy as np
 
+from animegraph.search.dtw_args import band_radius as _band
+from animegraph.search.dtw_args import count as _count
+from animegraph.search.dtw_args import curve_array as _curve
+from animegraph.search.dtw_args import int_vector as _int_vector
+from animegraph.search.dtw_args import known_finite as _known_finite
+from animegraph.search.dtw_args import mark_finite
+from animegraph.search.dtw_args import path_array as _path
+from animegraph.search.dtw_args import same_width as _same_width
+from animegraph.search.dtw_args import values_array as _values
 from animegraph.search.jit import kernel
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
-           "warp_indices", "warp_indices_many", "warp_onto"]
+           "mark_finite", "warp_indices", "warp_indices_many", "warp_onto"]
 
 _METRICS = {"euclidean": 0, "sqeuclidean": 1}
 #: Local distances of Eq. 5's audio cost: the paper's Euclidean norm between RASTA-PLP
@@ -637,12 +647,40 @@ def _run_pairs(c_inputs, values, offsets, nodes, band, code):
                 _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
                              code, cuts[k], cuts[k + 1], out, warps)
 
-            with ThreadPoolExecutor(threads, thread_name_prefix="dtw") as pool:
-                list(pool.map(chunk, range(len(cuts) - 1)))
+            list(_pool(threads).map(chunk, range(len(cuts) - 1)))
         else:
             _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
                          0, len(flat), out, warps)
     return sizes, out, warps
+
+
+#: The threads of :func:`_run_pairs`, one pool per thread count, made when first needed
+#: and kept: starting a pool's threads on every call was most of a small batch's time
+#: (a live stream's window: docs/results/live.md, "What is computed once, what is not").
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The kept pool of ``threads`` threads. Callers on several threads may share it:
+    each waits only for its own chunks."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(threads)
+        if pool is None:
+            pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="dtw")
+        return pool
+
+
+def _forget_pools() -> None:
+    """In a forked child: the parent's pools have no threads here (a fork copies only
+    the calling thread), and work given to them would wait for ever; new ones are made."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()  # another thread may have held it at the fork
+
+
+if hasattr(os, "register_at_fork"):  # not on Windows, which does not fork
+    os.register_at_fork(after_in_child=_forget_pools)
 
 
 def _split(a: np.ndarray, sizes: np.ndarray) -> list[np.ndarray]:
@@ -666,6 +704,8 @@ def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> 
             f"offsets must give node {a} a curve within values' {len(values)} frames, "
             f"got [{starts[bad[0]]}, {stops[bad[0]]})"
         )
+    if _known_finite(values):
+        return
     t = _first_nonfinite(values, offsets, nodes)
     if t >= 0:
         raise ParameterError(f"values must be finite, got NaN or inf in node {nodes[t]}'s curve")
@@ -674,102 +714,10 @@ def _check_nodes(values: np.ndarray, offsets: np.ndarray, nodes: np.ndarray) -> 
 # --------------------------------------------------------------------------- validation
 
 
-def _curve(name: str, a, dtype) -> np.ndarray:
-    """A finite, non-empty (n_frames, n_features) array, C-contiguous.
-
-    ``dtype``: cast to it; None keeps float32 and float64 (and casts others to float64).
-    """
-    try:
-        arr = np.asarray(a)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} must be a (n_frames, n_features) array, got a ragged "
-                             f"or non-numeric {type(a).__name__}") from None
-    if arr.ndim != 2:
-        raise ParameterError(
-            f"{name} must be a (n_frames, n_features) array, got shape {arr.shape}")
-    if arr.shape[0] == 0 or arr.shape[1] == 0:
-        raise ParameterError(f"{name} must not be empty, got shape {arr.shape}")
-    if arr.dtype.kind not in "iuf":
-        raise ParameterError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    if dtype is None:
-        dtype = arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64
-    arr = np.ascontiguousarray(arr, dtype=dtype)
-    finite = np.isfinite(arr)
-    if not finite.all():
-        frame = int(np.flatnonzero(~finite.all(axis=1))[0])
-        raise ParameterError(f"{name} must be finite, got {arr[frame][~finite[frame]][0]} "
-                             f"in frame {frame}")
-    return arr
-
-
-def _values(a) -> np.ndarray:
-    """The ragged values array: 2-D, float32 or float64 (finiteness is checked per node)."""
-    arr = np.asarray(a)
-    if arr.ndim != 2 or arr.shape[1] == 0:
-        raise ParameterError(
-            f"values must be a (n_frames, n_features) array, got shape {arr.shape}")
-    if arr.dtype.kind not in "iuf":
-        raise ParameterError(f"values must hold real numbers, got dtype {arr.dtype}")
-    dtype = arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64
-    return np.ascontiguousarray(arr, dtype=dtype)
-
-
-def _int_vector(name: str, a) -> np.ndarray:
-    arr = np.asarray(a)
-    if arr.ndim != 1 or (arr.dtype.kind not in "iu" and arr.size):
-        raise ParameterError(
-            f"{name} must be a 1-D integer array, got shape {arr.shape} dtype {arr.dtype}")
-    return np.ascontiguousarray(arr, dtype=np.int64)
-
-
-def _same_width(name: str, a: np.ndarray, ref_name: str, ref: np.ndarray) -> None:
-    if a.shape[1] != ref.shape[1]:
-        raise ParameterError(
-            f"{name} must have {ref.shape[1]} features like {ref_name}, got {a.shape[1]}")
-
-
-def _band(band) -> int:
-    if band is None:
-        return -1
-    if isinstance(band, bool) or not isinstance(band, Integral) or band < 0:
-        raise ParameterError(f"band must be None or a non-negative integer, got {band!r}")
-    return int(band)
-
-
 def _audio_metric(metric) -> int:
     if not isinstance(metric, str) or metric not in AUDIO_METRICS:
         raise ParameterError(f"metric must be one of {', '.join(AUDIO_METRICS)}, got {metric!r}")
     return AUDIO_METRICS[metric]
-
-
-def _count(name: str, n) -> int:
-    if isinstance(n, bool) or not isinstance(n, Integral) or n < 1:
-        raise ParameterError(f"{name} must be a positive integer, got {n!r}")
-    return int(n)
-
-
-def _path(path, n: int, m: int | None) -> np.ndarray:
-    """A DTW path from (0, 0) to (n-1, m-1) of unit steps (any m when ``m`` is None)."""
-    arr = np.asarray(path)
-    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) == 0 or arr.dtype.kind not in "iu":
-        raise ParameterError(
-            f"path must be a non-empty (L, 2) integer array, got shape {arr.shape} "
-            f"dtype {arr.dtype}")
-    arr = arr.astype(np.int64, copy=False)
-    end = (n - 1, arr[-1, 1] if m is None else m - 1)
-    if tuple(arr[0]) != (0, 0) or tuple(arr[-1]) != end:
-        raise ParameterError(
-            f"path must run from (0, 0) to {end}, got {tuple(arr[0].tolist())} to "
-            f"{tuple(arr[-1].tolist())}")
-    steps = np.diff(arr, axis=0)
-    bad = np.flatnonzero((steps < 0).any(axis=1) | (steps > 1).any(axis=1)
-                         | (steps == 0).all(axis=1))
-    if len(bad):
-        k = int(bad[0])
-        raise ParameterError(
-            f"path must move by (1, 0), (0, 1) or (1, 1), got {tuple(arr[k].tolist())} -> "
-            f"{tuple(arr[k + 1].tolist())}")
-    return arr
 
 
 def _row_starts(path: np.ndarray) -> np.ndarray:

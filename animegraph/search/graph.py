@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from animegraph.search.dtw import mark_finite
 from db.arrow import numbers
-from db.errors import DataError
+from db.errors import DataError, ParameterError
 from db.store import Database
 from ingest.speech.phones import PHONES
 
@@ -221,16 +222,25 @@ class AnimeGraph:
         if np.diff(self.motion_offsets).min(initial=1) < 1 or np.diff(
                 self.prosody_offsets).min(initial=1) < 1:
             raise ValueError("a node without motion or prosody frames")
-        for name in ("prosody_values", "motion_values", "first_pcs", "last_pcs",
-                     "start_time", "end_time"):
+        for name in ("motion_values", "first_pcs", "last_pcs", "start_time", "end_time"):
             if not np.isfinite(getattr(self, name)).all():
                 raise ValueError(f"{name} not finite")
+        # The curves the DTW reads: checked here once (and made read-only), so that its
+        # pair functions need not scan them again on every call.
+        try:
+            mark_finite(self.prosody_values)
+        except ParameterError:
+            raise ValueError("prosody_values not finite") from None
         if self.posterior_values is not None:
             post = self.posterior_values
             if len(self.posterior_offsets) != n + 1 or np.diff(
                     self.posterior_offsets).min(initial=1) < 1:
                 raise ValueError("a node without posteriorgram frames")
-            if not np.isfinite(post).all() or (post <= 0).any() or (post > 1).any():
+            try:
+                mark_finite(post)
+            except ParameterError:
+                raise ValueError("posteriorgram values outside (0, 1]") from None
+            if (post <= 0).any() or (post > 1).any():
                 raise ValueError("posteriorgram values outside (0, 1]")
         if self.first_pcs.shape != self.last_pcs.shape or self.first_pcs.shape[0] != n:
             raise ValueError("first_pcs and last_pcs shapes differ")

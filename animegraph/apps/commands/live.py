@@ -49,7 +49,8 @@ def cmd_live(args: argparse.Namespace) -> int:
                 setting[name] = given
         stream = Stream(model, sample_rate=source.sample_rate, **setting,
                         emotion=args.emotion, guide=guide,
-                        backlog_ms=None if args.fast else DEFAULT_BACKLOG_MS, text=args.text)
+                        backlog_ms=None if args.fast else DEFAULT_BACKLOG_MS, text=args.text,
+                        threads=args.threads)
     except (ParameterError, DataError) as exc:
         raise UsageError(f"animegraph live: {exc}") from None
     outputs = []
