@@ -292,6 +292,7 @@ class Stream:
             return self._empty()
         frames = self._update(self._heard, final=True)
         self._closed = True
+        self._end_transcript()
         return frames
 
     # -- one update ------------------------------------------------------------------------
@@ -346,6 +347,20 @@ class Stream:
         if script.failed is not None:
             self.stats.warnings[script.failed[:80]] += 1
             self._transcript = None
+
+    def _end_transcript(self) -> None:
+        """The speech has ended: test the transcript's fit over all of it (a short
+        utterance never had the seconds the running test needs) and say if it failed;
+        the frames sent followed it (:meth:`animegraph.live.transcript.TranscriptTrack.
+        finish`)."""
+        script = self._transcript
+        if script is None:
+            return
+        first = script.fixed
+        rows = self._track.posteriors(first, self._track.frames - first)
+        script.finish(np.log(np.maximum(rows, 1e-30)), first)
+        if script.failed is not None:
+            self.stats.warnings[script.failed[:80]] += 1
 
     def _on_posterior_frame(self, first: int) -> int:
         """The latest motion frame at or before ``first`` that starts a 20 ms posterior
