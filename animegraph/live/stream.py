@@ -79,8 +79,10 @@ MIN_RATE, MAX_RATE = 8000, 96000
 #: A window this many dB below the reference peak (:meth:`Stream.level`) is a pause.
 QUIET_DB = 40.0
 #: The reference peak is at least this many dB over the noise floor (the quietest 20 ms
-#: heard, by its peak), at most full scale: speech peaks some 20-35 dB over the noise
-#: of a recording (GRID: 22-32 dB), so the noise before the first word is heard quiet.
+#: heard, by its peak), at most full scale, so that the noise before the first word is
+#: heard quiet. Set below what speech reaches (GRID s1's database clips: their peak
+#: 38-47 dB over their quietest 20 ms, 5th-95th percentile), so that the reference is
+#: not above the speech's own peak; not tuned.
 SPEECH_OVER_NOISE_DB = 30.0
 #: Audio (s) whose peak is one step of the noise floor's running minimum.
 FLOOR_FRAME_S = 0.02
