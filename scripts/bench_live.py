@@ -3,6 +3,7 @@
 Usage::
 
     python scripts/bench_live.py [--quality synthetic facegood grid] [--grid-db DB] [--text]
+                                 [--joined]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
@@ -22,7 +23,11 @@ Usage::
   ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
   given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
   default with each clip's transcript (k-best, context ranking, no guide: what ``synth``
-  runs) and the live stream given it (``Stream(text=...)``, the guide blended).
+  runs) and the live stream given it (``Stream(text=...)``, the guide blended); the
+  transcripts given up while the stream ran, and those its end test reported. With
+  ``--joined``, also the held-out clips played back to back as one stream (each clip's
+  frames scored: the steady state, where the stream has a past), and each clip scored
+  after its first second (offline and live).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
