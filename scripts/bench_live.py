@@ -3,6 +3,7 @@
 Usage::
 
     python scripts/bench_live.py [--quality synthetic facegood grid] [--grid-db DB] [--text]
+                                 [--joined]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
@@ -22,7 +23,11 @@ Usage::
   ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
   given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
   default with each clip's transcript (k-best, context ranking, no guide: what ``synth``
-  runs) and the live stream given it (``Stream(text=...)``, the guide blended).
+  runs) and the live stream given it (``Stream(text=...)``, the guide blended); the
+  transcripts given up while the stream ran, and those its end test reported. With
+  ``--joined``, also the held-out clips played back to back as one stream (each clip's
+  frames scored: the steady state, where the stream has a past), and each clip scored
+  after its first second (offline and live).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
@@ -78,6 +83,9 @@ GRID_TRAIN_DB: list = []
 #: Also score the live stream and the offline default given each clip's transcript
 #: (``--text``; clips that have one).
 TEXT: list = []
+#: Also score the held-out clips played back to back as one stream, and each clip's
+#: frames after its first second (``--joined``).
+JOINED: list = []
 #: Speech for latency and drift with --db (eSpeak NG).
 SENTENCES = ("Please bring the blue box to the table.",
              "We were away a year ago when the rain came down on the hills.",
@@ -140,10 +148,13 @@ def live_motion(model, audio, sr, lookahead_ms, guide, text=None
     return np.concatenate(parts), stream
 
 
-def mouth_r(model, pred, clip) -> float:
+def mouth_r(model, pred, clip, skip_s: float = 0.0) -> float:
+    """Mouth R of ``pred`` against ``clip``'s recording over its observed frames (from
+    ``skip_s`` on: the frames after a stream's start-up)."""
     truth = clip.motion.astype(np.float64)
     n = min(len(pred), len(truth))
     keep = ~np.asarray(clip.missing, dtype=bool)[:n].any(axis=1)
+    keep[: int(round(skip_s * model.graph.fps))] = False
     local = model.to_local(pred[:n])[keep]
     return pearson(mouth_opening(local, model.names, model.kind),
                    mouth_opening(truth[:n][keep], model.names, model.kind))
@@ -174,15 +185,21 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     rows = {"offline": [], "offline-hama": [], "loudness": [],
             **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
+    if JOINED:  # the clips back to back as one stream, and every clip after its first s
+        rows.update({f"joined-{la:g}": [] for la in lookaheads})
+        rows.update({f"{k}-after1s": [] for k in ("offline", *(f"live-{la:g}"
+                                                                for la in lookaheads))})
     if TEXT:
         rows.update({"offline-text": [], **{f"live-text-{la:g}": [] for la in lookaheads}})
         cpu.update({f"live-text-{la:g}": [] for la in lookaheads})
-    misfit = 0
+    misfit = misfit_end = 0  # transcripts given up while running, found wrong at the end
     for clip in test:
         audio = clip.audio.astype(np.float32) / 32768.0
         sr = clip.sample_rate
         off = synthesize(model, audio, sr, k_best=AUDIO_ONLY_K_BEST, guide=guide).motion
         rows["offline"].append(mouth_r(model, off, clip))
+        if JOINED:
+            rows["offline-after1s"].append(mouth_r(model, off, clip, 1.0))
         # The engine the live windows use: how much of the gap is PocketSphinx's placing.
         off = synthesize(model, audio, sr, k_best=AUDIO_ONLY_K_BEST, guide=guide,
                          phones_engine="hama").motion
@@ -194,6 +211,11 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
             motion, stream = live_motion(model, audio, sr, la, guide)
             rows[f"live-{la:g}"].append(mouth_r(model, motion, clip))
             cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
+            if JOINED:
+                rows[f"live-{la:g}-after1s"].append(mouth_r(model, motion, clip, 1.0))
+        if JOINED:  # scored below, once the clips are joined
+            for la in lookaheads:
+                rows[f"joined-{la:g}"].append(np.nan)
         text = getattr(clip, "text", None) if TEXT else None
         if TEXT and text:  # as synth with a transcript: k-best, context ranking, no guide
             off = synthesize(model, audio, sr, text=text, k_best=TRANSCRIPT_K_BEST,
@@ -203,16 +225,43 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
                 motion, stream = live_motion(model, audio, sr, la, guide, text=text)
                 rows[f"live-text-{la:g}"].append(mouth_r(model, motion, clip))
                 cpu[f"live-text-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
-                misfit += any(k.startswith("the transcript does not fit")
-                              for k in stream.stats.warnings)
+                said = [k for k in stream.stats.warnings
+                        if k.startswith("the transcript does not fit")]
+                misfit += any("at its end" not in k for k in said)
+                misfit_end += any("at its end" in k for k in said)
         print(f"#   {clip.clip_id}: " + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rows.items()),
               flush=True)
+    if JOINED:
+        for la in lookaheads:
+            rows[f"joined-{la:g}"] = joined(model, test, la, guide)
+            print(f"#   joined {la:g} ms: " + " ".join(f"{r:.3f}"
+                                                      for r in rows[f"joined-{la:g}"]),
+                  flush=True)
     out = {"clips": len(test), "fps": model.graph.fps, "transcripts_given_up": misfit,
-           "mouth_r": {k: float(np.mean(v)) for k, v in rows.items()},
+           "transcripts_misfit_at_end": misfit_end,
+           "mouth_r": {k: float(np.nanmean(v)) for k, v in rows.items()},
            "cpu_share": {k: float(np.mean(v)) for k, v in cpu.items()}}
     out["model"], out["guide"] = model, guide
     out["speech"] = [(c.audio.astype(np.float32) / 32768.0, c.sample_rate) for c in test]
     return out
+
+
+def joined(model, test, lookahead_ms: float, guide) -> list[float]:
+    """Each clip's mouth R in one stream of the held-out clips played back to back (the
+    steady state: a live stream is long, its start-up happens once); clips at another
+    rate than the first are left out (NaN)."""
+    sr = test[0].sample_rate
+    parts, at = [], []
+    for clip in test:
+        at.append(sum(len(a) for a in parts) / sr if clip.sample_rate == sr else None)
+        if clip.sample_rate == sr:
+            parts.append(clip.audio.astype(np.float32) / 32768.0)
+    motion, _ = live_motion(model, np.concatenate(parts), sr, lookahead_ms, guide)
+    fps = model.graph.fps
+    return [np.nan if t is None else
+            mouth_r(model, motion[int(round(t * fps)): int(round(t * fps)) + len(clip.motion)],
+                    clip)
+            for clip, t in zip(test, at, strict=True)]
 
 
 def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:
@@ -312,6 +361,9 @@ def main() -> int:
                         "database clips (e.g. animegraph ingest of their videos)")
     parser.add_argument("--text", action="store_true",
                         help="also live and offline with each held-out clip's transcript")
+    parser.add_argument("--joined", action="store_true",
+                        help="also the held-out clips back to back as one stream, and "
+                        "each clip scored after its first second")
     parser.add_argument("--hop", type=float, default=None, help="the stream's hop (ms)")
     parser.add_argument("--context", type=float, default=None,
                         help="the stream's context (ms)")
@@ -326,6 +378,7 @@ def main() -> int:
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
     TEXT.extend([True] if args.text else [])
+    JOINED.extend([True] if args.joined else [])
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
                                      ("settle_ms", args.settle), ("threads", args.threads))

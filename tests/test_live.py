@@ -100,6 +100,39 @@ def test_silence_is_the_rest_pose_and_no_error(model):
     assert stream.stats.pauses >= 1
 
 
+def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monkeypatch):
+    """A second of room noise (-48 dBFS) before the speech: its level reference is 30 dB
+    over the noise, not the noise's own peak, so hama hears it quiet and the face rests;
+    with the loudest sample so far as the reference (as before) the noise moves it."""
+    from animegraph.live import Stream
+    from animegraph.live import stream as live_stream
+
+    audio, sr = speech
+    rng = np.random.default_rng(0)
+    said = 0.8 * audio / np.abs(audio).max()
+    noisy = np.concatenate([np.zeros(sr, np.float32), said])
+    noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+    rest = live_stream.rest_pose(model)
+    lead = int(0.8 * model.graph.fps)  # the noise's frames, before any look-ahead hears speech
+
+    def play(db):
+        monkeypatch.setattr(live_stream, "SPEECH_OVER_NOISE_DB", db)
+        stream = Stream(model, sample_rate=sr, backlog_ms=None)
+        first = stream.push(noisy[:sr])
+        level = stream.level()
+        batches, _ = _play(stream, noisy[sr:])
+        return np.concatenate([first.motion, *[b.motion for b in batches]]), level, stream
+
+    motion, level, stream = play(30.0)
+    noise_peak = float(np.abs(noisy[:sr]).max())
+    assert 10 * noise_peak < level < 1.0  # not the noise's peak
+    assert stream.level() == pytest.approx(float(np.abs(noisy).max()))  # the speech's
+    np.testing.assert_allclose(motion[:lead], np.repeat(rest[None], lead, 0))
+    before, level, _ = play(-np.inf)
+    assert level == pytest.approx(noise_peak)
+    assert np.abs(before[:lead] - rest).max() > 0.1 * np.abs(motion - rest).max()
+
+
 def test_bad_input_is_refused_in_one_line(model):
     from animegraph.live import Stream
 

@@ -80,6 +80,51 @@ def test_transcript_of_other_words_or_too_few_is_given_up(log_probs):
     assert short.failed is not None
 
 
+SHORT = "Please bring the blue box to me."  # 2.3 s: the running test never has its 2 s
+
+
+@pytest.fixture(scope="module")
+def short_log_probs():
+    from ingest.speech import ctc
+    from ingest.speech.espeak import speak
+
+    u = speak(SHORT)
+    return np.log(np.maximum(ctc.posteriors(u.audio.astype(np.float32), u.sample_rate),
+                             1e-30))
+
+
+@pytest.mark.parametrize("text, why", [
+    (SHORT, None),
+    ("Seven wizards quietly hex a jolly fish.", "nats/frame below recognition"),  # other words
+    ("Please bring.", "phones where about"),  # words left out
+    (SHORT[:-1] + " and then go home again today.", "below recognition"),  # not all said
+])
+def test_transcript_of_a_short_utterance_is_checked_at_its_end(short_log_probs, text, why):
+    """Too short for the running test (it is never given up while the audio arrives), a
+    wrong transcript is found when the speech ends, and a right one is kept."""
+    from animegraph.live.transcript import TranscriptTrack
+
+    track = _follow(TranscriptTrack(text, 50), short_log_probs)
+    assert track.failed is None
+    track.finish(short_log_probs[track.fixed:], track.fixed)
+    if why is None:
+        assert track.failed is None and track.fixed == len(short_log_probs)
+    else:
+        assert track.failed.startswith("the transcript does not fit the speech at its end")
+        assert why in track.failed
+
+
+def test_transcript_with_more_phones_than_frames_left_fails_at_the_end(short_log_probs):
+    """A closed path that cannot reach the transcript's last phone in the frames left."""
+    from animegraph.live.transcript import TranscriptTrack
+
+    n = 15  # 0.3 s of 2.3: fewer frames than the transcript has phones
+    track = _follow(TranscriptTrack(SHORT, 50), short_log_probs[:n])
+    assert len(track.phones) > n
+    track.finish(short_log_probs[track.fixed:n], track.fixed)
+    assert track.failed is not None and "phones said" in track.failed
+
+
 def test_transcript_window_segments_are_its_phones(speech, log_probs):
     """A window's segments tile its audio and name the transcript's phones, in order."""
     from animegraph.live.transcript import TranscriptTrack, window_segments
@@ -127,6 +172,29 @@ def test_stream_with_its_transcript_or_another_sends_every_frame(model, speech):
     said = [w for w in wrong.stats.warnings if w.startswith("the transcript does not fit")]
     assert len(said) == 1 and wrong.stats.warnings[said[0]] == 1
     assert wrong._transcript is None  # recognising
+
+
+def test_stream_reports_a_wrong_transcript_of_a_short_utterance_at_its_end(model):
+    """A 2.3 s utterance with another one's transcript: said once, when the stream closes
+    (the running test needs more audio); with its own transcript nothing is said."""
+    from animegraph.live import Stream
+    from ingest.speech.espeak import speak
+
+    u = speak(SHORT)
+    audio, sr = u.audio.astype(np.float32), u.sample_rate
+    right = Stream(model, sample_rate=sr, backlog_ms=None, text=SHORT)
+    _play(right, audio)
+    assert not any("transcript" in w for w in right.stats.warnings)
+    wrong = Stream(model, sample_rate=sr, backlog_ms=None,
+                   text="Seven wizards quietly hex a jolly fish.")
+    step = int(0.02 * sr)
+    for k in range(0, len(audio), step):
+        wrong.push(audio[k:k + step])
+    assert not any("transcript" in w for w in wrong.stats.warnings)  # not while it ran
+    wrong.close()
+    said = [w for w in wrong.stats.warnings if w.startswith("the transcript does not fit")]
+    assert len(said) == 1 and "at its end" in said[0]
+    assert wrong.stats.warnings[said[0]] == 1
 
 
 def test_stream_transcript_mouth_follows_offline_with_the_transcript(model, speech):
@@ -237,12 +305,15 @@ def test_live_command_with_a_transcript(tiny_db, speech, tmp_path):
     write_wav(tmp_path / "s.wav", audio, sr)
     base = ["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
             "--guide", "none", "--record", str(tmp_path / "take")]
-    out = _live([*base, "--text", SAID, "--low-latency"])
+    out = _live([*base, "--text", SAID])
     assert out.returncode == 0, out.stderr
     assert "frames for" in out.stderr and "transcript" not in out.stderr
-    assert "look-ahead 40 ms, an update every 40 ms" in out.stderr
-    out = _live([*base, "--text", "Seven wizards quietly hex a jolly box of frozen fish."])
+    # (--low-latency's posteriors lose this transcript's place after 2.4 s: its path
+    # stays on a pause, which the check at the stream's end reports.)
+    out = _live([*base, "--text", "Seven wizards quietly hex a jolly box of frozen fish.",
+                 "--low-latency"])
     assert out.returncode == 0, out.stderr
+    assert "look-ahead 40 ms, an update every 40 ms" in out.stderr
     assert "warning: the transcript does not fit" in out.stderr
     for text, words in (("   ", "empty"), ("... !!!", "pronounceable")):
         out = _live([*base, "--text", text])

@@ -30,7 +30,13 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   first :data:`FADE_FRAMES` frames of an update are cross-faded from what the previous
   window had for them, so that two windows meet without a step.
 
-A window whose loudest sample lies :data:`QUIET_DB` below the loudest heard so far (or is
+hama hears the audio at one level, set by a reference peak (:meth:`Stream.level`): offline
+the clip's own peak; live the loudest sample heard so far, but never less than what speech
+:data:`SPEECH_OVER_NOISE_DB` above the quietest 20 ms heard would reach. At a stream's
+start, before any speech, the loudest sample is the room's noise: scaled to the speech's
+level, hama heard it as phones, and the leading silence moved the mouth.
+
+A window whose loudest sample lies :data:`QUIET_DB` below that reference (or is
 silent) is a pause: hama would hear the noise at full level (it hears every input at one
 level), so no phone is looked for; its frames ease into the database's rest pose (the
 mean of its silence animes).
@@ -71,8 +77,16 @@ LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
-#: A window this many dB below the loudest sample heard so far is a pause.
+#: A window this many dB below the reference peak (:meth:`Stream.level`) is a pause.
 QUIET_DB = 40.0
+#: The reference peak is at least this many dB over the noise floor (the quietest 20 ms
+#: heard, by its peak), at most full scale, so that the noise before the first word is
+#: heard quiet. Set below what speech reaches (GRID s1's database clips: their peak
+#: 38-47 dB over their quietest 20 ms, 5th-95th percentile), so that the reference is
+#: not above the speech's own peak; not tuned.
+SPEECH_OVER_NOISE_DB = 30.0
+#: Audio (s) whose peak is one step of the noise floor's running minimum.
+FLOOR_FRAME_S = 0.02
 #: Audio waiting (ms) beyond which one update hears all of it at once (the stream has
 #: fallen behind: it catches up, with a longer window, instead of lagging ever more).
 DEFAULT_BACKLOG_MS = 400.0
@@ -238,6 +252,8 @@ class Stream:
         self._buffer_start = 0  # sample index of _buffer[0]
         self._heard = 0  # samples pushed
         self._peak = 0.0  # loudest sample heard
+        self._floor = np.inf  # the quietest FLOOR_FRAME_S heard, by its peak
+        self._floor_at = 0  # samples of the input measured for the floor
         self._sent = 0  # frames sent
         self._updated_at = 0  # samples heard at the last update
         self._last = self._rest.copy()  # the last frame sent
@@ -290,6 +306,7 @@ class Stream:
         self._heard += len(x)
         if len(x):
             self._peak = max(self._peak, float(np.max(np.abs(x))))
+            self._measure_floor()
         hop = int(round(self.hop_s * self.sample_rate))
         out = []
         while self._heard - self._updated_at >= hop:
@@ -301,12 +318,32 @@ class Stream:
                 out.append(self._update(self._updated_at + hop, final=False))
         return join(out, self._empty())
 
+    def level(self) -> float:
+        """The reference peak hama's input is scaled to (and pauses are judged by): the
+        loudest sample heard so far, at least :data:`SPEECH_OVER_NOISE_DB` over the noise
+        floor (at most full scale)."""
+        floor = 0.0 if not np.isfinite(self._floor) else self._floor
+        return max(self._peak, min(1.0, floor * 10 ** (SPEECH_OVER_NOISE_DB / 20)))
+
+    def _measure_floor(self) -> None:
+        """The noise floor: the least peak of the whole FLOOR_FRAME_S spans heard."""
+        n = int(round(FLOOR_FRAME_S * self.sample_rate))
+        end = self._buffer_start + len(self._buffer)
+        count = (end - self._floor_at) // n
+        if count <= 0:
+            return
+        a = self._floor_at - self._buffer_start
+        spans = np.abs(self._buffer[a: a + count * n]).reshape(count, n).max(axis=1)
+        self._floor = min(self._floor, float(spans.min()))
+        self._floor_at += count * n
+
     def close(self) -> Frames:
         """Send the frames left, up to the end of the audio (no more look-ahead)."""
         if self._closed:
             return self._empty()
         frames = self._update(self._heard, final=True)
         self._closed = True
+        self._end_transcript()
         return frames
 
     # -- one update ------------------------------------------------------------------------
@@ -341,7 +378,7 @@ class Stream:
         and the index of the first."""
         first = self._on_posterior_frame(
             max(0, int(np.floor((self._sent / self.fps - self.context_s) * self.fps))))
-        self._track.update(self._buffer, self._buffer_start, end, self._peak)
+        self._track.update(self._buffer, self._buffer_start, end, self.level())
         self._follow_transcript()
         motion = self._window(first, end)  # frames first, first + 1, ... (may end short)
         if len(motion) < target - first:  # rounding at the end: hold the last frame
@@ -369,6 +406,20 @@ class Stream:
             self.stats.warnings[script.failed[:80]] += 1
             self._transcript = None
 
+    def _end_transcript(self) -> None:
+        """The speech has ended: test the transcript's fit over all of it (a short
+        utterance never had the seconds the running test needs) and say if it failed;
+        the frames sent followed it (:meth:`animegraph.live.transcript.TranscriptTrack.
+        finish`)."""
+        script = self._transcript
+        if script is None:
+            return
+        first = script.fixed
+        rows = self._track.posteriors(first, self._track.frames - first)
+        script.finish(np.log(np.maximum(rows, 1e-30)), first)
+        if script.failed is not None:
+            self.stats.warnings[script.failed[:80]] += 1
+
     def _on_posterior_frame(self, first: int) -> int:
         """The latest motion frame at or before ``first`` that starts a 20 ms posterior
         frame too (so that the window's posteriors are the track's rows, not shifted),
@@ -395,7 +446,7 @@ class Stream:
         audio = self._buffer[max(0, start - self._buffer_start): end - self._buffer_start]
         n = int(round(len(audio) / self.sample_rate * self.fps))
         peak = float(np.max(np.abs(audio))) if len(audio) else 0.0
-        if peak <= self._peak * 10 ** (-QUIET_DB / 20) or peak <= 1e-4:
+        if peak <= self.level() * 10 ** (-QUIET_DB / 20) or peak <= 1e-4:
             return self._pause(n)
         start_s = max(start, self._buffer_start) / self.sample_rate  # where the audio begins
         try:

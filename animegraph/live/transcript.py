@@ -24,6 +24,15 @@ frame, or it says fewer than :data:`ingest.speech.ctc.MIN_PHONE_SHARE` phones pe
 recognition hears (with a free end a path of a wrong transcript can stay on the blank
 and say nothing). The stream then recognises the phones of the rest of the speech, as
 the offline path falls back to recognition.
+
+Those tests need :data:`MIN_CHECK_S` of fixed frames, and the last :data:`COMMIT_S` of a
+stream are never fixed while it runs: a wrong transcript of a short utterance (a GRID
+sentence is 3 s) would go unnoticed. When the speech ends (:meth:`TranscriptTrack.finish`)
+the path is closed as offline closes it (it must end on the transcript's last phone or
+the blank after it: the speech said all of it), every frame is fixed, and the same tests
+run over all of it from offline's shortest clip (:data:`ingest.speech.inputs.MIN_DURATION`)
+on. The frames already sent followed the transcript: a failure there is reported (the
+stream counts a warning), not mended.
 """
 
 from __future__ import annotations
@@ -134,25 +143,53 @@ class TranscriptTrack:
         # Fix the frames older than COMMIT_S before the newest one.
         newest = self._fixed + len(lp)
         fix_to = max(self._fixed, newest - int(round(COMMIT_S * self.frame_rate)))
-        n_fix = fix_to - self._fixed
-        if n_fix:
-            rows = lp[:n_fix]
-            on_path = rows[np.arange(n_fix), self._states[visited[:n_fix]]]
-            self._loss = np.concatenate([self._loss, rows.max(axis=1) - on_path])
-            best = np.argmax(rows, axis=1)
-            before = np.concatenate([[self._last_best], best[:-1]])
-            self._heard = np.concatenate([self._heard, (best != before)
-                                          & (best != self._blank)])
-            states = visited[:n_fix]
-            entered = np.concatenate([[self._fixed_state], states[:-1]]) != states
-            self._said = np.concatenate([self._said, entered & (states % 2 == 1)])
-            self._last_best = int(best[-1])
-            self._fixed_state = int(visited[n_fix - 1])
-            self._fixed = fix_to
+        if fix_to > self._fixed:
+            self._fix(lp, visited, fix_to - self._fixed)
             self._check()
 
-    def _viterbi(self, lp: np.ndarray) -> np.ndarray:
-        """States of the best path through ``lp`` from the fixed state, free at its end."""
+    def finish(self, log_probs: np.ndarray, first: int) -> None:
+        """The speech has ended: close the path over the frames from ``first`` on (the
+        stream's last posteriors, as :meth:`update` takes them), fix every frame and test
+        the fit over all of them (see the module's docstring); :attr:`failed` says why
+        it does not fit."""
+        from ingest.speech.inputs import MIN_DURATION
+
+        if self.failed is not None:
+            return
+        if first > self._fixed:
+            raise ValueError(f"posteriors from frame {first}, the path is fixed to "
+                             f"{self._fixed}")
+        lp = np.maximum(log_probs[self._fixed - first:], LOG_FLOOR)
+        if len(lp):
+            visited = self._viterbi(lp, closed=True)
+            if visited is None:  # the frames left cannot say the phones left
+                said = (max(self._fixed_state, 0) + 1) // 2
+                self.failed = (f"the transcript does not fit the speech at its end "
+                               f"({said} of its {len(self.phones)} phones said)")
+                return
+            self._path = np.concatenate([self._path[: self._fixed - self._first], visited])
+            self._fix(lp, visited, len(lp))
+        self._check(min_s=MIN_DURATION, at="at its end")
+
+    def _fix(self, lp: np.ndarray, visited: np.ndarray, n_fix: int) -> None:
+        """Fix the first ``n_fix`` frames of ``visited`` (their posteriors ``lp``): keep
+        what the fit's tests need of them."""
+        rows = lp[:n_fix]
+        on_path = rows[np.arange(n_fix), self._states[visited[:n_fix]]]
+        self._loss = np.concatenate([self._loss, rows.max(axis=1) - on_path])
+        best = np.argmax(rows, axis=1)
+        before = np.concatenate([[self._last_best], best[:-1]])
+        self._heard = np.concatenate([self._heard, (best != before) & (best != self._blank)])
+        states = visited[:n_fix]
+        entered = np.concatenate([[self._fixed_state], states[:-1]]) != states
+        self._said = np.concatenate([self._said, entered & (states % 2 == 1)])
+        self._last_best = int(best[-1])
+        self._fixed_state = int(visited[n_fix - 1])
+        self._fixed += n_fix
+
+    def _viterbi(self, lp: np.ndarray, *, closed: bool = False) -> np.ndarray | None:
+        """States of the best path through ``lp`` from the fixed state, free at its end
+        (``closed``: ending on the last phone or the blank after it; None if it cannot)."""
         n = len(lp)
         lo = max(self._fixed_state, 0)
         hi = min(len(self._states), lo + 2 * n + 2)
@@ -171,6 +208,11 @@ class TranscriptTrack:
         for t in range(1, n):
             back[t] = self._moves(score, skip)
             score = self._step(score, skip) + lp[t, states]
+        if closed:  # the last phone or the final blank, if this many frames reach them
+            ends = np.arange(hi - lo) + lo >= len(self._states) - 2
+            if not np.isfinite(score[ends]).any():
+                return None
+            score = np.where(ends, score, -np.inf)
         s = int(np.argmax(score))  # free end: any state
         visited = np.empty(n, dtype=np.int64)
         for t in range(n - 1, -1, -1):
@@ -195,24 +237,24 @@ class TranscriptTrack:
         best = np.maximum(stay, np.maximum(step, hop))
         return np.where(best == stay, 0, np.where(best == step, 1, 2)).astype(np.int8)
 
-    def _check(self) -> None:
+    def _check(self, min_s: float = MIN_CHECK_S, at: str | None = None) -> None:
         """Give the transcript up when its fixed path fits the last :data:`CHECK_S` of
-        speech much worse than free recognition does."""
+        speech (once there are ``min_s`` of it) much worse than free recognition does."""
         n = int(round(CHECK_S * self.frame_rate))
         self._loss, self._heard, self._said = self._loss[-n:], self._heard[-n:], self._said[-n:]
-        if len(self._loss) < MIN_CHECK_S * self.frame_rate:
+        if len(self._loss) < min_s * self.frame_rate:
             return
         loss = float(np.mean(self._loss))
         heard, said = int(self._heard.sum()), int(self._said.sum())
-        at = f"after {self._fixed / self.frame_rate:.1f} s"
+        then = "phones recognised from there on" if at is None else "the frames followed it"
+        at = at or f"after {self._fixed / self.frame_rate:.1f} s"
         if loss > self._max_loss:
             why = f"alignment {loss:.2f} nats/frame below recognition"
         elif said < self._min_share * heard:  # a free end can stop saying phones
             why = f"it says {said} phones where about {heard} were heard"
         else:
             return
-        self.failed = (f"the transcript does not fit the speech {at} ({why}): phones "
-                       "recognised from there on")
+        self.failed = f"the transcript does not fit the speech {at} ({why}): {then}"
 
     def phone_starts(self, first: int, count: int) -> tuple[list[str], np.ndarray]:
         """The transcript's phones on the path in frames ``first`` to ``first + count``
