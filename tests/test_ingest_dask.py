@@ -316,3 +316,16 @@ def test_a_local_cluster_runs_with_its_ticks_cut(tmp_path):
     import dask
 
     assert dask.config.get("distributed.worker.profile.enabled") is True
+
+
+def test_a_local_cluster_reads_the_clips_where_they_are_a_scheduler_gets_their_bytes():
+    from ingest.on_dask import _local
+
+    cluster, client = _threads_cluster()
+    try:
+        assert _local(client)  # started here: its workers share this machine's disks
+        with distributed.Client(cluster.scheduler_address, set_as_default=False) as remote:
+            assert not _local(remote)  # known by its address only: the bytes travel
+    finally:
+        client.close()
+        cluster.close()
