@@ -299,18 +299,24 @@ def test_a_local_cluster_runs_with_its_ticks_cut(tmp_path):
     from animegraph.apps.batch_cluster import LOCAL_CLUSTER_CONFIG, dask_client
 
     def seen(dask_worker):  # on the worker: its settings and what it does periodically
+        import os
+
         import dask
 
         return ({key: dask.config.get(key) for key in LOCAL_CLUSTER_CONFIG},
-                sorted(dask_worker.periodic_callbacks))
+                sorted(dask_worker.periodic_callbacks),
+                os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OMP_NUM_THREADS"))
 
     options = SimpleNamespace(scheduler=None, workers=1, connect_timeout=30.0)
     with dask_client(options) as (client, n_workers):
-        (config, callbacks), = client.run(seen).values()
+        (config, callbacks, trim, omp), = client.run(seen).values()
         scheduler_ticks = client.run_on_scheduler(
             lambda dask_scheduler: dask_scheduler.periodic_callbacks["tick"].callback_time)
     assert n_workers == 1 and config == LOCAL_CLUSTER_CONFIG
     assert "profile" not in callbacks and "heartbeat" in callbacks
+    # glibc's own trim threshold (Dask's 64 kB made a clip's arrays fault pages anew);
+    # one native thread.
+    assert trim == os.environ.get("MALLOC_TRIM_THRESHOLD_") and omp == "1"
     assert scheduler_ticks == 1000  # ms: Dask's default wakes it every 20
     # Left as they were for what runs after the cluster.
     import dask
