@@ -11,7 +11,9 @@ the database. Two things make this more than ``client.map``:
   sent to its worker with its files' bytes, written there into a temporary folder laid
   out as on the client (so the readers find a clip's side files where they expect them)
   and removed after; a worker need not see the client's disks. A larger clip travels as
-  its paths, which its worker must be able to read (a shared file system).
+  its paths, which its worker must be able to read (a shared file system). On a local
+  cluster (one this process started: its workers share this machine's disks) every clip
+  travels as its paths.
 """
 
 from __future__ import annotations
@@ -186,6 +188,7 @@ def map_clips(client, func: Callable, jobs: Sequence, *, settle: Callable,
     futures: dict = {}
     completed = as_completed(loop=client.loop)
     room = IN_FLIGHT_PER_THREAD * _threads(client)
+    travel = not _local(client)
 
     def finish(future) -> tuple:
         index = futures.pop(future)
@@ -201,7 +204,7 @@ def map_clips(client, func: Callable, jobs: Sequence, *, settle: Callable,
     def decided() -> Iterator[tuple]:
         compiled = False
         for index, job in enumerate(jobs):
-            shipped = ship(job.source, max_bytes)
+            shipped = ship(job.source, max_bytes) if travel else None
             settled = settle(job, None if shipped is None else shipped.checksum)
             if settled is not None:
                 results[index] = settled
@@ -240,6 +243,16 @@ def _compile_once_per_host(client) -> None:
         first.setdefault(str(worker.get("host", address)), address)
     client.gather([client.submit(compile_shared_kernels, workers=[address], pure=False,
                                  allow_other_workers=False) for address in first.values()])
+
+
+def _local(client) -> bool:
+    """The client's cluster is one this process started here (a ``LocalCluster``): its
+    workers read the clips where they are. Sending them each clip's bytes, written to a
+    temporary folder and read back, cost a local cluster CPU the process pool does not
+    spend (``docs/results/speed.md``, "Ingest on Dask")."""
+    from distributed import LocalCluster
+
+    return isinstance(getattr(client, "cluster", None), LocalCluster)
 
 
 def _threads(client) -> int:

@@ -11,9 +11,12 @@ folder) and looks for a kept one before it reads a clip; on Dask, the client doe
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+
+from threadpoolctl import threadpool_limits
 
 from db.errors import AnimeGraphError, DataError
 from ingest import prepared_cache
@@ -125,12 +128,14 @@ def _checksum(source: ClipSource) -> str | None:
 
 
 def run_clips(found, known, fps, config, workers, progress, reference, schema=None, *,
-              client=None, keep: Path | None = None):
+              client=None, cluster=None, keep: Path | None = None):
     """Prepare each clip of ``found`` (see :func:`_prepare_source`): in this process, in
-    ``workers`` processes, or on the Dask cluster of ``client``. ``schema``: the channels a
-    clip must have (the database's), None to take any. ``keep``: the database's folder,
-    to be resumable: each prepared clip is kept in the cache (:mod:`ingest.prepared_cache`)
-    and those an earlier ingest into it kept are taken from there.
+    ``workers`` processes, or on the Dask cluster of ``client`` (or of ``cluster()``, a
+    context manager yielding a client: left, and so a local cluster closed, once the
+    clips are prepared). ``schema``: the channels a clip must have (the database's), None
+    to take any. ``keep``: the database's folder, to be resumable: each prepared clip is
+    kept in the cache (:mod:`ingest.prepared_cache`) and those an earlier ingest into it
+    kept are taken from there.
 
     Returns (one (report, clip or None) a clip, the cache entries of the prepared clips,
     how many were taken from the cache)."""
@@ -138,7 +143,7 @@ def run_clips(found, known, fps, config, workers, progress, reference, schema=No
                     reference, config.phones_engine, config.limits, config.posteriorgrams,
                     schema, str(Path(keep).resolve()) if keep else "") for s in found]
     wrap = progress(len(jobs)) if progress else None
-    if keep is None and client is None:
+    if keep is None and client is None and cluster is None:
         results = [(*done, None, False) for done in _map(work, jobs, workers, wrap)]
     else:
         bound = prepared_cache.Bound()
@@ -152,16 +157,17 @@ def run_clips(found, known, fps, config, workers, progress, reference, schema=No
         def watched(done):
             return wrap(noted(done)) if wrap else noted(done)
 
-        if client is None:
+        if client is None and cluster is None:
             results = _map(_work_kept, jobs, workers, watched)
         else:
             from ingest.on_dask import map_clips
 
-            results = map_clips(
-                client, work, jobs, settle=_settle, keep=_keep, progress=watched,
-                failed=lambda job, reason: ClipReport(str(job.source.path),
-                                                      job.source.clip_id, "rejected",
-                                                      reason=reason))
+            with contextlib.nullcontext(client) if client is not None else cluster() as on:
+                results = map_clips(
+                    on, work, jobs, settle=_settle, keep=_keep, progress=watched,
+                    failed=lambda job, reason: ClipReport(str(job.source.path),
+                                                          job.source.clip_id, "rejected",
+                                                          reason=reason))
     return ([(report, clip) for report, clip, _, _ in results],
             [key for _, _, key, _ in results if key is not None],
             sum(resumed for *_, resumed in results))
@@ -169,8 +175,14 @@ def run_clips(found, known, fps, config, workers, progress, reference, schema=No
 
 def _map(func, jobs, workers, progress):
     if workers == 1 or len(jobs) == 1:
-        results = map(func, jobs)
-        return list(progress(results) if progress else results)
+        # One native thread, as a pool worker has (ingest.workers): a clip's arrays are
+        # small, and BLAS threads on every core spin more than they compute (the 800 GRID
+        # clips cost 84 CPU-s here against 51 in a pool of 2, docs/results/speed.md,
+        # "Ingest on Dask"). Only meanwhile: the writer's decomposition is one large
+        # product that does use the cores.
+        with threadpool_limits(limits=1):
+            results = map(func, jobs)
+            return list(progress(results) if progress else results)
     return map_in_processes(func, jobs, workers=workers, chunksize=4, progress=progress)
 
 

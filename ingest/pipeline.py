@@ -27,6 +27,7 @@ import logging
 import os
 import time
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -181,6 +182,7 @@ def ingest(
     say: Callable[[str], object] | None = None,
     wait: float = WRITE_WAIT_S,
     client=None,
+    cluster: Callable[[], AbstractContextManager] | None = None,
 ) -> IngestReport:
     """Ingest clips found under ``sources`` into the database at ``db_path``.
 
@@ -206,6 +208,12 @@ def ingest(
         Prepare the clips on this Dask cluster instead (``workers`` is then unused):
         resumable, and the clips' bytes travel to the workers (:mod:`ingest.on_dask`).
         This process alone writes the database.
+    cluster : callable, optional
+        Instead of ``client``: ``cluster()`` is a context manager that yields a
+        ``distributed.Client``; entered once the clips to prepare are known and left
+        (a local cluster closed) as soon as they are prepared, before the writer's part
+        (decomposition, emotion model, writing), which runs in this process alone: a
+        cluster left up meanwhile spends CPU on its heartbeats for nothing.
 
     Raises
     ------
@@ -237,7 +245,7 @@ def ingest(
     try:
         with writer_lock(db_path, wait=wait, what="database"):
             return _ingest_locked(found, db_path, config, workers, progress, started, say,
-                                  client)
+                                  client, cluster)
     except BaseException:  # an interrupt too: a first ingest that fails leaves no folder
         if made:
             _remove_unmade(db_path)
@@ -260,7 +268,7 @@ def _remove_unmade(folder: Path) -> None:
 
 def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig, workers: int,
                    progress, started: float, say: Callable[[str], object] | None,
-                   client=None) -> IngestReport:
+                   client=None, cluster=None) -> IngestReport:
     existing: Database | None = None
     if is_database(db_path):
         existing = Database.open(db_path)
@@ -294,7 +302,8 @@ def _ingest_locked(found: list[ClipSource], db_path: Path, config: IngestConfig,
     report = IngestReport(db=db_path)
     schema = stored_schema(existing) if existing is not None else None
     results, kept_keys, report.resumed = run_clips(found, known, fps, config, workers, progress,
-                                              reference, schema, client=client, keep=db_path)
+                                              reference, schema, client=client, cluster=cluster,
+                                              keep=db_path)
     new: list[PreparedClip] = []
     for clip_report, clip in results:
         report.clips.append(clip_report)

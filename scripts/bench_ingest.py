@@ -47,6 +47,7 @@ features (:func:`ingest.emotion.model.classifier_features`) on the corpus' first
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import resource
@@ -192,7 +193,6 @@ def _subset(corpus: Path, n: int, out: Path) -> Path:
 
 def _cluster(args):
     """A Dask client (``--dask``, ``--scheduler``) as ``ingest`` uses it, or None."""
-    import contextlib
     from types import SimpleNamespace
 
     if not (args.dask or args.scheduler):
@@ -259,15 +259,25 @@ def main() -> int:
                   f"{kids - k0:.1f} s workers, load {os.getloadavg()[0]:.1f}: {line}",
                   flush=True)
 
-        with _cluster(args) as (client, n_workers):
-            started = time.perf_counter() - t0
-            report = ingest([corpus], db, workers=args.workers, say=say, client=client)
+        on_dask = bool(args.dask or args.scheduler)
+        cluster_up: dict = {"start_s": 0.0, "workers": args.workers}
+
+        @contextlib.contextmanager
+        def cluster():  # as ingest enters it: for the clips only
+            t = time.perf_counter()
+            with _cluster(args) as (client, n):
+                cluster_up.update(start_s=time.perf_counter() - t, workers=n)
+                yield client
+
+        report = ingest([corpus], db, workers=args.workers, say=say,
+                        cluster=cluster if on_dask else None)
         wall = time.perf_counter() - t0
+        started, n_workers = cluster_up["start_s"], cluster_up["workers"]
         me, kids = _cpu()
         m = Database.open(db).manifest
         row = {
             "scale": args.scale if args.corpus is None else str(args.corpus),
-            "workers": n_workers, "on": "dask" if client is not None else (
+            "workers": n_workers, "on": "dask" if on_dask else (
                 "pool" if args.workers > 1 else "this process"),
             "wall_s": round(wall, 1), "start_s": round(started, 1),
             "clips_s": round(steps[0], 1) if steps else None,

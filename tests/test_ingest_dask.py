@@ -3,6 +3,7 @@ the process pool's, resumable after a kill, and clips whose bytes travel to the 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -266,3 +267,71 @@ def test_a_bad_clip_is_rejected_on_its_worker_and_the_others_go_in(tiny_corpus, 
     # The reason names the file where the user has it, not the worker's copy.
     assert str(victim) in rejected[0].reason and "animegraph-clip-" not in rejected[0].reason
     assert Database.open(tmp_path / "db").manifest["n_clips"] == report.count("added") > 0
+
+
+def test_the_cluster_is_closed_before_the_database_is_written(tiny_corpus, tmp_path):
+    corpus = _subset(tiny_corpus, tmp_path / "corpus", ("s0001",))
+    events: list[str] = []
+    clients: list = []
+
+    @contextlib.contextmanager
+    def cluster():
+        made, client = _threads_cluster()
+        clients.append(client)
+        try:
+            yield client
+        finally:
+            client.close()
+            made.close()
+            events.append("closed")
+
+    report = ingest([corpus], tmp_path / "db", cluster=cluster,
+                    say=lambda line: events.append(f"{line} (client {clients[0].status})"))
+    assert report.count("added") == len(discover([corpus])) > 0
+    # Once the clips were prepared the cluster went; the writer's steps came after.
+    assert events[0] == "closed" and len(events) > 1, events
+    assert all("(client closed)" in line for line in events[1:]), events
+
+
+def test_a_local_cluster_runs_with_its_ticks_cut(tmp_path):
+    from types import SimpleNamespace
+
+    from animegraph.apps.batch_cluster import LOCAL_CLUSTER_CONFIG, dask_client
+
+    def seen(dask_worker):  # on the worker: its settings and what it does periodically
+        import os
+
+        import dask
+
+        return ({key: dask.config.get(key) for key in LOCAL_CLUSTER_CONFIG},
+                sorted(dask_worker.periodic_callbacks),
+                os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OMP_NUM_THREADS"))
+
+    options = SimpleNamespace(scheduler=None, workers=1, connect_timeout=30.0)
+    with dask_client(options) as (client, n_workers):
+        (config, callbacks, trim, omp), = client.run(seen).values()
+        scheduler_ticks = client.run_on_scheduler(
+            lambda dask_scheduler: dask_scheduler.periodic_callbacks["tick"].callback_time)
+    assert n_workers == 1 and config == LOCAL_CLUSTER_CONFIG
+    assert "profile" not in callbacks and "heartbeat" in callbacks
+    # glibc's own trim threshold (Dask's 64 kB made a clip's arrays fault pages anew);
+    # one native thread.
+    assert trim == os.environ.get("MALLOC_TRIM_THRESHOLD_") and omp == "1"
+    assert scheduler_ticks == 1000  # ms: Dask's default wakes it every 20
+    # Left as they were for what runs after the cluster.
+    import dask
+
+    assert dask.config.get("distributed.worker.profile.enabled") is True
+
+
+def test_a_local_cluster_reads_the_clips_where_they_are_a_scheduler_gets_their_bytes():
+    from ingest.on_dask import _local
+
+    cluster, client = _threads_cluster()
+    try:
+        assert _local(client)  # started here: its workers share this machine's disks
+        with distributed.Client(cluster.scheduler_address, set_as_default=False) as remote:
+            assert not _local(remote)  # known by its address only: the bytes travel
+    finally:
+        client.close()
+        cluster.close()

@@ -126,3 +126,21 @@ def test_librosa_s_gufuncs_are_compiled_into_the_cache_before_workers_start(tmp_
     assert any("_pi_wrapper" in n for n in names), names  # yin's parabolic interpolation
     assert any("_zc_wrapper" in n for n in names), names  # zero crossings
     assert any("_localmin" in n for n in names), names  # yin's troughs
+
+
+def test_clips_prepared_in_this_process_use_one_blas_thread_meanwhile():
+    """``--workers 1``: the clips are prepared here with one BLAS thread, as a pool worker
+    has; the writer's part after them gets the cores back."""
+    import pytest
+    from threadpoolctl import threadpool_limits
+
+    from ingest.per_clip import _map
+
+    with threadpool_limits(limits=2):
+        before, _ = _thread_pools(None)
+        if max(before, default=1) < 2:
+            pytest.skip("numpy's BLAS here runs one thread: nothing to limit")
+        seen = _map(_thread_pools, [0, 1], 1, None)
+        after, _ = _thread_pools(None)
+    assert [blas for blas, _ in seen] == [[1] * len(before)] * 2
+    assert after == before

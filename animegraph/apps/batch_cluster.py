@@ -8,7 +8,7 @@ import logging
 import multiprocessing
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 
 from db.errors import DataError
 from ingest.workers import sigint_ignored_by_children
@@ -22,6 +22,30 @@ CONNECT_TIMEOUT_S = 5.0
 #: The loggers a local cluster speaks through while it is stopped (tornado's "Exception
 #: in callback" among them; Dask's configuration sets tornado.application's own level).
 _DASK_LOGGERS = ("distributed", "tornado", "tornado.application", "asyncio")
+#: Dask's settings for a local cluster (its scheduler and nannies live in this process,
+#: its workers are given this process' settings). At Dask's defaults every server's event
+#: loop wakes 50 times a second to time itself, each worker samples its threads' stacks
+#: 100 times a second for a profile only a dashboard shows (there is none), the memory
+#: monitors look 10 times a second and the scheduler moves tasks between workers: all
+#: CPU spent for as long as the cluster is up, busy or not (``docs/results/speed.md``,
+#: "Ingest on Dask"). The clips' tasks are alike and independent, and a worker's memory
+#: is checked often enough every second.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.admin.system-monitor.disk": False,
+    "distributed.admin.system-monitor.gil.enabled": False,
+    "distributed.worker.profile.enabled": False,
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing": False,
+    "distributed.scheduler.active-memory-manager.start": False,
+    # Dask's default also sets MALLOC_TRIM_THRESHOLD_=65536 in its workers: glibc then
+    # gives freed memory back to the system at once and takes it again for the next
+    # frame's arrays (page faults, system time); a clip cost its worker 76 ms of CPU
+    # against 57.6 in a pool worker. The native thread pools keep one thread each.
+    "distributed.nanny.pre-spawn-environ": {
+        "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
+}
 
 
 @contextmanager
@@ -54,11 +78,14 @@ def dask_client(options, *, prepare: Callable[[], object] | None = None
 
 @contextmanager
 def _client(options, prepare: Callable[[], object] | None):
+    import dask
     from distributed import Client, LocalCluster
 
     cluster = client = None
     before = set(multiprocessing.active_children())
     quiet: dict[str, int] = {}
+    # Left last (after the cluster is closed): its settings are the cluster's while it is up.
+    settings = ExitStack()
     try:
         if options.scheduler:
             address = options.scheduler
@@ -88,6 +115,7 @@ def _client(options, prepare: Callable[[], object] | None):
             from ingest.workers import compile_shared_kernels
 
             compile_shared_kernels()  # the local workers share this installation's caches
+            settings.enter_context(dask.config.set(LOCAL_CLUSTER_CONFIG))
             cluster = LocalCluster(
                 n_workers=0, threads_per_worker=1, processes=True,
                 # CRITICAL: a worker busy in a line when a Ctrl-C closes the scheduler
@@ -133,6 +161,7 @@ def _client(options, prepare: Callable[[], object] | None):
             client.close()
         if cluster is not None:
             cluster.close()
+        settings.close()
         for name, level in quiet.items():
             logging.getLogger(name).setLevel(level)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import contextmanager
 from types import SimpleNamespace
 
 from animegraph.apps.commands.common import UsageError, progress, say
@@ -27,24 +28,25 @@ def cmd_ingest(args: argparse.Namespace) -> int:
                           posteriorgrams=args.posteriorgrams)
     wait = {} if args.wait is None else {"wait": args.wait}
 
-    def run(client=None):
-        return ingest(args.sources, args.db, config, workers=args.workers, client=client,
-                      progress=lambda total: progress(total, args.quiet, "clip",
-                                                      "ingest: reading clips"),
-                      say=None if args.quiet else say, **wait)
-
-    if args.scheduler is None:
-        report = run()
-    else:
+    cluster = None
+    if args.scheduler is not None:
         from animegraph.apps.batch_cluster import CONNECT_TIMEOUT_S, dask_client
 
         options = SimpleNamespace(scheduler=args.scheduler, workers=args.workers,
                                   connect_timeout=CONNECT_TIMEOUT_S)
-        with dask_client(options) as (client, n_workers):
-            if not args.quiet:
-                say(f"ingest: preparing the clips on {n_workers} Dask worker"
-                    f"{'s' * (n_workers != 1)} at {args.scheduler}")
-            report = run(client)
+
+        @contextmanager
+        def cluster():  # entered for the clips only: the database is written without it
+            with dask_client(options) as (client, n_workers):
+                if not args.quiet:
+                    say(f"ingest: preparing the clips on {n_workers} Dask worker"
+                        f"{'s' * (n_workers != 1)} at {args.scheduler}")
+                yield client
+
+    report = ingest(args.sources, args.db, config, workers=args.workers, cluster=cluster,
+                    progress=lambda total: progress(total, args.quiet, "clip",
+                                                    "ingest: reading clips"),
+                    say=None if args.quiet else say, **wait)
     for line in report.lines():
         print(line)
     if not args.no_prepare:
