@@ -137,27 +137,28 @@ def _file_id(path: Path) -> list:
 def _write(db: Database, staging: Path, key: tuple) -> None:
     """Load ``db``'s graph with its curves written into ``staging``, then its other arrays
     and the index (the files flushed to disk before the index names them)."""
-    mapped = {}
+    written = {}
 
     def empty(name: str, shape: tuple[int, ...]) -> np.ndarray:
         array = np.lib.format.open_memmap(staging / f"{_CURVES[name]}.npy", mode="w+",
                                           dtype=np.float32, shape=shape)
-        mapped[_CURVES[name]] = array
+        written[_CURVES[name]] = array
         return array
 
     graph = AnimeGraph.from_database(db, empty)
     arrays = {"clip_means": clip_motion_means(graph)}
     for name in ARRAYS:
-        if name not in mapped and name != "clip_means":
+        if name not in written and name != "clip_means":
             value = getattr(graph, name)
             if value is not None:
                 arrays[name] = value
-    for array in mapped.values():
+    for array in written.values():
         array.flush()
     index = {"format": FORMAT, "key": key, "clip_ids": list(graph.clip_ids),
              "emotions": list(graph.emotions), "fps": graph.fps,
              "n_channels": graph.n_channels, "files": {}}
-    del graph, mapped
+    del graph
+    written.clear()  # the files are unmapped once nothing refers to them
     for name, array in arrays.items():
         np.save(staging / f"{name}.npy", np.ascontiguousarray(array, dtype=ARRAYS[name]),
                 allow_pickle=False)
