@@ -236,6 +236,11 @@ def _print(row: dict) -> None:
 def _projected_peak(measured: list[dict], animes: int) -> float | None:
     """Peak memory at ``animes`` extrapolated linearly from the sizes measured: through
     the last two, or from the last one's growth over its memory before loading."""
+    peaks = {}  # the highest peak measured at each size
+    for r in measured:
+        if r["peak_rss_gb"] >= peaks.get(r["animes"], {"peak_rss_gb": -1.0})["peak_rss_gb"]:
+            peaks[r["animes"]] = r
+    measured = [peaks[a] for a in sorted(peaks)]
     if not measured:
         return None
     b = measured[-1]
