@@ -187,3 +187,18 @@ def test_synthesis_from_the_mapped_graph_is_synthesis_from_the_converted(copy_db
         a = synthesize(lazy, utt.audio, utt.sample_rate, labels=labels, **kwargs)
         b = synthesize(eager, utt.audio, utt.sample_rate, labels=labels, **kwargs)
         assert np.array_equal(a.ics, b.ics)
+
+
+def test_the_cache_of_a_database_that_is_gone_is_removed(tiny_db, tmp_path, monkeypatch,
+                                                          cached):
+    monkeypatch.setenv("ANIMEGRAPH_CACHE", str(tmp_path / "cache"))
+    for name in ("a", "b"):
+        shutil.copytree(tiny_db[0], tmp_path / name, symlinks=True)
+    mapped.load_graph(Database.open(tmp_path / "a"))
+    shutil.rmtree(tmp_path / "a")
+    (mapped.cache_dir() / "graphs" / ".x.partial-999999999-00").mkdir()  # a dead writer's
+    mapped.load_graph(Database.open(tmp_path / "b"))  # writes its own, removes the others
+    left = list((mapped.cache_dir() / "graphs").iterdir())
+    assert len(left) == 1
+    assert json.loads((left[0] / "index.json").read_text())["key"][1] == str(
+        (tmp_path / "b").resolve())

@@ -241,8 +241,16 @@ def _graph(folder: Path, index: dict) -> AnimeGraph:
 
 
 def _remove_abandoned(graphs: Path) -> None:
-    """Delete the staging folders of writers that are gone (killed while writing)."""
+    """Delete the staging folders of writers that are gone (killed while writing), and
+    the caches of databases that are gone (their index names the database's folder)."""
     for child in graphs.iterdir():
         found = _PARTIAL.match(child.name)
         if found and not pid_alive(int(found.group(2))):
             shutil.rmtree(child, ignore_errors=True)
+        elif not child.name.startswith("."):
+            try:
+                root = json.loads((child / "index.json").read_bytes())["key"][1]
+            except (OSError, ValueError, TypeError, KeyError, IndexError):
+                continue  # being written, or not ours: left alone
+            if isinstance(root, str) and not Path(root).exists():
+                shutil.rmtree(child, ignore_errors=True)
