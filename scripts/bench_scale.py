@@ -283,7 +283,7 @@ def main() -> int:
         base, out = args.build
         print(json.dumps(build(base, args.sizes[0], out, np.random.default_rng(args.seed))))
         return 0
-    if args.db is None:
+    if args.db is None and not args.reuse:
         from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
 
         corpus, _, _ = ensure_default_corpus()
