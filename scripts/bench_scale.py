@@ -4,7 +4,8 @@ Usage::
 
     python scripts/bench_scale.py [--db BASE] [--sizes 10000 100000 1000000 4000000]
                                   [--work DIR] [--keep] [--max-rss-gb 8] [--repeats 2]
-                                  [--json OUT] [--after JSON]
+                                  [--json OUT] [--after JSON] [--reuse]
+                                  [--modes eager cold warm] [--load-only]
 
 For each size, a database is written on disk (``--work``, a temporary folder by default,
 removed at the end unless ``--keep``) whose animes and clips replicate those of BASE (the
@@ -26,6 +27,13 @@ search alone (one anime a phone, ``--exact``'s search), ``--repeats`` times each
 first pays numba's cache load; the best is reported). Latency is wall time, CPU is every
 thread's. Before a size is loaded its peak memory is projected from the size before it
 (linear in animes): a size projected above ``--max-rss-gb`` is built but not loaded.
+
+``--modes`` says how the graph is loaded (:mod:`animegraph.search.mapped`), each in its
+own process: ``eager`` converts it from Parquet at every load (no cache), ``cold``
+converts it and writes its cache (removed first), ``warm`` maps the cache written
+before (``$ANIMEGRAPH_CACHE/graphs``, 0.3 to 2.1 kB an anime). ``--reuse`` measures a
+database already at ``--work``/db-SIZE instead of writing it; ``--load-only`` leaves out
+the synthesis.
 """
 
 from __future__ import annotations
@@ -135,11 +143,22 @@ def _rss_gb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
 
 
-def measure(db_path: Path, repeats: int) -> dict:
-    """Load the database and synthesize the line (run in a fresh process)."""
+def measure(db_path: Path, repeats: int, mode: str = "cold", load_only: bool = False) -> dict:
+    """Load the database and synthesize the line (run in a fresh process); ``mode`` as
+    ``--modes`` says."""
+    import hashlib
+
+    from animegraph.search import mapped
     from animegraph.synthesis import Model, synthesize
+    from ingest.cache import cache_dir
     from ingest.formats.phones_csv import Segment
     from ingest.speech.espeak import speak
+
+    if mode == "eager":
+        mapped.MIN_ANIMES = 2**62
+    elif mode == "cold":  # the folder load_graph keeps this database's graph in
+        shutil.rmtree(cache_dir() / "graphs" / hashlib.sha256(
+            os.fsencode(db_path.resolve())).hexdigest()[:24], ignore_errors=True)
 
     utt = speak(TEXT)
     labels = [Segment(p.phone, p.start, p.end) for p in utt.phones]
@@ -151,8 +170,8 @@ def measure(db_path: Path, repeats: int) -> dict:
            "rss_after_load_gb": _rss_gb(), "rss_before_load_gb": rss0,
            "peak_after_load_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
            "animes": model.graph.n_nodes, "graph_gb": model.graph.nbytes() / 1e9,
-           "speech_s": seconds, "phones": len(labels)}
-    for name, kwargs in (("kbest", {"k_best": 20}), ("exact", {})):
+           "speech_s": seconds, "phones": len(labels), "mode": mode}
+    for name, kwargs in () if load_only else (("kbest", {"k_best": 20}), ("exact", {})):
         best = None
         for _ in range(repeats):
             t, c = time.perf_counter(), time.process_time()
@@ -168,9 +187,60 @@ def measure(db_path: Path, repeats: int) -> dict:
     return row
 
 
+def _build(base: Path, out: Path, size: int, seed: int) -> dict | None:
+    """Write the database of ``size`` animes at ``out`` (in a child process: the build's
+    tables, gigabytes at 4M animes, are not held while it is measured); None if it
+    failed (said)."""
+    shutil.rmtree(out, ignore_errors=True)
+    built = subprocess.run(
+        [sys.executable, __file__, "--build", str(base), str(out), "--sizes", str(size),
+         "--seed", str(seed)], capture_output=True, text=True, check=False)
+    if built.returncode:
+        print(built.stderr.strip().splitlines()[-1] if built.stderr.strip() else
+              f"build failed ({built.returncode})")
+        return None
+    return json.loads(built.stdout.strip().splitlines()[-1])
+
+
+def _existing(out: Path) -> dict | None:
+    """What :func:`build` says of the database already at ``out``; None if there is none
+    (said)."""
+    from db.errors import DataError
+    from db.store import Database
+
+    try:
+        manifest = Database.open(out).manifest
+    except DataError as exc:
+        print(exc)
+        return None
+    disk = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    return {"animes": manifest["n_animes"], "build_s": float("nan"),
+            "hours": float(manifest.get("duration_s", 0.0)) / 3600, "disk_gb": disk / 1e9}
+
+
+def _print(row: dict) -> None:
+    """One line of the table for a measured row."""
+    load = (f"{row['animes']:9d} {row['hours']:6.1f} {row['disk_gb']:7.2f} {row['mode']:>5s} "
+            f"{row['load_s']:7.2f} {row['load_cpu_s']:8.2f} {row['rss_after_load_gb']:8.2f} "
+            f"{row['peak_after_load_gb']:8.2f}")
+    if "kbest_s" not in row:
+        print(load)
+    else:
+        print(f"{load} {row['peak_rss_gb']:7.2f} {row['kbest_s']:7.2f} {row['kbest_cpu_s']:7.2f} "
+              f"{row['kbest_rtf']:7.3f} {row['exact_s']:7.2f} {row['exact_cpu_s']:9.2f}")
+        print("          k-best phases: " + ", ".join(
+            f"{k[:-2]} {v:.2f} s" for k, v in row["kbest_timings"].items()))
+    sys.stdout.flush()
+
+
 def _projected_peak(measured: list[dict], animes: int) -> float | None:
     """Peak memory at ``animes`` extrapolated linearly from the sizes measured: through
     the last two, or from the last one's growth over its memory before loading."""
+    peaks = {}  # the highest peak measured at each size
+    for r in measured:
+        if r["peak_rss_gb"] >= peaks.get(r["animes"], {"peak_rss_gb": -1.0})["peak_rss_gb"]:
+            peaks[r["animes"]] = r
+    measured = [peaks[a] for a in sorted(peaks)]
     if not measured:
         return None
     b = measured[-1]
@@ -196,17 +266,24 @@ def main() -> int:
     parser.add_argument("--after", type=Path,
                         help="the --json of an earlier run: its sizes project the peak "
                              "memory of these (to measure 4M alone, after the smaller ones)")
+    parser.add_argument("--reuse", action="store_true",
+                        help="measure the databases already at --work (db-SIZE)")
+    parser.add_argument("--modes", nargs="+", choices=("eager", "cold", "warm"),
+                        default=["eager", "cold", "warm"],
+                        help="how the graph is loaded (each in its own process)")
+    parser.add_argument("--load-only", action="store_true", help="no synthesis")
+    parser.add_argument("--mode", default="cold", help=argparse.SUPPRESS)
     parser.add_argument("--measure", type=Path, help=argparse.SUPPRESS)  # the children's
     parser.add_argument("--build", type=Path, nargs=2, help=argparse.SUPPRESS)  # parts
     args = parser.parse_args()
     if args.measure:
-        print(json.dumps(measure(args.measure, args.repeats)))
+        print(json.dumps(measure(args.measure, args.repeats, args.mode, args.load_only)))
         return 0
     if args.build:
         base, out = args.build
         print(json.dumps(build(base, args.sizes[0], out, np.random.default_rng(args.seed))))
         return 0
-    if args.db is None:
+    if args.db is None and not args.reuse:
         from animegraph.apps.demo import ensure_default_corpus, ensure_default_db
 
         corpus, _, _ = ensure_default_corpus()
@@ -215,54 +292,45 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     print(f"# {os.cpu_count()} cores; base {args.db}; line: {TEXT!r}")
-    print(f"{'animes':>9s} {'hours':>6s} {'disk_GB':>7s} {'build_s':>7s} {'load_s':>7s} "
-          f"{'rss_load':>8s} {'peak_GB':>7s} {'kbest_s':>7s} {'kbest_x':>7s} {'exact_s':>7s} "
-          f"{'search_s':>8s} {'exact_cpu':>9s}")
+    print(f"{'animes':>9s} {'hours':>6s} {'disk_GB':>7s} {'mode':>5s} {'load_s':>7s} "
+          f"{'load_cpu':>8s} {'rss_load':>8s} {'pk_load':>8s} {'peak_GB':>7s} {'kbest_s':>7s} "
+          f"{'kb_cpu':>7s} {'kbest_x':>7s} {'exact_s':>7s} {'exact_cpu':>9s}")
     rows = []
     measured = ([r for r in json.loads(args.after.read_text()) if "peak_rss_gb" in r]
                 if args.after else [])
     try:
         for size in args.sizes:
             out = work / f"db-{size}"
-            shutil.rmtree(out, ignore_errors=True)
-            # Built in a child process too: the build's tables (gigabytes at 4M animes)
-            # are not held while the database is measured.
-            built = subprocess.run(
-                [sys.executable, __file__, "--build", str(args.db), str(out), "--sizes",
-                 str(size), "--seed", str(int(rng.integers(2**31)))],
-                capture_output=True, text=True, check=False)
-            if built.returncode:
-                print(built.stderr.strip().splitlines()[-1] if built.stderr.strip() else
-                      f"build failed ({built.returncode})")
+            if args.reuse:
+                base = _existing(out)
+            else:
+                base = _build(args.db, out, size, int(rng.integers(2**31)))
+            if base is None:
                 return 1
-            row = json.loads(built.stdout.strip().splitlines()[-1])
-            projected = _projected_peak(measured, row["animes"])
-            if projected is not None:
-                if projected > args.max_rss_gb:
+            for mode in args.modes:
+                row = dict(base)
+                # Converting (eager, cold) peaks as it always did: projected from those.
+                projected = _projected_peak([r for r in measured if r.get("mode") != "warm"],
+                                            row["animes"]) if mode != "warm" else None
+                if projected is not None and projected > args.max_rss_gb:
                     row["skipped"] = f"projected peak {projected:.1f} GB > {args.max_rss_gb}"
                     print(f"{row['animes']:9d} {row['hours']:6.1f} {row['disk_gb']:7.2f} "
-                          f"{row['build_s']:7.1f} not loaded: {row['skipped']}")
+                          f"{mode:>5s} not loaded: {row['skipped']}")
                     rows.append(row)
                     continue
-            child = subprocess.run(
-                [sys.executable, __file__, "--measure", str(out), "--repeats",
-                 str(args.repeats)], capture_output=True, text=True, check=False)
-            if child.returncode:
-                print(child.stderr.strip().splitlines()[-1] if child.stderr.strip() else
-                      f"measure failed ({child.returncode})")
-                return 1
-            row |= json.loads(child.stdout.strip().splitlines()[-1])
-            rows.append(row)
-            measured.append(row)
-            print(f"{row['animes']:9d} {row['hours']:6.1f} {row['disk_gb']:7.2f} "
-                  f"{row['build_s']:7.1f} {row['load_s']:7.2f} {row['rss_after_load_gb']:8.2f} "
-                  f"{row['peak_rss_gb']:7.2f} {row['kbest_s']:7.2f} {row['kbest_rtf']:7.3f} "
-                  f"{row['exact_s']:7.2f} {row['exact_search_s'] or float('nan'):8.2f} "
-                  f"{row['exact_cpu_s']:9.2f}")
-            print("          k-best phases: " + ", ".join(
-                f"{k[:-2]} {v:.2f} s" for k, v in row["kbest_timings"].items()))
-            sys.stdout.flush()
-            if not args.keep:
+                command = [sys.executable, __file__, "--measure", str(out), "--repeats",
+                           str(args.repeats), "--mode", mode]
+                child = subprocess.run(command + ["--load-only"] * args.load_only,
+                                       capture_output=True, text=True, check=False)
+                if child.returncode:
+                    print(child.stderr.strip().splitlines()[-1] if child.stderr.strip()
+                          else f"measure failed ({child.returncode})")
+                    return 1
+                row |= json.loads(child.stdout.strip().splitlines()[-1])
+                rows.append(row)
+                measured.append(row)
+                _print(row)
+            if not args.keep and not args.reuse:
                 shutil.rmtree(out, ignore_errors=True)
     finally:
         if not args.keep and args.work is None:

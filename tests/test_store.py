@@ -426,3 +426,36 @@ def test_a_file_just_written_is_not_remembered(tmp_path, monkeypatch):
     os.utime(arrays_file, ns=(stat.st_atime_ns, stat.st_mtime_ns))  # as if in one tick
     with pytest.raises(DataError, match="SHA-256"):
         Database.open(tmp_path / "db").arrays()
+
+
+@pytest.mark.parametrize("dictionary", [True, False])
+def test_strings_are_counted_and_measured_as_read_without_decoding_each_row(tmp_path,
+                                                                            dictionary):
+    """decoded_bytes counts a dictionary's strings once a row they are in, exactly as the
+    rows decoded would give; check_text finds one long value among many rows."""
+    from db.footers import decoded_bytes
+    from db.validate import MAX_TEXT_BYTES, check_text
+
+    rng = np.random.default_rng(0)
+    words = ["x" * int(n) for n in rng.integers(0, 3000, size=40)] + [None]
+    column = [words[i] for i in rng.integers(0, len(words), size=5000)]
+    path = tmp_path / "t.parquet"
+    pq.write_table(pa.table({"s": column}), path, use_dictionary=dictionary,
+                   row_group_size=700)
+    meta = pq.read_metadata(path)
+    exact = sum(len(s) for s in column if s is not None)
+    base = sum(meta.row_group(g).column(0).total_uncompressed_size
+               + 4 * meta.row_group(g).column(0).num_values
+               for g in range(meta.num_row_groups))
+    if dictionary:  # the bound (each row as long as its chunk) passes the limit: counted
+        assert decoded_bytes(path, meta, 0, base + exact) == base + exact
+    column[4321] = "y" * (MAX_TEXT_BYTES + 1)
+    pq.write_table(pa.table({"s": column}), path, use_dictionary=dictionary,
+                   row_group_size=700)
+
+    class Db:
+        def damaged(self, name, problem):
+            return DataError(f"{name}: {problem}")
+
+    with pytest.raises(DataError, match=f"a s value of {MAX_TEXT_BYTES + 1} bytes"):
+        check_text(Db(), "t", path, "t.parquet", pq.read_metadata(path))

@@ -69,6 +69,10 @@ class AnimeGraph:
         Beyond the paper: each node's phone posteriorgram (50 frames per second,
         :mod:`ingest.speech.posteriorgram`), as ``prosody_*``; None when the database has
         none (built without hama, or before posteriorgrams).
+    clip_means : np.ndarray of float64, shape (len(clip_ids), n_ics), or None
+        Each recording's mean motion (:func:`clip_motion_means`), when it was computed
+        with the graph (:mod:`animegraph.search.mapped`): k-best's recentring then need
+        not read every anime's motion. None: computed on first use.
     """
 
     node_phone: np.ndarray
@@ -94,6 +98,7 @@ class AnimeGraph:
     n_channels: int
     posterior_offsets: np.ndarray | None = None
     posterior_values: np.ndarray | None = None
+    clip_means: np.ndarray | None = None
 
     @property
     def n_nodes(self) -> int:
@@ -118,7 +123,7 @@ class AnimeGraph:
         return total
 
     @classmethod
-    def from_database(cls, db: Database) -> AnimeGraph:
+    def from_database(cls, db: Database, empty=None) -> AnimeGraph:
         """Load the graph of ``db`` (its animes table, sorted by node id).
 
         Every array is checked before the graph exists (the compiled search kernels
@@ -131,14 +136,18 @@ class AnimeGraph:
         DataError
             If the database has no animes or its animes table does not hold up (the
             message names the file and the problem).
+
+        ``empty(name, shape)``, if given, allocates the float32 array of curve ``name``
+        ("prosody", "motion", "posteriors", "first_pcs", "last_pcs"; default
+        :func:`numpy.empty`): :mod:`animegraph.search.mapped` has them written into files.
         """
         try:
-            return cls._from_database(db)
+            return cls._from_database(db, empty)
         except (KeyError, IndexError, TypeError, ValueError, pa.ArrowException) as exc:
             raise db.damaged("animes", f"{type(exc).__name__}: {exc}") from None
 
     @classmethod
-    def _from_database(cls, db: Database) -> AnimeGraph:
+    def _from_database(cls, db: Database, empty=None) -> AnimeGraph:
         # Two passes: the per-node columns whole, then the curves a batch at a time into
         # their arrays (the whole table, then a sorted copy of it, were 2.3 GB of the
         # load's peak a million animes: docs/results/speed.md, "A database of 100 hours").
@@ -181,7 +190,7 @@ class AnimeGraph:
         if posteriors:
             frames["posteriors"] = ints("posterior_frames", np.int64)
         frames |= {"first_pcs": np.ones(n, np.int64), "last_pcs": np.ones(n, np.int64)}
-        curves = _read_curves(db, frames)
+        curves = _read_curves(db, frames, empty)
         manifest = db.manifest
         posterior_values, posterior_offsets = curves.get("posteriors", (None, None))
         graph = cls(
@@ -204,8 +213,12 @@ class AnimeGraph:
         graph.check()
         return graph
 
-    def check(self) -> None:
-        """ValueError unless every array is in range and consistent (see from_database)."""
+    def check(self, values: bool = True) -> None:
+        """ValueError unless every array is in range and consistent (see from_database).
+
+        ``values`` False leaves out what reads the curves' values (finite, posteriors in
+        (0, 1]): every page of them. :mod:`animegraph.search.mapped` checks them once,
+        when it writes them, and their shapes at every load."""
         n = self.n_nodes
         for name in ("next_node", "prev_node"):
             links = getattr(self, name)
@@ -222,30 +235,70 @@ class AnimeGraph:
         if np.diff(self.motion_offsets).min(initial=1) < 1 or np.diff(
                 self.prosody_offsets).min(initial=1) < 1:
             raise ValueError("a node without motion or prosody frames")
-        for name in ("motion_values", "first_pcs", "last_pcs", "start_time", "end_time"):
+        for name in ("prosody", "motion", "posterior"):
+            offsets, rows = getattr(self, f"{name}_offsets"), getattr(self, f"{name}_values")
+            if offsets is None:
+                continue
+            if (offsets.shape != (n + 1,) or offsets[0] != 0 or rows.ndim != 2
+                    or offsets[-1] != rows.shape[0]):
+                raise ValueError(f"{name}_offsets do not fit {name}_values")
+        for name in ("start_time", "end_time") + (
+                ("motion_values", "first_pcs", "last_pcs") if values else ()):
             if not np.isfinite(getattr(self, name)).all():
                 raise ValueError(f"{name} not finite")
         # The curves the DTW reads: checked here once (and made read-only), so that its
-        # pair functions need not scan them again on every call.
-        try:
-            mark_finite(self.prosody_values)
-        except ParameterError:
-            raise ValueError("prosody_values not finite") from None
+        # pair functions need not scan them again on every call. A mapped graph's were
+        # checked when they were written; marking them would read every page, so its
+        # DTW checks the few curves a query touches instead.
+        if values:
+            try:
+                mark_finite(self.prosody_values)
+            except ParameterError:
+                raise ValueError("prosody_values not finite") from None
         if self.posterior_values is not None:
             post = self.posterior_values
             if len(self.posterior_offsets) != n + 1 or np.diff(
                     self.posterior_offsets).min(initial=1) < 1:
                 raise ValueError("a node without posteriorgram frames")
-            try:
-                mark_finite(post)
-            except ParameterError:
-                raise ValueError("posteriorgram values outside (0, 1]") from None
-            if (post <= 0).any() or (post > 1).any():
+            if values:
+                try:
+                    mark_finite(post)
+                except ParameterError:
+                    raise ValueError("posteriorgram values outside (0, 1]") from None
+            if values and ((post <= 0).any() or (post > 1).any()):
                 raise ValueError("posteriorgram values outside (0, 1]")
         if self.first_pcs.shape != self.last_pcs.shape or self.first_pcs.shape[0] != n:
             raise ValueError("first_pcs and last_pcs shapes differ")
         if not (np.isfinite(self.fps) and self.fps > 0 and self.n_channels > 0):
             raise ValueError(f"fps {self.fps} / n_channels {self.n_channels} in the manifest")
+        n_clips = len(self.clip_ids)
+        if self.node_clip.shape != (n,) or ((self.node_clip < 0) | (
+                self.node_clip >= n_clips)).any():
+            raise ValueError(f"node_clip outside [0, {n_clips})")
+        if self.clip_means is not None and self.clip_means.shape != (
+                n_clips, self.motion_values.shape[1]):
+            raise ValueError(f"clip_means has shape {self.clip_means.shape}")
+
+
+def clip_motion_means(graph: AnimeGraph) -> np.ndarray:
+    """Each recording's mean motion over its animes' frames.
+
+    Returns
+    -------
+    np.ndarray of float64, shape (len(graph.clip_ids), n_ics)
+        Row ``c``: the mean of ``graph.motion_values`` over the frames of the animes of
+        clip ``c`` (zeros for a clip without frames).
+    """
+    off = graph.motion_offsets
+    counts = np.diff(off).astype(np.float64)
+    sums = np.zeros((len(counts), graph.motion_values.shape[1]))
+    full = counts > 0
+    sums[full] = np.add.reduceat(graph.motion_values, off[:-1][full], axis=0, dtype=np.float64)
+    n_clips = len(graph.clip_ids)
+    total = np.zeros((n_clips, sums.shape[1]))
+    np.add.at(total, graph.node_clip, sums)
+    frames = np.bincount(graph.node_clip, weights=counts, minlength=n_clips)
+    return total / np.maximum(frames, 1.0)[:, None]
 
 
 def _links(column: pa.ChunkedArray) -> np.ndarray:
@@ -265,16 +318,17 @@ def _ints(t: pa.Table, name: str, dtype) -> np.ndarray:
     return values.astype(dtype)
 
 
-def _read_curves(db: Database, frames: dict[str, np.ndarray]
+def _read_curves(db: Database, frames: dict[str, np.ndarray], empty=None,
                  ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The list columns ``frames`` names of the animes table, each as (values of shape
     (total frames, width) float32, row offsets of shape (n_nodes + 1,)) in node order.
 
     ``frames[c]``, shape (n_nodes,): the frames of each node in column ``c`` (a list of
     ``frames * width`` numbers a node). Read a batch at a time (:meth:`Database.batches`)
-    and copied to each node's place: the column is never held whole."""
+    and copied to each node's place: the column is never held whole. ``empty(name,
+    shape)`` allocates a column's array (:meth:`AnimeGraph.from_database`)."""
     n = len(next(iter(frames.values())))
-    offsets, out, width = {}, {}, {}
+    offsets, out, width, arrays = {}, {}, {}, {}
     for c, rows in frames.items():
         if (rows < 1).any():
             raise ValueError(f"a node with no frames in {c}")
@@ -296,7 +350,10 @@ def _read_curves(db: Database, frames: dict[str, np.ndarray]
                 width[c] = int(lengths.sum()) // max(int(need.sum()), 1)
                 if width[c] < 1:
                     raise ValueError(f"{c}: no values")
-                out[c] = np.empty(int(offsets[c][-1]) * width[c], dtype=np.float32)
+                shape = (int(offsets[c][-1]), width[c])
+                arrays[c] = (np.empty(shape, dtype=np.float32) if empty is None
+                             else empty(c, shape))
+                out[c] = arrays[c].reshape(-1)
             if not np.array_equal(lengths, need * width[c]):
                 raise ValueError(f"{c}: a node's list does not hold its frames")
             values = _list_values(column, int(lengths.sum()))
@@ -309,7 +366,7 @@ def _read_curves(db: Database, frames: dict[str, np.ndarray]
                 out[c][np.repeat(start - src, lengths) + np.arange(values.size)] = values
     if (seen != 1).any():
         raise ValueError("the curves' node ids differ from the nodes'")
-    return {c: (out[c].reshape(-1, width[c]), offsets[c]) for c in frames}
+    return {c: (arrays[c], offsets[c]) for c in frames}
 
 
 def _list_lengths(column: pa.ChunkedArray) -> np.ndarray:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from animegraph.search.dtw import dtw, warp_indices, warp_indices_many
-from animegraph.search.graph import PHONE_INDEX, AnimeGraph
+from animegraph.search.graph import PHONE_INDEX, AnimeGraph, clip_motion_means
 from db.errors import ParameterError
 from ingest.lowpass import smooth
 
@@ -351,7 +351,9 @@ def rank_weights(n: int) -> np.ndarray:
 
 @functools.lru_cache(maxsize=2)  # per graph (hashed by identity): batch reuses it
 def recording_means(graph: AnimeGraph) -> np.ndarray:
-    """Each recording's mean motion over its animes' frames (read-only).
+    """Each recording's mean motion over its animes' frames (read-only): the graph's
+    ``clip_means`` when it was loaded with them, else
+    :func:`animegraph.search.graph.clip_motion_means` (every anime's motion read).
 
     Returns
     -------
@@ -359,16 +361,8 @@ def recording_means(graph: AnimeGraph) -> np.ndarray:
         Row ``c``: the mean of ``graph.motion_values`` over the frames of the animes of
         clip ``c`` (zeros for a clip without frames).
     """
-    off = graph.motion_offsets
-    counts = np.diff(off).astype(np.float64)
-    sums = np.zeros((len(counts), graph.motion_values.shape[1]))
-    full = counts > 0
-    sums[full] = np.add.reduceat(graph.motion_values, off[:-1][full], axis=0, dtype=np.float64)
-    n_clips = len(graph.clip_ids)
-    total = np.zeros((n_clips, sums.shape[1]))
-    np.add.at(total, graph.node_clip, sums)
-    frames = np.bincount(graph.node_clip, weights=counts, minlength=n_clips)
-    means = total / np.maximum(frames, 1.0)[:, None]
+    means = graph.clip_means if graph.clip_means is not None else clip_motion_means(graph)
+    means = means.view()
     means.flags.writeable = False
     return means
 

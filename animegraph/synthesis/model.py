@@ -8,6 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from animegraph.search.graph import AnimeGraph
+from animegraph.search.mapped import load_graph
 from db.store import Database
 from ingest.clip import stored_schema
 from ingest.emotion.model import EmotionModel, NoEmotionModel
@@ -64,7 +65,7 @@ class Model:
         """
         db = Database.open(path)
         arrays = db.arrays()
-        graph = AnimeGraph.from_database(db)
+        graph = load_graph(db)
         channels, names, groups, kind = read_channels(db)
         try:
             decomposer = Unmixing.from_arrays(arrays)
