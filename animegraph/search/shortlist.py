@@ -169,42 +169,58 @@ def shortlist(graph: AnimeGraph, cands: Candidates, size: int, *,
         u = weights.w_audio * audio + weights.w_emotion * mismatch[off[i] + pos]
         return u + backoff[i]
 
-    # Round 1: every candidate that is surely kept, and from the group the cut falls in
-    # the ones of least bound; round 2: the rest of that group whose bound does not
-    # exceed the size-th exact cost of round 1 (the others cannot be kept).
+    # First every candidate surely kept and, of the group the cut falls in, the ``need``
+    # of least bound; then, best bound first in batches that double, those of the group
+    # whose bound does not exceed the need-th least exact cost found so far (a candidate
+    # whose bound exceeds it cannot be kept; the cost found only falls).
     plan = [_plan(len(c), None if group is None else group[off[i]:off[i + 1]], size)
             for i, c in enumerate(cands.nodes)]
-    first, cut_lb = [], []
-    for i, (sure, tied, need) in enumerate(plan):
-        lb = unary(i, bounds[i][tied], tied) if need else np.zeros(0)
-        take = tied if need == len(tied) else tied[np.argpartition(lb, need - 1)[:need]]
-        first.append(np.concatenate([sure, take]))
-        cut_lb.append(lb)
-    got = compute(first)
-    known = [dict(zip(p.tolist(), a.tolist(), strict=True)) for p, a in zip(first, got,
-                                                                         strict=True)]
-    second = []
-    for i, (sure, tied, need) in enumerate(plan):
-        if need == len(tied):
-            second.append(np.zeros(0, dtype=np.int64))
-            continue
-        exact_cut = unary(i, np.array([known[i][p] for p in tied[np.isin(tied, first[i])]]),
-                          tied[np.isin(tied, first[i])])
-        tau = np.partition(exact_cut, need - 1)[need - 1]
-        second.append(tied[(cut_lb[i] <= tau) & ~np.isin(tied, first[i])])
-    for i, a in enumerate(compute(second)):
-        known[i].update(zip(second[i].tolist(), a.tolist(), strict=True))
+    lbs = [unary(i, bounds[i][tied], tied) for i, (_, tied, _) in enumerate(plan)]
+    first = []
+    for (sure, tied, need), lb in zip(plan, lbs, strict=True):
+        least = np.argpartition(lb, need - 1)[:need] if need < len(tied) else np.arange(len(tied))
+        first.append(least)
+    got = compute([np.concatenate([sure, tied[f]]) for (sure, tied, _), f in zip(plan, first,
+                                                                                strict=True)])
+    sure_audio = [a[:len(p[0])] for a, p in zip(got, plan, strict=True)]
+    tied_audio = [np.full(len(p[1]), np.nan) for p in plan]  # NaN: not computed
+    for i, ((_, tied, _), f) in enumerate(zip(plan, first, strict=True)):
+        tied_audio[i][f] = got[i][len(plan[i][0]):]
+    n_costs = sum(len(a) for a in got)
+    pending = [np.zeros(0, dtype=np.int64)] * len(plan)  # places in ``tied``, by bound
+    for i, ((_, tied, need), lb) in enumerate(zip(plan, lbs, strict=True)):
+        if need < len(tied):
+            tau = np.partition(unary(i, tied_audio[i][first[i]], tied[first[i]]), need - 1)[
+                need - 1]
+            rest = np.flatnonzero((lb <= tau) & np.isnan(tied_audio[i]))
+            pending[i] = rest[np.argsort(lb[rest], kind="stable")]
+    batch = [max(p[2], 1) for p in plan]
+    while any(len(p) for p in pending):
+        take = []
+        for i, (_, tied, need) in enumerate(plan):
+            if len(pending[i]):
+                done = ~np.isnan(tied_audio[i])
+                u = unary(i, tied_audio[i][done], tied[done])
+                tau = np.partition(u, need - 1)[need - 1]
+                pending[i] = pending[i][:np.searchsorted(lbs[i][pending[i]], tau, "right")]
+            take.append(pending[i][:batch[i]])
+            pending[i] = pending[i][batch[i]:]
+            batch[i] *= 2
+        got = compute([tied[t] for (_, tied, _), t in zip(plan, take, strict=True)])
+        for i, t in enumerate(take):
+            tied_audio[i][t] = got[i]
+        n_costs += sum(len(t) for t in take)
     nodes, audio = [], []
     for i, (sure, tied, need) in enumerate(plan):
-        pool = np.setdiff1d(np.fromiter(known[i], dtype=np.int64, count=len(known[i])), sure)
-        if need < len(tied):
-            u = unary(i, np.array([known[i][p] for p in pool]), pool)
-            pool = pool[np.argsort(u, kind="stable")[:need]]  # pool ascending: ties by place
-        keep = np.sort(np.concatenate([sure, pool]))
-        nodes.append(cands.nodes[i][keep])
-        audio.append(np.array([known[i][p] for p in keep.tolist()], dtype=np.float64))
+        done = np.flatnonzero(~np.isnan(tied_audio[i]))  # ascending: ties by place
+        pick = done[np.argsort(unary(i, tied_audio[i][done], tied[done]), kind="stable")[:need]]
+        keep = np.concatenate([sure, tied[pick]])
+        values = np.concatenate([sure_audio[i], tied_audio[i][pick]])
+        order = np.argsort(keep)
+        nodes.append(cands.nodes[i][keep[order]])
+        audio.append(values[order])
     return Shortlist(cands=replace(cands, nodes=tuple(nodes)), audio=audio, n_all=int(off[-1]),
-                     n_costs=sum(len(f) for f in first) + sum(len(s) for s in second))
+                     n_costs=n_costs)
 
 
 def _plan(n: int, group: np.ndarray | None, size: int) -> tuple[np.ndarray, np.ndarray, int]:
