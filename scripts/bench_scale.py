@@ -4,7 +4,7 @@ Usage::
 
     python scripts/bench_scale.py [--db BASE] [--sizes 10000 100000 1000000 4000000]
                                   [--work DIR] [--keep] [--max-rss-gb 8] [--repeats 2]
-                                  [--json OUT] [--after JSON]
+                                  [--json OUT] [--after JSON] [--kbest-all]
 
 For each size, a database is written on disk (``--work``, a temporary folder by default,
 removed at the end unless ``--keep``) whose animes and clips replicate those of BASE (the
@@ -20,7 +20,8 @@ Each size is built, then measured, in a fresh process: :meth:`animegraph.synthes
 ``synth`` loads before it hears the speech), the resident memory after it and the peak of
 the whole process, then :func:`animegraph.synthesis.synthesize` of a 10 s eSpeak NG line
 given its own phone labels (the segmentation's cost does not depend on the database) with
-``synth``'s default k-best blending (20 animes a phone; the guide, a fitted model's
+``synth``'s default k-best blending (20 animes a phone, the search over each phone's
+shortlist; with ``--kbest-all`` also over every candidate; the guide, a fitted model's
 forward pass whose cost does not grow with the database, is left out) and the exact
 search alone (one anime a phone, ``--exact``'s search), ``--repeats`` times each (the
 first pays numba's cache load; the best is reported). Latency is wall time, CPU is every
@@ -135,7 +136,7 @@ def _rss_gb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
 
 
-def measure(db_path: Path, repeats: int) -> dict:
+def measure(db_path: Path, repeats: int, kbest_all: bool = False) -> dict:
     """Load the database and synthesize the line (run in a fresh process)."""
     from animegraph.synthesis import Model, synthesize
     from ingest.formats.phones_csv import Segment
@@ -152,7 +153,10 @@ def measure(db_path: Path, repeats: int) -> dict:
            "peak_after_load_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
            "animes": model.graph.n_nodes, "graph_gb": model.graph.nbytes() / 1e9,
            "speech_s": seconds, "phones": len(labels)}
-    for name, kwargs in (("kbest", {"k_best": 20}), ("exact", {})):
+    runs = [("kbest", {"k_best": 20})]
+    if kbest_all:  # the search over every candidate (synth --shortlist all)
+        runs.append(("kbest_all", {"k_best": 20, "shortlist": None}))
+    for name, kwargs in (*runs, ("exact", {})):
         best = None
         for _ in range(repeats):
             t, c = time.perf_counter(), time.process_time()
@@ -192,6 +196,8 @@ def main() -> int:
     parser.add_argument("--max-rss-gb", type=float, default=8.0)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--kbest-all", action="store_true",
+                        help="also k-best over every candidate (synth --shortlist all)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--after", type=Path,
                         help="the --json of an earlier run: its sizes project the peak "
@@ -200,7 +206,7 @@ def main() -> int:
     parser.add_argument("--build", type=Path, nargs=2, help=argparse.SUPPRESS)  # parts
     args = parser.parse_args()
     if args.measure:
-        print(json.dumps(measure(args.measure, args.repeats)))
+        print(json.dumps(measure(args.measure, args.repeats, args.kbest_all)))
         return 0
     if args.build:
         base, out = args.build
@@ -246,7 +252,8 @@ def main() -> int:
                     continue
             child = subprocess.run(
                 [sys.executable, __file__, "--measure", str(out), "--repeats",
-                 str(args.repeats)], capture_output=True, text=True, check=False)
+                 str(args.repeats), *(["--kbest-all"] if args.kbest_all else [])],
+                capture_output=True, text=True, check=False)
             if child.returncode:
                 print(child.stderr.strip().splitlines()[-1] if child.stderr.strip() else
                       f"measure failed ({child.returncode})")
@@ -259,8 +266,11 @@ def main() -> int:
                   f"{row['peak_rss_gb']:7.2f} {row['kbest_s']:7.2f} {row['kbest_rtf']:7.3f} "
                   f"{row['exact_s']:7.2f} {row['exact_search_s'] or float('nan'):8.2f} "
                   f"{row['exact_cpu_s']:9.2f}")
-            print("          k-best phases: " + ", ".join(
-                f"{k[:-2]} {v:.2f} s" for k, v in row["kbest_timings"].items()))
+            for name in ("kbest", "kbest_all"):
+                if f"{name}_timings" in row:
+                    print(f"          {name} {row[f'{name}_s']:.2f} s, CPU "
+                          f"{row[f'{name}_cpu_s']:.2f} s; phases: " + ", ".join(
+                              f"{k[:-2]} {v:.2f} s" for k, v in row[f"{name}_timings"].items()))
             sys.stdout.flush()
             if not args.keep:
                 shutil.rmtree(out, ignore_errors=True)
