@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import threading
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
@@ -176,15 +176,13 @@ def shortlist(graph: AnimeGraph, cands: Candidates, size: int, *,
     plan = [_plan(len(c), None if group is None else group[off[i]:off[i + 1]], size)
             for i, c in enumerate(cands.nodes)]
     lbs = [unary(i, bounds[i][tied], tied) for i, (_, tied, _) in enumerate(plan)]
-    first = []
-    for (sure, tied, need), lb in zip(plan, lbs, strict=True):
-        least = np.argpartition(lb, need - 1)[:need] if need < len(tied) else np.arange(len(tied))
-        first.append(least)
+    first = [np.argpartition(lb, need - 1)[:need] if need < len(tied) else np.arange(len(tied))
+             for (_, tied, need), lb in zip(plan, lbs, strict=True)]
     got = compute([np.concatenate([sure, tied[f]]) for (sure, tied, _), f in zip(plan, first,
                                                                                 strict=True)])
     sure_audio = [a[:len(p[0])] for a, p in zip(got, plan, strict=True)]
     tied_audio = [np.full(len(p[1]), np.nan) for p in plan]  # NaN: not computed
-    for i, ((_, tied, _), f) in enumerate(zip(plan, first, strict=True)):
+    for i, f in enumerate(first):
         tied_audio[i][f] = got[i][len(plan[i][0]):]
     n_costs = sum(len(a) for a in got)
     pending = [np.zeros(0, dtype=np.int64)] * len(plan)  # places in ``tied``, by bound
@@ -245,7 +243,8 @@ _boxes_lock = threading.Lock()
 def prosody_boxes(graph: AnimeGraph) -> tuple[np.ndarray, np.ndarray]:
     """Per-feature minimum and maximum of every anime's prosody curve, each shape
     (n_nodes, n_prosody) float32 (exact: minima and maxima of float32 values), computed
-    once per graph (72 bytes an anime with the paper's 9 coefficients; an empty curve gets (-inf, inf), a bound of 0)."""
+    once per graph (72 bytes an anime with the paper's 9 coefficients; an empty curve
+    gets (-inf, inf), a bound of 0)."""
     with _boxes_lock:
         hit = _boxes.get(id(graph))
         if hit is not None and hit[0]() is graph:
@@ -315,16 +314,7 @@ def box_bounds(graph: AnimeGraph, curves: Sequence[np.ndarray],
     return np.split(out, np.cumsum(sizes)[:-1]) if len(sizes) else []
 
 
-def _jit(func: Callable) -> Callable:
-    """``numba.njit(cache=True, nogil=True)``, uncached where no folder is writable (as
-    :mod:`animegraph.search.dtw` does)."""
-    try:
-        return numba.njit(cache=True, nogil=True)(func)
-    except RuntimeError:
-        return numba.njit(cache=False, nogil=True)(func)
-
-
-@_jit
+@numba.njit(cache=True, nogil=True)
 def _box_range(x_all, x_off, inputs, nodes, lo, hi, start, stop, out):
     d = x_all.shape[1]
     for t in range(start, stop):
