@@ -5,6 +5,7 @@ Usage::
     python scripts/bench_scale.py [--db BASE] [--sizes 10000 100000 1000000 4000000]
                                   [--work DIR] [--keep] [--max-rss-gb 8] [--repeats 2]
                                   [--json OUT] [--after JSON] [--kbest-all]
+                                  [--no-exact]
 
 For each size, a database is written on disk (``--work``, a temporary folder by default,
 removed at the end unless ``--keep``) whose animes and clips replicate those of BASE (the
@@ -136,7 +137,7 @@ def _rss_gb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
 
 
-def measure(db_path: Path, repeats: int, kbest_all: bool = False) -> dict:
+def measure(db_path: Path, repeats: int, kbest_all: bool = False, exact: bool = True) -> dict:
     """Load the database and synthesize the line (run in a fresh process)."""
     from animegraph.synthesis import Model, synthesize
     from ingest.formats.phones_csv import Segment
@@ -156,7 +157,7 @@ def measure(db_path: Path, repeats: int, kbest_all: bool = False) -> dict:
     runs = [("kbest", {"k_best": 20})]
     if kbest_all:  # the search over every candidate (synth --shortlist all)
         runs.append(("kbest_all", {"k_best": 20, "shortlist": None}))
-    for name, kwargs in (*runs, ("exact", {})):
+    for name, kwargs in (*runs, *([("exact", {})] if exact else [])):
         best = None
         for _ in range(repeats):
             t, c = time.perf_counter(), time.process_time()
@@ -196,6 +197,8 @@ def main() -> int:
     parser.add_argument("--max-rss-gb", type=float, default=8.0)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-exact", action="store_true",
+                        help="leave out the exact search alone (bench_search.py times it)")
     parser.add_argument("--kbest-all", action="store_true",
                         help="also k-best over every candidate (synth --shortlist all)")
     parser.add_argument("--json", type=Path)
@@ -206,7 +209,8 @@ def main() -> int:
     parser.add_argument("--build", type=Path, nargs=2, help=argparse.SUPPRESS)  # parts
     args = parser.parse_args()
     if args.measure:
-        print(json.dumps(measure(args.measure, args.repeats, args.kbest_all)))
+        print(json.dumps(measure(args.measure, args.repeats, args.kbest_all,
+                                 not args.no_exact)))
         return 0
     if args.build:
         base, out = args.build
@@ -224,7 +228,7 @@ def main() -> int:
     print(f"{'animes':>9s} {'hours':>6s} {'disk_GB':>7s} {'build_s':>7s} {'load_s':>7s} "
           f"{'rss_load':>8s} {'peak_GB':>7s} {'kbest_s':>7s} {'kbest_x':>7s} {'exact_s':>7s} "
           f"{'search_s':>8s} {'exact_cpu':>9s}")
-    rows = []
+    rows, nan = [], float("nan")
     measured = ([r for r in json.loads(args.after.read_text()) if "peak_rss_gb" in r]
                 if args.after else [])
     try:
@@ -252,7 +256,8 @@ def main() -> int:
                     continue
             child = subprocess.run(
                 [sys.executable, __file__, "--measure", str(out), "--repeats",
-                 str(args.repeats), *(["--kbest-all"] if args.kbest_all else [])],
+                 str(args.repeats), *(["--kbest-all"] if args.kbest_all else []),
+                 *(["--no-exact"] if args.no_exact else [])],
                 capture_output=True, text=True, check=False)
             if child.returncode:
                 print(child.stderr.strip().splitlines()[-1] if child.stderr.strip() else
@@ -264,8 +269,8 @@ def main() -> int:
             print(f"{row['animes']:9d} {row['hours']:6.1f} {row['disk_gb']:7.2f} "
                   f"{row['build_s']:7.1f} {row['load_s']:7.2f} {row['rss_after_load_gb']:8.2f} "
                   f"{row['peak_rss_gb']:7.2f} {row['kbest_s']:7.2f} {row['kbest_rtf']:7.3f} "
-                  f"{row['exact_s']:7.2f} {row['exact_search_s'] or float('nan'):8.2f} "
-                  f"{row['exact_cpu_s']:9.2f}")
+                  f"{row.get('exact_s', nan):7.2f} {row.get('exact_search_s') or nan:8.2f} "
+                  f"{row.get('exact_cpu_s', nan):9.2f}")
             for name in ("kbest", "kbest_all"):
                 if f"{name}_timings" in row:
                     print(f"          {name} {row[f'{name}_s']:.2f} s, CPU "
