@@ -152,13 +152,16 @@ def shortlist(graph: AnimeGraph, cands: Candidates, size: int, *,
             if len(c) != len(cands.nodes[i]):
                 raise ParameterError(f"costs[{i}] must have shape ({len(cands.nodes[i])},), "
                                      f"got {c.shape}")
-        bounds = exact
 
         def compute(lists: list[np.ndarray]) -> list[np.ndarray]:
             return [exact[i][pos] for i, pos in enumerate(lists)]
+
+        bound = compute
     else:
         xs = [np.asarray(c, dtype=np.float64) for c in curves]
-        bounds = box_bounds(graph, xs, cands.nodes)
+
+        def bound(lists: list[np.ndarray]) -> list[np.ndarray]:
+            return box_bounds(graph, xs, [cands.nodes[i][pos] for i, pos in enumerate(lists)])
 
         def compute(lists: list[np.ndarray]) -> list[np.ndarray]:
             return audio_costs_many(xs, graph.prosody_values, graph.prosody_offsets,
@@ -175,9 +178,11 @@ def shortlist(graph: AnimeGraph, cands: Candidates, size: int, *,
     # whose bound exceeds it cannot be kept; the cost found only falls).
     plan = [_plan(len(c), None if group is None else group[off[i]:off[i + 1]], size)
             for i, c in enumerate(cands.nodes)]
-    lbs = [unary(i, bounds[i][tied], tied) for i, (_, tied, _) in enumerate(plan)]
+    # Bounds only where the cut falls inside a group (elsewhere every candidate is kept).
+    cut = [tied if need < len(tied) else tied[:0] for _, tied, need in plan]
+    lbs = [unary(i, b, cut[i]) for i, b in enumerate(bound(cut))]
     first = [np.argpartition(lb, need - 1)[:need] if need < len(tied) else np.arange(len(tied))
-             for (_, tied, need), lb in zip(plan, lbs, strict=True)]
+             for (_, tied, need), lb in zip(plan, lbs, strict=True)]  # places in ``tied``
     got = compute([np.concatenate([sure, tied[f]]) for (sure, tied, _), f in zip(plan, first,
                                                                                 strict=True)])
     sure_audio = [a[:len(p[0])] for a, p in zip(got, plan, strict=True)]
