@@ -6,6 +6,7 @@ Usage::
                                   [--work DIR] [--keep] [--max-rss-gb 8] [--repeats 2]
                                   [--json OUT] [--after JSON] [--reuse]
                                   [--modes eager cold warm] [--load-only]
+                                  [--kbest-all] [--no-exact]
 
 For each size, a database is written on disk (``--work``, a temporary folder by default,
 removed at the end unless ``--keep``) whose animes and clips replicate those of BASE (the
@@ -21,7 +22,8 @@ Each size is built, then measured, in a fresh process: :meth:`animegraph.synthes
 ``synth`` loads before it hears the speech), the resident memory after it and the peak of
 the whole process, then :func:`animegraph.synthesis.synthesize` of a 10 s eSpeak NG line
 given its own phone labels (the segmentation's cost does not depend on the database) with
-``synth``'s default k-best blending (20 animes a phone; the guide, a fitted model's
+``synth``'s default k-best blending (20 animes a phone, the search over each phone's
+shortlist; with ``--kbest-all`` also over every candidate; the guide, a fitted model's
 forward pass whose cost does not grow with the database, is left out) and the exact
 search alone (one anime a phone, ``--exact``'s search), ``--repeats`` times each (the
 first pays numba's cache load; the best is reported). Latency is wall time, CPU is every
@@ -143,7 +145,8 @@ def _rss_gb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
 
 
-def measure(db_path: Path, repeats: int, mode: str = "cold", load_only: bool = False) -> dict:
+def measure(db_path: Path, repeats: int, mode: str = "cold", load_only: bool = False,
+            kbest_all: bool = False, exact: bool = True) -> dict:
     """Load the database and synthesize the line (run in a fresh process); ``mode`` as
     ``--modes`` says."""
     import hashlib
@@ -171,7 +174,12 @@ def measure(db_path: Path, repeats: int, mode: str = "cold", load_only: bool = F
            "peak_after_load_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
            "animes": model.graph.n_nodes, "graph_gb": model.graph.nbytes() / 1e9,
            "speech_s": seconds, "phones": len(labels), "mode": mode}
-    for name, kwargs in () if load_only else (("kbest", {"k_best": 20}), ("exact", {})):
+    runs = [("kbest", {"k_best": 20})]
+    if kbest_all:  # the search over every candidate (synth --shortlist all)
+        runs.append(("kbest_all", {"k_best": 20, "shortlist": None}))
+    if exact:
+        runs.append(("exact", {}))
+    for name, kwargs in () if load_only else runs:
         best = None
         for _ in range(repeats):
             t, c = time.perf_counter(), time.process_time()
@@ -220,6 +228,7 @@ def _existing(out: Path) -> dict | None:
 
 def _print(row: dict) -> None:
     """One line of the table for a measured row."""
+    nan = float("nan")
     load = (f"{row['animes']:9d} {row['hours']:6.1f} {row['disk_gb']:7.2f} {row['mode']:>5s} "
             f"{row['load_s']:7.2f} {row['load_cpu_s']:8.2f} {row['rss_after_load_gb']:8.2f} "
             f"{row['peak_after_load_gb']:8.2f}")
@@ -227,9 +236,13 @@ def _print(row: dict) -> None:
         print(load)
     else:
         print(f"{load} {row['peak_rss_gb']:7.2f} {row['kbest_s']:7.2f} {row['kbest_cpu_s']:7.2f} "
-              f"{row['kbest_rtf']:7.3f} {row['exact_s']:7.2f} {row['exact_cpu_s']:9.2f}")
-        print("          k-best phases: " + ", ".join(
-            f"{k[:-2]} {v:.2f} s" for k, v in row["kbest_timings"].items()))
+              f"{row['kbest_rtf']:7.3f} {row.get('exact_s', nan):7.2f} "
+              f"{row.get('exact_cpu_s', nan):9.2f}")
+        for name in ("kbest", "kbest_all"):
+            if f"{name}_timings" in row:
+                print(f"          {name} {row[f'{name}_s']:.2f} s, CPU "
+                      f"{row[f'{name}_cpu_s']:.2f} s; phases: " + ", ".join(
+                          f"{k[:-2]} {v:.2f} s" for k, v in row[f"{name}_timings"].items()))
     sys.stdout.flush()
 
 
@@ -262,6 +275,10 @@ def main() -> int:
     parser.add_argument("--max-rss-gb", type=float, default=8.0)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-exact", action="store_true",
+                        help="leave out the exact search alone (bench_search.py times it)")
+    parser.add_argument("--kbest-all", action="store_true",
+                        help="also k-best over every candidate (synth --shortlist all)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--after", type=Path,
                         help="the --json of an earlier run: its sizes project the peak "
@@ -277,7 +294,8 @@ def main() -> int:
     parser.add_argument("--build", type=Path, nargs=2, help=argparse.SUPPRESS)  # parts
     args = parser.parse_args()
     if args.measure:
-        print(json.dumps(measure(args.measure, args.repeats, args.mode, args.load_only)))
+        print(json.dumps(measure(args.measure, args.repeats, args.mode, args.load_only,
+                                 args.kbest_all, not args.no_exact)))
         return 0
     if args.build:
         base, out = args.build
@@ -320,7 +338,9 @@ def main() -> int:
                     continue
                 command = [sys.executable, __file__, "--measure", str(out), "--repeats",
                            str(args.repeats), "--mode", mode]
-                child = subprocess.run(command + ["--load-only"] * args.load_only,
+                command += ["--load-only"] * args.load_only + ["--kbest-all"] * args.kbest_all
+                command += ["--no-exact"] * args.no_exact
+                child = subprocess.run(command,
                                        capture_output=True, text=True, check=False)
                 if child.returncode:
                     print(child.stderr.strip().splitlines()[-1] if child.stderr.strip()

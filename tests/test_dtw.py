@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import animegraph.search.dtw as dtw_module
+import animegraph.search.threads as threads_module
 from animegraph.search.dtw import (
     audio_cost,
     audio_costs,
@@ -298,11 +299,12 @@ def test_the_kept_pool_gives_the_serial_costs_and_survives_fork(rng, monkeypatch
     serial = [[audio_cost(x, curves[a]) for a in nodes]
               for x, nodes in zip(inputs, lists, strict=True)]
     assert _parallel_costs(values, offsets, inputs, lists) == serial
-    pool = dtw_module._POOLS[2]
+    pool = threads_module._POOLS[2]
     assert _parallel_costs(values, offsets, inputs, lists) == serial
-    assert dtw_module._POOLS[2] is pool  # kept, not started again
-    child = in_forked_child(lambda: (_parallel_costs(values, offsets, inputs, lists),
-                                     2 in dtw_module._POOLS and dtw_module._POOLS[2] is not pool))
+    assert threads_module._POOLS[2] is pool  # kept, not started again
+    child = in_forked_child(lambda: (
+        _parallel_costs(values, offsets, inputs, lists),
+        2 in threads_module._POOLS and threads_module._POOLS[2] is not pool))
     assert child == [serial, True]
     assert _parallel_costs(values, offsets, inputs, lists) == serial  # the parent's still works
 

@@ -312,6 +312,32 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
         synthesize(model, audio, sr, labels=labels, k_best=0)
 
 
+
+def test_shortlist_cuts_k_bests_candidates_and_none_restores_the_full_search(model, held_out):
+    from animegraph.search import SearchWeights, search
+    from animegraph.synthesis.pipeline import query_phones, score_candidates
+    from tests.test_shortlist import full_ranking_first
+
+    stem, _ = held_out
+    audio, sr = read_wav(stem.with_suffix(".wav"))
+    labels = read_phones_csv(f"{stem}.phones.csv")
+    phones, _ = query_phones(audio, sr, labels=labels)
+    cands, costs = score_candidates(model, phones)
+    assert max(cands.sizes) > 4  # more animes of a phone than the shortlist below keeps
+    full = synthesize(model, audio, sr, labels=labels, k_best=4, shortlist=None)
+    np.testing.assert_array_equal(full.result.nodes, search(model.graph, cands, costs).nodes)
+    # A shortlist of 2 with k-best 4 keeps 4 a phone (never fewer than k): the first 4 by
+    # the ranking (context first: the phones are known), which are the 4 blended.
+    cut = synthesize(model, audio, sr, labels=labels, k_best=4, shortlist=2)
+    first = full_ranking_first(model.graph, cands, costs, 4, emotion=None, context=True,
+                               weights=SearchWeights())
+    for i, animes in enumerate(cut.blended):
+        assert sorted(a["node"] for a in animes) == first[i].tolist()
+        assert int(cut.result.nodes[i]) in first[i]
+    for bad in (0, -1, True, 1.5):
+        with pytest.raises(ParameterError, match="shortlist must be"):
+            synthesize(model, audio, sr, labels=labels, k_best=4, shortlist=bad)
+
 def _played_through(graph, nodes):
     """Input phones on the recorded frames of ``nodes``, one after another."""
     from animegraph.synthesis import Phone

@@ -99,6 +99,19 @@ class _Parser(argparse.ArgumentParser):
         return f"; did you mean {' or '.join(dict.fromkeys(close))}?" if close else ""
 
 
+def _shortlist(text: str) -> int | str:
+    """``--shortlist``: ``all`` or a whole number >= 1."""
+    if text == "all":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1 or 'all', got {text!r}")
+    return value
+
+
 def _whole_number(text: str) -> int:
     try:
         value = int(text)
@@ -408,6 +421,11 @@ def _synth_beyond_paper_options(syn: argparse.ArgumentParser) -> None:
                      help="beyond the paper: average the K best-matching animes of each "
                      "phone (default 20, which suits real data; --exact, --window or "
                      "--search alone: the paper's one anime a phone)")
+    syn.add_argument("--shortlist", type=_shortlist, default=None, metavar="N|all",
+                     help="beyond the paper: k-best's search and ranking see each phone's "
+                     "first N candidates by the ranking's own order (default 100, so that "
+                     "the time does not grow with the database; never fewer than K); all: "
+                     "every candidate")
     syn.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
                      help="beyond the paper: k-best averages each anime relative to its "
                      "recording's mean pose, the utterance taking the mean pose of the "

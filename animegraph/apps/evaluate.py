@@ -14,6 +14,7 @@ import numpy as np
 
 from animegraph.motion.measures import lip_channels, motion_scores, paper_scores
 from animegraph.search import search
+from animegraph.search.shortlist import SHORTLIST, shortlist
 from animegraph.synthesis import (
     HELPER_MODES,
     PostOptions,
@@ -49,7 +50,7 @@ METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "exact-p
            "kbest20-ctx-blend", "kbest20-raw", "kbest20-ctx-raw", "kbest20-raw-blend",
            "kbest20-ctx-raw-blend", "kbest20-rc", "kbest20-ctx-rc", "kbest20-rc-blend",
            "kbest20-ctx-rc-blend", "kbest20-cut", "kbest20-ctx-cut", "kbest20-cut-blend",
-           "kbest20-rc-cut-blend")
+           "kbest20-rc-cut-blend", "kbest20-ctx-all", "kbest20-all-blend", "kbest20-all")
 #: The methods scored unless others are asked for (those of the paper's audio cost;
 #: ``kbest20-ctx`` is ``synth``'s default with known phones).
 DEFAULT_METHODS = ("exact", "window3", "window6", "random", "first", "kbest20", "kbest20-ctx")
@@ -65,6 +66,11 @@ RECENTRE_SUFFIXES = {RAW_SUFFIX: False, RECENTRE_SUFFIX: True}
 #: cross-faded into its neighbours' through the recorded transitions
 #: (``PostOptions(blend=False)``).
 CUT_SUFFIX = "-cut"
+#: ``kbest<K>[...]-all``: the search over every candidate of each phone, not over the
+#: first ``max(SHORTLIST, K)`` by the ranking's order as ``synth`` does
+#: (:func:`animegraph.search.shortlist.shortlist`, docs/results/speed.md, "A database of
+#: 100 hours").
+ALL_SUFFIX = "-all"
 #: ``kbest<K>-ctx``: the K animes ranked by phonetic context first
 #: (``animegraph.search.k_best(..., context=True)``; beyond the paper).
 CONTEXT_SUFFIX = "-ctx"
@@ -155,8 +161,9 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
                   rng: np.random.Generator | None = None) -> tuple[np.ndarray, int]:
     """The motion (independent components) one of :data:`METHODS` synthesizes from the
     search input of :func:`heldout_query`, and its number of jump matches."""
-    nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     if method.startswith("kbest"):
+        every = method.endswith(ALL_SUFFIX)
+        method = method.removesuffix(ALL_SUFFIX)
         blend = not method.endswith(CUT_SUFFIX)
         method = method.removesuffix(CUT_SUFFIX)
         recentre = None  # synth's default
@@ -165,9 +172,15 @@ def method_motion(model, phones, cands, audio_cost, method: str, *,
                 recentre, method = on, method.removesuffix(suffix)
         context = method.endswith(CONTEXT_SUFFIX)
         k = int(method[len("kbest"):len(method) - len(CONTEXT_SUFFIX) * context])
+        if not every:  # synth's cut of the candidates before the search (the same costs)
+            cut = shortlist(model.graph, cands, max(SHORTLIST, k), costs=audio_cost,
+                            emotion=emotion, context=context)
+            cands, audio_cost = cut.cands, cut.audio
+        nodes, jumps = method_nodes(model, cands, audio_cost, "exact", emotion=emotion)
         return render_k_best(model, phones, cands, audio_cost, nodes, k, emotion=emotion,
                              context=context,
                              options=PostOptions(recentre=recentre, blend=blend))[0], jumps
+    nodes, jumps = method_nodes(model, cands, audio_cost, method, emotion=emotion, rng=rng)
     options = (PostOptions(helper=method[len("exact-"):]) if method in OPTIONAL_METHODS
                else None)
     return render_nodes(model, phones, nodes, emotion=emotion, options=options)[0], jumps

@@ -8,7 +8,9 @@ What the room holds, one module each:
   with viseme back-off, the cost of a sequence, the flat arrays every solver uses;
 * :mod:`.solve` -- :func:`search`, which runs one of the solvers
   :mod:`.exact` (default; its k-d tree in :mod:`.kdtree`), :mod:`.paper` (the paper's
-  priority queue), :mod:`.window` (its bounded look-ahead) and :mod:`.dp` (the oracle).
+  priority queue), :mod:`.window` (its bounded look-ahead) and :mod:`.dp` (the oracle);
+* :mod:`.shortlist` -- k-best's candidates cut to each phone's first N by its ranking
+  (beyond the paper), the audio cost computed where a lower bound cannot rule it out.
 
 Imports: ``db`` and ``ingest`` only -- nothing else of ``animegraph``.
 """

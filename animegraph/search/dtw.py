@@ -39,10 +39,7 @@ assume valid input: every public function validates its arguments first.
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
@@ -58,6 +55,7 @@ from animegraph.search.dtw_args import path_array as _path
 from animegraph.search.dtw_args import same_width as _same_width
 from animegraph.search.dtw_args import values_array as _values
 from animegraph.search.jit import kernel
+from animegraph.search.threads import thread_pool
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
@@ -647,40 +645,11 @@ def _run_pairs(c_inputs, values, offsets, nodes, band, code):
                 _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
                              code, cuts[k], cuts[k + 1], out, warps)
 
-            list(_pool(threads).map(chunk, range(len(cuts) - 1)))
+            list(thread_pool(threads).map(chunk, range(len(cuts) - 1)))
         else:
             _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
                          0, len(flat), out, warps)
     return sizes, out, warps
-
-
-#: The threads of :func:`_run_pairs`, one pool per thread count, made when first needed
-#: and kept: starting a pool's threads on every call was most of a small batch's time
-#: (a live stream's window: docs/results/live.md, "What is computed once, what is not").
-_POOLS: dict[int, ThreadPoolExecutor] = {}
-_POOLS_LOCK = threading.Lock()
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    """The kept pool of ``threads`` threads. Callers on several threads may share it:
-    each waits only for its own chunks."""
-    with _POOLS_LOCK:
-        pool = _POOLS.get(threads)
-        if pool is None:
-            pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="dtw")
-        return pool
-
-
-def _forget_pools() -> None:
-    """In a forked child: the parent's pools have no threads here (a fork copies only
-    the calling thread), and work given to them would wait for ever; new ones are made."""
-    global _POOLS_LOCK
-    _POOLS.clear()
-    _POOLS_LOCK = threading.Lock()  # another thread may have held it at the fork
-
-
-if hasattr(os, "register_at_fork"):  # not on Windows, which does not fork
-    os.register_at_fork(after_in_child=_forget_pools)
 
 
 def _split(a: np.ndarray, sizes: np.ndarray) -> list[np.ndarray]:

@@ -9,14 +9,13 @@ after the first call) and a large layer's queries run on several threads.
 from __future__ import annotations
 
 import logging
-import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from animegraph.search.jit import kernel
 from animegraph.search.kdtree import LEAF, build_tree, query
 from animegraph.search.problem import Problem, row_dist
+from animegraph.search.threads import thread_pool
 from db.system import usable_cpus
 
 log = logging.getLogger(__name__)
@@ -27,17 +26,6 @@ _DOMINANCE_RANGE = 64
 _REBUILD = 0.7
 #: Queries of a layer below which one thread does them all.
 _PARALLEL_MIN = 2048
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="search")
-        return _POOL
-
 
 
 def exact(p: Problem, tolerance: float = 0.0) -> tuple[np.ndarray, float, int, int]:
@@ -402,6 +390,6 @@ def _run_queries(cn, lo1, hi1, n_query, args) -> int:
     if threads == 1 or n_query < _PARALLEL_MIN:
         return _query_layer(cn, lo1, hi1, *args)
     cuts = np.linspace(lo1, hi1, threads + 1).astype(np.int64)
-    futures = [_pool(threads).submit(_query_layer, cn, int(a), int(b), *args)
+    futures = [thread_pool(threads).submit(_query_layer, cn, int(a), int(b), *args)
                for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     return sum(f.result() for f in futures)

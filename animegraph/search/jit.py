@@ -31,7 +31,8 @@ __all__ = ["KERNEL_FILES", "cache_folder", "cache_key", "kernel", "kernel_source
 
 #: The files of this room that hold kernels (and this one, which decides their cache):
 #: their sources make the cache's key. ``tests/test_search_jit.py`` checks it is complete.
-KERNEL_FILES = ("dtw.py", "exact.py", "jit.py", "kdtree.py", "paper.py", "problem.py")
+KERNEL_FILES = ("dtw.py", "exact.py", "jit.py", "kdtree.py", "paper.py", "problem.py",
+                "shortlist.py")
 #: Cache folders of other keys unused for this long are removed when a new one is made.
 _STALE_SECONDS = 24 * 3600
 _PREFIX = "numba-"
@@ -46,7 +47,7 @@ def kernel_sources(folder: Path | None = None) -> list[Path]:
 def cache_key(folder: Path | None = None) -> str:
     """The package's version and a hash of the kernels' sources (16 hex digits).
 
-    Hashing the six files takes well under a millisecond, once a process.
+    Hashing the seven files takes well under a millisecond, once a process.
     """
     from animegraph import __version__
 

@@ -15,7 +15,7 @@ from importlib import import_module
 from pathlib import Path
 
 #: Modules of this room holding cached numba kernels, by the search method using them.
-KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree"),
+KERNEL_MODULES = {"exact": ("dtw", "problem", "exact", "kdtree", "shortlist"),
                   "paper": ("dtw", "problem", "paper"),
                   "window": ("dtw", "problem"), "dp": ("dtw", "problem")}
 #: Kernels of those modules that synthesis never calls: ``dtw.dtw``'s path, for scripts

@@ -25,6 +25,8 @@ import numpy as np
 from animegraph.emotion.control import map_frames, map_frames_over_time, resolve_emotion
 from animegraph.search import SearchWeights, candidates, search
 from animegraph.search import k_best as ranked_candidates
+from animegraph.search.shortlist import SHORTLIST
+from animegraph.search.shortlist import shortlist as cut_candidates
 from animegraph.synthesis.assemble import (
     Phone,
     PostOptions,
@@ -72,7 +74,7 @@ def synthesize(
     prosody_config: RastaPlpConfig | None = None, k_best: int | None = None,
     phones_engine: str | None = None, audio_cost: str = "plp", candidates_from: str = "label",
     guide=None, guide_blend: float = GUIDE_BLEND, guide_rank: bool = False,
-    context: bool | None = None, recognized_guide=None,
+    context: bool | None = None, recognized_guide=None, shortlist: int | None = SHORTLIST,
 ) -> Synthesis:
     """Facial motion for speech ``audio`` (shape (n_samples,)) from the database ``model``.
 
@@ -138,6 +140,15 @@ def synthesize(
         (:func:`animegraph.search.k_best`). None (default): as
         :data:`animegraph.synthesis.path.KNOWN_PHONES_CONTEXT` says when the phones are
         known (labels, or a transcript aligned), off when they are recognised.
+    shortlist : int or None, optional
+        With ``k_best``, beyond the paper: the search and the ranking see only the first
+        ``max(shortlist, k_best)`` candidates of each phone by the ranking's own order
+        (:func:`animegraph.search.shortlist.shortlist`: the emotion term, the context with
+        ``context``, then the unary cost), so that their cost does not grow with the
+        database; the ``k_best - 1`` animes ranked next to the pick are the same, the pick
+        is the best sequence over the shortlist. Default
+        :data:`animegraph.search.shortlist.SHORTLIST`; None: every candidate (as with
+        ``guide_rank``, whose ranking includes the guide's target cost).
     recognized_guide : guide, or a callable returning one (or None), optional
         With ``text`` and no ``guide``: the guide used when the transcript does not fit
         the speech and the phones are recognised instead, so that a wrong transcript
@@ -164,6 +175,7 @@ def synthesize(
     t0 = time.perf_counter()
     if guide is not None:
         check_guide_use(guide_blend, guide_rank)
+    check_shortlist(shortlist)
     if candidates_from not in CANDIDATE_SOURCES:
         raise ParameterError(f"candidates_from must be one of {', '.join(CANDIDATE_SOURCES)}, "
                              f"got {candidates_from!r}")
@@ -191,8 +203,13 @@ def synthesize(
 
     t1 = time.perf_counter()
     cost_name = audio_cost
+    if k_best is not None and context is None:
+        context = KNOWN_PHONES_CONTEXT and method_used in ("labels", "aligned")
+    cut = (max(shortlist, k_best) if k_best is not None and shortlist is not None
+           and not (guide is not None and guide_rank) else None)
     cands, audio_cost = score_candidates(model, phones, emotion=emotion, audio_cost=cost_name,
-                                         candidates_from=candidates_from)
+                                         candidates_from=candidates_from, shortlist=cut,
+                                         weights=weights, context=bool(context))
     guide_ics, target, unary = None, None, audio_cost
     if guide is not None:
         t_guide = time.perf_counter()
@@ -213,8 +230,6 @@ def synthesize(
     if k_best is None:
         ics, joins = render_nodes(model, phones, result.nodes, options=options, emotion=emotion)
     else:
-        if context is None:
-            context = KNOWN_PHONES_CONTEXT and method_used in ("labels", "aligned")
         ics, ranked = render_k_best(model, phones, cands, unary, result.nodes, k_best,
                                     weights=weights, options=options, emotion=emotion,
                                     context=context)
@@ -337,14 +352,37 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
 
 
 def score_candidates(model: Model, phones, *, emotion: str | None = None,
-                     audio_cost: str = "plp", candidates_from: str = "label"):
+                     audio_cost: str = "plp", candidates_from: str = "label",
+                     shortlist: int | None = None, weights: SearchWeights | None = None,
+                     context: bool = False):
     """Candidate animes of every input phone and their audio costs (Eq. 5; ``audio_cost``
     one of :data:`animegraph.synthesis.audio.AUDIO_COSTS`, ``candidates_from`` one of
-    :data:`animegraph.synthesis.audio.CANDIDATE_SOURCES`)."""
+    :data:`animegraph.synthesis.audio.CANDIDATE_SOURCES`); with ``shortlist``, each
+    phone's first ``shortlist`` by k-best's order (``weights``, ``context``;
+    :func:`animegraph.search.shortlist.shortlist`), the paper's cost computed only where
+    that order needs it."""
     cands = candidates(model.graph, [p.phone for p in phones], emotion=emotion)
     if candidates_from == "likely":
         cands = likely_candidates(model.graph, phones, cands)
-    return cands, candidate_costs(model.graph, phones, cands.nodes, audio_cost)
+    if shortlist is None:
+        return cands, candidate_costs(model.graph, phones, cands.nodes, audio_cost)
+    if audio_cost == "plp":  # the paper's cost: bounded from below, computed where needed
+        cut = cut_candidates(model.graph, cands, shortlist, weights=weights, emotion=emotion,
+                             context=context,
+                             curves=[p.prosody.astype(np.float32) for p in phones])
+    else:  # the others (a median over all candidates, posteriors): all of them first
+        cut = cut_candidates(model.graph, cands, shortlist, weights=weights, emotion=emotion,
+                             context=context,
+                             costs=candidate_costs(model.graph, phones, cands.nodes, audio_cost))
+    return cut.cands, cut.audio
+
+
+def check_shortlist(shortlist) -> None:
+    """ParameterError unless ``shortlist`` is None or an int >= 1."""
+    if shortlist is not None and (isinstance(shortlist, bool)
+                                  or not isinstance(shortlist, int | np.integer)
+                                  or shortlist < 1):
+        raise ParameterError(f"shortlist must be None or an int >= 1, got {shortlist!r}")
 
 
 def render_nodes(model: Model, phones, nodes, *, options: PostOptions | None = None,

@@ -123,7 +123,8 @@ def _synth(args: argparse.Namespace, heard) -> int:
                      phones_engine=args.phones_engine, audio_cost=audio_cost,
                      candidates_from=args.candidates or "label", guide=guide,
                      guide_blend=guide_blend, guide_rank=guide_rank,
-                     context=args.context_ranking, recognized_guide=recognized_guide(args))
+                     context=args.context_ranking, recognized_guide=recognized_guide(args),
+                     shortlist=_shortlist_size(args))
     from animegraph.synthesis.path import CONTEXT_PHRASE
 
     if mismatch is not None:
@@ -199,10 +200,22 @@ def _check_k_best_options(args: argparse.Namespace, k_best: int | None) -> None:
     if args.helper is not None and k_best:
         raise UsageError("animegraph synth: --helper blends the paper's search (one anime a "
                          "phone) at its jumps; --k-best averages animes instead: give one")
+    if args.shortlist is not None and not k_best:
+        raise UsageError("animegraph synth: --shortlist cuts the candidates k-best ranks; "
+                         "the paper's search (--exact, --window, --search) sees every one")
     if args.recentre is not None and not k_best:
         raise UsageError("animegraph synth: --recentre changes how k-best averages "
                          "animes; the paper's search (--exact, --window, --search) takes one "
                          "anime a phone")
+
+
+def _shortlist_size(args: argparse.Namespace) -> int | None:
+    """``synthesize``'s ``shortlist`` from ``--shortlist`` (None: every candidate)."""
+    from animegraph.search.shortlist import SHORTLIST
+
+    if args.shortlist is None:
+        return SHORTLIST
+    return None if args.shortlist == "all" else args.shortlist
 
 
 def _emotion_lines(emotion) -> list[str]:
@@ -296,7 +309,8 @@ def _synth_baseline(args: argparse.Namespace) -> int:
         ("--candidates", args.candidates is not None), ("--guide", args.guide is not None),
         ("--guide-blend", args.guide_blend is not None), ("--guide-rank", args.guide_rank),
         ("--context-ranking", args.context_ranking is not None),
-        ("--recentre", args.recentre is not None)) if on]
+        ("--recentre", args.recentre is not None),
+        ("--shortlist", args.shortlist is not None)) if on]
     if search_only:
         raise UsageError(f"animegraph synth: {', '.join(search_only)} only "
                          f"appl{'y' if len(search_only) > 1 else 'ies'} to --method "
