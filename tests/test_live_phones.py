@@ -225,7 +225,8 @@ def _segments(speech):
 
 def test_window_with_nothing_kept_is_the_offline_synthesis(model, speech):
     """With an empty memory the window is synthesized exactly as synthesize() does with
-    the same phones as labels (k-best, no context ranking)."""
+    the same phones as labels (k-best, no context ranking, every candidate searched: the
+    window does not cut a shortlist)."""
     from animegraph.live.window import PhoneMemory, window_motion
     from animegraph.synthesis import synthesize
 
@@ -233,7 +234,8 @@ def test_window_with_nothing_kept_is_the_offline_synthesis(model, speech):
     window, segments = _segments(speech)
     memory = PhoneMemory()
     motion, _ = window_motion(model, window, sr, segments, 0.0, memory=memory, k_best=20)
-    offline = synthesize(model, window, sr, labels=segments, k_best=20, context=False).motion
+    offline = synthesize(model, window, sr, labels=segments, k_best=20, context=False,
+                         shortlist=None).motion
     np.testing.assert_allclose(motion, offline, atol=1e-9)
     assert memory.hits == 0 and memory.misses == len(segments) == len(memory)
 
