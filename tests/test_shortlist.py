@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_search import EMOTIONS, random_graph
 
 from animegraph import search as S
 from animegraph.apps.cli import main
@@ -14,7 +15,6 @@ from animegraph.search.dtw import audio_costs_many
 from animegraph.search.problem import Problem, context_match
 from animegraph.search.shortlist import box_bounds, shortlist
 from db.errors import ParameterError
-from tests.test_search import EMOTIONS, random_graph
 
 PHONES = ("AA", "B", "M", "T", "S", "IY")
 

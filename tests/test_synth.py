@@ -314,9 +314,10 @@ def test_k_best_blends_animes_and_one_is_the_pick_unblended(model, held_out):
 
 
 def test_shortlist_cuts_k_bests_candidates_and_none_restores_the_full_search(model, held_out):
+    from test_shortlist import full_ranking_first
+
     from animegraph.search import SearchWeights, search
     from animegraph.synthesis.pipeline import query_phones, score_candidates
-    from tests.test_shortlist import full_ranking_first
 
     stem, _ = held_out
     audio, sr = read_wav(stem.with_suffix(".wav"))

@@ -185,6 +185,10 @@ def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *
     from its transcript (forced alignment). A synthesis scores enough pairs for the
     audio cost's threaded path (it runs the same kernel as the serial one).
     """
+    import numpy as np
+
+    from animegraph.search.dtw import audio_costs_many
+    from animegraph.search.shortlist import box_bounds
     from animegraph.synthesis import Model, synthesize
     from animegraph.synthesis.path import synthesis_path
     from ingest.formats.phones_csv import Segment
@@ -208,6 +212,16 @@ def warm_kernels(db: Path, methods: set[tuple[str, int | None]] | None = None, *
             synthesize(model, utt.audio, utt.sample_rate, labels=labels, **options)
         if align:
             synthesize(model, utt.audio, utt.sample_rate, text=utt.text)
+        # Two kernels a small database's synthesis never calls: the shortlist's bound (run
+        # only where a phone has more candidates than the shortlist keeps) and the DTW's
+        # scan of curves not checked at load (a mapped graph's). Left out, every later
+        # command would announce their compilation. Compiled here with the types they run on.
+        graph, n = model.graph, min(2, model.graph.n_nodes)
+        nodes = [np.arange(n, dtype=np.int64)]
+        box_bounds(graph, [graph.prosody_values[:1]], nodes)
+        offsets = np.asarray(graph.prosody_offsets[:n + 1])
+        curves = np.array(graph.prosody_values[:offsets[-1]])  # a copy: not marked checked
+        audio_costs_many([curves[:1]], curves, offsets, nodes)
     finally:
         search_log.setLevel(level)
 
