@@ -307,10 +307,9 @@ def _run_locked(lines, options: BatchOptions, db: Path, version, identity, files
                 # batch said "compiling" every time).
                 methods = {t.line.method for t in making}
                 notice = next(filter(None, map(compile_notice, sorted(methods))), None)
-                say(f"{notice.removesuffix(' ...')}, in this process before the workers "
-                    "start ..."
-                    if notice else "loading the search in this process before the workers "
-                    "start ...")
+                if notice:  # a line of its own: what follows reads the same either way
+                    say(notice)
+                say("loading the search in this process before the workers start ...")
                 try:
                     warm_up(db, {(t.line.method, t.line.window) for t in making},
                             align=any(t.line.audio is not None for t in making))
