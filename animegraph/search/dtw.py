@@ -55,7 +55,7 @@ from animegraph.search.dtw_args import path_array as _path
 from animegraph.search.dtw_args import same_width as _same_width
 from animegraph.search.dtw_args import values_array as _values
 from animegraph.search.jit import kernel
-from animegraph.search.threads import thread_pool
+from animegraph.search.threads import in_chunks
 from db.errors import ParameterError
 
 __all__ = ["AUDIO_METRICS", "DTWResult", "audio_cost", "audio_costs", "audio_costs_many", "dtw",
@@ -634,21 +634,12 @@ def _run_pairs(c_inputs, values, offsets, nodes, band, code):
         inputs = np.repeat(np.arange(len(xs), dtype=np.int64), sizes)
         max_len = int(np.diff(offsets)[flat].max())
         threads = numba.get_num_threads() if len(flat) >= _PARALLEL_MIN_NODES else 1
-        if threads > 1:
-            # Chunks of pairs on Python threads (the kernel releases the GIL), each chunk
-            # writing its own rows of ``out``/``warps``; several chunks a thread even out
-            # pairs of unequal length. Not numba's prange: a parallel kernel took ~5 s
-            # CPU more to compile at first use (scripts/bench_startup.py --kernels).
-            cuts = np.linspace(0, len(flat), min(len(flat), 4 * threads) + 1).astype(np.int64)
-
-            def chunk(k: int) -> None:
-                _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band,
-                             code, cuts[k], cuts[k + 1], out, warps)
-
-            list(thread_pool(threads).map(chunk, range(len(cuts) - 1)))
-        else:
-            _pairs_range(xs_all, x_off, values, offsets, inputs, flat, max_len, band, code,
-                         0, len(flat), out, warps)
+        # Chunks of pairs on Python threads (the kernel releases the GIL), each chunk
+        # writing its own rows of ``out``/``warps``. Not numba's prange: a parallel kernel
+        # took ~5 s CPU more to compile at first use (scripts/bench_startup.py --kernels).
+        in_chunks(len(flat), threads, lambda a, b: _pairs_range(
+            xs_all, x_off, values, offsets, inputs, flat, max_len, band, code, a, b, out,
+            warps))
     return sizes, out, warps
 
 

@@ -46,7 +46,7 @@ from animegraph.search.problem import (
     context_match,
     emotion_code,
 )
-from animegraph.search.threads import thread_pool
+from animegraph.search.threads import in_chunks
 from db.errors import ParameterError
 
 #: Candidates kept per input phone (``synth --shortlist``): five times k-best's default 20.
@@ -306,15 +306,8 @@ def box_bounds(graph: AnimeGraph, curves: Sequence[np.ndarray],
     inputs = np.repeat(np.arange(len(xs), dtype=np.int64), sizes)
     out = np.empty(len(flat))
     threads = numba.get_num_threads() if len(flat) >= _PARALLEL_MIN else 1
-    cuts = np.linspace(0, len(flat), max(1, min(len(flat), 4 * threads)) + 1).astype(np.int64)
-
-    def chunk(k: int) -> None:
-        _box_range(x_all, x_off, inputs, flat, lo, hi, cuts[k], cuts[k + 1], out)
-
-    if threads > 1:
-        list(thread_pool(threads).map(chunk, range(len(cuts) - 1)))
-    else:
-        chunk(0) if len(cuts) == 2 else [chunk(k) for k in range(len(cuts) - 1)]
+    in_chunks(len(flat), threads,
+              lambda a, b: _box_range(x_all, x_off, inputs, flat, lo, hi, a, b, out))
     out *= 1.0 - _SAFETY
     return np.split(out, np.cumsum(sizes)[:-1]) if len(sizes) else []
 

@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
-__all__ = ["thread_pool"]
+import numpy as np
+
+__all__ = ["in_chunks", "thread_pool"]
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 _LOCK = threading.Lock()
@@ -29,6 +32,17 @@ def thread_pool(threads: int) -> ThreadPoolExecutor:
         if pool is None:
             pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="search")
         return pool
+
+
+def in_chunks(n: int, threads: int, run: Callable[[int, int], None]) -> None:
+    """``run(start, stop)`` over ``[0, n)``: in one call on one thread, else in about four
+    chunks a thread on the kept pool (several a thread even out items of unequal cost).
+    Each chunk must write only its own items."""
+    if threads <= 1:
+        run(0, n)
+        return
+    cuts = np.linspace(0, n, min(n, 4 * threads) + 1).astype(np.int64)
+    list(thread_pool(threads).map(lambda k: run(cuts[k], cuts[k + 1]), range(len(cuts) - 1)))
 
 
 def _forget_pools() -> None:
