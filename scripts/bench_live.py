@@ -36,13 +36,13 @@ Usage::
   over the audio's duration (1.0 = one core), and their wall time likewise.
 * **CPU alone** (``--unpaced``): the same speech pushed in 20 ms chunks as fast as the
   stream takes it (a second pass, after a warm-up one): CPU per second of audio and
-  each update's CPU time, without the pacing's waits.
+  each update's CPU and wall time (median, p95), without the pacing's waits.
 * **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
   frames sent against the audio heard times the frame rate, the latency over its first
   and last tenth, and the updates that had to catch up.
 
 The machine's load is printed (``os.getloadavg``): on a shared machine wall times rise
-with it, CPU times much less.
+with it, CPU times much less; and the commit of the code measured (``# code``).
 """
 
 from __future__ import annotations
@@ -309,6 +309,7 @@ def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
     for _ in range(2):  # the first pass warms hama and the kernels
         cpu = seconds = 0.0
         updates: list[float] = []
+        walls: list[float] = []
         for audio, sr in speech:
             stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
                             backlog_ms=None, **WINDOW)
@@ -320,10 +321,13 @@ def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
             cpu += time.process_time() - t
             seconds += len(audio) / sr
             updates += stream.stats.update_cpu
+            walls += stream.stats.update_wall
         runs.append({"seconds": seconds, "cpu_share": cpu / seconds,
                      "update_cpu_ms": {"median": 1000 * float(np.median(updates)),
                                        "p95": 1000 * float(np.percentile(updates, 95))},
-                     "load": os.getloadavg()})
+                     "update_wall_ms": {"median": 1000 * float(np.median(walls)),
+                                        "p95": 1000 * float(np.percentile(walls, 95))},
+                     "updates": len(updates), "load": os.getloadavg()})
     return runs[-1]
 
 
@@ -338,6 +342,26 @@ def speech_file(speech, seconds: float, path: Path) -> Path:
                 total += len(audio)
     write_wav(path, np.concatenate(parts)[: int(seconds * sr)], sr)
     return path
+
+
+def code_version() -> str:
+    """The commit of the animegraph imported (its checkout's short hash, ``+`` if it has
+    changes not committed), or where it was imported from when that is not a checkout:
+    the figures' results pages name the commit measured."""
+    import subprocess
+
+    import animegraph
+
+    root = Path(animegraph.__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, timeout=10, check=True)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return f"not a git checkout: {root}"
+    return head.stdout.strip() + ("+" if dirty.stdout.strip() else "") + f" ({root})"
 
 
 def main() -> int:
@@ -387,6 +411,7 @@ def main() -> int:
         WINDOW["threads"] = None  # no cap
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
+    print(f"# code {code_version()}", flush=True)
     results: dict = {"quality": {}, "latency": [], "drift": None}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
