@@ -572,8 +572,12 @@ def test_mixtures_factorised_once_score_as_each_mixture_alone():
     # mu-mlp's classifier scores all its mixtures in one stacked solve with factors
     # computed once: bit for bit each mixture's own gmm_loglik, for mixtures of
     # different sizes, and after its mixtures are replaced (refitted) the new ones.
-    from animegraph.baselines.mu_mlp_forward import (Mixtures, MuMlpForward, gmm_loglik,
-                                                     mixtures_loglik)
+    from animegraph.baselines.mu_mlp_forward import (
+        Mixtures,
+        MuMlpForward,
+        gmm_loglik,
+        mixtures_loglik,
+    )
 
     rng = np.random.default_rng(1)
     d = 13

@@ -288,10 +288,12 @@ def _bark_to_hz(bark: np.ndarray | float) -> np.ndarray:
     return 600.0 * np.sinh(np.asarray(bark, dtype=np.float64) / 6.0)
 
 
+@lru_cache(maxsize=16, typed=True)  # a live stream takes every window's RASTA-PLP
 def _bark_filterbank(
     sample_rate: int, n_fft: int, min_freq: float, max_freq: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Trapezoidal critical-band weights (Ellis ``fft2barkmx.m``, width 1 Bark; PLP §2.1).
+    """Trapezoidal critical-band weights (Ellis ``fft2barkmx.m``, width 1 Bark; PLP §2.1),
+    built once per rate, FFT size and band (read-only).
 
     Returns
     -------
@@ -307,7 +309,10 @@ def _bark_filterbank(
     distance = bin_barks[None, :] - centres[:, None]
     # Power weights: 1 over a 1-Bark flat top, +10 dB/Bark below it, -25 dB/Bark above.
     weights = 10.0 ** np.minimum(0.0, np.minimum(distance + 0.5, -2.5 * (distance - 0.5)))
-    return weights, _bark_to_hz(centres)
+    centres_hz = _bark_to_hz(centres)
+    for a in (weights, centres_hz):
+        a.flags.writeable = False
+    return weights, centres_hz
 
 
 def _rasta_filter(log_bands: np.ndarray) -> np.ndarray:
