@@ -52,64 +52,62 @@ VARIANTS = ("base", "post", "post+seg", "post+ext", "post+extg", "post+gfut", "g
 CHUNK_S = 0.02
 
 
-class Swapped(Stream):
-    """A stream whose windows are given the future in the ways ``flags`` name."""
+def swapped(stream: Stream, flags: frozenset, future_s: float, full: np.ndarray,
+            settled: np.ndarray | None) -> Stream:
+    """``stream`` with its windows given the future in the ways ``flags`` name (``full``:
+    the clip's whole audio; ``settled``: every frame's final posteriors)."""
+    sr = stream.sample_rate
 
-    flags: frozenset = frozenset()
-    future_s = 0.08
-    full: np.ndarray  # the clip's whole audio
-    settled: np.ndarray | None = None  # every frame's final posteriors
+    def rows(first: int, n_samples: int) -> np.ndarray:
+        count = int(np.ceil(n_samples / sr * FRAME_RATE - 1e-9))
+        if "post" in flags:
+            return settled[np.clip(np.arange(first, first + count), 0, len(settled) - 1)]
+        return stream._track.posteriors(first, count)
 
-    def _rows(self, first: int, n_samples: int) -> np.ndarray:
-        count = int(np.ceil(n_samples / self.sample_rate * FRAME_RATE - 1e-9))
-        if "post" in self.flags:
-            return self.settled[np.clip(np.arange(first, first + count), 0,
-                                        len(self.settled) - 1)]
-        return self._track.posteriors(first, count)
+    def guided(audio: np.ndarray, n: int) -> np.ndarray:
+        end = SimpleNamespace(start=0.0, end=len(audio) / sr)
+        g = guide_trajectory(stream.model, stream.guide, audio, sr, [end])
+        return stream.model.to_channels(g)[:n]
 
-    def _guide(self, audio: np.ndarray, n: int) -> np.ndarray:
-        end = SimpleNamespace(start=0.0, end=len(audio) / self.sample_rate)
-        g = guide_trajectory(self.model, self.guide, audio, self.sample_rate, [end])
-        return self.model.to_channels(g)[:n]
+    def motion(audio, segments, start_s, guide):
+        return window_motion(stream.model, audio, sr, segments, start_s,
+                             memory=stream._memory, k_best=stream.k_best, guide=guide)[0]
 
-    def _motion(self, audio, segments, start_s, guide):
-        return window_motion(self.model, audio, self.sample_rate, segments, start_s,
-                             memory=self._memory, k_best=self.k_best, guide=guide)[0]
-
-    def _synthesize(self, audio, n, start_s, **_):
-        sr, fl = self.sample_rate, self.flags
+    def synthesize(audio, n, start_s, **_):
         first = int(round(start_s * FRAME_RATE))
-        if "gonly" in fl:
-            return self._guide(audio, n)
-        ahead = bool(fl & {"seg", "ext", "extg", "gfut"})
+        if "gonly" in flags:
+            return guided(audio, n)
+        ahead = bool(flags & {"seg", "ext", "extg", "gfut"})
         s0 = int(round(start_s * sr))
-        longer = self.full[s0: s0 + len(audio) + int(round(self.future_s * sr))]
+        longer = full[s0: s0 + len(audio) + int(round(future_s * sr))]
         heard = longer if ahead else audio
-        ctc.remember(heard, sr, self._rows(first, len(heard)))
+        ctc.remember(heard, sr, rows(first, len(heard)))
         segments = ctc.recognize(heard, sr)
         if all(s.phone == "SIL" for s in segments):
-            return self._pause(n)
+            return stream._pause(n)
         end_s = len(audio) / sr
-        ctc.remember(audio, sr, self._rows(first, len(audio)))  # the window's own rows
-        if "seg" in fl:
+        ctc.remember(audio, sr, rows(first, len(audio)))  # the window's own rows
+        if "seg" in flags:
             cut = [s._replace(end=min(s.end, end_s)) for s in segments
                    if s.start < end_s - 1e-3]
-            return self._motion(audio, cut, start_s, self.guide)
-        if "ext" in fl:
-            ctc.remember(longer, sr, self._rows(first, len(longer)))
-            return self._motion(longer, segments, start_s, self.guide)[:n]
-        if "extg" in fl:
-            ctc.remember(longer, sr, self._rows(first, len(longer)))
-            animes = self._motion(longer, segments, start_s, None)[:n]
-            guide = self._guide(audio, n)
-        elif "gfut" in fl:
-            animes = self._motion(audio, ctc.recognize(audio, sr), start_s, None)
-            guide = self._guide(longer, n)
+            return motion(audio, cut, start_s, stream.guide)
+        if "ext" in flags:
+            ctc.remember(longer, sr, rows(first, len(longer)))
+            return motion(longer, segments, start_s, stream.guide)[:n]
+        if "extg" in flags:
+            ctc.remember(longer, sr, rows(first, len(longer)))
+            animes = motion(longer, segments, start_s, None)[:n]
+            guide = guided(audio, n)
+        elif "gfut" in flags:
+            animes = motion(audio, ctc.recognize(audio, sr), start_s, None)
+            guide = guided(longer, n)
         else:
-            return self._motion(audio, segments, start_s,
-                                None if "aonly" in fl else self.guide)
+            return motion(audio, segments, start_s, None if "aonly" in flags else stream.guide)
         k = min(len(animes), len(guide))
         return 0.5 * animes[:k] + 0.5 * guide[:k]  # as GUIDE_BLEND
+
+    stream._synthesize = synthesize
+    return stream
 
 
 def play(stream: Stream, audio: np.ndarray) -> np.ndarray:
@@ -173,9 +171,9 @@ def main() -> int:
         settled = (settled_posteriors(model, guide, audio, sr, setting)
                    if any("post" in v for v in args.variants) else None)
         for v in args.variants:
-            stream = Swapped(model, sample_rate=sr, guide=guide, backlog_ms=None, **setting)
-            stream.flags = frozenset(v.split("+")) - {"base"}
-            stream.future_s, stream.full, stream.settled = args.future, audio, settled
+            stream = swapped(Stream(model, sample_rate=sr, guide=guide, backlog_ms=None,
+                                    **setting),
+                             frozenset(v.split("+")) - {"base"}, args.future, audio, settled)
             scores[v].append(mouth_r(model, play(stream, audio), clip))
         print(clip.clip_id, " ".join(f"{v} {s[-1]:.3f}" for v, s in scores.items()),
               flush=True)
