@@ -133,6 +133,45 @@ def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monke
     assert np.abs(before[:lead] - rest).max() > 0.1 * np.abs(motion - rest).max()
 
 
+def test_guide_loudness_is_against_all_the_stream_heard(model, speech, monkeypatch):
+    """ppg-ridge's loudness feature is relative to the loud level of all the stream has
+    heard (:class:`animegraph.live.frontend.LoudLevel`, given by
+    :func:`animegraph.baselines.ppg_forward.loud_level`), as offline to the whole clip's:
+    before the first word at least 30 dB over the quietest 20 ms (not the room's noise's
+    own level, which made the noise as loud as speech), then the 95th percentile of every
+    20 ms frame's RMS; each window's guide hears that level, not the window's own."""
+    from animegraph.baselines import ppg_forward
+    from animegraph.live import Stream
+    from animegraph.live import stream as live_stream
+
+    audio, sr = speech
+    rng = np.random.default_rng(0)
+    said = 0.8 * audio / np.abs(audio).max()
+    noisy = np.concatenate([np.zeros(sr, np.float32), said])
+    noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+    given = []
+    window_motion = live_stream.window_motion
+
+    def heard(*args, **kwargs):
+        given.append(ppg_forward._LOUD.get())
+        return window_motion(*args, **kwargs)
+
+    monkeypatch.setattr(live_stream, "window_motion", heard)
+    stream = Stream(model, sample_rate=sr, backlog_ms=None)
+    stream.push(noisy[:sr])
+    n = sr // 50  # 20 ms frames
+    noise_rms = np.sqrt((noisy[:sr].reshape(-1, n).astype(np.float64) ** 2).mean(axis=1))
+    assert stream._loud.level() == pytest.approx(noise_rms.min() * 10 ** 1.5, rel=0.02)
+    assert stream._loud.level() > 10 * np.percentile(noise_rms, 95)  # not the noise's own
+    _play(stream, noisy[sr:])
+    m = len(noisy) // n
+    rms = np.sqrt((noisy[: m * n].reshape(m, n).astype(np.float64) ** 2).mean(axis=1))
+    level = stream._loud.level()
+    assert level == pytest.approx(np.percentile(rms, 95), rel=0.03)  # the speech's
+    assert given and all(g is not None and g > 10 * noise_rms.max() for g in given)
+    assert given[-1] == pytest.approx(level, rel=0.03)
+
+
 def test_bad_input_is_refused_in_one_line(model):
     from animegraph.live import Stream
 
