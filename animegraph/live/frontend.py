@@ -16,7 +16,9 @@ model needs:
   peak ahead, and a window's own peak would change the level from update to update).
 
 So the model hears ``context + settle + hop`` of audio per update rather than the whole
-window. A frame's posteriors are those of one call that heard ``context_s`` before it
+window. Before the stream's first sample it hears silence (the context's worth): the
+model hears the start of its input as the start of speech, and heard the room's noise
+there as phones. A frame's posteriors are those of one call that heard ``context_s`` before it
 and at least ``settle_s`` after it: what a window of that reach gives
 (``tests/test_live.py`` compares them with such windows, and with the whole utterance).
 """
@@ -108,7 +110,14 @@ class PosteriorTrack:
         x = to_model_rate(audio, self.sample_rate)
         if peak > 0:
             x = x * (LEVEL / peak)
-        probs = ctc.phone_probs(x.astype(np.float32))
+        # Near the stream's start the frames to settle have less than the context before
+        # them: the model hears silence before the first sample, as if it had listened
+        # to nothing before. The start of its input is heard as the start of speech: GRID's
+        # leading noise, at the very start of the input, was heard as phones (1-7 frames
+        # of its first 10), with 600 ms of silence before it as silence, as offline.
+        pad = max(0, ctx - (self.settled - start_frame)) if start_frame == 0 else 0
+        x = np.concatenate([np.zeros(pad * (MODEL_RATE // FRAME_RATE)), x])
+        probs = ctc.phone_probs(x.astype(np.float32))[pad:]
         self.model_s += len(x) / MODEL_RATE
         n_total = int(math.ceil(heard / per_frame))  # frames the audio so far begins
         probs = _fit(probs, n_total - start_frame)
