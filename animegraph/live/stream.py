@@ -39,7 +39,11 @@ level, hama heard it as phones, and the leading silence moved the mouth.
 A window whose loudest sample lies :data:`QUIET_DB` below that reference (or is
 silent) is a pause: hama would hear the noise at full level (it hears every input at one
 level), so no phone is looked for; its frames ease into the database's rest pose (the
-mean of its silence animes).
+mean of its silence animes). A window in which hama hears only silence is synthesized
+as offline synthesis synthesizes an utterance's silences (its silence animes and the
+guide), not as the rest pose: offline the leading silence moves, as the recording does
+(GRID's speakers open their mouth before the first word), and the rest pose was most of
+live's loss in each clip's first second (docs/results/live.md).
 
 Frame ``k`` is at ``k / fps`` seconds in the input's clock (its first sample at 0), in the
 database's channel layout ``(n_frames, n_channels)``.
@@ -482,8 +486,6 @@ class Stream:
                                        self.sample_rate)
         else:
             segments = ctc.recognize(audio, self.sample_rate)
-        if all(s.phone == "SIL" for s in segments):
-            return self._pause(n)
         # Known phones are ranked by phonetic context first, as offline (synthesis.path);
         # unlike offline the guide stays blended: a short window's animes alone followed
         # the recording much less closely (docs/results/live.md, "With a transcript").
