@@ -58,8 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from animegraph.live.frontend import (CONTEXT_S, FRAME_RATE, SETTLE_S, LoudLevel,
-                                      PosteriorTrack)
+from animegraph.live.frontend import CONTEXT_S, FRAME_RATE, SETTLE_S, LoudLevel, PosteriorTrack
 from animegraph.live.transcript import TranscriptTrack, window_segments
 from animegraph.live.window import PhoneMemory, window_motion
 from db.errors import DataError, ParameterError
