@@ -225,6 +225,36 @@ def test_ppg_ridge_features_are_gain_free_and_in_context(split):
         PpgRidge(step_s=0).fit(split[0])
 
 
+def test_ppg_ridge_loudness_is_relative_to_a_level_given(split):
+    """Within ``loud_level(L)`` each frame's loudness is taken relative to ``L`` (what a
+    live stream has heard) instead of the audio's own loud frames: the loudness columns
+    shift by log(own / L), the posteriorgram's do not; the audio's own level changes
+    nothing."""
+    from animegraph.baselines.ppg_forward import LOUD_PERCENTILE, frame_loudness, loud_level
+    from ingest.speech import ctc
+
+    clip = split[1][0]
+    audio = clip.audio.astype(np.float32) / 32767
+    q = len(ctc.posteriors(audio, clip.sample_rate))
+    times = (np.arange(q) + 0.5) * 0.02  # the frames' centres: each feature one frame's
+    est = PpgRidge()
+    f = est.features(audio, clip.sample_rate, times)
+    own = float(np.percentile(frame_loudness(audio, clip.sample_rate, q), LOUD_PERCENTILE))
+    with loud_level(own):
+        np.testing.assert_allclose(est.features(audio, clip.sample_rate, times), f, atol=1e-12)
+    with loud_level(10 * own):
+        g = est.features(audio, clip.sample_rate, times)
+    loudness = np.arange(N_PER_OFFSET - 1, f.shape[1], N_PER_OFFSET)
+    others = np.setdiff1d(np.arange(f.shape[1]), loudness)
+    np.testing.assert_allclose(g[:, others], f[:, others], atol=1e-12)
+    loud = f[:, loudness] > np.log(1e-3) + np.log(10) + 1e-6  # not at the floor either way
+    assert loud.mean() > 0.5
+    np.testing.assert_allclose(g[:, loudness][loud], f[:, loudness][loud] - np.log(10),
+                               atol=1e-9)
+    with loud_level(None):  # no level: the audio's own
+        np.testing.assert_allclose(est.features(audio, clip.sample_rate, times), f, atol=1e-12)
+
+
 @pytest.mark.shared
 @pytest.mark.parametrize("n, p, t, noise", [(400, 30, 5, 1.0), (1500, 80, 12, 0.1),
                                              (1500, 80, 12, 30.0), (1200, 40, 90, 3.0)])

@@ -100,10 +100,120 @@ def test_silence_is_the_rest_pose_and_no_error(model):
     assert stream.stats.pauses >= 1
 
 
+def test_a_window_heard_as_silence_is_synthesized_as_offline_silence(model, monkeypatch):
+    """Room noise (not quiet enough to be a pause by its level) in which hama hears only
+    silence is synthesized as offline synthesizes an utterance's silences (the silence
+    animes and the guide), not held at the rest pose; offline, audio whose phones are
+    all silence is still refused."""
+    from animegraph.live import Stream
+    from animegraph.live.stream import rest_pose
+    from animegraph.synthesis.pipeline import query_phones
+    from ingest.formats.phones_csv import Segment
+    from ingest.speech import ctc
+
+    heard = []
+    recognize = ctc.recognize
+
+    def recognized(*args, **kwargs):  # hama's own phones, noted
+        segments = recognize(*args, **kwargs)
+        heard.append([s.phone for s in segments])
+        return segments
+
+    monkeypatch.setattr(ctc, "recognize", recognized)
+    rng = np.random.default_rng(1)
+    noise = (0.01 * rng.standard_normal(32000)).astype(np.float32)
+    stream = Stream(model, sample_rate=16000, backlog_ms=None)
+    batches, _ = _play(stream, noise)
+    motion = np.concatenate([b.motion for b in batches])
+    assert heard and all(set(h) == {"SIL"} for h in heard)  # hama heard only silence
+    assert not any("no speech" in w for w in stream.stats.warnings)
+    assert np.abs(motion - rest_pose(model)).max() > 1e-3  # synthesized, not the rest pose
+    labels = [Segment("SIL", 0.0, 0.5)]
+    with pytest.raises(DataError, match="no speech found"):
+        query_phones(noise[:8000], 16000, labels=labels)
+    phones, _ = query_phones(noise[:8000], 16000, labels=labels, silence=True)
+    assert [p.phone for p in phones] == ["SIL"]
+
+
+def test_posterior_track_hears_silence_before_the_streams_first_sample(speech):
+    """At a stream's start the model hears the context's worth of silence before the first
+    sample, as every later frame hears context before it: the first update's rows are the
+    model's output on [silence, audio], not on the audio alone (the start of its input
+    is heard as the start of speech: GRID's leading noise there was heard as phones)."""
+    from animegraph.live.frontend import LEVEL, MODEL_RATE, PosteriorTrack, to_model_rate
+    from ingest.speech import ctc
+
+    audio, sr = speech
+    rng = np.random.default_rng(2)
+    x = np.concatenate([0.01 * rng.standard_normal(int(0.3 * sr)), audio[: int(0.2 * sr)]])
+    x = x.astype(np.float32)
+    peak = float(np.abs(x).max())
+    track = PosteriorTrack(sr, context_s=0.6, settle_s=0.12)
+    track.update(x, 0, len(x), peak)
+    rows = track.posteriors(0, track.frames)
+    y = (to_model_rate(x, sr) * (LEVEL / peak)).astype(np.float32)
+    pad = np.zeros(30 * (MODEL_RATE // 50), dtype=np.float32)  # 600 ms
+    want = ctc.phone_probs(np.concatenate([pad, y]))[30:]
+    n = min(len(rows), len(want))
+    assert n >= len(rows) - 1
+    np.testing.assert_allclose(rows[:n], want[:n], atol=1e-6)
+    alone = ctc.phone_probs(y)[:n]
+    assert np.abs(alone - rows[:n]).sum(axis=1).max() > 0.05  # the silence before matters
+
+
 def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monkeypatch):
     """A second of room noise (-48 dBFS) before the speech: its level reference is 30 dB
-    over the noise, not the noise's own peak, so hama hears it quiet and the face rests;
-    with the loudest sample so far as the reference (as before) the noise moves it."""
+    over the noise, not the noise's own peak (with the loudest sample so far as the
+    reference it was the noise's), and hama hears no phone in it (its windows are a
+    silence or a pause). This white noise is heard as silence at either reference since
+    hama hears silence before the stream's first sample
+    (test_posterior_track_hears_silence_before_the_streams_first_sample)."""
+    from animegraph.live import Stream
+    from animegraph.live import stream as live_stream
+    from ingest.speech import ctc
+
+    audio, sr = speech
+    rng = np.random.default_rng(0)
+    said = 0.8 * audio / np.abs(audio).max()
+    noisy = np.concatenate([np.zeros(sr, np.float32), said])
+    noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+    heard = []
+    recognize = ctc.recognize
+
+    def recognized(*args, **kwargs):  # hama's own phones, noted
+        segments = recognize(*args, **kwargs)
+        heard.append({s.phone for s in segments})
+        return segments
+
+    monkeypatch.setattr(ctc, "recognize", recognized)
+
+    def play(db):
+        monkeypatch.setattr(live_stream, "SPEECH_OVER_NOISE_DB", db)
+        stream = Stream(model, sample_rate=sr, backlog_ms=None)
+        heard.clear()
+        stream.push(noisy[:sr])  # windows of the noise alone
+        in_noise, level = list(heard), stream.level()
+        _play(stream, noisy[sr:])
+        return in_noise, level, stream
+
+    in_noise, level, stream = play(30.0)
+    noise_peak = float(np.abs(noisy[:sr]).max())
+    assert 10 * noise_peak < level < 1.0  # not the noise's peak
+    assert stream.level() == pytest.approx(float(np.abs(noisy).max()))  # the speech's
+    assert all(h == {"SIL"} for h in in_noise)
+    before, level, _ = play(-np.inf)
+    assert level == pytest.approx(noise_peak)
+    assert all(h == {"SIL"} for h in before)
+
+
+def test_guide_loudness_is_against_all_the_stream_heard(model, speech, monkeypatch):
+    """ppg-ridge's loudness feature is relative to the loud level of all the stream has
+    heard (:class:`animegraph.live.frontend.LoudLevel`, given by
+    :func:`animegraph.baselines.ppg_forward.loud_level`), as offline to the whole clip's:
+    before the first word at least 30 dB over the quietest 20 ms (not the room's noise's
+    own level, which made the noise as loud as speech), then the 95th percentile of every
+    20 ms frame's RMS; each window's guide hears that level, not the window's own."""
+    from animegraph.baselines import ppg_forward
     from animegraph.live import Stream
     from animegraph.live import stream as live_stream
 
@@ -112,25 +222,27 @@ def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monke
     said = 0.8 * audio / np.abs(audio).max()
     noisy = np.concatenate([np.zeros(sr, np.float32), said])
     noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
-    rest = live_stream.rest_pose(model)
-    lead = int(0.8 * model.graph.fps)  # the noise's frames, before any look-ahead hears speech
+    given = []
+    window_motion = live_stream.window_motion
 
-    def play(db):
-        monkeypatch.setattr(live_stream, "SPEECH_OVER_NOISE_DB", db)
-        stream = Stream(model, sample_rate=sr, backlog_ms=None)
-        first = stream.push(noisy[:sr])
-        level = stream.level()
-        batches, _ = _play(stream, noisy[sr:])
-        return np.concatenate([first.motion, *[b.motion for b in batches]]), level, stream
+    def heard(*args, **kwargs):
+        given.append(ppg_forward._LOUD.get())
+        return window_motion(*args, **kwargs)
 
-    motion, level, stream = play(30.0)
-    noise_peak = float(np.abs(noisy[:sr]).max())
-    assert 10 * noise_peak < level < 1.0  # not the noise's peak
-    assert stream.level() == pytest.approx(float(np.abs(noisy).max()))  # the speech's
-    np.testing.assert_allclose(motion[:lead], np.repeat(rest[None], lead, 0))
-    before, level, _ = play(-np.inf)
-    assert level == pytest.approx(noise_peak)
-    assert np.abs(before[:lead] - rest).max() > 0.1 * np.abs(motion - rest).max()
+    monkeypatch.setattr(live_stream, "window_motion", heard)
+    stream = Stream(model, sample_rate=sr, backlog_ms=None)
+    stream.push(noisy[:sr])
+    n = sr // 50  # 20 ms frames
+    noise_rms = np.sqrt((noisy[:sr].reshape(-1, n).astype(np.float64) ** 2).mean(axis=1))
+    assert stream._loud.level() == pytest.approx(noise_rms.min() * 10 ** 1.5, rel=0.02)
+    assert stream._loud.level() > 10 * np.percentile(noise_rms, 95)  # not the noise's own
+    _play(stream, noisy[sr:])
+    m = len(noisy) // n
+    rms = np.sqrt((noisy[: m * n].reshape(m, n).astype(np.float64) ** 2).mean(axis=1))
+    level = stream._loud.level()
+    assert level == pytest.approx(np.percentile(rms, 95), rel=0.03)  # the speech's
+    assert given and all(g is not None and g > 10 * noise_rms.max() for g in given)
+    assert given[-1] == pytest.approx(level, rel=0.03)
 
 
 def test_bad_input_is_refused_in_one_line(model):

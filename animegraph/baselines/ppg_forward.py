@@ -9,6 +9,10 @@ one-shot ``synth`` guided by ppg-ridge does not import it (as
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+
 import numpy as np
 
 from animegraph.baselines.data import rms_envelope
@@ -30,6 +34,23 @@ LOUDNESS_FLOOR = 1e-3
 RMS_WINDOW_S = 0.025
 #: Columns per context offset: the posteriorgram's phones, the blank, the loudness.
 N_PER_OFFSET = len(PHONES) + 1
+#: The loud level set by :func:`loud_level` for the features built in its block (None:
+#: each audio's own).
+_LOUD: ContextVar[float | None] = ContextVar("ppg_loud_level", default=None)
+
+
+@contextmanager
+def loud_level(loud: float | None) -> Iterator[None]:
+    """Within the block, :func:`ppg_features` takes each frame's loudness relative to
+    ``loud`` (an RMS, > 0) instead of the audio's own loud level. A live stream predicts
+    from a short window: its own loud level is the room's noise before the first word
+    (heard as loud as speech: a half-open mouth), so the stream gives the level of all
+    it has heard (:class:`animegraph.live.frontend.LoudLevel`), as offline the clip's."""
+    token = _LOUD.set(None if loud is None or not loud > 0 else float(loud))
+    try:
+        yield
+    finally:
+        _LOUD.reset(token)
 
 
 def n_offsets(context_s: float, step_s: float) -> int:
@@ -106,22 +127,31 @@ def ppg_features(audio: np.ndarray, sample_rate: int, times: np.ndarray, *,
     -------
     np.ndarray, shape (n, N_PER_OFFSET * n_offsets), float64
         Per context offset (earliest first): the 39 posteriorgram columns, the blank's
-        probability and the log loudness relative to the clip's loud frames.
+        probability and the log loudness relative to the clip's loud frames (the
+        :data:`LOUD_PERCENTILE` of its frames' RMS, or the level :func:`loud_level` set).
     """
     if stored is None:
         probs = ctc.posteriors(audio, sample_rate)
         stored = fold(probs), blank_of(probs)
     frames = np.column_stack(stored)
     n_frames = len(frames)
-    level = rms_envelope(audio, sample_rate, (np.arange(n_frames) + 0.5) * HOP_S,
-                         window=RMS_WINDOW_S, smooth=0.0)
-    loud = float(np.percentile(level, LOUD_PERCENTILE)) if n_frames else 0.0
+    level = frame_loudness(audio, sample_rate, n_frames)
+    loud = _LOUD.get()  # a stream's level of all it has heard (loud_level), else the clip's
+    if loud is None:
+        loud = float(np.percentile(level, LOUD_PERCENTILE)) if n_frames else 0.0
     rel = (np.log(np.maximum(level / loud, LOUDNESS_FLOOR)) if loud > 0
            else np.full(n_frames, np.log(LOUDNESS_FLOOR)))
     frames = np.column_stack([frames.astype(np.float64), rel])
     times = np.asarray(times, dtype=np.float64)
     return np.concatenate([_at(frames, HOP_S, times + o)
                            for o in context_offsets(context_s, step_s)], axis=1)
+
+
+def frame_loudness(audio: np.ndarray, sample_rate: int, n_frames: int) -> np.ndarray:
+    """RMS of ``audio`` (shape (n_samples,)) over :data:`RMS_WINDOW_S` at the centre of
+    each of ``n_frames`` posteriorgram frames: shape (n_frames,)."""
+    return rms_envelope(audio, sample_rate, (np.arange(n_frames) + 0.5) * HOP_S,
+                        window=RMS_WINDOW_S, smooth=0.0)
 
 
 class PpgForward:

@@ -16,7 +16,9 @@ model needs:
   peak ahead, and a window's own peak would change the level from update to update).
 
 So the model hears ``context + settle + hop`` of audio per update rather than the whole
-window. A frame's posteriors are those of one call that heard ``context_s`` before it
+window. Before the stream's first sample it hears silence (the context's worth): the
+model hears the start of its input as the start of speech, and heard the room's noise
+there as phones. A frame's posteriors are those of one call that heard ``context_s`` before it
 and at least ``settle_s`` after it: what a window of that reach gives
 (``tests/test_live.py`` compares them with such windows, and with the whole utterance).
 """
@@ -108,7 +110,14 @@ class PosteriorTrack:
         x = to_model_rate(audio, self.sample_rate)
         if peak > 0:
             x = x * (LEVEL / peak)
-        probs = ctc.phone_probs(x.astype(np.float32))
+        # Near the stream's start the frames to settle have less than the context before
+        # them: the model hears silence before the first sample, as if it had listened
+        # to nothing before. The start of its input is heard as the start of speech: GRID's
+        # leading noise, at the very start of the input, was heard as phones (1-7 frames
+        # of its first 10), with 600 ms of silence before it as silence, as offline.
+        pad = max(0, ctx - (self.settled - start_frame)) if start_frame == 0 else 0
+        x = np.concatenate([np.zeros(pad * (MODEL_RATE // FRAME_RATE)), x])
+        probs = ctc.phone_probs(x.astype(np.float32))[pad:]
         self.model_s += len(x) / MODEL_RATE
         n_total = int(math.ceil(heard / per_frame))  # frames the audio so far begins
         probs = _fit(probs, n_total - start_frame)
@@ -134,6 +143,59 @@ class PosteriorTrack:
         if cut > 0:
             self._rows = self._rows[cut:]
             self._first += cut
+
+
+class LoudLevel:
+    """The loud level (RMS) of a stream's speech, which ppg-ridge's loudness feature is
+    relative to (:func:`animegraph.baselines.ppg_forward.loud_level`).
+
+    Offline it is the clip's: the :data:`~animegraph.baselines.ppg_forward.LOUD_PERCENTILE`
+    of its 20 ms frames' RMS (over 25 ms). Live it is that percentile of every 20 ms of
+    the stream heard so far (each span's RMS, whatever the chunks pushed; a
+    histogram in :data:`BIN_DB` steps, so that a long stream costs no more), but at least
+    ``over_noise_db`` over the quietest frame's RMS: before the first word every frame
+    is the room's noise, and a window's own loud level made the noise as loud as speech
+    (ppg-ridge then opened the mouth in the leading silence; docs/results/live.md).
+
+    Parameters
+    ----------
+    over_noise_db : float
+        The least ratio of the loud level to the quietest frame's RMS (dB).
+    """
+
+    BIN_DB = 0.1
+    FLOOR_DB = -160.0  # digital silence counts as this
+
+    def __init__(self, over_noise_db: float) -> None:
+        self.over_noise_db = float(over_noise_db)
+        self._counts = np.zeros(int(-self.FLOOR_DB / self.BIN_DB) + 1, dtype=np.int64)
+        self._quietest = np.inf
+
+    def add(self, rms: np.ndarray) -> None:
+        """Count frames of RMS ``rms`` (shape (n,))."""
+        rms = np.asarray(rms, dtype=np.float64)
+        if not rms.size:
+            return
+        db = 20 * np.log10(np.maximum(rms, 10 ** (self.FLOOR_DB / 20)))
+        bins = np.clip(np.round((db - self.FLOOR_DB) / self.BIN_DB).astype(np.int64), 0,
+                       len(self._counts) - 1)
+        np.add.at(self._counts, bins, 1)
+        self._quietest = min(self._quietest, float(rms.min()))
+
+    def level(self) -> float:
+        """The loud level (RMS; 0 before any frame)."""
+        from animegraph.baselines.ppg_forward import LOUD_PERCENTILE
+
+        total = int(self._counts.sum())
+        if not total:
+            return 0.0
+        # As np.percentile: between the frames of rank floor(r) and floor(r) + 1.
+        r = LOUD_PERCENTILE / 100 * (total - 1)
+        ranks = np.minimum([int(r), int(r) + 1], total - 1)
+        bins = np.searchsorted(np.cumsum(self._counts), ranks, side="right")
+        at = 10 ** ((self.FLOOR_DB + bins * self.BIN_DB) / 20)
+        loud = at[0] + (r - int(r)) * (at[1] - at[0])
+        return max(float(loud), min(1.0, self._quietest * 10 ** (self.over_noise_db / 20)))
 
 
 def to_model_rate(audio: np.ndarray, sample_rate: int) -> np.ndarray:

@@ -39,7 +39,11 @@ level, hama heard it as phones, and the leading silence moved the mouth.
 A window whose loudest sample lies :data:`QUIET_DB` below that reference (or is
 silent) is a pause: hama would hear the noise at full level (it hears every input at one
 level), so no phone is looked for; its frames ease into the database's rest pose (the
-mean of its silence animes).
+mean of its silence animes). A window in which hama hears only silence is synthesized
+as offline synthesis synthesizes an utterance's silences (its silence animes and the
+guide), not as the rest pose: offline the leading silence moves, as the recording does
+(GRID's speakers open their mouth before the first word), and the rest pose was most of
+live's loss in each clip's first second (docs/results/live.md).
 
 Frame ``k`` is at ``k / fps`` seconds in the input's clock (its first sample at 0), in the
 database's channel layout ``(n_frames, n_channels)``.
@@ -54,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from animegraph.live.frontend import CONTEXT_S, FRAME_RATE, SETTLE_S, PosteriorTrack
+from animegraph.live.frontend import CONTEXT_S, FRAME_RATE, SETTLE_S, LoudLevel, PosteriorTrack
 from animegraph.live.transcript import TranscriptTrack, window_segments
 from animegraph.live.window import PhoneMemory, window_motion
 from db.errors import DataError, ParameterError
@@ -81,9 +85,11 @@ MIN_RATE, MAX_RATE = 8000, 96000
 QUIET_DB = 40.0
 #: The reference peak is at least this many dB over the noise floor (the quietest 20 ms
 #: heard, by its peak), at most full scale, so that the noise before the first word is
-#: heard quiet. Set below what speech reaches (GRID s1's database clips: their peak
-#: 38-47 dB over their quietest 20 ms, 5th-95th percentile), so that the reference is
-#: not above the speech's own peak; not tuned.
+#: heard quiet; so is the loud level of ppg-ridge's loudness feature over the quietest
+#: 20 ms by its RMS (:class:`animegraph.live.frontend.LoudLevel`). Set below what speech
+#: reaches (GRID s1's 640 database clips: their peak 37-47 dB over their quietest 20 ms,
+#: their frames' 95th-percentile RMS 33-43 dB over the quietest frame's, 5th-95th
+#: percentile), so that the reference is not above the speech's own; not tuned.
 SPEECH_OVER_NOISE_DB = 30.0
 #: Audio (s) whose peak is one step of the noise floor's running minimum.
 FLOOR_FRAME_S = 0.02
@@ -254,6 +260,7 @@ class Stream:
         self._peak = 0.0  # loudest sample heard
         self._floor = np.inf  # the quietest FLOOR_FRAME_S heard, by its peak
         self._floor_at = 0  # samples of the input measured for the floor
+        self._loud = LoudLevel(SPEECH_OVER_NOISE_DB)  # ppg-ridge's loud level
         self._sent = 0  # frames sent
         self._updated_at = 0  # samples heard at the last update
         self._last = self._rest.copy()  # the last frame sent
@@ -326,15 +333,18 @@ class Stream:
         return max(self._peak, min(1.0, floor * 10 ** (SPEECH_OVER_NOISE_DB / 20)))
 
     def _measure_floor(self) -> None:
-        """The noise floor: the least peak of the whole FLOOR_FRAME_S spans heard."""
+        """The noise floor (the least peak of the whole FLOOR_FRAME_S spans heard) and the
+        spans' RMS, for ppg-ridge's loud level (each span's own: however the audio was cut
+        into chunks, the same)."""
         n = int(round(FLOOR_FRAME_S * self.sample_rate))
         end = self._buffer_start + len(self._buffer)
         count = (end - self._floor_at) // n
         if count <= 0:
             return
         a = self._floor_at - self._buffer_start
-        spans = np.abs(self._buffer[a: a + count * n]).reshape(count, n).max(axis=1)
-        self._floor = min(self._floor, float(spans.min()))
+        spans = self._buffer[a: a + count * n].reshape(count, n).astype(np.float64)
+        self._floor = min(self._floor, float(np.abs(spans).max(axis=1).min()))
+        self._loud.add(np.sqrt((spans ** 2).mean(axis=1)))
         self._floor_at += count * n
 
     def close(self) -> Frames:
@@ -462,6 +472,7 @@ class Stream:
     def _synthesize(self, audio: np.ndarray, n: int, start_s: float) -> np.ndarray:
         """The window's motion (its audio begins at ``start_s``); its phones and the
         guide's posteriorgram from the track's posteriors, the model not run again."""
+        from animegraph.baselines.ppg_forward import loud_level
         from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
         from ingest.speech import ctc
 
@@ -474,16 +485,17 @@ class Stream:
                                        self.sample_rate)
         else:
             segments = ctc.recognize(audio, self.sample_rate)
-        if all(s.phone == "SIL" for s in segments):
-            return self._pause(n)
         # Known phones are ranked by phonetic context first, as offline (synthesis.path);
         # unlike offline the guide stays blended: a short window's animes alone followed
         # the recording much less closely (docs/results/live.md, "With a transcript").
         context = self._transcript is not None and KNOWN_PHONES_CONTEXT
-        motion, warnings = window_motion(
-            self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
-            k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
-            guide=self.guide)
+        # ppg-ridge's loudness relative to all the stream has heard, as offline to the
+        # whole clip's: not to the window's own loud level (LoudLevel).
+        with loud_level(self._loud.level()):
+            motion, warnings = window_motion(
+                self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
+                k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
+                guide=self.guide)
         for warning in warnings:
             self.stats.warnings[warning[:80]] += 1
         return motion

@@ -128,7 +128,7 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
     choice = resolve_emotion(emotion, model.emotion_model, graph.emotions, audio, sample_rate,
                              timeline=True)
     wanted = choice.search
-    phones, _ = query_phones(audio, sample_rate, labels=segments)
+    phones, _ = query_phones(audio, sample_rate, labels=segments, silence=True)  # a pause too
     warnings = input_warnings(audio, sample_rate, False, phones_heard=False)  # as labels
     kept = [memory.find(p.phone, wanted, p.start + offset_s, p.end + offset_s,
                         cut=i == 0 and p.start == 0.0) for i, p in enumerate(phones)]

@@ -316,14 +316,16 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
                  prosody_config: RastaPlpConfig | None = None,
                  engine: str | None = None, posteriorgram: bool = False,
                  posteriors: np.ndarray | None = None,
-                 on_fallback=None) -> tuple[tuple[Phone, ...], str]:
+                 on_fallback=None, silence: bool = False) -> tuple[tuple[Phone, ...], str]:
     """The search nodes of an utterance: its phones with their prosody curves.
 
     With ``posteriorgram`` each phone also gets its part of the utterance's phone
     posteriorgram (:mod:`ingest.speech.posteriorgram`; ``posteriors``, shape
     (n_frames, 39), if already computed). Returns the phones and how they were found
     (``labels``, ``aligned``, ``recognized``); a failed alignment of ``text`` is said to
-    ``on_fallback`` (:func:`ingest.speech.segment.segment`).
+    ``on_fallback`` (:func:`ingest.speech.segment.segment`). Audio whose phones are all
+    silence is refused (DataError), unless ``silence`` (a live window within a pause,
+    synthesized as a silence of an utterance is).
     """
     audio = np.asarray(audio, dtype=np.float32)
     if audio.ndim != 1:
@@ -334,7 +336,7 @@ def query_phones(audio: np.ndarray, sample_rate: int, *, text: str | None = None
                                            on_fallback=on_fallback)
     else:
         segments, method = segment(audio, sample_rate, labels=labels, engine=engine)
-    if all(s.phone == "SIL" for s in segments):
+    if not silence and all(s.phone == "SIL" for s in segments):
         raise DataError("no speech found in the audio (every phone is silence)")
     cfg = prosody_config or RastaPlpConfig()
     curve = rasta_plp(audio, sample_rate, config=cfg)
