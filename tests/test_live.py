@@ -410,7 +410,8 @@ def test_live_command_records_what_it_sent(tiny_db, speech, tmp_path):
     audio, sr = speech
     write_wav(tmp_path / "s.wav", audio, sr)
     out = _live(["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
-                 "--hop", "200", "--guide", "none", "--record", str(tmp_path / "take")])
+                 "--hop", "200", "--guide", "none", "--record", str(tmp_path / "take"),
+                 "--threads", "0"])  # 0: no cap
     assert out.returncode == 0, out.stderr
     assert "Traceback" not in out.stderr and "frames for" in out.stderr
     heard, rate = read_wav(tmp_path / "take" / "take.wav")
@@ -427,6 +428,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", str(tmp_path / "none.wav"), "--record", str(tmp_path)], 2, "no such"),
         (["--source", "-", "--rate", "16000"], 2, "say where"),
         (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
+        # the CLI's own spelling of no cap (0), not the Python API's (None)
+        (["--source", "-", "--rate", "16000", "--threads", "-1"], 2, "or 0 for no cap"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")
