@@ -62,6 +62,7 @@ from animegraph.baselines.reference import Loudness
 from animegraph.live import Stream
 from animegraph.live.run import run
 from animegraph.live.sources import FileSource
+from animegraph.live.stream import DEFAULT_LOOKAHEAD_MS
 from animegraph.motion.measures import mouth_opening, pearson
 from animegraph.synthesis import Model, synthesize
 from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST, TRANSCRIPT_K_BEST
@@ -323,7 +324,7 @@ def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
         runs.append({"seconds": seconds, "cpu_share": cpu / seconds,
                      "update_cpu_ms": {"median": 1000 * float(np.median(updates)),
                                        "p95": 1000 * float(np.percentile(updates, 95))},
-                     "load": os.getloadavg()})
+                     "lookahead_ms": lookahead_ms, "load": os.getloadavg()})
     return runs[-1]
 
 
@@ -343,7 +344,10 @@ def speech_file(speech, seconds: float, path: Path) -> Path:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quality", nargs="*", default=["synthetic"])
-    parser.add_argument("--lookaheads", nargs="+", type=float, default=[40, 80, 120, 200, 300])
+    parser.add_argument("--lookaheads", nargs="+", type=float, default=None,
+                        help="look-aheads (ms) of the quality and latency curves (40 80 "
+                        "120 200 300); --unpaced times the first given (else the default "
+                        "look-ahead, 120)")
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--drift-seconds", type=float, default=120.0)
     parser.add_argument("--facegood-seconds", type=float, default=30.0)
@@ -375,6 +379,8 @@ def main() -> int:
                         help="threads an update may run at once (the stream's default if "
                         "not given; 0: no cap)")
     args = parser.parse_args()
+    unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
+    args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
     TEXT.extend([True] if args.text else [])
@@ -409,7 +415,7 @@ def main() -> int:
         else:
             model, guide = first["model"], first["guide"]
         if args.unpaced:
-            results["unpaced"] = unpaced(model, guide, first["speech"])
+            results["unpaced"] = unpaced(model, guide, first["speech"], unpaced_lookahead)
             print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
             wav = speech_file(first["speech"], args.latency_seconds, tmp / "latency.wav")

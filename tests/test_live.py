@@ -641,3 +641,16 @@ def test_websocket_source_needs_a_rate_and_a_port(tiny_db, tmp_path):
         out = _live(["--db", str(tiny_db[0]), "--record", str(tmp_path / "t"), *args])
         assert out.returncode != 0 and said in out.stderr, out.stderr
         assert "Traceback" not in out.stderr
+
+
+def test_bench_live_unpaced_times_the_first_lookahead_given(tiny_db, tmp_path):
+    """``bench_live.py --unpaced`` streams at ``--lookaheads``' first (it always used
+    120 ms, whatever was asked); without ``--lookaheads``, at the default look-ahead."""
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "bench_live.py"), "--quality", "--db", str(tiny_db[0]), "--unpaced",
+         "--lookaheads", "40", "--latency-seconds", "0", "--drift-seconds", "0",
+         "--json", str(tmp_path / "out.json")],
+        capture_output=True, text=True, timeout=900,
+        env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "out.json").read_text())["unpaced"]["lookahead_ms"] == 40
