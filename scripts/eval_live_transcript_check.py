@@ -108,10 +108,11 @@ def replay(text: str, fed, last) -> tuple[float, float, str | None]:
 def one_word_changes(text: str, rng: np.random.Generator) -> dict[str, str]:
     """GRID: the sentence with one slot's word changed to another of that slot."""
     words = text.split()
-    if len(words) != len(GRID_SLOTS) or any(w not in s for w, s in zip(words, GRID_SLOTS)):
+    if len(words) != len(GRID_SLOTS) or any(
+            w not in s for w, s in zip(words, GRID_SLOTS, strict=True)):
         return {}
     out = {}
-    for i, (name, slot) in enumerate(zip(SLOT_NAMES, GRID_SLOTS)):
+    for i, (name, slot) in enumerate(zip(SLOT_NAMES, GRID_SLOTS, strict=True)):
         other = [w for w in slot if w != words[i]]
         changed = list(words)
         changed[i] = other[int(rng.integers(len(other)))]
