@@ -55,36 +55,27 @@ GRID_SLOTS = (("bin", "lay", "place", "set"), ("blue", "green", "red", "white"),
 SLOT_NAMES = ("command", "colour", "preposition", "letter", "digit", "adverb")
 
 
-class _Recorder(TranscriptTrack):
-    """A transcript's track that keeps the posteriors it is fed and never gives up (so
-    the stream feeds it to its end, whatever the test would say)."""
-
-    def __init__(self, text: str, frame_rate: int) -> None:
-        super().__init__(text, frame_rate)
-        self.fed: list[tuple[np.ndarray, int]] = []
-        self.last: tuple[np.ndarray, int] | None = None
-
-    def update(self, log_probs, first):
-        self.fed.append((np.array(log_probs), int(first)))
-        super().update(log_probs, first)
-
-    def finish(self, log_probs, first):
-        self.last = (np.array(log_probs), int(first))
-
-    def _check(self, *args, **kwargs):
-        return None
-
-
 def fed_posteriors(model, audio: np.ndarray, sr: int, text: str, setting: dict):
-    """The posteriors a live stream of ``audio`` feeds its transcript's path."""
+    """The posteriors a live stream of ``audio`` feeds its transcript's path: every
+    update's ``(log_probs, first)``, and the last (the stream's end). The stream's own
+    track records them and never gives up (its test is switched off), so that the stream
+    feeds it to the end whatever the test would say."""
     stream = Stream(model, sample_rate=sr, backlog_ms=None, text=text, **setting)
-    recorder = _Recorder(text, FRAME_RATE)
-    stream._transcript = recorder  # the stream's own track, recording what it is fed
+    track, fed, last = stream._transcript, [], []
+    update = track.update
+
+    def record(log_probs, first):
+        fed.append((np.array(log_probs), int(first)))
+        update(log_probs, first)
+
+    track.update = record
+    track.finish = lambda log_probs, first: last.append((np.array(log_probs), int(first)))
+    track._check = lambda *args, **kwargs: None
     step = int(CHUNK_S * sr)
     for k in range(0, len(audio), step):
         stream.push(audio[k:k + step])
     stream.close()
-    return recorder.fed, recorder.last
+    return fed, last[0]
 
 
 def replay(text: str, fed, last) -> tuple[float, float, str | None]:
