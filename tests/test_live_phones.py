@@ -247,21 +247,34 @@ def _segments(speech):
     return window, ctc.recognize(window, sr)
 
 
-def test_window_with_nothing_kept_is_the_offline_synthesis(model, speech):
+@pytest.mark.parametrize(("k_best", "shortlist", "context"), [
+    (20, None, False),  # every candidate searched
+    (20, "default", False),  # offline's default shortlist (the tiny database: all of them)
+    (2, 4, False),  # a shortlist that cuts: the same cut as offline's
+    (2, 4, True),  # ... ranked by phonetic context first (a transcript's phones)
+])
+def test_window_with_nothing_kept_is_the_offline_synthesis(model, speech, k_best, shortlist,
+                                                          context):
     """With an empty memory the window is synthesized exactly as synthesize() does with
-    the same phones as labels (k-best, no context ranking, every candidate searched: the
-    window does not cut a shortlist)."""
+    the same phones as labels (k-best, the same shortlist, the same ranking)."""
     from animegraph.live.window import PhoneMemory, window_motion
+    from animegraph.search.shortlist import SHORTLIST
     from animegraph.synthesis import synthesize
 
     _, sr = speech
     window, segments = _segments(speech)
     memory = PhoneMemory()
-    motion, _ = window_motion(model, window, sr, segments, 0.0, memory=memory, k_best=20)
-    offline = synthesize(model, window, sr, labels=segments, k_best=20, context=False,
-                         shortlist=None).motion
+    motion, _ = window_motion(model, window, sr, segments, 0.0, memory=memory,
+                              k_best=k_best, shortlist=shortlist, context=context)
+    offline = synthesize(model, window, sr, labels=segments, k_best=k_best, context=context,
+                         shortlist=SHORTLIST if shortlist == "default" else shortlist).motion
     np.testing.assert_allclose(motion, offline, atol=1e-9)
     assert memory.hits == 0 and memory.misses == len(segments) == len(memory)
+    if shortlist == 4:  # it cut: the search saw fewer candidates than the phones have
+        from animegraph.search import candidates
+
+        every = candidates(model.graph, [s.phone for s in segments])
+        assert any(len(n) > 4 for n in every.nodes)
 
 
 def test_window_keeps_each_phones_choice_across_updates(model, speech):
