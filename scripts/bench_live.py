@@ -35,7 +35,8 @@ Usage::
   median, 95th percentile, max. CPU: the stream's updates' process CPU time (all threads)
   over the audio's duration (1.0 = one core), and their wall time likewise.
 * **CPU alone** (``--unpaced``): the same speech pushed in 20 ms chunks as fast as the
-  stream takes it (a second pass, after a warm-up one): CPU per second of audio and
+  stream takes it (a second pass, after a warm-up one; at ``--lookaheads``' first
+  look-ahead, else the default 120 ms): CPU per second of audio and
   each update's CPU and wall time (median, p95), without the pacing's waits. With
   ``--profile``, that pass runs under cProfile (slower: its times are not the figures)
   and each part's share of the updates' time is printed (hama's call, the guide, the
