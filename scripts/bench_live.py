@@ -35,7 +35,8 @@ Usage::
   median, 95th percentile, max. CPU: the stream's updates' process CPU time (all threads)
   over the audio's duration (1.0 = one core), and their wall time likewise.
 * **CPU alone** (``--unpaced``): the same speech pushed in 20 ms chunks as fast as the
-  stream takes it (a second pass, after a warm-up one): CPU per second of audio and
+  stream takes it (a second pass, after a warm-up one; at ``--lookaheads``' first
+  look-ahead, else the default 120 ms): CPU per second of audio and
   each update's CPU and wall time (median, p95), without the pacing's waits. With
   ``--profile``, that pass runs under cProfile (slower: its times are not the figures)
   and each part's share of the updates' time is printed (hama's call, the guide, the
@@ -65,6 +66,7 @@ from animegraph.baselines.reference import Loudness
 from animegraph.live import Stream
 from animegraph.live.run import run
 from animegraph.live.sources import FileSource
+from animegraph.live.stream import DEFAULT_LOOKAHEAD_MS
 from animegraph.motion.measures import mouth_opening, pearson
 from animegraph.synthesis import Model, synthesize
 from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST, TRANSCRIPT_K_BEST
@@ -353,7 +355,8 @@ def unpaced(model, guide, speech, lookahead_ms: float = 120.0,
                                        "p95": 1000 * float(np.percentile(updates, 95))},
                      "update_wall_ms": {"median": 1000 * float(np.median(walls)),
                                         "p95": 1000 * float(np.percentile(walls, 95))},
-                     "updates": len(updates), "load": os.getloadavg()})
+                     "updates": len(updates), "lookahead_ms": lookahead_ms,
+                     "load": os.getloadavg()})
     if profile:
         runs[-1]["profile"] = runs[-2]["profile"]
     return runs[-1]
@@ -406,7 +409,10 @@ def code_version() -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quality", nargs="*", default=["synthetic"])
-    parser.add_argument("--lookaheads", nargs="+", type=float, default=[40, 80, 120, 200, 300])
+    parser.add_argument("--lookaheads", nargs="+", type=float, default=None,
+                        help="look-aheads (ms) of the quality and latency curves (40 80 "
+                        "120 200 300); --unpaced times the first given (else the default "
+                        "look-ahead, 120)")
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--drift-seconds", type=float, default=120.0)
     parser.add_argument("--facegood-seconds", type=float, default=30.0)
@@ -441,6 +447,8 @@ def main() -> int:
                         help="threads an update may run at once (the stream's default if "
                         "not given; 0: no cap)")
     args = parser.parse_args()
+    unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
+    args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
     TEXT.extend([True] if args.text else [])
@@ -476,7 +484,8 @@ def main() -> int:
         else:
             model, guide = first["model"], first["guide"]
         if args.unpaced:
-            results["unpaced"] = unpaced(model, guide, first["speech"], profile=args.profile)
+            results["unpaced"] = unpaced(model, guide, first["speech"], unpaced_lookahead,
+                                         profile=args.profile)
             print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
             wav = speech_file(first["speech"], args.latency_seconds, tmp / "latency.wav")

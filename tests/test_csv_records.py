@@ -24,7 +24,7 @@ def test_records_have_their_line_and_stripped_cells(tmp_path):
 @pytest.mark.parametrize(("text", "message"), [
     ("label,other\nlm1,x\n", ":1: {what} needs 'label' and '{column}' columns, got"),
     ("", ":1: {what} needs 'label' and '{column}' columns, got []"),
-    ("label,{column}\nlm1,{value}\nlm2,a\rb\n", ": malformed CSV"),
+    ("label,{column}\nlm1,{value}\nlm2,a\rb\n", ":3: malformed CSV"),  # the line it is on
     ("label,{column}\nlm1,{value}\nlm1,{value}\n", ":3: marker 'lm1' listed twice"),
 ])
 def test_the_marker_table_and_the_marker_map_say_the_same_of_the_same_fault(tmp_path, text,

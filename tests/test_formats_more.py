@@ -431,3 +431,42 @@ def test_side_files_past_the_bound_are_refused_before_they_are_parsed(tmp_path):
         (tmp_path / name).hardlink_to(big)
         with pytest.raises(DataError, match=rf"{name} is larger than 16,777,216 bytes$"):
             read(tmp_path / name)
+
+
+def _tg(rows) -> str:
+    """A TextGrid (Praat's long text format) of one interval tier ``phones``."""
+    items = "".join(f"        intervals [{k}]:\n            xmin = {a}\n            xmax = {b}\n"
+                    f"            text = \"{p}\"\n" for k, (p, a, b) in enumerate(rows, 1))
+    return ('File type = "ooTextFile"\nObject class = "TextGrid"\n\nxmin = 0\nxmax = 1\n'
+            'tiers? <exists>\nsize = 1\nitem []:\n    item [1]:\n        class = '
+            '"IntervalTier"\n        name = "phones"\n        xmin = 0\n        xmax = 1\n'
+            f"        intervals: size = {len(rows)}\n{items}")
+
+
+@pytest.mark.parametrize(("rows", "problem"), [
+    ([("AA", 0.0, 0.2), ("B", 0.1, 0.3)], "start 0.1 overlaps the previous segment ending 0.2"),
+    ([("AA", 0.0, 0.2), ("B", 0.3, 0.25)], "start 0.3 is not before end 0.25"),
+    ([("AA", 0.0, 0.2), ("QQ", 0.2, 0.3)], "unknown phone label 'QQ'"),
+])
+def test_the_phone_readers_say_the_same_of_the_same_fault(tmp_path, rows, problem):
+    """The phones CSV, TextGrid and HTK label readers check a segment one way
+    (``ingest.formats.phones_csv.append_read``): the same fault, the same words, each
+    after the file and line it is on; an overlap within ORDER_TOLERANCE is forgiven."""
+    files = {
+        "p.csv": ("start,end,phone\n" + "".join(f"{a},{b},{p}\n" for p, a, b in rows),
+                  read_phones_csv, 3),
+        "p.lab": ("".join(f"{round(a * 1e7)} {round(b * 1e7)} {p}\n" for p, a, b in rows),
+                  read_htk_lab, 2),
+        "p.TextGrid": (_tg(rows), read_textgrid, None),
+    }
+    for name, (text, read, line) in files.items():
+        path = tmp_path / name
+        path.write_text(text)
+        with pytest.raises(DataError) as caught:
+            read(path)
+        message = str(caught.value)
+        assert message.startswith(f"{path}:{line or ''}") and problem in message, message
+    close = [("AA", 0.0, 0.2), ("B", 0.2 - 1e-10, 0.3)]
+    path = tmp_path / "close.csv"
+    path.write_text("start,end,phone\n" + "".join(f"{a!r},{b},{p}\n" for p, a, b in close))
+    assert [s.phone for s in read_phones_csv(path)] == ["AA", "B"]

@@ -464,6 +464,29 @@ def test_a_kept_reason_from_someone_else_is_read_within_its_bound(tiny_db, tmp_p
     assert unfit_reason(db, "mu-mlp") is None
 
 
+def test_a_kept_reason_is_written_under_the_writer_lock(tiny_db, tmp_path):
+    """Why a guide could not be fitted is written as a fitted guide is saved, under the
+    database's writer lock: while another process writes the database nothing is written
+    (not waited for either); once it is done, the reason is kept."""
+    import signal
+
+    from test_writer_lock import _hold
+
+    from animegraph.baselines.stored import record_unfit, unfit_reason
+
+    db = tmp_path / "db"
+    copy_unfitted(tiny_db[0], db)
+    proc = _hold(db)
+    try:
+        record_unfit(db, "mu-mlp", "too little data")
+        assert unfit_reason(db, "mu-mlp") is None
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    record_unfit(db, "mu-mlp", "too little data")
+    assert unfit_reason(db, "mu-mlp") == "too little data"
+
+
 def test_the_path_line_of_a_guide_reads_as_english_and_claims_only_what_was_measured():
     """"the output 0.5 mu-mlp's predicted motion" read as no English, and the default
     guide's "measured best on real speech" was said of --guide-rank too, which

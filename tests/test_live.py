@@ -564,7 +564,8 @@ def test_live_command_records_what_it_sent(tiny_db, speech, tmp_path):
     audio, sr = speech
     write_wav(tmp_path / "s.wav", audio, sr)
     out = _live(["--db", str(tiny_db[0]), "--source", str(tmp_path / "s.wav"), "--fast",
-                 "--hop", "200", "--guide", "none", "--record", str(tmp_path / "take")])
+                 "--hop", "200", "--guide", "none", "--record", str(tmp_path / "take"),
+                 "--threads", "0"])  # 0: no cap
     assert out.returncode == 0, out.stderr
     assert "Traceback" not in out.stderr and "frames for" in out.stderr
     heard, rate = read_wav(tmp_path / "take" / "take.wav")
@@ -581,6 +582,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", str(tmp_path / "none.wav"), "--record", str(tmp_path)], 2, "no such"),
         (["--source", "-", "--rate", "16000"], 2, "say where"),
         (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
+        # the CLI's own spelling of no cap (0), not the Python API's (None)
+        (["--source", "-", "--rate", "16000", "--threads", "-1"], 2, "or 0 for no cap"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")
@@ -792,3 +795,16 @@ def test_websocket_source_needs_a_rate_and_a_port(tiny_db, tmp_path):
         out = _live(["--db", str(tiny_db[0]), "--record", str(tmp_path / "t"), *args])
         assert out.returncode != 0 and said in out.stderr, out.stderr
         assert "Traceback" not in out.stderr
+
+
+def test_bench_live_unpaced_times_the_first_lookahead_given(tiny_db, tmp_path):
+    """``bench_live.py --unpaced`` streams at ``--lookaheads``' first (it always used
+    120 ms, whatever was asked); without ``--lookaheads``, at the default look-ahead."""
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "bench_live.py"), "--quality", "--db", str(tiny_db[0]), "--unpaced",
+         "--lookaheads", "40", "--latency-seconds", "0", "--drift-seconds", "0",
+         "--json", str(tmp_path / "out.json")],
+        capture_output=True, text=True, timeout=900,
+        env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "out.json").read_text())["unpaced"]["lookahead_ms"] == 40

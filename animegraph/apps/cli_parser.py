@@ -120,6 +120,19 @@ def _whole_number(text: str) -> int:
     return value
 
 
+def _thread_cap(text: str) -> int | None:
+    """``--threads``: a whole number >= 1, or 0 for no cap (None, as the Python API
+    spells it)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, or 0 for no cap, "
+                                         f"got {text!r}")
+    return value or None
+
+
 def _output(folder: bool | None):
     """The type of an option naming an output: :func:`db.atomic.check_output_path` (a new path,
     or an existing regular file or folder as ``folder`` says; never a device, FIFO or
@@ -641,9 +654,9 @@ def _add_live(sub) -> None:
                       help="frames sooner, following the offline output less closely: "
                       "look-ahead 40 ms, an update every 40 ms, hama hearing 300 ms of "
                       "context and settling a frame 40 ms after it (docs/results/live.md)")
-    live.add_argument("--threads", type=_whole_number, default=1, metavar="N",
+    live.add_argument("--threads", type=_thread_cap, default=1, metavar="N",
                       help="threads an update may run at once (the DTW's, BLAS's; 1: the "
-                      "stream within one core, docs/results/live.md)")
+                      "stream within one core, docs/results/live.md; 0: no cap)")
     live.add_argument("--emotion", default=None, metavar="E|auto|E=W,...",
                       help="the face's emotion: a name, auto, or a mix")
     live.add_argument("--text", default=None, metavar="TRANSCRIPT",

@@ -87,16 +87,23 @@ def unfit_reason(db_root, method: str) -> str | None:
 def record_unfit(db_root, method: str, reason: str) -> None:
     """Keep why ``method`` cannot be fitted on the live version of ``db_root``, so that a
     default use (``synth``'s audio-only guide) does not fit it again on every run; a new
-    version (another ingest) tries again. A database that cannot be written is left as
-    it is."""
+    version (another ingest) tries again. Written under the database's writer lock, as
+    a fitted model is saved (:func:`animegraph.baselines.base.save_model`): the version
+    cannot move, nor its stale folders be removed, under the write. A database that
+    cannot be written, or that another process is writing (not waited for: a reason is
+    a saving, not a result), is left as it is."""
     from db.atomic import atomic_write
+    from db.errors import DataError
+    from db.lock import writer_lock
 
-    path = _unfit_path(db_root, method)
+    _unfit_path(db_root, method)  # a database, before its folder is locked
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(path) as handle:
-            handle.write(reason.encode("utf-8"))
-    except OSError:
+        with writer_lock(db_root, wait=0.0, what="database"):
+            path = _unfit_path(db_root, method)  # the version the lock holds still
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_write(path) as handle:
+                handle.write(reason.encode("utf-8"))
+    except (OSError, DataError):  # BusyError is a DataError
         pass
 
 #: Stored models :func:`load_forward` restores without scikit-learn: method -> class.

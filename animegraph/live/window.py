@@ -96,7 +96,8 @@ def _resampled(positions: np.ndarray | None, n: int) -> np.ndarray | None:
 
 def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s: float, *,
                   memory: PhoneMemory, k_best: int, emotion=None, context: bool = False,
-                  guide=None) -> tuple[np.ndarray, list[str]]:
+                  guide=None, shortlist: int | str | None = "default"
+                  ) -> tuple[np.ndarray, list[str]]:
     """The window's motion, shape (n_frames, n_channels), and warnings on its input.
 
     Parameters
@@ -111,13 +112,20 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
         The window's start in the stream's clock (phones are kept by their place there).
     memory : PhoneMemory
         The phones ranked before; the new ones are added.
-    k_best, emotion, context, guide
-        As :func:`animegraph.synthesis.synthesize` (``emotion`` a name, a mix or None).
+    k_best, emotion, context, guide, shortlist
+        As :func:`animegraph.synthesis.synthesize` (``emotion`` a name, a mix or None;
+        a new phone's candidates cut to its first ``max(shortlist, k_best)`` by k-best's
+        order, :func:`animegraph.search.shortlist.shortlist`; ``"default"``: offline's
+        default, :data:`animegraph.search.shortlist.SHORTLIST`, read when called so that
+        importing the stream does not load the search's kernels; None: every candidate).
+        A kept phone's candidates are its kept animes.
     """
     from animegraph.emotion.control import resolve_emotion
     from animegraph.search import SearchWeights, candidates, search
     from animegraph.search import k_best as ranked_candidates
     from animegraph.search.problem import Candidates
+    from animegraph.search.shortlist import SHORTLIST
+    from animegraph.search.shortlist import shortlist as cut_candidates
     from animegraph.synthesis import blend_k_best, map_emotion, query_phones, recentres
     from animegraph.synthesis.assemble import PostOptions, blend_positions
     from animegraph.synthesis.audio import candidate_costs
@@ -136,8 +144,22 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
     new = [i for i, k in enumerate(kept) if k is None]
     memory.hits += len(phones) - len(new)
     memory.misses += len(new)
-    scored = candidate_costs(graph, [phones[i] for i in new], [cands.nodes[i] for i in new])
+    weights = SearchWeights()
     nodes, costs = list(cands.nodes), [None] * len(phones)
+    shortlist = SHORTLIST if shortlist == "default" else shortlist
+    if shortlist is None:
+        scored = candidate_costs(graph, [phones[i] for i in new], [cands.nodes[i] for i in new])
+    else:  # the new phones' shortlists, ranked in their place (the window's phones
+        # around them give the context); a kept phone is not scored again here
+        sub = Candidates(nodes=tuple(cands.nodes[i] if i in new else cands.nodes[i][:0]
+                                     for i in range(len(phones))),
+                         backoff=cands.backoff, phones=cands.phones, emotion=cands.emotion)
+        cut = cut_candidates(graph, sub, max(shortlist, k_best), weights=weights,
+                             emotion=wanted, context=context,
+                             curves=[p.prosody.astype(np.float32) for p in phones])
+        scored = [cut.audio[i] for i in new]
+        for i in new:
+            nodes[i] = cut.cands.nodes[i]
     for i, c in zip(new, scored, strict=True):
         costs[i] = c
     for i, k in enumerate(kept):
@@ -146,7 +168,6 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
             nodes[i], costs[i] = k.ranked[order], k.costs[order]
     cands = Candidates(nodes=tuple(nodes), backoff=cands.backoff, phones=cands.phones,
                        emotion=cands.emotion)
-    weights = SearchWeights()
     result = search(graph, cands, costs, weights=weights, emotion=wanted)
     ranked = list(ranked_candidates(graph, cands, costs, result.nodes, k_best, weights=weights,
                                     emotion=wanted, context=context))

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from db.atomic import atomic_write
 from db.errors import DataError
-from ingest.formats.labels import decode_text, to_arpabet
-from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, as_segments, order_error
+from ingest.formats.labels import decode_text
+from ingest.formats.phones_csv import Segment, append_read, as_segments
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
@@ -94,16 +94,7 @@ def read_htk_lab(path: str | os.PathLike[str]) -> list[Segment]:
         context = _FULL_CONTEXT.match(label)
         if context is not None:
             label = context.group(1)
-        try:
-            phone = to_arpabet(label)
-        except DataError as exc:
-            raise DataError(f"{path}:{number}: {exc}") from None
-        segment = Segment(phone, round(start, 7), round(end, 7))
-        problem = order_error(segment, segments[-1] if segments else None,
-                              tolerance=ORDER_TOLERANCE)
-        if problem is not None:
-            raise DataError(f"{path}:{number}: {problem}")
-        segments.append(segment)
+        append_read(segments, label, round(start, 7), round(end, 7), f"{path}:{number}")
     return segments
 
 

@@ -111,6 +111,45 @@ def order_error(segment, previous, *, tolerance: float = 0.0) -> str | None:
     return None
 
 
+def append_read(segments: list[Segment], label: str, start: float, end: float, where: str,
+                *, noun: str = "", note: str = "") -> None:
+    """Append a phone segment read from another tool's file to ``segments``: its label
+    mapped to ARPAbet (:func:`ingest.formats.labels.to_arpabet`), its times checked
+    against the segment before (:func:`order_error`, forgiving :data:`ORDER_TOLERANCE`).
+    The phones CSV, TextGrid and HTK label readers check their segments this one way.
+
+    Parameters
+    ----------
+    segments : list of Segment
+        The segments read so far (appended to).
+    label : str
+        The file's label of the phone.
+    start, end : float
+        Its times in seconds (finite: the caller has parsed them).
+    where : str
+        ``path:line``, which a message starts with.
+    noun, note : str, optional
+        What an order problem is of (``"interval "``), and what follows a message
+        (``" in tier 'phones'"``).
+
+    Raises
+    ------
+    DataError
+        An unknown label, ``start >= end``, or a segment out of order or overlapping the
+        one before.
+    """
+    try:
+        phone = to_arpabet(label)
+    except DataError as exc:
+        raise DataError(f"{where}: {exc}{note}") from None
+    segment = Segment(phone, start, end)
+    problem = order_error(segment, segments[-1] if segments else None,
+                         tolerance=ORDER_TOLERANCE)
+    if problem is not None:
+        raise DataError(f"{where}: {noun}{problem}{note}")
+    segments.append(segment)
+
+
 def as_segments(segments: Iterable[object]) -> list[Segment]:
     """Check phone segments before they are written; return them as :class:`Segment`.
 
@@ -219,21 +258,12 @@ def read_phones_csv(path: str | os.PathLike[str]) -> list[Segment]:
                 raise DataError(f"{path}:{line}: expected 3 fields, got {len(row)}: {row!r}")
             start_text, end_text, label = (field.strip() for field in row)
             try:
-                phone = to_arpabet(label)
-            except DataError as exc:
-                raise DataError(f"{path}:{line}: {exc}") from None
-            try:
                 start, end = float(start_text), float(end_text)
             except ValueError as exc:
                 raise DataError(f"{path}:{line}: bad time in {row!r}") from exc
             if not (math.isfinite(start) and math.isfinite(end)) or start < 0:
                 raise DataError(f"{path}:{line}: times must be finite and >= 0, got {row!r}")
-            segment = Segment(phone, start, end)
-            problem = order_error(segment, segments[-1] if segments else None,
-                                  tolerance=ORDER_TOLERANCE)
-            if problem is not None:
-                raise DataError(f"{path}:{line}: {problem}")
-            segments.append(segment)
+            append_read(segments, label, start, end, f"{path}:{line}")
     except csv.Error as exc:
         raise DataError(f"{path}:{lines.line_num}: malformed CSV: {exc}") from exc
     return segments

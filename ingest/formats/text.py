@@ -99,6 +99,6 @@ def read_csv_records(path, what: str, columns: tuple[str, ...], *,
         reader.fieldnames = names
         rows = [(f"{path}:{reader.line_num}",
                  {name: (row.get(name) or "").strip() for name in names}) for row in reader]
-    except csv.Error as exc:
-        raise DataError(f"{path}:{reader.line_num}: malformed CSV: {exc}") from None
+    except csv.Error as exc:  # DictReader's own line_num is the last row it returned
+        raise DataError(f"{path}:{reader.reader.line_num}: malformed CSV: {exc}") from None
     return names, rows

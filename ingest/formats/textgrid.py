@@ -22,8 +22,8 @@ from pathlib import Path
 
 from db.atomic import atomic_write
 from db.errors import DataError, ParameterError
-from ingest.formats.labels import decode_text, format_seconds, to_arpabet
-from ingest.formats.phones_csv import ORDER_TOLERANCE, Segment, as_segments, order_error
+from ingest.formats.labels import decode_text, format_seconds
+from ingest.formats.phones_csv import Segment, append_read, as_segments
 from ingest.formats.text import MAX_SIDE_FILE_BYTES, read_bytes
 
 logger = logging.getLogger(__name__)
@@ -225,16 +225,8 @@ def read_textgrid(path: str | os.PathLike[str], *, tier: str | None = None) -> l
     chosen = _pick_tier(read_tiers(path), tier, path)
     segments: list[Segment] = []
     for start, end, text, line in chosen.items:
-        try:
-            phone = to_arpabet(text)
-        except DataError as exc:
-            raise DataError(f"{path}:{line}: {exc} in tier {chosen.name!r}") from None
-        segment = Segment(phone, start, end)
-        problem = order_error(segment, segments[-1] if segments else None,
-                              tolerance=ORDER_TOLERANCE)
-        if problem is not None:
-            raise DataError(f"{path}:{line}: interval {problem} (tier {chosen.name!r})")
-        segments.append(segment)
+        append_read(segments, text, start, end, f"{path}:{line}", noun="interval ",
+                    note=f" in tier {chosen.name!r}")
     return segments
 
 

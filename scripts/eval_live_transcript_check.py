@@ -1,0 +1,232 @@
+"""How well the live stream's end-of-speech transcript test tells right transcripts from
+wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` is chosen on.
+
+Usage::
+
+    python scripts/eval_live_transcript_check.py --grid-db DB640 [--every 8]
+        [--synthetic] [--held-out S1DB] [--json out.json]
+
+Each clip is streamed live (:class:`animegraph.live.Stream`, 20 ms chunks, as
+``bench_live.py`` plays them) at the default setting and at ``--low-latency``, given its
+own transcript, and the posteriors the transcript's path is fed (every update's, and the
+stream's last) are kept. The same posteriors are then fed to a
+:class:`~animegraph.live.transcript.TranscriptTrack` of each transcript tried — the
+clip's own, another clip's sentence, and the sentence with one word changed — as the
+stream would feed it: the posteriors are the audio's alone (the transcript only places
+the window's phones), and the frames the path fixes depend only on how many there are.
+Printed per setting and kind: the alignment loss at the end (nats/frame below free
+recognition; its percentiles) and how many the test reports at offline's threshold
+(:data:`ingest.speech.ctc.MAX_ALIGN_LOSS`) and at the live one.
+
+Clips: GRID's database clips (``--grid-db``, e.g. /work/grid2/db640: the 640 clips of
+``animegraph.apps.evaluate.grid_split``'s database part; every ``--every``-th), none of
+the held-out clips the results are scored on; with ``--synthetic``, eSpeak NG speech of
+the synthetic corpus' sentences that ``bench_live.py --quality synthetic`` keeps in its
+database (one take per sentence and emotion). GRID's one-word changes are made in each
+of its six slots (command, colour, preposition, letter, digit, adverb: another word of
+the same slot), so the table says which the test can hear. ``--held-out S1DB``: the 20
+held-out clips ``bench_live.py --quality grid --max-clips 20`` scores instead (measure
+there, never choose there).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from animegraph.live import Stream
+from animegraph.live.frontend import FRAME_RATE
+from animegraph.live.stream import DEFAULT_SETTING, LOW_LATENCY
+from animegraph.live.transcript import MAX_LIVE_ALIGN_LOSS, TranscriptTrack
+from animegraph.synthesis import Model
+from ingest.speech.ctc import MAX_ALIGN_LOSS, MIN_PHONE_SHARE
+
+CHUNK_S = 0.02
+SETTINGS = {"default": DEFAULT_SETTING, "low-latency": LOW_LATENCY}
+#: GRID's grammar: each sentence is one word of each slot, in this order.
+GRID_SLOTS = (("bin", "lay", "place", "set"), ("blue", "green", "red", "white"),
+              ("at", "by", "in", "with"), tuple("abcdefghijklmnopqrstuvxyz"),
+              ("zero", "one", "two", "three", "four", "five", "six", "seven", "eight",
+               "nine"), ("again", "now", "please", "soon"))
+SLOT_NAMES = ("command", "colour", "preposition", "letter", "digit", "adverb")
+
+
+def fed_posteriors(model, audio: np.ndarray, sr: int, text: str, setting: dict):
+    """The posteriors a live stream of ``audio`` feeds its transcript's path: every
+    update's ``(log_probs, first)``, and the last (the stream's end). The stream's own
+    track records them and never gives up (its test is switched off), so that the stream
+    feeds it to the end whatever the test would say."""
+    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=text, **setting)
+    track, fed, last = stream._transcript, [], []
+    update = track.update
+
+    def record(log_probs, first):
+        fed.append((np.array(log_probs), int(first)))
+        update(log_probs, first)
+
+    track.update = record
+    track.finish = lambda log_probs, first: last.append((np.array(log_probs), int(first)))
+    track._check = lambda *args, **kwargs: None
+    step = int(CHUNK_S * sr)
+    for k in range(0, len(audio), step):
+        stream.push(audio[k:k + step])
+    stream.close()
+    return fed, last[0]
+
+
+def replay(text: str, fed, last) -> tuple[float, float, str | None]:
+    """(alignment loss at the end, phones said per phone heard, why the test failed or
+    None) of ``text`` on the
+    posteriors a stream fed its track, fed as the stream feeds them. The live threshold
+    is the track's own; the loss is reported whatever it says."""
+    track = TranscriptTrack(text, FRAME_RATE)
+    for lp, first in fed:
+        track.update(lp, first)
+        if track.failed is not None:
+            break
+    if track.failed is None:
+        track.finish(*last)
+    if track.fit is None:  # the frames left could not say the phones left
+        return np.inf, 0.0, track.failed
+    loss, said, heard = track.fit
+    return loss, said / max(heard, 1), track.failed
+
+
+def one_word_changes(text: str, rng: np.random.Generator) -> dict[str, str]:
+    """GRID: the sentence with one slot's word changed to another of that slot."""
+    words = text.split()
+    if len(words) != len(GRID_SLOTS) or any(
+            w not in s for w, s in zip(words, GRID_SLOTS, strict=True)):
+        return {}
+    out = {}
+    for i, (name, slot) in enumerate(zip(SLOT_NAMES, GRID_SLOTS, strict=True)):
+        other = [w for w in slot if w != words[i]]
+        changed = list(words)
+        changed[i] = other[int(rng.integers(len(other)))]
+        out[f"one word: {name}"] = " ".join(changed)
+    return out
+
+
+def swapped_word(text: str, others: list[str], rng: np.random.Generator) -> str:
+    """Free text: one word of three letters or more replaced by one of another
+    sentence's."""
+    words = text.rstrip(".").split()
+    long = [i for i, w in enumerate(words) if len(w.strip(",")) >= 3]
+    i = long[int(rng.integers(len(long)))]
+    pool = sorted({w.strip(",.").lower() for s in others for w in s.split()
+                   if len(w.strip(",.")) >= 3} - {words[i].strip(",").lower()})
+    words[i] = pool[int(rng.integers(len(pool)))]
+    return " ".join(words) + "."
+
+
+def grid_clips(db: Path, every: int, held_out: bool):
+    """(id, audio float32, rate, text) of every ``every``-th clip of a GRID database
+    (``held_out``: its held-out part by ``grid_split``, as bench_live picks 20)."""
+    from animegraph.apps.evaluate import grid_split
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    clips = prepared_from_database(Database.open(db))
+    if held_out:
+        _, test = grid_split(clips)
+        clips = test[::max(1, -(-len(test) // 20))]
+    else:
+        clips = clips[::every]
+    return [(c.clip_id, c.audio.astype(np.float32) / 32768.0, c.sample_rate, c.text)
+            for c in clips if c.text]
+
+
+def synthetic_clips():
+    """eSpeak NG speech of the synthetic split's database sentences (bench_live's
+    corpus; its held-out sentences left out), one take per sentence and emotion."""
+    from ingest.corpus.synthetic import CorpusConfig, plan_corpus, synthesize_clip
+
+    config = CorpusConfig(sentences=14, parallel=4, variations=3, seed=3)
+    specs = plan_corpus(config)
+    parallel = sorted({s.sentence_id for s in specs[: 4 * 5 * 3]})
+    singles = sorted({s.sentence_id for s in specs} - set(parallel))
+    held = {parallel[-1], *singles[-2:]}  # as bench_live.split holds them out
+    out = []
+    for spec in specs:
+        if spec.sentence_id in held or spec.variation != 1:
+            continue
+        utt = synthesize_clip(spec, config).utterance
+        out.append((spec.clip_id, utt.audio.astype(np.float32), utt.sample_rate, spec.text))
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grid-db", type=Path, required=True,
+                        help="GRID database (its model streams; its clips are tried)")
+    parser.add_argument("--every", type=int, default=8, help="every n-th GRID clip")
+    parser.add_argument("--synthetic", action="store_true",
+                        help="also eSpeak NG speech of the synthetic corpus' sentences")
+    parser.add_argument("--held-out", type=Path, default=None,
+                        help="GRID s1 database: try its 20 held-out clips instead")
+    parser.add_argument("--settings", nargs="+", default=list(SETTINGS),
+                        choices=list(SETTINGS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    model = Model.load(args.grid_db)
+    corpora = {"grid": grid_clips(args.held_out or args.grid_db, args.every,
+                                  args.held_out is not None)}
+    if args.synthetic:
+        corpora["synthetic"] = synthetic_clips()
+    rows = []
+    for corpus, clips in corpora.items():
+        texts = [c[3] for c in clips]
+        print(f"# {corpus}: {len(clips)} clips", flush=True)
+        for i, (cid, audio, sr, text) in enumerate(clips):
+            other = next(t for t in texts[i + len(texts) // 2:] + texts if t != text)
+            tried = {"right": text, "another clip's": other}
+            if corpus == "grid":
+                tried.update(one_word_changes(text, rng))
+            else:
+                tried["one word"] = swapped_word(text, [t for t in texts if t != text], rng)
+            for name, setting in SETTINGS.items():
+                if name not in args.settings:
+                    continue
+                fed, last = fed_posteriors(model, audio, sr, text, setting)
+                for kind, t in tried.items():
+                    loss, share, failed = replay(t, fed, last)
+                    rows.append({"corpus": corpus, "clip": cid, "setting": name,
+                                 "kind": kind, "text": t, "loss": loss, "share": share,
+                                 "failed": failed})
+                right = rows[-len(tried)]
+                print(f"{corpus} {cid} {name}: right {right['loss']:.2f}, " + ", ".join(
+                    f"{r['kind']} {r['loss']:.2f}" for r in rows[-len(tried) + 1:]),
+                    flush=True)
+    summarize(rows)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1, default=float))
+    return 0
+
+
+def summarize(rows: list[dict]) -> None:
+    """Per corpus, setting and kind: the loss's percentiles and how many are reported at
+    offline's threshold and at the live one (the live track's verdict)."""
+    keys = sorted({(r["corpus"], r["setting"], r["kind"]) for r in rows},
+                  key=lambda k: (k[0], k[1], k[2] != "right", k[2]))
+    print(f"\n| corpus | setting | transcript | n | loss p1 / p50 / p99 / max | "
+          f"reported at {MAX_ALIGN_LOSS} | reported live ({MAX_LIVE_ALIGN_LOSS}) |")
+    print("|---|---|---|---|---|---|---|")
+    for key in keys:
+        got = [r for r in rows if (r["corpus"], r["setting"], r["kind"]) == key]
+        loss = np.array([r["loss"] for r in got])
+        p = np.percentile(loss, [1, 50, 99])
+        share = np.array([r["share"] for r in got])
+        offline = int(np.sum((loss > MAX_ALIGN_LOSS) | (share < MIN_PHONE_SHARE)))
+        live = sum(r["failed"] is not None for r in got)
+        print(f"| {key[0]} | {key[1]} | {key[2]} | {len(got)} | {p[0]:.2f} / {p[1]:.2f} / "
+              f"{p[2]:.2f} / {loss.max():.2f} | {offline} | {live} |")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
