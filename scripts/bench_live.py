@@ -2,7 +2,8 @@
 
 Usage::
 
-    python scripts/bench_live.py [--quality synthetic facegood talkingface grid]
+    python scripts/bench_live.py [--quality synthetic facegood talkingface
+                                            talkingface-across grid]
                                  [--grid-db DB] [--text]
                                  [--joined]
                                  [--lookaheads 40 80 120 200 300]
@@ -23,6 +24,8 @@ Usage::
   ``talkingface``: ``scripts/eval_lipsync.py``'s within-speaker split, two folds, each a
   database of the first 70 % of one of the two long single-speaker clips (its guides
   fitted on it) and that clip's last 30 % held out (the mean over the two);
+  ``talkingface-across``: its across-speaker split, each of the 11 other clips held out
+  of a database of the 12 others (11 folds);
   ``grid``: :func:`animegraph.apps.evaluate.grid_split` of the clips of ``--grid-db`` (an
   ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
   given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
@@ -124,7 +127,7 @@ def split(name: str, tmp: Path, facegood_seconds: float) -> list[tuple]:
         seconds = min(facegood_seconds, held.duration)
         return [(name, clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")],
                  reference)]
-    if name == "talkingface":
+    if name in ("talkingface", "talkingface-across"):
         if not (SHARED / "talkingface").is_dir():
             raise SystemExit(f"the talkingface split needs {SHARED / 'talkingface'}")
         # All 13 clips prepared, as eval_lipsync.py prepares them: the head reference and
@@ -132,6 +135,9 @@ def split(name: str, tmp: Path, facegood_seconds: float) -> list[tuple]:
         # the one of lipsync.md's within-speaker row.
         clips, reference = prepare_sources(discover([SHARED / "talkingface"]),
                                            IngestConfig(), workers=2)
+        if name == "talkingface-across":  # leave one of the other 11 clips out
+            return [(f"{name}-{held.clip_id}", [c for c in clips if c is not held], [held],
+                     reference) for held in clips if held.clip_id not in TALKINGFACE_LONG]
         folds = []
         for clip in (c for c in clips if c.clip_id in TALKINGFACE_LONG):
             cut = TALKINGFACE_CUT * clip.duration
