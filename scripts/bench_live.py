@@ -2,7 +2,9 @@
 
 Usage::
 
-    python scripts/bench_live.py [--quality synthetic facegood grid] [--grid-db DB] [--text]
+    python scripts/bench_live.py [--quality synthetic facegood talkingface
+                                            talkingface-across grid]
+                                 [--grid-db DB] [--text]
                                  [--joined]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
@@ -19,6 +21,11 @@ Usage::
   (:class:`animegraph.baselines.reference.Loudness`). ``synthetic``: the last parallel
   sentence and the last two single-emotion ones held out of a generated corpus;
   ``facegood``: its last clip held out (the first ``--facegood-seconds`` of it scored);
+  ``talkingface``: ``scripts/eval_lipsync.py``'s within-speaker split, two folds, each a
+  database of the first 70 % of one of the two long single-speaker clips (its guides
+  fitted on it) and that clip's last 30 % held out (the mean over the two);
+  ``talkingface-across``: its across-speaker split, each of the 11 other clips held out
+  of a database of the 12 others (11 folds);
   ``grid``: :func:`animegraph.apps.evaluate.grid_split` of the clips of ``--grid-db`` (an
   ``animegraph ingest`` of grid/s1), the database built from its 640 database clips or
   given (``--grid-train-db``, its guides stored). With ``--text``, also the offline
@@ -74,6 +81,7 @@ from db.errors import AnimeGraphError
 from ingest.corpus.synthetic import CorpusConfig, generate_corpus
 from ingest.formats.wav import write_wav
 from ingest.pipeline import IngestConfig, build_database, prepare_sources
+from ingest.prepare import slice_clip
 from ingest.readers import discover
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -97,8 +105,15 @@ SENTENCES = ("Please bring the blue box to the table.",
              "Seven wizards quietly hex a jolly box of frozen fish.")
 
 
-def split(name: str, tmp: Path, facegood_seconds: float):
-    """(train clips, held-out clips, head reference) of a split."""
+#: The talkingface split's two long single-speaker clips: the first 70 % of each the
+#: database, the last 30 % held out (``scripts/eval_lipsync.py``'s within-speaker split).
+TALKINGFACE_LONG = ("dfrf_cnn2", "edtalk_pose_source2")
+TALKINGFACE_CUT = 0.7
+
+
+def split(name: str, tmp: Path, facegood_seconds: float) -> list[tuple]:
+    """The folds of a split: (fold name, train clips, held-out clips, head reference) each
+    (one fold but for talkingface's two)."""
     if name == "synthetic":
         corpus = tmp / "corpus"
         generate_corpus(corpus, CorpusConfig(sentences=14, parallel=4, variations=3, seed=3),
@@ -109,17 +124,34 @@ def split(name: str, tmp: Path, facegood_seconds: float):
         held = {meta["parallel_sentences"][-1], *singles[-2:]}
         train = [c for c in clips if c.sentence_id not in held]
         test = [c for c in clips if c.sentence_id in held]
-        return train, test, reference
+        return [(name, train, test, reference)]
     if name == "facegood":
         clips, reference = prepare_sources(discover([SHARED / "facegood"]), IngestConfig(),
                                            workers=2)
-        from ingest.prepare import slice_clip
-
         held = clips[-1]
         seconds = min(facegood_seconds, held.duration)
-        return clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")], reference
+        return [(name, clips[:-1], [slice_clip(held, 0.0, seconds, suffix="-head")],
+                 reference)]
+    if name in ("talkingface", "talkingface-across"):
+        if not (SHARED / "talkingface").is_dir():
+            raise SystemExit(f"the talkingface split needs {SHARED / 'talkingface'}")
+        # All 13 clips prepared, as eval_lipsync.py prepares them: the head reference and
+        # the lip-audio lags are decided over them all, so the offline default here is
+        # the one of lipsync.md's within-speaker row.
+        clips, reference = prepare_sources(discover([SHARED / "talkingface"]),
+                                           IngestConfig(), workers=2)
+        if name == "talkingface-across":  # leave one of the other 11 clips out
+            return [(f"{name}-{held.clip_id}", [c for c in clips if c is not held], [held],
+                     reference) for held in clips if held.clip_id not in TALKINGFACE_LONG]
+        folds = []
+        for clip in (c for c in clips if c.clip_id in TALKINGFACE_LONG):
+            cut = TALKINGFACE_CUT * clip.duration
+            folds.append((f"{name}-{clip.clip_id}",
+                          [slice_clip(clip, 0.0, cut, suffix="_first70")],
+                          [slice_clip(clip, cut, clip.duration, suffix="_last30")], reference))
+        return folds
     if name == "grid":
-        if GRID_DB is None:
+        if not GRID_DB:
             raise SystemExit("the grid split needs --grid-db, a database ingested from grid/s1")
         from animegraph.apps.evaluate import grid_split
         from db.store import Database
@@ -128,7 +160,7 @@ def split(name: str, tmp: Path, facegood_seconds: float):
         clips = prepared_from_database(Database.open(GRID_DB[0]))
         reference = Database.open(GRID_DB[0]).arrays().get("head_reference")
         train, test = grid_split(clips)
-        return train, test, reference
+        return [(name, train, test, reference)]
     raise SystemExit(f"unknown split {name!r}")
 
 
@@ -167,26 +199,9 @@ def mouth_r(model, pred, clip, skip_s: float = 0.0) -> float:
 
 def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
             max_clips: int) -> dict:
+    """Mouth R of the offline default, loudness and the live stream at each look-ahead on
+    a split's held-out clips (the mean over the clips of all its folds)."""
     t0 = time.perf_counter()
-    train, test, reference = split(name, tmp, facegood_seconds)
-    test = test[::max(1, -(-len(test) // max_clips))]  # evenly, at most max_clips
-    loud = Loudness().fit(train)
-    if name == "grid" and GRID_TRAIN_DB:  # built already from the split's database clips
-        from animegraph.live import stored_guide
-
-        db = GRID_TRAIN_DB[0]
-        guide, missing = stored_guide(db)
-        missing = [f"{m}: not stored" for m in missing]
-    else:
-        db = tmp / f"db-{name}"
-        build_database(db, train, reference=reference)
-        guide, missing = guides(train)
-    n_train = len(train)
-    del train  # the clips (the grid split's are 2 GB)
-    model = Model.load(db)
-    print(f"# {name}: {n_train} clips in the database, {len(test)} held out; guide "
-          f"{AUDIO_ONLY_GUIDE}{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
-          f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
     rows = {"offline": [], "offline-hama": [], "loudness": [],
             **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
@@ -197,7 +212,46 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     if TEXT:
         rows.update({"offline-text": [], **{f"live-text-{la:g}": [] for la in lookaheads}})
         cpu.update({f"live-text-{la:g}": [] for la in lookaheads})
-    misfit = misfit_end = 0  # transcripts given up while running, found wrong at the end
+    misfit = [0, 0]  # transcripts given up while running, found wrong at the end
+    first: dict = {}
+    n_clips = 0
+    for fold, train, test, reference in split(name, tmp, facegood_seconds):
+        test = test[::max(1, -(-len(test) // max_clips))]  # evenly, at most max_clips
+        loud = Loudness().fit(train)
+        if name == "grid" and GRID_TRAIN_DB:  # built already from the database clips
+            from animegraph.live import stored_guide
+
+            db = GRID_TRAIN_DB[0]
+            guide, missing = stored_guide(db)
+            missing = [f"{m}: not stored" for m in missing]
+        else:
+            db = tmp / f"db-{fold}"
+            build_database(db, train, reference=reference)
+            guide, missing = guides(train)
+        n_train = len(train)
+        del train  # the clips (the grid split's are 2 GB)
+        model = Model.load(db)
+        print(f"# {fold}: {n_train} clips in the database, {len(test)} held out; guide "
+              f"{AUDIO_ONLY_GUIDE}"
+              f"{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
+              f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
+        score(model, guide, loud, test, lookaheads, rows, cpu, misfit)
+        n_clips += len(test)
+        if not first:  # the latency and drift runs' database and speech
+            first = {"model": model, "guide": guide,
+                     "speech": [(c.audio.astype(np.float32) / 32768.0, c.sample_rate)
+                                for c in test]}
+    out = {"clips": n_clips, "fps": first["model"].graph.fps,
+           "transcripts_given_up": misfit[0], "transcripts_misfit_at_end": misfit[1],
+           "mouth_r": {k: float(np.nanmean(v)) for k, v in rows.items()},
+           "cpu_share": {k: float(np.mean(v)) for k, v in cpu.items()}}
+    return {**out, **first}
+
+
+def score(model, guide, loud, test, lookaheads, rows: dict, cpu: dict,
+          misfit: list[int]) -> None:
+    """Score one fold's held-out clips ``test``: append each clip's mouth R to ``rows``,
+    its streams' CPU share to ``cpu``, and count the transcripts given up in ``misfit``."""
     for clip in test:
         audio = clip.audio.astype(np.float32) / 32768.0
         sr = clip.sample_rate
@@ -218,7 +272,7 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
             cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
             if JOINED:
                 rows[f"live-{la:g}-after1s"].append(mouth_r(model, motion, clip, 1.0))
-        if JOINED:  # scored below, once the clips are joined
+        if JOINED:  # scored below, once the fold's clips are joined
             for la in lookaheads:
                 rows[f"joined-{la:g}"].append(np.nan)
         text = getattr(clip, "text", None) if TEXT else None
@@ -232,23 +286,15 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
                 cpu[f"live-text-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
                 said = [k for k in stream.stats.warnings
                         if k.startswith("the transcript does not fit")]
-                misfit += any("at its end" not in k for k in said)
-                misfit_end += any("at its end" in k for k in said)
-        print(f"#   {clip.clip_id}: " + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rows.items()),
-              flush=True)
+                misfit[0] += any("at its end" not in k for k in said)
+                misfit[1] += any("at its end" in k for k in said)
+        print(f"#   {clip.clip_id}: " + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rows.items()
+                                                  if v), flush=True)
     if JOINED:
         for la in lookaheads:
-            rows[f"joined-{la:g}"] = joined(model, test, la, guide)
-            print(f"#   joined {la:g} ms: " + " ".join(f"{r:.3f}"
-                                                      for r in rows[f"joined-{la:g}"]),
-                  flush=True)
-    out = {"clips": len(test), "fps": model.graph.fps, "transcripts_given_up": misfit,
-           "transcripts_misfit_at_end": misfit_end,
-           "mouth_r": {k: float(np.nanmean(v)) for k, v in rows.items()},
-           "cpu_share": {k: float(np.mean(v)) for k, v in cpu.items()}}
-    out["model"], out["guide"] = model, guide
-    out["speech"] = [(c.audio.astype(np.float32) / 32768.0, c.sample_rate) for c in test]
-    return out
+            rows[f"joined-{la:g}"][-len(test):] = joined(model, test, la, guide)
+            got = rows[f"joined-{la:g}"][-len(test):]
+            print(f"#   joined {la:g} ms: " + " ".join(f"{r:.3f}" for r in got), flush=True)
 
 
 def joined(model, test, lookahead_ms: float, guide) -> list[float]:

@@ -24,7 +24,7 @@ are then labelled with it, e.g. ``av-hmm(n_mix=2,n_states=8)``.
 * facegood (real, animation curves, Mandarin): leave one clip out of five;
 * talkingface (real, English, landmarks from video): within-speaker splits of the two
   long clips (first 70 % as the database, last 30 % synthesized) and leave one clip out
-  across the other eleven;
+  across the other eleven (``--talkingface-splits`` picks either);
 * grid (real, English, one speaker on video, with transcripts and word alignments):
   the 800 GRID s1 utterances, faces tracked (``pip install -e ".[video]"``; cached),
   split within the speaker: in clip-id order every fifth clip is held out (160), the
@@ -97,6 +97,8 @@ PEER_ROWS: list[str] = []
 GUIDE: list[str] = []
 #: IngestConfig settings of every prepared clip (the phone engine).
 INGEST: dict[str, object] = {}
+#: The talkingface splits scored (``--talkingface-splits``).
+TALKINGFACE_SPLITS: list[str] = ["within-speaker", "leave-one-clip-out"]
 #: The systems plot shows the first seconds of its clip (real clips run 20-110 s).
 PLOT_SECONDS = 12.0
 
@@ -234,7 +236,7 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
                                          workers=workers)
     long_ids = ("dfrf_cnn2", "edtalk_pose_source2")
     out = []
-    for clip in clips:
+    for clip in clips if "within-speaker" in TALKINGFACE_SPLITS else ():
         if clip.clip_id in long_ids:
             cut = 0.7 * clip.duration
             train = [slice_clip(clip, 0.0, cut, suffix="_first70")]
@@ -242,7 +244,8 @@ def talkingface(tmp: Path, workers: int) -> list[dict]:
             print(f"# talkingface within-speaker: {clip.clip_id}", flush=True)
             for row in run_fold(tmp, f"tf-{clip.clip_id}", train, test, reference):
                 out.append({**row, "split": "within-speaker"})
-    others = [c for c in clips if c.clip_id not in long_ids]
+    others = [c for c in clips if c.clip_id not in long_ids
+              and "leave-one-clip-out" in TALKINGFACE_SPLITS]
     for k, held in enumerate(others):
         print(f"# talkingface leave-one-out {k + 1}/{len(others)}: {held.clip_id}", flush=True)
         train = [c for c in clips if c is not held]
@@ -343,6 +346,9 @@ def main() -> int:
     parser.add_argument("--guide", choices=GUIDES, default="mu-mlp",
                         help="the baseline guiding the -guided / -blend rows (fitted on each "
                              "fold's training clips, as its own row; default mu-mlp)")
+    parser.add_argument("--talkingface-splits", nargs="+", choices=TALKINGFACE_SPLITS,
+                        default=list(TALKINGFACE_SPLITS),
+                        help="talkingface: the splits scored (default both)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--plots", type=Path,
                         help="folder for one held-out clip's plot per dataset")
@@ -360,6 +366,7 @@ def main() -> int:
         parser.error(f"{', '.join(guided)} need the guide {args.guide} among --systems")
     GUIDE[:] = args.guide.split("+") if guided else []
     GRAPH_METHODS[:] = args.graph_methods
+    TALKINGFACE_SPLITS[:] = args.talkingface_splits
     PEER_ROWS[:] = args.peers
     for method, name, value in args.param:
         PARAMS.setdefault(method, {})[name] = value
@@ -393,7 +400,7 @@ def main() -> int:
                 rows = talkingface(tmp, args.workers)
             results[name] = {"summary": summarise(name, rows), "clips": rows}
             if name == "talkingface":
-                for split in ("within-speaker", "leave-one-clip-out"):
+                for split in TALKINGFACE_SPLITS:
                     part = [r for r in rows if r.get("split") == split]
                     results[name][split] = summarise(f"{name} {split}", part)
             if args.json:  # after every dataset, so a long run keeps what it finished
