@@ -36,13 +36,16 @@ Usage::
   over the audio's duration (1.0 = one core), and their wall time likewise.
 * **CPU alone** (``--unpaced``): the same speech pushed in 20 ms chunks as fast as the
   stream takes it (a second pass, after a warm-up one): CPU per second of audio and
-  each update's CPU time, without the pacing's waits.
+  each update's CPU and wall time (median, p95), without the pacing's waits. With
+  ``--profile``, that pass runs under cProfile (slower: its times are not the figures)
+  and each part's share of the updates' time is printed (hama's call, the guide, the
+  DTW of new phones, recognition, the phones' features, search, k-best blend).
 * **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
   frames sent against the audio heard times the frame rate, the latency over its first
   and last tenth, and the updates that had to catch up.
 
 The machine's load is printed (``os.getloadavg``): on a shared machine wall times rise
-with it, CPU times much less.
+with it, CPU times much less; and the commit of the code measured (``# code``).
 """
 
 from __future__ import annotations
@@ -302,13 +305,34 @@ def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:
             "load": os.getloadavg()}
 
 
-def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
+#: The parts of an update that ``--profile`` reports: (name, function as cProfile names it).
+#: (name, the function's file and name as cProfile gives them)
+PARTS = (("hama's call", "ingest/speech/ctc.py", "phone_probs"),
+         ("the guide", "animegraph/synthesis/guide.py", "guide_trajectory"),
+         ("DTW of new phones", "animegraph/synthesis/audio.py", "candidate_costs"),
+         ("phones recognised", "ingest/speech/ctc.py", "recognize"),
+         ("phones' features", "animegraph/synthesis/pipeline.py", "query_phones"),
+         ("search", "animegraph/search/solve.py", "search"),
+         ("k-best blend", "animegraph/synthesis/assemble.py", "blend_k_best"))
+
+
+def unpaced(model, guide, speech, lookahead_ms: float = 120.0,
+            profile: bool = False) -> dict:
     """CPU of the stream alone: ``speech`` pushed in 20 ms chunks as fast as it is taken
-    (after one warm-up pass), per second of audio and per update."""
+    (after one warm-up pass), per second of audio and per update; with ``profile``, the
+    measured pass under cProfile (its times then include the profiler's) and each of
+    :data:`PARTS`' share of the updates' time."""
+    import cProfile
+    import pstats
+
     runs = []
-    for _ in range(2):  # the first pass warms hama and the kernels
+    for measured in (False, True):  # the first pass warms hama and the kernels
+        profiler = cProfile.Profile() if profile and measured else None
+        if profiler is not None:
+            profiler.enable()
         cpu = seconds = 0.0
         updates: list[float] = []
+        walls: list[float] = []
         for audio, sr in speech:
             stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
                             backlog_ms=None, **WINDOW)
@@ -320,11 +344,30 @@ def unpaced(model, guide, speech, lookahead_ms: float = 120.0) -> dict:
             cpu += time.process_time() - t
             seconds += len(audio) / sr
             updates += stream.stats.update_cpu
+            walls += stream.stats.update_wall
+        if profiler is not None:
+            profiler.disable()
+            runs.append({"profile": _shares(pstats.Stats(profiler))})
         runs.append({"seconds": seconds, "cpu_share": cpu / seconds,
                      "update_cpu_ms": {"median": 1000 * float(np.median(updates)),
                                        "p95": 1000 * float(np.percentile(updates, 95))},
-                     "load": os.getloadavg()})
+                     "update_wall_ms": {"median": 1000 * float(np.median(walls)),
+                                        "p95": 1000 * float(np.percentile(walls, 95))},
+                     "updates": len(updates), "load": os.getloadavg()})
+    if profile:
+        runs[-1]["profile"] = runs[-2]["profile"]
     return runs[-1]
+
+
+def _shares(stats) -> dict:
+    """Each of :data:`PARTS`' cumulative time as a share of the updates' (``_update``)."""
+    def cumulative(path: str, name: str) -> float:  # recursive calls counted once
+        return sum(row[3] for (file, _, fn), row in stats.stats.items()
+                   if fn == name and Path(file).as_posix().endswith(path))
+
+    total = cumulative("animegraph/live/stream.py", "_update")
+    return {"updates_s": round(total, 3), **{part: round(cumulative(path, fn) / total, 3)
+                                             for part, path, fn in PARTS if total > 0}}
 
 
 def speech_file(speech, seconds: float, path: Path) -> Path:
@@ -338,6 +381,26 @@ def speech_file(speech, seconds: float, path: Path) -> Path:
                 total += len(audio)
     write_wav(path, np.concatenate(parts)[: int(seconds * sr)], sr)
     return path
+
+
+def code_version() -> str:
+    """The commit of the animegraph imported (its checkout's short hash, ``+`` if it has
+    changes not committed), or where it was imported from when that is not a checkout:
+    the figures' results pages name the commit measured."""
+    import subprocess
+
+    import animegraph
+
+    root = Path(animegraph.__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, timeout=10, check=True)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return f"not a git checkout: {root}"
+    return head.stdout.strip() + ("+" if dirty.stdout.strip() else "") + f" ({root})"
 
 
 def main() -> int:
@@ -354,6 +417,9 @@ def main() -> int:
     parser.add_argument("--unpaced", action="store_true",
                         help="also the stream's CPU with the speech pushed as fast as taken")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--profile", action="store_true",
+                        help="with --unpaced: the measured pass under cProfile, and the "
+                        "share of an update's time each part takes")
     parser.add_argument("--grid-db", type=Path, default=None,
                         help="the grid split's clips: a database ingested from grid/s1 (read)")
     parser.add_argument("--grid-train-db", type=Path, default=None,
@@ -387,6 +453,7 @@ def main() -> int:
         WINDOW["threads"] = None  # no cap
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
     print(f"# load average {os.getloadavg()} on {os.cpu_count()} cores", flush=True)
+    print(f"# code {code_version()}", flush=True)
     results: dict = {"quality": {}, "latency": [], "drift": None}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -409,7 +476,7 @@ def main() -> int:
         else:
             model, guide = first["model"], first["guide"]
         if args.unpaced:
-            results["unpaced"] = unpaced(model, guide, first["speech"])
+            results["unpaced"] = unpaced(model, guide, first["speech"], profile=args.profile)
             print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
             wav = speech_file(first["speech"], args.latency_seconds, tmp / "latency.wav")

@@ -373,6 +373,20 @@ def test_channel_mismatch_and_bad_predict_input(fitted, clips):
     est = fitted["hier-pca"]
     with pytest.raises(DataError, match="do not match"):
         est.check_channels(est.channels_[:-3] + ("a.x", "a.y", "a.z"), "database X")
+    # Names that passed are not compared again (a live stream checks every window), but
+    # other names, or the same after the model's channels changed, are.
+    names = tuple(est.channels_)
+    est.check_channels(names)
+    est.check_channels(names)
+    with pytest.raises(DataError, match="do not match"):
+        est.check_channels(names[:-1])
+    kept = est.channels_
+    try:
+        est.channels_ = kept[:-1] + ("a.x",)
+        with pytest.raises(DataError, match="do not match"):
+            est.check_channels(names)
+    finally:
+        est.channels_ = kept
     with pytest.raises(ParameterError, match="emotion 'bored'"):
         est.predict(clips[0].audio, 16000, emotion="bored")
     with pytest.raises(ParameterError, match="mono"):
@@ -582,3 +596,38 @@ def test_gmm_loglik_equals_one_component_at_a_time():
         got = gmm_loglik(x, g)
         assert got.shape == (n,)
         np.testing.assert_array_equal(got, one_at_a_time(x, g))
+
+
+def test_mixtures_factorised_once_score_as_each_mixture_alone():
+    # mu-mlp's classifier scores all its mixtures in one stacked solve with factors
+    # computed once: bit for bit each mixture's own gmm_loglik, for mixtures of
+    # different sizes, and after its mixtures are replaced (refitted) the new ones.
+    from animegraph.baselines.mu_mlp_forward import (
+        Mixtures,
+        MuMlpForward,
+        gmm_loglik,
+        mixtures_loglik,
+    )
+
+    rng = np.random.default_rng(1)
+    d = 13
+
+    def mixture(k):
+        a = rng.standard_normal((k, d, d))
+        return {"weights": rng.dirichlet(np.ones(k)), "means": rng.standard_normal((k, d)),
+                "covariances": a @ a.transpose(0, 2, 1) + d * np.eye(d)}
+
+    gmms = [mixture(k) for k in (1, 4, 8, 3)]
+    for n in (1, 9, 60):
+        x = rng.standard_normal((n, d))
+        got = mixtures_loglik(x, Mixtures(gmms))
+        assert got.shape == (n, len(gmms))
+        np.testing.assert_array_equal(got, np.stack([gmm_loglik(x, g) for g in gmms], axis=1))
+
+    model = MuMlpForward()
+    model.n_mfcc, model.context = d, 0
+    x = rng.standard_normal((30, d))
+    for gmms in ([mixture(2), mixture(5)], [mixture(3), mixture(1), mixture(4)]):
+        model.gmms_ = gmms
+        want = np.argmax(np.stack([gmm_loglik(x, g) for g in gmms], axis=1), axis=1)
+        np.testing.assert_array_equal(model._classify(x), want)

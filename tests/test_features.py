@@ -507,3 +507,20 @@ def test_mel_filters_and_dct_are_librosas(sample_rate, n_fft):
     x = np.random.default_rng(0).standard_normal((40, 7))
     np.testing.assert_allclose(dct_ii(40) @ x, scipy.fft.dct(x, type=2, norm="ortho", axis=0),
                                atol=1e-12)
+
+
+def test_mfcc_bases_built_once_per_rate_and_size_give_the_same_coefficients():
+    # The mel filters and DCT rows are kept per (rate, FFT size, n_mfcc): a rate or size
+    # met again gives its first coefficients bit for bit, and another gets its own.
+    from ingest.speech.features import mfcc
+
+    rng = np.random.default_rng(3)
+    audio = rng.normal(0, 0.1, 8000).astype(np.float32)
+    first = {(sr, n): mfcc(audio, sr, n_mfcc=n) for sr in (16000, 22050) for n in (13, 20)}
+    for (sr, n), coeffs in first.items():
+        again = mfcc(audio, sr, n_mfcc=n)
+        assert again.shape[1] == n
+        np.testing.assert_array_equal(again, coeffs)
+    np.testing.assert_allclose(first[16000, 13], first[16000, 20][:, :13], rtol=1e-5,
+                               atol=1e-4)
+    assert first[16000, 13].shape != first[22050, 13].shape

@@ -48,6 +48,22 @@ def test_smooth_equals_the_scipy_smoothing_it_replaces(rng):
     np.testing.assert_array_equal(lowpass.smooth(short, cutoffs, fps), short)
 
 
+def test_smooth_designs_each_set_of_cutoffs_once_and_filters_as_designed_anew(rng):
+    # The sections are kept per set of cutoffs (a live stream smooths every window with
+    # the same ones): the output is that of the filters designed on the call, bit for
+    # bit, for float64 and float32 cutoffs alike, and a new set is designed anew.
+    fps = 60.0
+    motion = rng.normal(size=(50, 3)).cumsum(axis=0)
+    for cutoffs in (np.array([2.0, 5.5, 11.0]), np.array([2.0, 5.5, 11.0], np.float32),
+                    np.array([3.0, 5.5, 11.0])):
+        sos = np.stack([butter_lowpass(lowpass.SMOOTHING_ORDER, c / (fps / 2))
+                        for c in cutoffs], axis=2)
+        for _ in range(2):  # designed, then taken from the cache
+            np.testing.assert_array_equal(lowpass.smooth(motion, cutoffs, fps),
+                                          sosfiltfilt(sos, motion))
+    assert lowpass._sections.cache_info().hits >= 3
+
+
 def test_lfilter_equals_scipys(rng):
     b = -np.array([-2.0, -1.0, 0.0, 1.0, 2.0]) / 10
     a = np.array([1.0, -0.94])

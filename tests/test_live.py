@@ -300,6 +300,48 @@ def test_threads_cap_an_update_and_change_no_frame(model, speech, monkeypatch):
         Stream(model, threads=0)
 
 
+def test_what_updates_keep_between_windows_changes_no_frame(model, speech, tiny_db,
+                                                            monkeypatch):
+    """What an update keeps for the next windows (the low-pass's filter design, the
+    MFCCs' mel filters and DCT rows, RASTA-PLP's critical bands, the guide's factorised
+    mixtures and its channel check): a stream that builds all of it again before every
+    window sends the same frames, bit for bit."""
+    import animegraph.live.stream as stream_module
+    from animegraph.baselines import make_estimator
+    from animegraph.live import Stream
+    from db.store import Database
+    from ingest import lowpass
+    from ingest.speech import features
+    from ingest.tables import prepared_from_database
+
+    guide = make_estimator("mu-mlp", n_mfcc=6, context=1, subset_hidden=(3, 4),
+                           expression_hidden=4, frame_rate=60.0).fit(
+        prepared_from_database(Database.open(tiny_db[0])))
+    audio, sr = speech
+    setting = {"sample_rate": sr, "guide": guide, "backlog_ms": None, "hop_ms": 80}
+    kept = np.concatenate([b.motion for b in _play(Stream(model, **setting), audio)[0]])
+    real, windows = stream_module.window_motion, []
+
+    def afresh(*args, **kw):
+        lowpass._sections.cache_clear()
+        features._mel_bases.cache_clear()
+        features._bark_filterbank.cache_clear()
+        for name in ("_mixtures", "_channels_checked"):
+            guide.__dict__.pop(name, None)
+        out = real(*args, **kw)
+        windows.append((lowpass._sections.cache_info().misses,
+                        features._mel_bases.cache_info().misses,
+                        features._bark_filterbank.cache_info().misses,
+                        "_mixtures" in vars(guide)))
+        return out
+
+    monkeypatch.setattr(stream_module, "window_motion", afresh)
+    fresh = np.concatenate([b.motion for b in _play(Stream(model, **setting), audio)[0]])
+    # Every window built them all again (its motion low-passed, its MFCCs and RASTA-PLP taken).
+    assert windows and all(w == (1, 1, 1, True) for w in windows), windows
+    np.testing.assert_array_equal(fresh, kept)
+
+
 # --- Live Link over UDP -----------------------------------------------------------------
 
 

@@ -33,18 +33,43 @@ def mlp_forward(x: np.ndarray, weights: list[np.ndarray], biases: list[np.ndarra
 def gmm_loglik(x: np.ndarray, g: dict) -> np.ndarray:
     """Log-likelihood of rows of ``x`` (n, d) under a full-covariance Gaussian mixture
     (``weights`` (k,), ``means`` (k, d), ``covariances`` (k, d, d)); shape (n,)."""
+    return mixtures_loglik(x, Mixtures([g]))[:, 0]
+
+
+class Mixtures:
+    """Gaussian mixtures (dicts as :func:`gmm_loglik` takes) factorised once: each
+    component's Cholesky factor, log-determinant and log-weight, all mixtures'
+    components stacked. A live stream classifies every window's frames with the same
+    mixtures; factorising them again on each call was a quarter of the scoring."""
+
+    def __init__(self, gmms) -> None:
+        chol = [np.linalg.cholesky(np.asarray(g["covariances"])) for g in gmms]  # (k, d, d)
+        self.chol = np.concatenate(chol)
+        self.means = np.concatenate([np.asarray(g["means"]) for g in gmms])
+        self.logdet = [2.0 * np.log(np.diagonal(c, axis1=1, axis2=2)).sum(axis=1)
+                       for c in chol]  # (k,) each
+        self.log_weights = [np.log(np.asarray(g["weights"])) for g in gmms]
+        self.bounds = np.cumsum([0] + [len(c) for c in chol])
+
+
+def mixtures_loglik(x: np.ndarray, mixtures: Mixtures) -> np.ndarray:
+    """Log-likelihood of rows of ``x`` (n, d) under each of ``mixtures``: shape
+    (n, n_mixtures)."""
     d = x.shape[1]
-    weights, means = np.asarray(g["weights"]), np.asarray(g["means"])
-    # All components in one stacked call each (the same factorisation and solve per
-    # component as one call a component): a live stream classifies every window's frames,
-    # and the calls' overhead was most of the time on its few frames.
-    chol = np.linalg.cholesky(np.asarray(g["covariances"]))  # (k, d, d)
-    sol = np.linalg.solve(chol, (x[None] - means[:, None]).transpose(0, 2, 1))  # (k, d, n)
-    logdet = 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)  # (k,)
-    stacked = (np.log(weights)[:, None]
-               - 0.5 * (d * np.log(2 * np.pi) + logdet[:, None] + (sol**2).sum(axis=1))).T
-    top = stacked.max(axis=1)
-    return top + np.log(np.exp(stacked - top[:, None]).sum(axis=1))
+    # All components of all mixtures in one stacked solve (the same factorisation and
+    # solve per component as one call a component): the calls' overhead was most of the
+    # time on a live window's few frames.
+    sol = np.linalg.solve(mixtures.chol, (x[None] - mixtures.means[:, None]).transpose(0, 2, 1))
+    quad = (sol**2).sum(axis=1)  # (k_total, n)
+    out = []
+    for i, (logdet, log_w) in enumerate(zip(mixtures.logdet, mixtures.log_weights,
+                                            strict=True)):
+        a, b = mixtures.bounds[i], mixtures.bounds[i + 1]
+        stacked = (log_w[:, None] - 0.5 * (d * np.log(2 * np.pi) + logdet[:, None]
+                                           + quad[a:b])).T
+        top = stacked.max(axis=1)
+        out.append(top + np.log(np.exp(stacked - top[:, None]).sum(axis=1)))
+    return np.stack(out, axis=1)
 
 
 class MuMlpForward:
@@ -65,9 +90,10 @@ class MuMlpForward:
 
     def _classify(self, z: np.ndarray) -> np.ndarray:
         """Index of the subset whose mixture gives the highest log-likelihood."""
-        x = self._current(z)
-        scores = np.stack([gmm_loglik(x, g) for g in self.gmms_], axis=1)
-        return np.argmax(scores, axis=1)
+        kept = getattr(self, "_mixtures", None)
+        if kept is None or kept[0] is not self.gmms_:  # factorised once per fitted set
+            kept = self._mixtures = (self.gmms_, Mixtures(self.gmms_))
+        return np.argmax(mixtures_loglik(self._current(z), kept[1]), axis=1)
 
     def _utterance_mups(self, z: np.ndarray) -> np.ndarray:
         """Estimated UMUPs (n, A0) of standardised audio features ``z``."""

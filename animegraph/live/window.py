@@ -162,8 +162,9 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
     for i, pos in zip(warp, fresh, strict=True):
         positions[i] = pos
     for i in new:
-        index = {int(n): j for j, n in enumerate(cands.nodes[i])}
-        rank_costs = costs[i][[index[int(n)] for n in ranked[i]]]
+        # Each ranked anime's place among the phone's candidates (unique node ids).
+        order = np.argsort(cands.nodes[i])
+        rank_costs = costs[i][order[np.searchsorted(cands.nodes[i], ranked[i], sorter=order)]]
         p = phones[i]
         memory.put(Kept(np.asarray(ranked[i]), rank_costs, positions[i], p.phone, wanted,
                         p.start + offset_s, p.end + offset_s))
