@@ -342,6 +342,46 @@ def test_what_updates_keep_between_windows_changes_no_frame(model, speech, tiny_
     np.testing.assert_array_equal(fresh, kept)
 
 
+def test_guide_share_reaches_each_windows_blend(model, speech, tiny_db):
+    """``Stream(guide_share=s)`` blends each window's motion as ``(1 - s) * animes + s *
+    guide``: share 0 sends the animes alone (as no guide, bit for bit), the default share
+    (:data:`LIVE_GUIDE_SHARE`) what the default sends, share 1 other frames, and share 0.5
+    frames near the mean of shares 0 and 1 (not exactly: the frames are not linear in the
+    window's motion); a share out of [0, 1] is refused."""
+    from animegraph.baselines import make_estimator
+    from animegraph.live import Stream
+    from animegraph.live.stream import LIVE_GUIDE_SHARE
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    guide = make_estimator("mu-mlp", n_mfcc=6, context=1, subset_hidden=(3, 4),
+                           expression_hidden=4, frame_rate=60.0).fit(
+        prepared_from_database(Database.open(tiny_db[0])))
+    audio, sr = speech
+    setting = {"sample_rate": sr, "backlog_ms": None, "hop_ms": 80}
+
+    def sent(**kw):
+        return np.concatenate([b.motion for b in _play(Stream(model, **setting, **kw),
+                                                       audio)[0]])
+
+    alone = sent(guide=None)
+    shares = {s: sent(guide=guide, guide_share=s) for s in (0.0, 1.0)}
+    shares[LIVE_GUIDE_SHARE] = sent(guide=guide)
+    np.testing.assert_array_equal(shares[0.0], alone)
+    if LIVE_GUIDE_SHARE == 0.5:
+        apart = np.linalg.norm(shares[1.0] - shares[0.0])
+        assert apart > 1e-3
+        assert np.linalg.norm(shares[0.5] - (shares[0.0] + shares[1.0]) / 2) < 0.1 * apart
+    else:
+        np.testing.assert_array_equal(shares[LIVE_GUIDE_SHARE],
+                                      sent(guide=guide, guide_share=LIVE_GUIDE_SHARE))
+        assert np.abs(shares[LIVE_GUIDE_SHARE] - sent(guide=guide, guide_share=0.5)
+                      ).max() > 1e-3
+    for bad in (1.5, -0.1, float("nan"), True):
+        with pytest.raises(ParameterError, match="guide_share"):
+            Stream(model, guide_share=bad)
+
+
 # --- Live Link over UDP -----------------------------------------------------------------
 
 

@@ -96,7 +96,8 @@ def _resampled(positions: np.ndarray | None, n: int) -> np.ndarray | None:
 
 def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s: float, *,
                   memory: PhoneMemory, k_best: int, emotion=None, context: bool = False,
-                  guide=None) -> tuple[np.ndarray, list[str]]:
+                  guide=None, guide_share: float | None = None
+                  ) -> tuple[np.ndarray, list[str]]:
     """The window's motion, shape (n_frames, n_channels), and warnings on its input.
 
     Parameters
@@ -113,6 +114,10 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
         The phones ranked before; the new ones are added.
     k_best, emotion, context, guide
         As :func:`animegraph.synthesis.synthesize` (``emotion`` a name, a mix or None).
+    guide_share : float in [0, 1] or None
+        The guide's share of the blended motion
+        (:func:`animegraph.synthesis.guide.blend_guide`); None: offline's
+        (:data:`animegraph.synthesis.guide.GUIDE_BLEND`).
     """
     from animegraph.emotion.control import resolve_emotion
     from animegraph.search import SearchWeights, candidates, search
@@ -176,6 +181,6 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
                              timeline=choice.timeline)
     if guide is not None:
         guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=wanted)
-        ics = blend_guide(ics, guide_ics, GUIDE_BLEND)
+        ics = blend_guide(ics, guide_ics, GUIDE_BLEND if guide_share is None else guide_share)
     memory.forget(offset_s - KEEP_S)
     return model.to_channels(ics), warnings
