@@ -4,6 +4,8 @@ Usage::
 
     python scripts/calib_live_share.py --grid-db S1DB --work DIR [--clips 30]
                                        [--shares 0.5 0.65 0.8 1.0] [--json OUT]
+                                       [--settings default low-latency]
+    python scripts/calib_live_share.py --grid-db S1DB --held-out DB640 --clips 20 ...
 
 :func:`animegraph.apps.evaluate.grid_split`'s 640 database clips of ``--grid-db`` (an
 ``animegraph ingest`` of grid/s1) are split again: every 8th (80) is a calibration clip,
@@ -15,7 +17,10 @@ the default setting and ``--low-latency``'s, the guide given each share of the w
 motion (``Stream(guide_share=...)``); each clip's mouth R against its recording is
 printed, and per setting the mean for each share with the mean paired difference to the
 first share (0.5, offline's) and its standard error (the differences' standard deviation
-over the square root of the number of clips).
+over the square root of the number of clips). With ``--held-out DB`` (a database of the
+GRID split's 640 database clips, guides stored), the same on the split's held-out clips
+(``--clips`` of them evenly, as ``scripts/bench_live.py --max-clips`` picks them): the
+check after the choice, never the choice.
 """
 
 from __future__ import annotations
@@ -56,21 +61,39 @@ def calibration_split(grid_db: Path):
     return calib, rest, reference
 
 
+def held_out_clips(grid_db: Path):
+    """The GRID split's held-out clips of ``grid_db``."""
+    from animegraph.apps.evaluate import grid_split
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    return grid_split(prepared_from_database(Database.open(grid_db)))[1]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--grid-db", type=Path, required=True)
-    parser.add_argument("--work", type=Path, required=True,
+    parser.add_argument("--work", type=Path, default=None,
                         help="folder for the calibration database (db560), reused if built")
+    parser.add_argument("--held-out", type=Path, default=None,
+                        help="stream the GRID split's held-out clips against this database "
+                        "of its 640 database clips instead")
     parser.add_argument("--clips", type=int, default=30)
     parser.add_argument("--shares", type=float, nargs="+", default=[0.5, 0.65, 0.8, 1.0])
     parser.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=SETTINGS)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    calib, rest, reference = calibration_split(args.grid_db)
-    db = args.work / "db560"
-    print(f"# {len(calib)} calibration clips, {len(rest)} in the database {db}", flush=True)
-    if not db.exists():
+    if (args.work is None) == (args.held_out is None):
+        raise SystemExit("calib_live_share.py: give --work DIR or --held-out DB")
+    if args.held_out:
+        calib, rest, db = held_out_clips(args.grid_db), [], args.held_out
+    else:
+        calib, rest, reference = calibration_split(args.grid_db)
+        db = args.work / "db560"
+    print(f"# {len(calib)} {'held-out' if args.held_out else 'calibration'} clips, "
+          f"database {db}", flush=True)
+    if not args.held_out and not db.exists():
         from animegraph.apps.prepare import fit_guides
         from ingest.pipeline import build_database
 
