@@ -621,6 +621,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", str(tmp_path / "none.wav"), "--record", str(tmp_path)], 2, "no such"),
         (["--source", "-", "--rate", "16000"], 2, "say where"),
         (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
+        (["--source", "-", "--rate", "16000", "--guide-share", "1.5", "--record",
+          str(tmp_path)], 2, "guide_share must be a number in [0, 1]"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")
