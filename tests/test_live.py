@@ -344,13 +344,13 @@ def test_what_updates_keep_between_windows_changes_no_frame(model, speech, tiny_
 
 def test_guide_share_reaches_each_windows_blend(model, speech, tiny_db):
     """``Stream(guide_share=s)`` blends each window's motion as ``(1 - s) * animes + s *
-    guide``: share 0 sends the animes alone (as no guide, bit for bit), the default share
-    (:data:`LIVE_GUIDE_SHARE`) what the default sends, share 1 other frames, and share 0.5
-    frames near the mean of shares 0 and 1 (not exactly: the frames are not linear in the
-    window's motion); a share out of [0, 1] is refused."""
+    guide``: share 0 sends the animes alone (as no guide, bit for bit), share 1 other
+    frames, and the default share (:data:`LIVE_GUIDE_SHARE`, not offline's 0.5) frames
+    near ``(1 - s) * share 0 + s * share 1`` (not exactly: the frames are not linear in
+    the window's motion) and away from share 0.5's; a share out of [0, 1] is refused."""
     from animegraph.baselines import make_estimator
     from animegraph.live import Stream
-    from animegraph.live.stream import LIVE_GUIDE_SHARE
+    from animegraph.live.stream import LIVE_GUIDE_SHARE as S
     from db.store import Database
     from ingest.tables import prepared_from_database
 
@@ -365,18 +365,15 @@ def test_guide_share_reaches_each_windows_blend(model, speech, tiny_db):
                                                        audio)[0]])
 
     alone = sent(guide=None)
-    shares = {s: sent(guide=guide, guide_share=s) for s in (0.0, 1.0)}
-    shares[LIVE_GUIDE_SHARE] = sent(guide=guide)
+    shares = {s: sent(guide=guide, guide_share=s) for s in (0.0, 0.5, 1.0)}
+    default = sent(guide=guide)
     np.testing.assert_array_equal(shares[0.0], alone)
-    if LIVE_GUIDE_SHARE == 0.5:
-        apart = np.linalg.norm(shares[1.0] - shares[0.0])
-        assert apart > 1e-3
-        assert np.linalg.norm(shares[0.5] - (shares[0.0] + shares[1.0]) / 2) < 0.1 * apart
-    else:
-        np.testing.assert_array_equal(shares[LIVE_GUIDE_SHARE],
-                                      sent(guide=guide, guide_share=LIVE_GUIDE_SHARE))
-        assert np.abs(shares[LIVE_GUIDE_SHARE] - sent(guide=guide, guide_share=0.5)
-                      ).max() > 1e-3
+    apart = np.linalg.norm(shares[1.0] - shares[0.0])
+    assert apart > 1e-3
+    off = np.linalg.norm(default - ((1 - S) * shares[0.0] + S * shares[1.0]))
+    assert off < 0.1 * apart
+    assert np.linalg.norm(default - shares[0.5]) > 5 * off
+    assert Stream(model).guide_share == S != 0.5
     for bad in (1.5, -0.1, float("nan"), True):
         with pytest.raises(ParameterError, match="guide_share"):
             Stream(model, guide_share=bad)
