@@ -5,7 +5,7 @@ Usage::
     python scripts/bench_live.py [--quality synthetic facegood talkingface
                                             talkingface-across grid]
                                  [--grid-db DB] [--text]
-                                 [--joined]
+                                 [--joined] [--guide-share S]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
@@ -492,6 +492,9 @@ def main() -> int:
     parser.add_argument("--threads", type=int, default=None,
                         help="threads an update may run at once (the stream's default if "
                         "not given; 0: no cap)")
+    parser.add_argument("--guide-share", type=float, default=None,
+                        help="the guide's share of each window's motion (the stream's "
+                        "default, LIVE_GUIDE_SHARE, if not given)")
     args = parser.parse_args()
     unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
@@ -501,7 +504,8 @@ def main() -> int:
     JOINED.extend([True] if args.joined else [])
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
-                                     ("settle_ms", args.settle), ("threads", args.threads))
+                                     ("settle_ms", args.settle), ("threads", args.threads),
+                                     ("guide_share", args.guide_share))
                    if v is not None})
     if WINDOW.get("threads") == 0:
         WINDOW["threads"] = None  # no cap

@@ -342,6 +342,43 @@ def test_what_updates_keep_between_windows_changes_no_frame(model, speech, tiny_
     np.testing.assert_array_equal(fresh, kept)
 
 
+def test_guide_share_reaches_each_windows_blend(model, speech, tiny_db):
+    """``Stream(guide_share=s)`` blends each window's motion as ``(1 - s) * animes + s *
+    guide``: share 0 sends the animes alone (as no guide, bit for bit), share 1 other
+    frames, and the default share (:data:`LIVE_GUIDE_SHARE`, not offline's 0.5) frames
+    near ``(1 - s) * share 0 + s * share 1`` (not exactly: the frames are not linear in
+    the window's motion) and away from share 0.5's; a share out of [0, 1] is refused."""
+    from animegraph.baselines import make_estimator
+    from animegraph.live import Stream
+    from animegraph.live.stream import LIVE_GUIDE_SHARE as S
+    from db.store import Database
+    from ingest.tables import prepared_from_database
+
+    guide = make_estimator("mu-mlp", n_mfcc=6, context=1, subset_hidden=(3, 4),
+                           expression_hidden=4, frame_rate=60.0).fit(
+        prepared_from_database(Database.open(tiny_db[0])))
+    audio, sr = speech
+    setting = {"sample_rate": sr, "backlog_ms": None, "hop_ms": 80}
+
+    def sent(**kw):
+        return np.concatenate([b.motion for b in _play(Stream(model, **setting, **kw),
+                                                       audio)[0]])
+
+    alone = sent(guide=None)
+    shares = {s: sent(guide=guide, guide_share=s) for s in (0.0, 0.5, 1.0)}
+    default = sent(guide=guide)
+    np.testing.assert_array_equal(shares[0.0], alone)
+    apart = np.linalg.norm(shares[1.0] - shares[0.0])
+    assert apart > 1e-3
+    off = np.linalg.norm(default - ((1 - S) * shares[0.0] + S * shares[1.0]))
+    assert off < 0.1 * apart
+    assert np.linalg.norm(default - shares[0.5]) > 5 * off
+    assert Stream(model).guide_share == S != 0.5
+    for bad in (1.5, -0.1, float("nan"), True):
+        with pytest.raises(ParameterError, match="guide_share"):
+            Stream(model, guide_share=bad)
+
+
 # --- Live Link over UDP -----------------------------------------------------------------
 
 
@@ -584,6 +621,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", "-", "--rate", "16000", "--livelink", "11111"], 2, "HOST:PORT"),
         # the CLI's own spelling of no cap (0), not the Python API's (None)
         (["--source", "-", "--rate", "16000", "--threads", "-1"], 2, "or 0 for no cap"),
+        (["--source", "-", "--rate", "16000", "--guide-share", "1.5", "--record",
+          str(tmp_path)], 2, "guide_share must be a number in [0, 1]"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")

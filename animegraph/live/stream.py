@@ -19,7 +19,8 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
-  blended 50/50) from those phones given as labels, except that each phone's choice of
+  blended) from those phones given as labels, except that the guide's share is
+  :data:`LIVE_GUIDE_SHARE` (offline's is 0.5) and each phone's choice of
   animes is made once (:mod:`animegraph.live.window`): a phone found again in the next
   window (same label, boundaries within 20 ms) keeps its k best animes and their
   time-warps, and only the new phones are scored by DTW and warped;
@@ -78,6 +79,15 @@ DEFAULT_CONTEXT_MS = 300.0
 DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
 LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
                "settle_ms": 40.0}
+#: The guide's share of each window's motion by default (``Stream(guide_share=...)``,
+#: ``--guide-share``); offline keeps its plain mean (0.5,
+#: :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a short window the animes are less
+#: reliable than offline: chosen on a calibration split of the GRID database clips (every
+#: 8th of the GRID split's 640, streamed against a database of the other 560; never the
+#: held-out clips) among 0.5, 0.65, 0.8 and 1.0, where 0.65 beat 0.5 at both settings by
+#: more than twice the paired standard error and 0.8 did no better than 0.65
+#: (docs/results/live.md, "The guide's share, live").
+LIVE_GUIDE_SHARE = 0.65
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
 MIN_RATE, MAX_RATE = 8000, 96000
@@ -208,8 +218,8 @@ class Stream:
     Raises
     ------
     ParameterError
-        On an unsupported rate or a look-ahead, hop or context out of range, or an
-        empty ``text``.
+        On an unsupported rate or a look-ahead, hop, context or guide share out of
+        range, or an empty ``text``.
     DataError
         A ``text`` with no pronounceable word.
     """
@@ -217,7 +227,7 @@ class Stream:
     def __init__(self, model, *, sample_rate: int = 16000,
                  lookahead_ms: float = DEFAULT_LOOKAHEAD_MS, hop_ms: float = DEFAULT_HOP_MS,
                  context_ms: float = DEFAULT_CONTEXT_MS, emotion=None, guide=None,
-                 k_best: int | None = None,
+                 guide_share: float = LIVE_GUIDE_SHARE, k_best: int | None = None,
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
                  settle_ms: float = SETTLE_S * 1000, text: str | None = None,
@@ -232,6 +242,10 @@ class Stream:
                                  ("settle_ms", settle_ms, 0.0)):
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= low):
                 raise ParameterError(f"{name} must be a number >= {low:g}, got {value!r}")
+        if isinstance(guide_share, bool) or not (isinstance(guide_share, int | float)
+                                                 and 0.0 <= guide_share <= 1.0):
+            raise ParameterError(f"guide_share must be a number in [0, 1], got "
+                                 f"{guide_share!r}")
         if threads is not None and (isinstance(threads, bool) or not isinstance(
                 threads, int | np.integer) or threads < 1):
             raise ParameterError(f"threads must be a whole number >= 1 or None, got "
@@ -243,6 +257,7 @@ class Stream:
         self.hop_s = hop_ms / 1000.0
         self.context_s = context_ms / 1000.0
         self.guide = guide
+        self.guide_share = float(guide_share)
         self.backlog_s = None if backlog_ms is None else backlog_ms / 1000.0
         self.k_best = AUDIO_ONLY_K_BEST if k_best is None else int(k_best)
         self.fps = float(self.model.graph.fps)
@@ -495,7 +510,7 @@ class Stream:
             motion, warnings = window_motion(
                 self.model, audio, self.sample_rate, segments, start_s, memory=self._memory,
                 k_best=self.k_best, emotion=self._emotion_for(audio), context=context,
-                guide=self.guide)
+                guide=self.guide, guide_share=self.guide_share)
         for warning in warnings:
             self.stats.warnings[warning[:80]] += 1
         return motion

@@ -96,7 +96,8 @@ def _resampled(positions: np.ndarray | None, n: int) -> np.ndarray | None:
 
 def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s: float, *,
                   memory: PhoneMemory, k_best: int, emotion=None, context: bool = False,
-                  guide=None, shortlist: int | str | None = "default"
+                  guide=None, shortlist: int | str | None = "default",
+                  guide_share: float | None = None
                   ) -> tuple[np.ndarray, list[str]]:
     """The window's motion, shape (n_frames, n_channels), and warnings on its input.
 
@@ -119,6 +120,10 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
         default, :data:`animegraph.search.shortlist.SHORTLIST`, read when called so that
         importing the stream does not load the search's kernels; None: every candidate).
         A kept phone's candidates are its kept animes.
+    guide_share : float in [0, 1] or None
+        The guide's share of the blended motion
+        (:func:`animegraph.synthesis.guide.blend_guide`); None: offline's
+        (:data:`animegraph.synthesis.guide.GUIDE_BLEND`).
     """
     from animegraph.emotion.control import resolve_emotion
     from animegraph.search import SearchWeights, candidates, search
@@ -197,6 +202,6 @@ def window_motion(model, audio: np.ndarray, sample_rate: int, segments, offset_s
                              timeline=choice.timeline)
     if guide is not None:
         guide_ics = guide_trajectory(model, guide, audio, sample_rate, phones, emotion=wanted)
-        ics = blend_guide(ics, guide_ics, GUIDE_BLEND)
+        ics = blend_guide(ics, guide_ics, GUIDE_BLEND if guide_share is None else guide_share)
     memory.forget(offset_s - KEEP_S)
     return model.to_channels(ics), warnings
