@@ -37,6 +37,14 @@ def model(tiny_db):
     return Model.load(tiny_db[0])
 
 
+def _after_noise(audio, sr):
+    """``audio`` (peak 0.8) after a second of silence, all in a room's faint white noise."""
+    rng = np.random.default_rng(0)
+    said = 0.8 * audio / np.abs(audio).max()
+    noisy = np.concatenate([np.zeros(sr, np.float32), said])
+    return (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+
+
 def _play(stream, audio, chunk_s=0.02):
     batches, heard = [], []
     step = int(chunk_s * stream.sample_rate)
@@ -173,10 +181,7 @@ def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monke
     from ingest.speech import ctc
 
     audio, sr = speech
-    rng = np.random.default_rng(0)
-    said = 0.8 * audio / np.abs(audio).max()
-    noisy = np.concatenate([np.zeros(sr, np.float32), said])
-    noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+    noisy = _after_noise(audio, sr)
     heard = []
     recognize = ctc.recognize
 
@@ -218,10 +223,7 @@ def test_guide_loudness_is_against_all_the_stream_heard(model, speech, monkeypat
     from animegraph.live import stream as live_stream
 
     audio, sr = speech
-    rng = np.random.default_rng(0)
-    said = 0.8 * audio / np.abs(audio).max()
-    noisy = np.concatenate([np.zeros(sr, np.float32), said])
-    noisy = (noisy + 0.004 * rng.standard_normal(len(noisy))).astype(np.float32)
+    noisy = _after_noise(audio, sr)
     given = []
     window_motion = live_stream.window_motion
 
@@ -840,9 +842,9 @@ def test_bench_live_unpaced_times_the_first_lookahead_given(tiny_db, tmp_path):
     """``bench_live.py --unpaced`` streams at ``--lookaheads``' first (it always used
     120 ms, whatever was asked); without ``--lookaheads``, at the default look-ahead."""
     out = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "bench_live.py"), "--quality", "--db", str(tiny_db[0]), "--unpaced",
-         "--lookaheads", "40", "--latency-seconds", "0", "--drift-seconds", "0",
-         "--json", str(tmp_path / "out.json")],
+        [sys.executable, str(ROOT / "scripts" / "bench_live.py"), "--quality", "--db",
+         str(tiny_db[0]), "--unpaced", "--lookaheads", "40", "--latency-seconds", "0",
+         "--drift-seconds", "0", "--json", str(tmp_path / "out.json")],
         capture_output=True, text=True, timeout=900,
         env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert out.returncode == 0, out.stderr
