@@ -85,7 +85,8 @@ LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300
 #: reliable than offline: chosen on a calibration split of the GRID database clips (every
 #: 8th of the GRID split's 640, streamed against a database of the other 560; never the
 #: held-out clips) among 0.5, 0.65, 0.8 and 1.0, where 0.65 beat 0.5 at both settings by
-#: more than twice the paired standard error and 0.8 did no better than 0.65
+#: more than twice the paired standard error and 0.8 did no better than 0.65; across
+#: speakers (talkingface) it cost 0.013 against 0.5, the guide hearing the speaker
 #: (docs/results/live.md, "The guide's share, live").
 LIVE_GUIDE_SHARE = 0.65
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
