@@ -373,8 +373,8 @@ def test_channel_mismatch_and_bad_predict_input(fitted, clips):
     est = fitted["hier-pca"]
     with pytest.raises(DataError, match="do not match"):
         est.check_channels(est.channels_[:-3] + ("a.x", "a.y", "a.z"), "database X")
-    # Names that passed are not compared again (a live stream checks every window), but
-    # other names, or the same after the model's channels changed, are.
+    # Names that passed pass again (a live stream checks every window); other names, or
+    # the same after the model's channels changed, do not.
     names = tuple(est.channels_)
     est.check_channels(names)
     est.check_channels(names)

@@ -149,9 +149,6 @@ class Predicting:
 
     def check_channels(self, names, where: str = "the database") -> None:
         """Raise DataError unless ``names`` are the channels the model was trained on."""
-        checked = getattr(self, "_channels_checked", (None, None))
-        if isinstance(names, tuple) and names is checked[0] and self.channels_ is checked[1]:
-            return  # the same (immutable) names as last time: a live stream's every window
         names = tuple(names)
         if names != tuple(self.channels_):
             extra = sorted(set(names) - set(self.channels_))[:3]
@@ -160,7 +157,6 @@ class Predicting:
                 f"the {self.method} model has {len(self.channels_)} channels and {where} "
                 f"{len(names)}: they do not match (e.g. new {extra or 'none'}, missing "
                 f"{lacking or 'none'}); refit the model on it")
-        self._channels_checked = (names, self.channels_)  # a refit's channels: checked anew
 
 
 class Stored(Predicting):
