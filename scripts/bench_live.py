@@ -73,7 +73,7 @@ from animegraph.baselines.reference import Loudness
 from animegraph.live import Stream
 from animegraph.live.run import run
 from animegraph.live.sources import FileSource
-from animegraph.live.stream import DEFAULT_LOOKAHEAD_MS
+from animegraph.live.stream import DEFAULT_LOOKAHEAD_MS, default_guide_share
 from animegraph.motion.measures import mouth_opening, pearson
 from animegraph.synthesis import Model, synthesize
 from animegraph.synthesis.path import AUDIO_ONLY_GUIDE, AUDIO_ONLY_K_BEST, TRANSCRIPT_K_BEST
@@ -234,6 +234,7 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
         print(f"# {fold}: {n_train} clips in the database, {len(test)} held out; guide "
               f"{AUDIO_ONLY_GUIDE}"
               f"{' (not fitted: ' + '; '.join(missing) + ')' if missing else ''}"
+              f"; guide share {WINDOW.get('guide_share', default_guide_share(model)):g}"
               f"; ready in {time.perf_counter() - t0:.0f} s", flush=True)
         score(model, guide, loud, test, lookaheads, rows, cpu, misfit)
         n_clips += len(test)
@@ -493,8 +494,8 @@ def main() -> int:
                         help="threads an update may run at once (the stream's default if "
                         "not given; 0: no cap)")
     parser.add_argument("--guide-share", type=float, default=None,
-                        help="the guide's share of each window's motion (the stream's "
-                        "default, LIVE_GUIDE_SHARE, if not given)")
+                        help="the guide's share of each window's motion (if not given "
+                        "the stream's default, by the database: default_guide_share)")
     args = parser.parse_args()
     unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]

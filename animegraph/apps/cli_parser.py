@@ -667,8 +667,9 @@ def _add_live(sub) -> None:
                       help="the audio-only default's guide (mu-mlp and ppg-ridge), or none")
     live.add_argument("--guide-share", type=_number, default=None, metavar="S",
                       help="the guide's share of each window's motion, 0-1 (1: the guide "
-                      "alone; 0.65 by default, chosen on a calibration split: "
-                      "docs/results/live.md, \"The guide's share, live\"; offline's is 0.5)")
+                      "alone); by default 0.65 (chosen on a calibration split of one "
+                      "speaker) for a database of one recording session, offline's 0.5 for "
+                      "several (docs/results/live.md, \"The guide's share, live\")")
     live.add_argument("--livelink", default=None, metavar="HOST:PORT",
                       help="send Live Link Face packets over UDP (Unreal listens on 11111); "
                       "ARKit databases")

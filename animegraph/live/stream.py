@@ -20,7 +20,8 @@ Live, each update re-synthesizes a bounded *window* with the same code:
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended) from those phones given as labels, except that the guide's share is
-  :data:`LIVE_GUIDE_SHARE` (offline's is 0.5) and each phone's choice of
+  :data:`LIVE_GUIDE_SHARE` on a database of one recording session (offline's 0.5 on
+  several: :func:`default_guide_share`) and each phone's choice of
   animes is made once (:mod:`animegraph.live.window`): a phone found again in the next
   window (same label, boundaries within 20 ms) keeps its k best animes and their
   time-warps, and only the new phones are scored by DTW and warped;
@@ -79,15 +80,14 @@ DEFAULT_CONTEXT_MS = 300.0
 DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
 LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
                "settle_ms": 40.0}
-#: The guide's share of each window's motion by default (``Stream(guide_share=...)``,
-#: ``--guide-share``); offline keeps its plain mean (0.5,
-#: :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a short window the animes are less
-#: reliable than offline: chosen on a calibration split of the GRID database clips (every
-#: 8th of the GRID split's 640, streamed against a database of the other 560; never the
-#: held-out clips) among 0.5, 0.65, 0.8 and 1.0, where 0.65 beat 0.5 at both settings by
-#: more than twice the paired standard error and 0.8 did no better than 0.65; across
-#: speakers (talkingface) it cost 0.013 against 0.5, the guide hearing the speaker
-#: (docs/results/live.md, "The guide's share, live").
+#: The guide's share of each window's motion by default for a database of one recording
+#: session (:func:`default_guide_share`; ``Stream(guide_share=...)``, ``--guide-share``);
+#: offline keeps its plain mean (0.5, :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a
+#: short window the animes are less reliable than offline: chosen on a calibration split
+#: of the GRID database clips (one speaker: every 8th of the GRID split's 640, streamed
+#: against a database of the other 560; never the held-out clips) among 0.5, 0.65, 0.8
+#: and 1.0, where 0.65 beat 0.5 at both settings by more than twice the paired standard
+#: error and 0.8 did no better than 0.65 (docs/results/live.md, "The guide's share, live").
 LIVE_GUIDE_SHARE = 0.65
 #: Input rates accepted (Hz): hama resamples to 16 kHz; below 8 kHz speech loses the
 #: band its phones need, above 96 kHz is not a microphone's or a voice's rate.
@@ -191,6 +191,10 @@ class Stream:
         The guide (:mod:`animegraph.synthesis.guide`); the offline audio-only default is
         the mean of mu-mlp and ppg-ridge (:func:`stored_guide` reads them from the
         database). None: the animes alone.
+    guide_share : float in [0, 1] or None
+        The guide's share of each window's motion (1: the guide alone). None: by the
+        database (:func:`default_guide_share`: :data:`LIVE_GUIDE_SHARE` for one recording
+        session, offline's 0.5 for several).
     k_best : int
         Animes averaged per phone.
     backlog_ms : float or None
@@ -228,7 +232,7 @@ class Stream:
     def __init__(self, model, *, sample_rate: int = 16000,
                  lookahead_ms: float = DEFAULT_LOOKAHEAD_MS, hop_ms: float = DEFAULT_HOP_MS,
                  context_ms: float = DEFAULT_CONTEXT_MS, emotion=None, guide=None,
-                 guide_share: float = LIVE_GUIDE_SHARE, k_best: int | None = None,
+                 guide_share: float | None = None, k_best: int | None = None,
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
                  settle_ms: float = SETTLE_S * 1000, text: str | None = None,
@@ -243,8 +247,8 @@ class Stream:
                                  ("settle_ms", settle_ms, 0.0)):
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= low):
                 raise ParameterError(f"{name} must be a number >= {low:g}, got {value!r}")
-        if isinstance(guide_share, bool) or not (isinstance(guide_share, int | float)
-                                                 and 0.0 <= guide_share <= 1.0):
+        if guide_share is not None and (isinstance(guide_share, bool) or not (
+                isinstance(guide_share, int | float) and 0.0 <= guide_share <= 1.0)):
             raise ParameterError(f"guide_share must be a number in [0, 1], got "
                                  f"{guide_share!r}")
         if threads is not None and (isinstance(threads, bool) or not isinstance(
@@ -258,7 +262,8 @@ class Stream:
         self.hop_s = hop_ms / 1000.0
         self.context_s = context_ms / 1000.0
         self.guide = guide
-        self.guide_share = float(guide_share)
+        self.guide_share = float(default_guide_share(self.model) if guide_share is None
+                                 else guide_share)
         self.backlog_s = None if backlog_ms is None else backlog_ms / 1000.0
         self.k_best = AUDIO_ONLY_K_BEST if k_best is None else int(k_best)
         self.fps = float(self.model.graph.fps)
@@ -597,6 +602,36 @@ def as_mono_float(samples) -> np.ndarray:
     from ingest.speech.inputs import mono_samples
 
     return mono_samples(np.asarray(samples), np.float32, "live audio")
+
+
+def default_guide_share(model) -> float:
+    """The guide's share of each live window's motion when none is given, for ``model``.
+
+    :data:`LIVE_GUIDE_SHARE` (calibrated on one speaker) for a database of one recording
+    session; offline's :data:`animegraph.synthesis.guide.GUIDE_BLEND` (0.5, never tuned)
+    where offline recentres each anime on its recording
+    (:func:`animegraph.synthesis.recentres`: the database holds several sessions, i.e.
+    speakers or corpus folders). mu-mlp hears the speaker and guides poorly across
+    speakers: there 0.65 cost 0.013 mouth R against 0.5 (talkingface across speakers),
+    and the calibration never held several. Sessions, not speakers, decide, because a
+    database cannot tell two folders of one unnamed actor from two actors, and a wrong
+    guess costs less this way: on one actress (FACEGOOD, 120 ms) 0.65 gained 0.002 over
+    0.5 (docs/results/live.md, "The guide's share, live").
+
+    Parameters
+    ----------
+    model : animegraph.synthesis.Model
+        The motion database.
+
+    Returns
+    -------
+    float
+        The share, in [0, 1].
+    """
+    from animegraph.synthesis import recentres
+    from animegraph.synthesis.guide import GUIDE_BLEND
+
+    return GUIDE_BLEND if recentres(model) else LIVE_GUIDE_SHARE
 
 
 def rest_pose(model) -> np.ndarray:
