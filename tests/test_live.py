@@ -380,6 +380,54 @@ def test_guide_share_reaches_each_windows_blend(model, speech, tiny_db):
             Stream(model, guide_share=bad)
 
 
+@pytest.mark.shared
+def test_default_guide_share_follows_the_databases_sessions(model, tmp_path):
+    """The default share is :data:`LIVE_GUIDE_SHARE` (calibrated on one speaker) on a
+    database of one recording session (the tiny corpus: one speaker) and offline's 0.5
+    on one of two speakers (two talkingface clips ingested), where offline recentres each
+    anime: that database's streams send the frames of an explicit 0.5, not of 0.65. An
+    explicit share wins on both."""
+    import shutil
+
+    from animegraph.baselines import make_estimator
+    from animegraph.live import Stream
+    from animegraph.live.stream import LIVE_GUIDE_SHARE, default_guide_share
+    from animegraph.synthesis import Model, recentres
+    from animegraph.synthesis.guide import GUIDE_BLEND
+    from db.store import Database
+    from ingest.formats.wav import read_wav
+    from ingest.pipeline import ingest
+    from ingest.tables import prepared_from_database
+
+    assert len(model.sessions) == 1 and not recentres(model)
+    assert default_guide_share(model) == Stream(model).guide_share == LIVE_GUIDE_SHARE != 0.5
+    assert Stream(model, guide_share=0.5).guide_share == 0.5
+
+    root = require_shared("talkingface")
+    corpus = tmp_path / "talkingface"
+    for name in ("styletalk_feifeili_clip3", "edtalk_mouth_source"):  # 7 s and 10 s
+        shutil.copytree(root / name, corpus / name)
+    ingest([corpus], tmp_path / "db")
+    two = Model.load(tmp_path / "db")
+    assert len({speaker for _, speaker in two.sessions}) == 2 and recentres(two)
+    assert default_guide_share(two) == Stream(two).guide_share == GUIDE_BLEND == 0.5
+    assert Stream(two, guide_share=LIVE_GUIDE_SHARE).guide_share == LIVE_GUIDE_SHARE
+
+    guide = make_estimator("mu-mlp", n_mfcc=6, context=1, subset_hidden=(3, 4),
+                           expression_hidden=4, frame_rate=25.0).fit(
+        prepared_from_database(Database.open(tmp_path / "db")))
+    audio, sr = read_wav(root / "styletalk_feifeili_clip3" / "audio_16k.wav")
+    audio = audio[: 2 * sr]
+
+    def sent(**kw):
+        stream = Stream(two, sample_rate=sr, backlog_ms=None, guide=guide, **kw)
+        return np.concatenate([b.motion for b in _play(stream, audio)[0]])
+
+    default = sent()
+    np.testing.assert_array_equal(default, sent(guide_share=0.5))
+    assert np.linalg.norm(default - sent(guide_share=LIVE_GUIDE_SHARE)) > 1e-3
+
+
 # --- Live Link over UDP -----------------------------------------------------------------
 
 
