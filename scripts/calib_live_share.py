@@ -6,6 +6,7 @@ Usage::
                                        [--shares 0.5 0.65 0.8 1.0] [--json OUT]
                                        [--settings default low-latency]
     python scripts/calib_live_share.py --grid-db S1DB --held-out DB640 --clips 20 ...
+    python scripts/calib_live_share.py --talkingface [--piece 6] --shares 0.5 0.65 ...
 
 :func:`animegraph.apps.evaluate.grid_split`'s 640 database clips of ``--grid-db`` (an
 ``animegraph ingest`` of grid/s1) are split again: every 8th (80) is a calibration clip,
@@ -21,6 +22,14 @@ over the square root of the number of clips). With ``--held-out DB`` (a database
 GRID split's 640 database clips, guides stored), the same on the split's held-out clips
 (``--clips`` of them evenly, as ``scripts/bench_live.py --max-clips`` picks them): the
 check after the choice, never the choice.
+
+``--talkingface``: a calibration split of several speakers, none of it scored by
+``scripts/bench_live.py``: the first 70 % of each of talkingface's two long clips (the
+within-speaker split's database part; the across split holds them in its databases,
+never scores them), cut into ``--piece``-second pieces, each streamed against a database
+of the speakers it is not: the 11 other clips and the other long clip's first 70 % (its
+guides fitted as ``bench_live.py``'s talkingface splits fit them). Those 11 clips are
+the across split's scored clips, here only database material.
 """
 
 from __future__ import annotations
@@ -36,7 +45,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_live import WINDOW, live_motion, mouth_r  # noqa: E402
+from bench_live import (  # noqa: E402
+    SHARED,
+    TALKINGFACE_CUT,
+    TALKINGFACE_LONG,
+    WINDOW,
+    guides,
+    live_motion,
+    mouth_r,
+)
 
 from animegraph.live import stored_guide  # noqa: E402
 from animegraph.live.stream import DEFAULT_SETTING, LOW_LATENCY  # noqa: E402
@@ -70,9 +87,57 @@ def held_out_clips(grid_db: Path):
     return grid_split(prepared_from_database(Database.open(grid_db)))[1]
 
 
+def talkingface_folds(work: Path, piece_s: float):
+    """(model, guide, clips streamed) per long talkingface clip: its first 70 % in pieces
+    of ``piece_s`` seconds, and a database in ``work`` of the speakers it is not (built and
+    its guides fitted once; the database reused if there already)."""
+    from ingest.pipeline import IngestConfig, build_database, prepare_sources
+    from ingest.prepare import slice_clip
+    from ingest.readers import discover
+
+    clips, reference = prepare_sources(discover([SHARED / "talkingface"]), IngestConfig(),
+                                       workers=2)
+    firsts = {c.clip_id: slice_clip(c, 0.0, TALKINGFACE_CUT * c.duration, suffix="_first70")
+              for c in clips if c.clip_id in TALKINGFACE_LONG}
+    short = [c for c in clips if c.clip_id not in TALKINGFACE_LONG]
+    for name, first in firsts.items():
+        train = short + [c for k, c in firsts.items() if k != name]
+        db = work / f"db-not-{name}"
+        if not db.exists():
+            build_database(db, train, reference=reference)
+        guide, missing = guides(train)
+        if missing:
+            raise SystemExit(f"the calibration guides could not be fitted: {missing}")
+        n = int(first.duration // piece_s)
+        pieces = [slice_clip(first, k * piece_s, (k + 1) * piece_s, suffix=f"_{k}")
+                  for k in range(n)]
+        yield Model.load(db), guide, pieces
+
+
+def stream_shares(model, guide, clips, settings, shares, rows: dict) -> None:
+    """Stream each of ``clips`` at each setting and share; append its mouth R to ``rows``."""
+    for clip in clips:
+        audio = clip.audio.astype(np.float32) / 32768.0
+        for setting in settings:
+            WINDOW.clear()
+            WINDOW.update({k: v for k, v in SETTINGS[setting].items() if k != "lookahead_ms"})
+            for share in shares:
+                WINDOW["guide_share"] = share
+                motion, _ = live_motion(model, audio, clip.sample_rate,
+                                        SETTINGS[setting]["lookahead_ms"], guide)
+                rows[(setting, share)].append(mouth_r(model, motion, clip))
+        print(f"#   {clip.clip_id}: " + ", ".join(f"{s} {g:g} {v[-1]:.3f}"
+                                                  for (s, g), v in rows.items()), flush=True)
+    WINDOW.clear()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--grid-db", type=Path, required=True)
+    parser.add_argument("--grid-db", type=Path, default=None)
+    parser.add_argument("--talkingface", action="store_true",
+                        help="the talkingface calibration split (several speakers) instead")
+    parser.add_argument("--piece", type=float, default=6.0,
+                        help="with --talkingface: seconds of each streamed piece")
     parser.add_argument("--work", type=Path, default=None,
                         help="folder for the calibration database (db560), reused if built")
     parser.add_argument("--held-out", type=Path, default=None,
@@ -84,8 +149,22 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    if (args.work is None) == (args.held_out is None):
-        raise SystemExit("calib_live_share.py: give --work DIR or --held-out DB")
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True, cwd=Path(__file__).parent).stdout.strip()
+    rows = {(s, g): [] for s in args.settings for g in args.shares}
+    if args.talkingface:
+        work = args.work or Path("calib-talkingface")
+        names = []
+        for model, guide, clips in talkingface_folds(work, args.piece):
+            print(f"# {len(clips)} pieces of {clips[0].clip_id.rsplit('_', 1)[0]}; code "
+                  f"{commit}; load {os.getloadavg()}; ready in "
+                  f"{time.perf_counter() - t0:.0f} s", flush=True)
+            stream_shares(model, guide, clips, args.settings, args.shares, rows)
+            names += [c.clip_id for c in clips]
+        return report(args, rows, names, commit)
+    if args.grid_db is None or (args.work is None) == (args.held_out is None):
+        raise SystemExit("calib_live_share.py: give --grid-db and --work DIR or --held-out "
+                         "DB, or --talkingface")
     if args.held_out:
         calib, rest, db = held_out_clips(args.grid_db), [], args.held_out
     else:
@@ -105,25 +184,16 @@ def main(argv=None) -> int:
     guide, missing = stored_guide(db)
     if missing:
         raise SystemExit(f"the calibration database lacks the guides {missing}")
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True, cwd=Path(__file__).parent).stdout.strip()
     print(f"# {len(calib)} clips streamed; code {commit}; load {os.getloadavg()}; ready in "
           f"{time.perf_counter() - t0:.0f} s", flush=True)
-    rows = {(s, g): [] for s in args.settings for g in args.shares}
-    for clip in calib:
-        audio = clip.audio.astype(np.float32) / 32768.0
-        for setting in args.settings:
-            WINDOW.clear()
-            WINDOW.update({k: v for k, v in SETTINGS[setting].items() if k != "lookahead_ms"})
-            for share in args.shares:
-                WINDOW["guide_share"] = share
-                motion, _ = live_motion(model, audio, clip.sample_rate,
-                                        SETTINGS[setting]["lookahead_ms"], guide)
-                rows[(setting, share)].append(mouth_r(model, motion, clip))
-        print(f"#   {clip.clip_id}: " + ", ".join(f"{s} {g:g} {v[-1]:.3f}"
-                                                  for (s, g), v in rows.items()), flush=True)
-    WINDOW.clear()
-    out = {"clips": [c.clip_id for c in calib], "commit": commit, "load": os.getloadavg(),
+    stream_shares(model, guide, calib, args.settings, args.shares, rows)
+    return report(args, rows, [c.clip_id for c in calib], commit)
+
+
+def report(args, rows: dict, names: list[str], commit: str) -> int:
+    """Print (and with ``--json`` write) each setting's mean per share, paired against the
+    first share."""
+    out = {"clips": names, "commit": commit, "load": os.getloadavg(),
            "settings": {}}
     for setting in args.settings:
         base = np.asarray(rows[(setting, args.shares[0])])
