@@ -4,7 +4,7 @@ wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` is c
 Usage::
 
     python scripts/eval_live_transcript_check.py --grid-db DB640 [--every 8]
-        [--synthetic] [--held-out S1DB] [--json out.json]
+        [--offset 0] [--synthetic] [--take 1] [--held-out S1DB] [--json out.json]
 
 Each clip is streamed live (:class:`animegraph.live.Stream`, 20 ms chunks, as
 ``bench_live.py`` plays them) at the default setting and at ``--low-latency``, given its
@@ -55,27 +55,33 @@ GRID_SLOTS = (("bin", "lay", "place", "set"), ("blue", "green", "red", "white"),
 SLOT_NAMES = ("command", "colour", "preposition", "letter", "digit", "adverb")
 
 
+class RecordingTrack(TranscriptTrack):
+    """A stream's transcript track that keeps what it is fed and never gives up (its
+    tests are off), so that the stream feeds it to the end whatever they would say."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text, FRAME_RATE, test=False)
+        self.fed: list[tuple[np.ndarray, int]] = []
+        self.last: tuple[np.ndarray, int] | None = None
+
+    def update(self, log_probs: np.ndarray, first: int) -> None:
+        self.fed.append((np.array(log_probs), int(first)))
+        super().update(log_probs, first)
+
+    def finish(self, log_probs: np.ndarray, first: int) -> None:
+        self.last = (np.array(log_probs), int(first))
+
+
 def fed_posteriors(model, audio: np.ndarray, sr: int, text: str, setting: dict):
     """The posteriors a live stream of ``audio`` feeds its transcript's path: every
-    update's ``(log_probs, first)``, and the last (the stream's end). The stream's own
-    track records them and never gives up (its test is switched off), so that the stream
-    feeds it to the end whatever the test would say."""
-    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=text, **setting)
-    track, fed, last = stream._transcript, [], []
-    update = track.update
-
-    def record(log_probs, first):
-        fed.append((np.array(log_probs), int(first)))
-        update(log_probs, first)
-
-    track.update = record
-    track.finish = lambda log_probs, first: last.append((np.array(log_probs), int(first)))
-    track._check = lambda *args, **kwargs: None
+    update's ``(log_probs, first)``, and the last (the stream's end)."""
+    track = RecordingTrack(text)
+    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=track, **setting)
     step = int(CHUNK_S * sr)
     for k in range(0, len(audio), step):
         stream.push(audio[k:k + step])
     stream.close()
-    return fed, last[0]
+    return track.fed, track.last
 
 
 def replay(text: str, fed, last) -> tuple[float, float, str | None]:
@@ -123,9 +129,10 @@ def swapped_word(text: str, others: list[str], rng: np.random.Generator) -> str:
     return " ".join(words) + "."
 
 
-def grid_clips(db: Path, every: int, held_out: bool):
-    """(id, audio float32, rate, text) of every ``every``-th clip of a GRID database
-    (``held_out``: its held-out part by ``grid_split``, as bench_live picks 20)."""
+def grid_clips(db: Path, every: int, held_out: bool, offset: int = 0):
+    """(id, audio float32, rate, text) of every ``every``-th clip of a GRID database from
+    the ``offset``-th on (``held_out``: its held-out part by ``grid_split``, as
+    bench_live picks 20)."""
     from animegraph.apps.evaluate import grid_split
     from db.store import Database
     from ingest.tables import prepared_from_database
@@ -135,14 +142,15 @@ def grid_clips(db: Path, every: int, held_out: bool):
         _, test = grid_split(clips)
         clips = test[::max(1, -(-len(test) // 20))]
     else:
-        clips = clips[::every]
+        clips = clips[offset::every]
     return [(c.clip_id, c.audio.astype(np.float32) / 32768.0, c.sample_rate, c.text)
             for c in clips if c.text]
 
 
-def synthetic_clips():
+def synthetic_clips(take: int = 1):
     """eSpeak NG speech of the synthetic split's database sentences (bench_live's
-    corpus; its held-out sentences left out), one take per sentence and emotion."""
+    corpus; its held-out sentences left out), one take per sentence and emotion (the
+    ``take``-th variation of the three)."""
     from ingest.corpus.synthetic import CorpusConfig, plan_corpus, synthesize_clip
 
     config = CorpusConfig(sentences=14, parallel=4, variations=3, seed=3)
@@ -152,7 +160,7 @@ def synthetic_clips():
     held = {parallel[-1], *singles[-2:]}  # as bench_live.split holds them out
     out = []
     for spec in specs:
-        if spec.sentence_id in held or spec.variation != 1:
+        if spec.sentence_id in held or spec.variation != take:
             continue
         utt = synthesize_clip(spec, config).utterance
         out.append((spec.clip_id, utt.audio.astype(np.float32), utt.sample_rate, spec.text))
@@ -164,6 +172,10 @@ def main(argv=None) -> int:
     parser.add_argument("--grid-db", type=Path, required=True,
                         help="GRID database (its model streams; its clips are tried)")
     parser.add_argument("--every", type=int, default=8, help="every n-th GRID clip")
+    parser.add_argument("--offset", type=int, default=0,
+                        help="the first GRID clip tried (another offset: other clips)")
+    parser.add_argument("--take", type=int, default=1, choices=(1, 2, 3),
+                        help="the synthetic corpus' take tried (another take: other speech)")
     parser.add_argument("--synthetic", action="store_true",
                         help="also eSpeak NG speech of the synthetic corpus' sentences")
     parser.add_argument("--held-out", type=Path, default=None,
@@ -176,9 +188,9 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     model = Model.load(args.grid_db)
     corpora = {"grid": grid_clips(args.held_out or args.grid_db, args.every,
-                                  args.held_out is not None)}
+                                  args.held_out is not None, args.offset)}
     if args.synthetic:
-        corpora["synthetic"] = synthetic_clips()
+        corpora["synthetic"] = synthetic_clips(args.take)
     rows = []
     for corpus, clips in corpora.items():
         texts = [c[3] for c in clips]
