@@ -48,7 +48,8 @@ Usage::
   ``--profile``, that pass runs under cProfile (slower: its times are not the figures)
   and each part's share of the updates' time is printed (hama's call, the guide, the
   DTW of new phones, recognition, the phones' features, search, k-best blend).
-* **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
+* **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated; at
+  ``--lookaheads``' first look-ahead, else the default 120 ms, as ``--unpaced``):
   frames sent against the audio heard times the frame rate, the latency over its first
   and last tenth, and the updates that had to catch up.
 
@@ -457,8 +458,8 @@ def main() -> int:
     parser.add_argument("--quality", nargs="*", default=["synthetic"])
     parser.add_argument("--lookaheads", nargs="+", type=float, default=None,
                         help="look-aheads (ms) of the quality and latency curves (40 80 "
-                        "120 200 300); --unpaced times the first given (else the default "
-                        "look-ahead, 120)")
+                        "120 200 300); --unpaced and --drift-seconds run at the first "
+                        "given (else the default look-ahead, 120)")
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--drift-seconds", type=float, default=120.0)
     parser.add_argument("--facegood-seconds", type=float, default=30.0)
@@ -496,7 +497,8 @@ def main() -> int:
                         help="the guide's share of each window's motion (the stream's "
                         "default, LIVE_GUIDE_SHARE, if not given)")
     args = parser.parse_args()
-    unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
+    # --unpaced and the drift stream run at one look-ahead: the first the user names.
+    first_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
@@ -534,7 +536,7 @@ def main() -> int:
         else:
             model, guide = first["model"], first["guide"]
         if args.unpaced:
-            results["unpaced"] = unpaced(model, guide, first["speech"], unpaced_lookahead,
+            results["unpaced"] = unpaced(model, guide, first["speech"], first_lookahead,
                                          profile=args.profile)
             print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
@@ -545,7 +547,7 @@ def main() -> int:
                 print(json.dumps(row), flush=True)
         if args.drift_seconds > 0:
             wav = speech_file(first["speech"], args.drift_seconds, tmp / "drift.wav")
-            results["drift"] = paced(model, guide, wav, 120.0)
+            results["drift"] = paced(model, guide, wav, first_lookahead)
             print(json.dumps({"drift": results["drift"]}), flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
