@@ -69,6 +69,9 @@ CHECK_S, MIN_CHECK_S = 10.0, 2.0
 #: clip's sentence reported 33 of 80 times, a one-word change 0-17 of 80 by its slot
 #: (docs/results/live.md, "The transcript's test at the stream's end").
 MAX_LIVE_ALIGN_LOSS = 0.9
+#: The live test's share: fewer phones said than this many per phone recognition hears
+#: gives the transcript up (offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`).
+MIN_LIVE_PHONE_SHARE = 0.5
 #: Log posterior floor (a probability of 0 from the model would make a path impossible).
 LOG_FLOOR = -30.0
 
@@ -124,7 +127,7 @@ class TranscriptTrack:
         self._states[1::2] = labels
         self._can_skip = np.zeros(len(self._states), dtype=bool)
         self._can_skip[3::2] = labels[1:] != labels[:-1]
-        self._max_loss, self._min_share = MAX_LIVE_ALIGN_LOSS, ctc.MIN_PHONE_SHARE
+        self._max_loss, self._min_share = MAX_LIVE_ALIGN_LOSS, MIN_LIVE_PHONE_SHARE
         self.failed: str | None = None
         self.fit: tuple[float, int, int] | None = None
         self._fixed = 0  # frames whose state is fixed
