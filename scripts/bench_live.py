@@ -8,6 +8,7 @@ Usage::
                                  [--joined] [--guide-share S]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
+    python scripts/bench_live.py --quality --db DB [--sentences 3] [--unpaced] ...
 
 * **Quality** (``--quality``): a database is built from a split's training clips (as
   ``scripts/eval_lipsync.py`` builds a fold's) with its guides (mu-mlp and ppg-ridge, the
@@ -467,6 +468,10 @@ def main() -> int:
                         help="held-out clips scored at most (every k-th)")
     parser.add_argument("--db", type=Path, default=None,
                         help="with --quality and nothing after it: time this database")
+    parser.add_argument("--sentences", type=int, default=len(SENTENCES),
+                        choices=tuple(range(1, len(SENTENCES) + 1)),
+                        help="with --db: the eSpeak NG sentences spoken (the first n; a "
+                        "short input for a quick check)")
     parser.add_argument("--unpaced", action="store_true",
                         help="also the stream's CPU with the speech pushed as fast as taken")
     parser.add_argument("--json", type=Path, default=None)
@@ -531,7 +536,7 @@ def main() -> int:
             from ingest.speech.espeak import speak
 
             model, (guide, _) = Model.load(args.db), stored_guide(args.db)
-            said = [speak(t) for t in SENTENCES]
+            said = [speak(t) for t in SENTENCES[:args.sentences]]
             first = {"speech": [(u.audio.astype(np.float32), u.sample_rate) for u in said]}
         else:
             model, guide = first["model"], first["guide"]
