@@ -1,5 +1,6 @@
 """How well the live stream's end-of-speech transcript test tells right transcripts from
-wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` is chosen on.
+wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` and
+:data:`~animegraph.live.transcript.MIN_LIVE_PHONE_SHARE` are chosen on.
 
 Usage::
 

@@ -21,10 +21,11 @@ after its end) is found by offline's two tests (:func:`ingest.speech.ctc.check_t
 here over the last :data:`CHECK_S` of fixed frames: the path's log posterior falls
 below free recognition's by more than :data:`MAX_LIVE_ALIGN_LOSS` nats per frame
 (offline's :data:`ingest.speech.ctc.MAX_ALIGN_LOSS`, calibrated for live posteriors), or
-it says fewer than :data:`ingest.speech.ctc.MIN_PHONE_SHARE` phones per phone recognition
-hears (with a free end a path of a wrong transcript can stay on the blank and say
-nothing). The stream then recognises the phones of the rest of the speech, as the
-offline path falls back to recognition.
+it says fewer than :data:`MIN_LIVE_PHONE_SHARE` phones per phone recognition hears
+(offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`, calibrated likewise; with a free
+end a path of a wrong transcript can stay on the blank and say nothing). The stream
+then recognises the phones of the rest of the speech, as the offline path falls back to
+recognition.
 
 What the loss measures live is whether the *path* kept its place, which a wrong
 transcript cannot, and a right one does not always: where hama hears no phone of a word
@@ -70,8 +71,18 @@ CHECK_S, MIN_CHECK_S = 10.0, 2.0
 #: (docs/results/live.md, "The transcript's test at the stream's end").
 MAX_LIVE_ALIGN_LOSS = 0.9
 #: The live test's share: fewer phones said than this many per phone recognition hears
-#: gives the transcript up (offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`).
-MIN_LIVE_PHONE_SHARE = 0.5
+#: gives the transcript up, in place of offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`
+#: (0.5), which right transcripts of eSpeak NG speech fell just below at ``--low-latency``
+#: with their path in place (0.48-0.49, the alignment under its threshold): free
+#: recognition on posteriors settled 40 ms after their frame hears more phone onsets.
+#: Rule: the 1st percentile of the worst share of the right transcripts the alignment test
+#: keeps (0.465), less 0.05, rounded down to a tenth, on clips that are not the reported
+#: ones (GRID's database clips every 32nd from the 4th, 20, and the synthetic corpus'
+#: second take, 23; both settings; ``scripts/eval_live_transcript_check.py --offset 4
+#: --every 32 --synthetic --take 2``). Wrong transcripts are mostly caught by the
+#: alignment; the one there the share alone caught said nothing (docs/results/live.md,
+#: "The transcript's test at the stream's end").
+MIN_LIVE_PHONE_SHARE = 0.4
 #: Log posterior floor (a probability of 0 from the model would make a path impossible).
 LOG_FLOOR = -30.0
 
