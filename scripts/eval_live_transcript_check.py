@@ -57,33 +57,19 @@ GRID_SLOTS = (("bin", "lay", "place", "set"), ("blue", "green", "red", "white"),
 SLOT_NAMES = ("command", "colour", "preposition", "letter", "digit", "adverb")
 
 
-class RecordingTrack(TranscriptTrack):
-    """A stream's transcript track that keeps what it is fed and never gives up (its
-    tests are off), so that the stream feeds it to the end whatever they would say."""
-
-    def __init__(self, text: str) -> None:
-        super().__init__(text, FRAME_RATE, test=False)
-        self.fed: list[tuple[np.ndarray, int]] = []
-        self.last: tuple[np.ndarray, int] | None = None
-
-    def update(self, log_probs: np.ndarray, first: int) -> None:
-        self.fed.append((np.array(log_probs), int(first)))
-        super().update(log_probs, first)
-
-    def finish(self, log_probs: np.ndarray, first: int) -> None:
-        self.last = (np.array(log_probs), int(first))
-
-
 def fed_posteriors(model, audio: np.ndarray, sr: int, text: str, setting: dict):
     """The posteriors a live stream of ``audio`` feeds its transcript's path: every
-    update's ``(log_probs, first)``, and the last (the stream's end)."""
-    track = RecordingTrack(text)
+    update's ``(log_probs, first)``, and the last (the stream's end). Its track keeps
+    them and never gives up (its tests off), so that the stream feeds it to the end."""
+    track = TranscriptTrack(text, FRAME_RATE, test=False, fed=[])
     stream = Stream(model, sample_rate=sr, backlog_ms=None, text=track, **setting)
     step = int(CHUNK_S * sr)
     for k in range(0, len(audio), step):
         stream.push(audio[k:k + step])
     stream.close()
-    return track.fed, track.last
+    fed = [(lp, first) for lp, first, at_end in track.fed if not at_end]
+    last = next((lp, first) for lp, first, at_end in track.fed if at_end)
+    return fed, last
 
 
 def replay(text: str, fed, last) -> dict:

@@ -191,18 +191,28 @@ def test_stream_with_its_transcript_or_another_sends_every_frame(model, speech):
 
 def test_stream_takes_a_new_transcript_track(model, speech):
     """A track given as ``text`` is the one the stream feeds (here with its test off:
-    a wrong transcript followed to the end, nothing said); a used one is refused."""
+    a wrong transcript followed to the end, nothing said, what it is fed kept); a used
+    one is refused."""
     from animegraph.live import Stream
     from animegraph.live.transcript import TranscriptTrack
 
     audio, sr = speech
-    track = TranscriptTrack("Seven wizards quietly hex a jolly box of frozen fish.", 50,
-                            test=False)
+    wrong = "Seven wizards quietly hex a jolly box of frozen fish."
+    track = TranscriptTrack(wrong, 50, test=False, fed=[])
     stream = Stream(model, sample_rate=sr, backlog_ms=None, text=track)
     _play(stream, audio)
     assert not any("transcript" in w for w in stream.stats.warnings)
     assert track.failed is None and track.fit is not None
     assert track.fixed == stream._track.frames  # fed to the stream's end
+    # What it was fed, replayed to a tested track, gives the stream's own verdict.
+    assert [at_end for _, _, at_end in track.fed] == [False] * (len(track.fed) - 1) + [True]
+    tested = TranscriptTrack(wrong, 50)
+    for log_probs, first, _ in track.fed[:-1]:
+        if tested.failed is None:
+            tested.update(log_probs, first)
+    said = Stream(model, sample_rate=sr, backlog_ms=None, text=wrong)
+    _play(said, audio)
+    assert tested.failed is not None and tested.failed[:80] in said.stats.warnings
     with pytest.raises(ParameterError, match="must be new"):
         Stream(model, sample_rate=sr, text=track)
 

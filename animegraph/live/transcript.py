@@ -101,6 +101,10 @@ class TranscriptTrack:
         measured (:attr:`fit`) but the path follows the transcript whatever the tests
         say (to measure them, as ``scripts/eval_live_transcript_check.py`` does); a path
         that cannot be closed at the end is still reported.
+    fed : list, optional
+        Every posterior block the track is given is appended to it, as ``(log_probs,
+        first, at_end)`` (a copy; ``at_end``: given to :meth:`finish`), so that a stream's
+        feeding can be replayed to other tracks (``scripts/eval_live_transcript_check.py``).
 
     Attributes
     ----------
@@ -120,7 +124,8 @@ class TranscriptTrack:
         A transcript with no pronounceable word.
     """
 
-    def __init__(self, text: str, frame_rate: int, *, test: bool = True) -> None:
+    def __init__(self, text: str, frame_rate: int, *, test: bool = True,
+                 fed: list | None = None) -> None:
         from ingest.speech import ctc
         from ingest.speech.inputs import check_text
         from ingest.speech.phones import PHONES, SILENCE
@@ -132,6 +137,7 @@ class TranscriptTrack:
         self.text = text
         self.frame_rate = int(frame_rate)
         self.test = bool(test)
+        self.fed = fed
         self._blank = PHONES.index(SILENCE)
         labels = np.asarray([PHONES.index(p) for p in self.phones], dtype=np.int64)
         self._states = np.full(2 * len(labels) + 1, self._blank, dtype=np.int64)
@@ -170,6 +176,8 @@ class TranscriptTrack:
             not be after the first frame not fixed yet (earlier rows are skipped).
         first : int
         """
+        if self.fed is not None:
+            self.fed.append((np.array(log_probs), int(first), False))
         if self.failed is not None or not len(log_probs):
             return
         if first > self._fixed:
@@ -195,6 +203,8 @@ class TranscriptTrack:
         it does not fit."""
         from ingest.speech.inputs import MIN_DURATION
 
+        if self.fed is not None:
+            self.fed.append((np.array(log_probs), int(first), True))
         if self.failed is not None:
             return
         if first > self._fixed:
