@@ -8,6 +8,7 @@ Usage::
                                  [--joined] [--guide-share S]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
+    python scripts/bench_live.py --quality --db DB [--sentences 3] [--unpaced] ...
 
 * **Quality** (``--quality``): a database is built from a split's training clips (as
   ``scripts/eval_lipsync.py`` builds a fold's) with its guides (mu-mlp and ppg-ridge, the
@@ -48,7 +49,8 @@ Usage::
   ``--profile``, that pass runs under cProfile (slower: its times are not the figures)
   and each part's share of the updates' time is printed (hama's call, the guide, the
   DTW of new phones, recognition, the phones' features, search, k-best blend).
-* **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated):
+* **Drift** (``--drift-seconds``): one long paced stream (held-out speech repeated; at
+  ``--lookaheads``' first look-ahead, else the default 120 ms, as ``--unpaced``):
   frames sent against the audio heard times the frame rate, the latency over its first
   and last tenth, and the updates that had to catch up.
 
@@ -458,8 +460,8 @@ def main() -> int:
     parser.add_argument("--quality", nargs="*", default=["synthetic"])
     parser.add_argument("--lookaheads", nargs="+", type=float, default=None,
                         help="look-aheads (ms) of the quality and latency curves (40 80 "
-                        "120 200 300); --unpaced times the first given (else the default "
-                        "look-ahead, 120)")
+                        "120 200 300); --unpaced and --drift-seconds run at the first "
+                        "given (else the default look-ahead, 120)")
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--drift-seconds", type=float, default=120.0)
     parser.add_argument("--facegood-seconds", type=float, default=30.0)
@@ -467,6 +469,10 @@ def main() -> int:
                         help="held-out clips scored at most (every k-th)")
     parser.add_argument("--db", type=Path, default=None,
                         help="with --quality and nothing after it: time this database")
+    parser.add_argument("--sentences", type=int, default=len(SENTENCES),
+                        choices=tuple(range(1, len(SENTENCES) + 1)),
+                        help="with --db: the eSpeak NG sentences spoken (the first n; a "
+                        "short input for a quick check)")
     parser.add_argument("--unpaced", action="store_true",
                         help="also the stream's CPU with the speech pushed as fast as taken")
     parser.add_argument("--json", type=Path, default=None)
@@ -497,7 +503,8 @@ def main() -> int:
                         help="the guide's share of each window's motion (if not given "
                         "the stream's default, by the database: default_guide_share)")
     args = parser.parse_args()
-    unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
+    # --unpaced and the drift stream run at one look-ahead: the first the user names.
+    first_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
     GRID_DB.extend([args.grid_db] if args.grid_db else [])
     GRID_TRAIN_DB.extend([args.grid_train_db] if args.grid_train_db else [])
@@ -530,12 +537,12 @@ def main() -> int:
             from ingest.speech.espeak import speak
 
             model, (guide, _) = Model.load(args.db), stored_guide(args.db)
-            said = [speak(t) for t in SENTENCES]
+            said = [speak(t) for t in SENTENCES[:args.sentences]]
             first = {"speech": [(u.audio.astype(np.float32), u.sample_rate) for u in said]}
         else:
             model, guide = first["model"], first["guide"]
         if args.unpaced:
-            results["unpaced"] = unpaced(model, guide, first["speech"], unpaced_lookahead,
+            results["unpaced"] = unpaced(model, guide, first["speech"], first_lookahead,
                                          profile=args.profile)
             print(json.dumps({"unpaced": results["unpaced"]}), flush=True)
         if args.latency_seconds > 0:
@@ -546,7 +553,7 @@ def main() -> int:
                 print(json.dumps(row), flush=True)
         if args.drift_seconds > 0:
             wav = speech_file(first["speech"], args.drift_seconds, tmp / "drift.wav")
-            results["drift"] = paced(model, guide, wav, 120.0)
+            results["drift"] = paced(model, guide, wav, first_lookahead)
             print(json.dumps({"drift": results["drift"]}), flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))

@@ -1,10 +1,12 @@
 """How well the live stream's end-of-speech transcript test tells right transcripts from
-wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` is chosen on.
+wrong ones: the data :data:`animegraph.live.transcript.MAX_LIVE_ALIGN_LOSS` and
+:data:`~animegraph.live.transcript.MIN_LIVE_PHONE_SHARE` are chosen on.
 
 Usage::
 
     python scripts/eval_live_transcript_check.py --grid-db DB640 [--every 8]
-        [--synthetic] [--held-out S1DB] [--json out.json]
+        [--offset 0] [--synthetic] [--take 1] [--held-out S1DB] [--json out.json]
+    python scripts/eval_live_transcript_check.py --summarize out.json
 
 Each clip is streamed live (:class:`animegraph.live.Stream`, 20 ms chunks, as
 ``bench_live.py`` plays them) at the default setting and at ``--low-latency``, given its
@@ -41,7 +43,7 @@ import numpy as np
 from animegraph.live import Stream
 from animegraph.live.frontend import FRAME_RATE
 from animegraph.live.stream import DEFAULT_SETTING, LOW_LATENCY
-from animegraph.live.transcript import MAX_LIVE_ALIGN_LOSS, TranscriptTrack
+from animegraph.live.transcript import MAX_LIVE_ALIGN_LOSS, MIN_LIVE_PHONE_SHARE, TranscriptTrack
 from animegraph.synthesis import Model
 from ingest.speech.ctc import MAX_ALIGN_LOSS, MIN_PHONE_SHARE
 
@@ -57,43 +59,57 @@ SLOT_NAMES = ("command", "colour", "preposition", "letter", "digit", "adverb")
 
 def fed_posteriors(model, audio: np.ndarray, sr: int, text: str, setting: dict):
     """The posteriors a live stream of ``audio`` feeds its transcript's path: every
-    update's ``(log_probs, first)``, and the last (the stream's end). The stream's own
-    track records them and never gives up (its test is switched off), so that the stream
-    feeds it to the end whatever the test would say."""
-    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=text, **setting)
-    track, fed, last = stream._transcript, [], []
-    update = track.update
-
-    def record(log_probs, first):
-        fed.append((np.array(log_probs), int(first)))
-        update(log_probs, first)
-
-    track.update = record
-    track.finish = lambda log_probs, first: last.append((np.array(log_probs), int(first)))
-    track._check = lambda *args, **kwargs: None
+    update's ``(log_probs, first)``, and the last (the stream's end). Its track keeps
+    them and never gives up (its tests off), so that the stream feeds it to the end."""
+    track = TranscriptTrack(text, FRAME_RATE, test=False, fed=[])
+    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=track, **setting)
     step = int(CHUNK_S * sr)
     for k in range(0, len(audio), step):
         stream.push(audio[k:k + step])
     stream.close()
-    return fed, last[0]
+    fed = [(lp, first) for lp, first, at_end in track.fed if not at_end]
+    last = next((lp, first) for lp, first, at_end in track.fed if at_end)
+    return fed, last
 
 
-def replay(text: str, fed, last) -> tuple[float, float, str | None]:
-    """(alignment loss at the end, phones said per phone heard, why the test failed or
-    None) of ``text`` on the
-    posteriors a stream fed its track, fed as the stream feeds them. The live threshold
-    is the track's own; the loss is reported whatever it says."""
+def replay(text: str, fed, last) -> dict:
+    """``text``'s track fed the posteriors a stream fed its own, as the stream feeds them.
+
+    Returns ``loss`` and ``share`` (the alignment loss, nats/frame below free recognition,
+    and the phones said per phone heard, of the test that failed, else of the test at the
+    end; inf and 0 if the path could not be closed), ``failed`` (why the track gave the
+    transcript up, at its own thresholds, or None) and, from a track with its tests off
+    (the same path, followed to the end), ``worst_loss`` and ``worst_share`` (the largest
+    loss and the smallest share of all its tests): a threshold pair reports the
+    transcript if and only if one of the two crosses it, so the data choose thresholds
+    without streaming again."""
     track = TranscriptTrack(text, FRAME_RATE)
+    untested = TranscriptTrack(text, FRAME_RATE, test=False)
+    worst_loss, worst_share = -np.inf, np.inf
+
+    def measure():
+        nonlocal worst_loss, worst_share
+        if untested.fit is not None:
+            loss, said, heard = untested.fit
+            worst_loss, worst_share = max(worst_loss, loss), min(worst_share,
+                                                                 said / max(heard, 1))
+
     for lp, first in fed:
-        track.update(lp, first)
-        if track.failed is not None:
-            break
+        if track.failed is None:
+            track.update(lp, first)
+        untested.update(lp, first)
+        measure()
     if track.failed is None:
         track.finish(*last)
-    if track.fit is None:  # the frames left could not say the phones left
-        return np.inf, 0.0, track.failed
-    loss, said, heard = track.fit
-    return loss, said / max(heard, 1), track.failed
+    untested.finish(*last)
+    if untested.failed is not None:  # the path could not be closed
+        worst_loss, worst_share = np.inf, 0.0
+    else:
+        measure()
+    loss, said, heard = (np.inf, 0, 1) if track.fit is None else track.fit
+    return {"loss": loss, "share": said / max(heard, 1), "failed": track.failed,
+            "worst_loss": worst_loss, "worst_share": worst_share,
+            "thresholds": [MAX_LIVE_ALIGN_LOSS, MIN_LIVE_PHONE_SHARE]}
 
 
 def one_word_changes(text: str, rng: np.random.Generator) -> dict[str, str]:
@@ -123,9 +139,10 @@ def swapped_word(text: str, others: list[str], rng: np.random.Generator) -> str:
     return " ".join(words) + "."
 
 
-def grid_clips(db: Path, every: int, held_out: bool):
-    """(id, audio float32, rate, text) of every ``every``-th clip of a GRID database
-    (``held_out``: its held-out part by ``grid_split``, as bench_live picks 20)."""
+def grid_clips(db: Path, every: int, held_out: bool, offset: int = 0):
+    """(id, audio float32, rate, text) of every ``every``-th clip of a GRID database from
+    the ``offset``-th on (``held_out``: its held-out part by ``grid_split``, as
+    bench_live picks 20)."""
     from animegraph.apps.evaluate import grid_split
     from db.store import Database
     from ingest.tables import prepared_from_database
@@ -135,14 +152,15 @@ def grid_clips(db: Path, every: int, held_out: bool):
         _, test = grid_split(clips)
         clips = test[::max(1, -(-len(test) // 20))]
     else:
-        clips = clips[::every]
+        clips = clips[offset::every]
     return [(c.clip_id, c.audio.astype(np.float32) / 32768.0, c.sample_rate, c.text)
             for c in clips if c.text]
 
 
-def synthetic_clips():
+def synthetic_clips(take: int = 1):
     """eSpeak NG speech of the synthetic split's database sentences (bench_live's
-    corpus; its held-out sentences left out), one take per sentence and emotion."""
+    corpus; its held-out sentences left out), one take per sentence and emotion (the
+    ``take``-th variation of the three)."""
     from ingest.corpus.synthetic import CorpusConfig, plan_corpus, synthesize_clip
 
     config = CorpusConfig(sentences=14, parallel=4, variations=3, seed=3)
@@ -152,7 +170,7 @@ def synthetic_clips():
     held = {parallel[-1], *singles[-2:]}  # as bench_live.split holds them out
     out = []
     for spec in specs:
-        if spec.sentence_id in held or spec.variation != 1:
+        if spec.sentence_id in held or spec.variation != take:
             continue
         utt = synthesize_clip(spec, config).utterance
         out.append((spec.clip_id, utt.audio.astype(np.float32), utt.sample_rate, spec.text))
@@ -161,9 +179,16 @@ def synthetic_clips():
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--grid-db", type=Path, required=True,
+    parser.add_argument("--summarize", type=Path, default=None, metavar="JSON",
+                        help="only print the table of the rows a run wrote (--json), "
+                        "at today's thresholds")
+    parser.add_argument("--grid-db", type=Path, default=None,
                         help="GRID database (its model streams; its clips are tried)")
     parser.add_argument("--every", type=int, default=8, help="every n-th GRID clip")
+    parser.add_argument("--offset", type=int, default=0,
+                        help="the first GRID clip tried (another offset: other clips)")
+    parser.add_argument("--take", type=int, default=1, choices=(1, 2, 3),
+                        help="the synthetic corpus' take tried (another take: other speech)")
     parser.add_argument("--synthetic", action="store_true",
                         help="also eSpeak NG speech of the synthetic corpus' sentences")
     parser.add_argument("--held-out", type=Path, default=None,
@@ -173,12 +198,17 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
+    if args.summarize is not None:
+        summarize(json.loads(args.summarize.read_text()))
+        return 0
+    if args.grid_db is None:
+        parser.error("--grid-db is required (or --summarize JSON)")
     rng = np.random.default_rng(args.seed)
     model = Model.load(args.grid_db)
     corpora = {"grid": grid_clips(args.held_out or args.grid_db, args.every,
-                                  args.held_out is not None)}
+                                  args.held_out is not None, args.offset)}
     if args.synthetic:
-        corpora["synthetic"] = synthetic_clips()
+        corpora["synthetic"] = synthetic_clips(args.take)
     rows = []
     for corpus, clips in corpora.items():
         texts = [c[3] for c in clips]
@@ -195,37 +225,47 @@ def main(argv=None) -> int:
                     continue
                 fed, last = fed_posteriors(model, audio, sr, text, setting)
                 for kind, t in tried.items():
-                    loss, share, failed = replay(t, fed, last)
                     rows.append({"corpus": corpus, "clip": cid, "setting": name,
-                                 "kind": kind, "text": t, "loss": loss, "share": share,
-                                 "failed": failed})
+                                 "kind": kind, "text": t, **replay(t, fed, last)})
                 right = rows[-len(tried)]
                 print(f"{corpus} {cid} {name}: right {right['loss']:.2f}, " + ", ".join(
                     f"{r['kind']} {r['loss']:.2f}" for r in rows[-len(tried) + 1:]),
                     flush=True)
+            if args.json:  # after every clip: a long run stopped keeps what it measured
+                args.json.write_text(json.dumps(rows, indent=1, default=float))
     summarize(rows)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1, default=float))
     return 0
 
 
 def summarize(rows: list[dict]) -> None:
-    """Per corpus, setting and kind: the loss's percentiles and how many are reported at
-    offline's threshold and at the live one (the live track's verdict)."""
+    """Per corpus, setting and kind: the percentiles of the loss where the track stopped
+    and of the worst share of its tests, and how many are reported at offline's
+    thresholds and at the live ones (the live track's verdict)."""
     keys = sorted({(r["corpus"], r["setting"], r["kind"]) for r in rows},
                   key=lambda k: (k[0], k[1], k[2] != "right", k[2]))
     print(f"\n| corpus | setting | transcript | n | loss p1 / p50 / p99 / max | "
-          f"reported at {MAX_ALIGN_LOSS} | reported live ({MAX_LIVE_ALIGN_LOSS}) |")
-    print("|---|---|---|---|---|---|---|")
+          f"worst share min / p1 / p5 / p50 | reported at {MAX_ALIGN_LOSS}, "
+          f"{MIN_PHONE_SHARE} | reported live ({MAX_LIVE_ALIGN_LOSS}, "
+          f"{MIN_LIVE_PHONE_SHARE}) |")
+    print("|---|---|---|---|---|---|---|---|")
     for key in keys:
         got = [r for r in rows if (r["corpus"], r["setting"], r["kind"]) == key]
         loss = np.array([r["loss"] for r in got])
         p = np.percentile(loss, [1, 50, 99])
-        share = np.array([r["share"] for r in got])
-        offline = int(np.sum((loss > MAX_ALIGN_LOSS) | (share < MIN_PHONE_SHARE)))
-        live = sum(r["failed"] is not None for r in got)
+        worst_loss = np.array([r["worst_loss"] for r in got])
+        worst_share = np.array([r["worst_share"] for r in got])
+        q = np.percentile(worst_share, [0, 1, 5, 50])
+        offline = int(np.sum((worst_loss > MAX_ALIGN_LOSS) | (worst_share < MIN_PHONE_SHARE)))
+        live = int(np.sum((worst_loss > MAX_LIVE_ALIGN_LOSS)
+                          | (worst_share < MIN_LIVE_PHONE_SHARE)))
+        for r in got:  # the track's verdict is its worst test's against its thresholds
+            if "thresholds" in r:
+                max_loss, min_share = r["thresholds"]
+                assert (r["failed"] is not None) == (
+                    r["worst_loss"] > max_loss or r["worst_share"] < min_share), r
         print(f"| {key[0]} | {key[1]} | {key[2]} | {len(got)} | {p[0]:.2f} / {p[1]:.2f} / "
-              f"{p[2]:.2f} / {loss.max():.2f} | {offline} | {live} |")
+              f"{p[2]:.2f} / {loss.max():.2f} | {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} / "
+              f"{q[3]:.2f} | {offline} | {live} |")
 
 
 if __name__ == "__main__":

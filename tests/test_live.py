@@ -885,14 +885,23 @@ def test_websocket_source_needs_a_rate_and_a_port(tiny_db, tmp_path):
         assert "Traceback" not in out.stderr
 
 
-def test_bench_live_unpaced_times_the_first_lookahead_given(tiny_db, tmp_path):
-    """``bench_live.py --unpaced`` streams at ``--lookaheads``' first (it always used
-    120 ms, whatever was asked); without ``--lookaheads``, at the default look-ahead."""
+def test_bench_live_unpaced_and_drift_run_at_the_first_lookahead_given(tiny_db, tmp_path):
+    """``bench_live.py --unpaced`` and the drift stream run at ``--lookaheads``' first
+    (they always used 120 ms, whatever was asked). One short sentence (``--sentences
+    1``) keeps the real script quick: it still speaks, streams and times it."""
+    from ingest.speech.espeak import speak
+
     out = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "bench_live.py"), "--quality", "--db",
-         str(tiny_db[0]), "--unpaced", "--lookaheads", "40", "--latency-seconds", "0",
-         "--drift-seconds", "0", "--json", str(tmp_path / "out.json")],
+         str(tiny_db[0]), "--sentences", "1", "--unpaced", "--lookaheads", "40",
+         "--latency-seconds", "0", "--drift-seconds", "1", "--json",
+         str(tmp_path / "out.json")],
         capture_output=True, text=True, timeout=900,
         env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert out.returncode == 0, out.stderr
-    assert json.loads((tmp_path / "out.json").read_text())["unpaced"]["lookahead_ms"] == 40
+    got = json.loads((tmp_path / "out.json").read_text())
+    u = speak("Please bring the blue box to the table.")  # bench_live.SENTENCES[0]
+    assert got["unpaced"]["lookahead_ms"] == 40 and got["unpaced"]["updates"] > 0
+    assert got["unpaced"]["seconds"] == pytest.approx(len(u.audio) / u.sample_rate)
+    assert got["drift"]["lookahead_ms"] == 40
+    assert got["drift"]["frames"] == got["drift"]["expected_frames"] > 0

@@ -80,6 +80,21 @@ def test_transcript_of_other_words_or_too_few_is_given_up(log_probs):
     assert short.failed is not None
 
 
+def test_transcript_with_its_test_off_is_measured_but_kept(log_probs):
+    """``test=False``: the same path as a tested track's up to where that one gives up,
+    the fit still measured (a wrong transcript's worse than the right one's), never given
+    up."""
+    from animegraph.live.transcript import TranscriptTrack
+
+    wrong = "Seven wizards quietly hex a jolly box of fish."
+    tested = _follow(TranscriptTrack(wrong, 50), log_probs)
+    kept = _follow(TranscriptTrack(wrong, 50, test=False), log_probs)
+    right = _follow(TranscriptTrack(SAID, 50, test=False), log_probs)
+    assert tested.failed is not None and kept.failed is None and right.failed is None
+    assert kept.fixed > tested.fixed
+    assert kept.fit is not None and kept.fit[0] > right.fit[0]
+
+
 SHORT = "Please bring the blue box to me."  # 2.3 s: the running test never has its 2 s
 
 
@@ -172,6 +187,34 @@ def test_stream_with_its_transcript_or_another_sends_every_frame(model, speech):
     said = [w for w in wrong.stats.warnings if w.startswith("the transcript does not fit")]
     assert len(said) == 1 and wrong.stats.warnings[said[0]] == 1
     assert wrong._transcript is None  # recognising
+
+
+def test_stream_takes_a_new_transcript_track(model, speech):
+    """A track given as ``text`` is the one the stream feeds (here with its test off:
+    a wrong transcript followed to the end, nothing said, what it is fed kept); a used
+    one is refused."""
+    from animegraph.live import Stream
+    from animegraph.live.transcript import TranscriptTrack
+
+    audio, sr = speech
+    wrong = "Seven wizards quietly hex a jolly box of frozen fish."
+    track = TranscriptTrack(wrong, 50, test=False, fed=[])
+    stream = Stream(model, sample_rate=sr, backlog_ms=None, text=track)
+    _play(stream, audio)
+    assert not any("transcript" in w for w in stream.stats.warnings)
+    assert track.failed is None and track.fit is not None
+    assert track.fixed == stream._track.frames  # fed to the stream's end
+    # What it was fed, replayed to a tested track, gives the stream's own verdict.
+    assert [at_end for _, _, at_end in track.fed] == [False] * (len(track.fed) - 1) + [True]
+    tested = TranscriptTrack(wrong, 50)
+    for log_probs, first, _ in track.fed[:-1]:
+        if tested.failed is None:
+            tested.update(log_probs, first)
+    said = Stream(model, sample_rate=sr, backlog_ms=None, text=wrong)
+    _play(said, audio)
+    assert tested.failed is not None and tested.failed[:80] in said.stats.warnings
+    with pytest.raises(ParameterError, match="must be new"):
+        Stream(model, sample_rate=sr, text=track)
 
 
 def test_stream_reports_a_wrong_transcript_of_a_short_utterance_at_its_end(model):

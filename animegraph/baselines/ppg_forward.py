@@ -45,7 +45,12 @@ def loud_level(loud: float | None) -> Iterator[None]:
     ``loud`` (an RMS, > 0) instead of the audio's own loud level. A live stream predicts
     from a short window: its own loud level is the room's noise before the first word
     (heard as loud as speech: a half-open mouth), so the stream gives the level of all
-    it has heard (:class:`animegraph.live.frontend.LoudLevel`), as offline the clip's."""
+    it has heard (:class:`animegraph.live.frontend.LoudLevel`), as offline the clip's.
+
+    A context, not a parameter: the level would go through ``window_motion``,
+    ``guide_trajectory`` and the shared ``predict(audio, sample_rate)`` and
+    ``_predict`` of every guide (mu-mlp, av-hmm, ..., which have no use for it), or
+    ``guide_trajectory`` would single ppg-ridge out of a list of guides."""
     token = _LOUD.set(None if loud is None or not loud > 0 else float(loud))
     try:
         yield

@@ -206,8 +206,9 @@ class Stream:
         (:class:`animegraph.live.frontend.PosteriorTrack`): the model hears this much audio
         before the first unsettled frame, and a frame is settled once this much audio
         after it has been heard.
-    text : str, optional
-        What the speech says (a text-to-speech voice knows it): the window's phones are
+    text : str or TranscriptTrack, optional
+        What the speech says (a text-to-speech voice knows it), or a new track of it
+        (to set its options, or to watch what it is fed): the window's phones are
         the transcript's, aligned to the posteriors as the audio arrives
         (:class:`animegraph.live.transcript.TranscriptTrack`) and ranked by phonetic
         context first, as offline synthesis with a transcript does
@@ -288,7 +289,11 @@ class Stream:
         self._tentative: tuple[int, np.ndarray] | None = None  # unsent frames of a window
         self._track = PosteriorTrack(self.sample_rate, context_s=posterior_context_ms / 1000,
                                      settle_s=settle_ms / 1000)
-        self._transcript = None if text is None else TranscriptTrack(text, FRAME_RATE)
+        if isinstance(text, TranscriptTrack) and (text.frames or text.frame_rate != FRAME_RATE):
+            raise ParameterError(f"text: a transcript track must be new and at "
+                                 f"{FRAME_RATE} frames/s")
+        self._transcript = (text if isinstance(text, TranscriptTrack) or text is None
+                            else TranscriptTrack(text, FRAME_RATE))
         self._memory = PhoneMemory()  # each phone's choice of animes, made once
         self._closed = False
 

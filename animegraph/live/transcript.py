@@ -21,10 +21,11 @@ after its end) is found by offline's two tests (:func:`ingest.speech.ctc.check_t
 here over the last :data:`CHECK_S` of fixed frames: the path's log posterior falls
 below free recognition's by more than :data:`MAX_LIVE_ALIGN_LOSS` nats per frame
 (offline's :data:`ingest.speech.ctc.MAX_ALIGN_LOSS`, calibrated for live posteriors), or
-it says fewer than :data:`ingest.speech.ctc.MIN_PHONE_SHARE` phones per phone recognition
-hears (with a free end a path of a wrong transcript can stay on the blank and say
-nothing). The stream then recognises the phones of the rest of the speech, as the
-offline path falls back to recognition.
+it says fewer than :data:`MIN_LIVE_PHONE_SHARE` phones per phone recognition hears
+(offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`, calibrated likewise; with a free
+end a path of a wrong transcript can stay on the blank and say nothing). The stream
+then recognises the phones of the rest of the speech, as the offline path falls back to
+recognition.
 
 What the loss measures live is whether the *path* kept its place, which a wrong
 transcript cannot, and a right one does not always: where hama hears no phone of a word
@@ -69,6 +70,19 @@ CHECK_S, MIN_CHECK_S = 10.0, 2.0
 #: clip's sentence reported 33 of 80 times, a one-word change 0-17 of 80 by its slot
 #: (docs/results/live.md, "The transcript's test at the stream's end").
 MAX_LIVE_ALIGN_LOSS = 0.9
+#: The live test's share: fewer phones said than this many per phone recognition hears
+#: gives the transcript up, in place of offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`
+#: (0.5), which right transcripts of eSpeak NG speech fell just below at ``--low-latency``
+#: with their path in place (0.48-0.49, the alignment under its threshold): free
+#: recognition on posteriors settled 40 ms after their frame hears more phone onsets.
+#: Rule: the 1st percentile of the worst share of the right transcripts the alignment test
+#: keeps (0.465), less 0.05, rounded down to a tenth, on clips that are not the reported
+#: ones (GRID's database clips every 32nd from the 4th, 20, and the synthetic corpus'
+#: second take, 23; both settings; ``scripts/eval_live_transcript_check.py --offset 4
+#: --every 32 --synthetic --take 2``). Wrong transcripts are mostly caught by the
+#: alignment; the one there the share alone caught said nothing (docs/results/live.md,
+#: "The transcript's test at the stream's end").
+MIN_LIVE_PHONE_SHARE = 0.4
 #: Log posterior floor (a probability of 0 from the model would make a path impossible).
 LOG_FLOOR = -30.0
 
@@ -82,6 +96,15 @@ class TranscriptTrack:
         What the voice says (English; numbers and symbols are spelled out, as offline).
     frame_rate : int
         Posterior frames per second.
+    test : bool, default=True
+        Give the transcript up when it stops fitting the speech. False: the fit is still
+        measured (:attr:`fit`) but the path follows the transcript whatever the tests
+        say (to measure them, as ``scripts/eval_live_transcript_check.py`` does); a path
+        that cannot be closed at the end is still reported.
+    fed : list, optional
+        Every posterior block the track is given is appended to it, as ``(log_probs,
+        first, at_end)`` (a copy; ``at_end``: given to :meth:`finish`), so that a stream's
+        feeding can be replayed to other tracks (``scripts/eval_live_transcript_check.py``).
 
     Attributes
     ----------
@@ -101,7 +124,8 @@ class TranscriptTrack:
         A transcript with no pronounceable word.
     """
 
-    def __init__(self, text: str, frame_rate: int) -> None:
+    def __init__(self, text: str, frame_rate: int, *, test: bool = True,
+                 fed: list | None = None) -> None:
         from ingest.speech import ctc
         from ingest.speech.inputs import check_text
         from ingest.speech.phones import PHONES, SILENCE
@@ -112,13 +136,15 @@ class TranscriptTrack:
             raise DataError(f"the transcript {text[:60]!r} has no pronounceable word")
         self.text = text
         self.frame_rate = int(frame_rate)
+        self.test = bool(test)
+        self.fed = fed
         self._blank = PHONES.index(SILENCE)
         labels = np.asarray([PHONES.index(p) for p in self.phones], dtype=np.int64)
         self._states = np.full(2 * len(labels) + 1, self._blank, dtype=np.int64)
         self._states[1::2] = labels
         self._can_skip = np.zeros(len(self._states), dtype=bool)
         self._can_skip[3::2] = labels[1:] != labels[:-1]
-        self._max_loss, self._min_share = MAX_LIVE_ALIGN_LOSS, ctc.MIN_PHONE_SHARE
+        self._max_loss, self._min_share = MAX_LIVE_ALIGN_LOSS, MIN_LIVE_PHONE_SHARE
         self.failed: str | None = None
         self.fit: tuple[float, int, int] | None = None
         self._fixed = 0  # frames whose state is fixed
@@ -150,6 +176,8 @@ class TranscriptTrack:
             not be after the first frame not fixed yet (earlier rows are skipped).
         first : int
         """
+        if self.fed is not None:
+            self.fed.append((np.array(log_probs), int(first), False))
         if self.failed is not None or not len(log_probs):
             return
         if first > self._fixed:
@@ -175,6 +203,8 @@ class TranscriptTrack:
         it does not fit."""
         from ingest.speech.inputs import MIN_DURATION
 
+        if self.fed is not None:
+            self.fed.append((np.array(log_probs), int(first), True))
         if self.failed is not None:
             return
         if first > self._fixed:
@@ -276,7 +306,8 @@ class TranscriptTrack:
             why = f"it says {said} phones where about {heard} were heard"
         else:
             return
-        self.failed = f"the transcript does not fit the speech {at} ({why}): {then}"
+        if self.test:
+            self.failed = f"the transcript does not fit the speech {at} ({why}): {then}"
 
     def phone_starts(self, first: int, count: int) -> tuple[list[str], np.ndarray]:
         """The transcript's phones on the path in frames ``first`` to ``first + count``
