@@ -359,6 +359,7 @@ PARTS = (("hama's call", "ingest/speech/ctc.py", "phone_probs"),
          ("the guide", "animegraph/synthesis/guide.py", "guide_trajectory"),
          ("DTW of new phones", "animegraph/synthesis/audio.py", "candidate_costs"),
          ("phones recognised", "ingest/speech/ctc.py", "recognize"),
+         ("phones placed by PocketSphinx", "ingest/speech/sphinx.py", "align_phones"),
          ("phones' features", "animegraph/synthesis/pipeline.py", "query_phones"),
          ("search", "animegraph/search/solve.py", "search"),
          ("k-best blend", "animegraph/synthesis/assemble.py", "blend_k_best"))
@@ -495,6 +496,10 @@ def main() -> int:
     parser.add_argument("--guide-share", type=float, default=None,
                         help="the guide's share of each window's motion (the stream's "
                         "default, LIVE_GUIDE_SHARE, if not given)")
+    parser.add_argument("--phones-engine", choices=("hama", "auto"), default=None,
+                        help="how the stream's windows recognise their phones (the stream's "
+                        "default if not given; auto: hama names them, PocketSphinx places "
+                        "them, as offline)")
     args = parser.parse_args()
     unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
@@ -505,7 +510,8 @@ def main() -> int:
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
                                      ("settle_ms", args.settle), ("threads", args.threads),
-                                     ("guide_share", args.guide_share))
+                                     ("guide_share", args.guide_share),
+                                     ("phones_engine", args.phones_engine))
                    if v is not None})
     if WINDOW.get("threads") == 0:
         WINDOW["threads"] = None  # no cap

@@ -13,9 +13,11 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   each update the model hears only the frames not settled yet and a context before
   them), and hands the window's rows to :mod:`ingest.speech.ctc`
   (:func:`~ingest.speech.ctc.remember`); the window's phones are recognised from them
-  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
-  PocketSphinx place hama's phones, left out here for its cost) and ppg-ridge reads
-  them as its posteriorgram. A window starts on a 20 ms frame (when the frame rate
+  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`: hama names and places them)
+  and ppg-ridge reads them as its posteriorgram. With ``phones_engine="auto"`` the
+  window's phones are recognised as offline's default recognises an utterance's
+  (:func:`ingest.speech.engines.recognize_auto`: hama names them, from the same
+  posteriors, and PocketSphinx places them on the window's audio). A window starts on a 20 ms frame (when the frame rate
   allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
@@ -111,6 +113,12 @@ DEFAULT_BACKLOG_MS = 400.0
 #: OpenBLAS's threads (which wait spinning) and the DTW's took a quarter more CPU for
 #: little less wall time (docs/results/live.md, "CPU").
 DEFAULT_THREADS = 1
+#: How a window's phones are recognised (``Stream(phones_engine=...)``, ``--phones-engine``):
+#: ``"hama"`` names and places them (CTC greedy decoding of the track's posteriors);
+#: ``"auto"``, offline's default (:mod:`ingest.speech.engines`), has PocketSphinx place
+#: hama's phones on the window's audio.
+LIVE_PHONE_ENGINES = ("hama", "auto")
+DEFAULT_PHONE_ENGINE = "hama"
 #: Frames at the start of an update cross-faded from the previous window's estimate.
 FADE_FRAMES = 3
 #: With ``emotion="auto"``: the speech is classified again every this many seconds, over
@@ -215,12 +223,18 @@ class Stream:
         Threads an update may run at once: the DTW's (numba's, for the updating thread)
         and BLAS's (the whole process' while an update runs). None: as many as the
         libraries take (the cores). hama hears a window in one piece, on one thread.
+    phones_engine : {"hama", "auto"}
+        How the window's phones are recognised (:data:`LIVE_PHONE_ENGINES`): ``"hama"``
+        names and places them; ``"auto"`` as offline's default engine, hama naming them
+        and PocketSphinx placing them on the window's audio (hama's own timing where
+        PocketSphinx finds no path). A transcript's phones are placed by its path either
+        way.
 
     Raises
     ------
     ParameterError
-        On an unsupported rate or a look-ahead, hop, context or guide share out of
-        range, or an empty ``text``.
+        On an unsupported rate, a look-ahead, hop, context or guide share out of
+        range, an unknown ``phones_engine``, or an empty ``text``.
     DataError
         A ``text`` with no pronounceable word.
     """
@@ -232,7 +246,8 @@ class Stream:
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
                  settle_ms: float = SETTLE_S * 1000, text: str | None = None,
-                 threads: int | None = DEFAULT_THREADS) -> None:
+                 threads: int | None = DEFAULT_THREADS,
+                 phones_engine: str = DEFAULT_PHONE_ENGINE) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
@@ -251,6 +266,10 @@ class Stream:
                 threads, int | np.integer) or threads < 1):
             raise ParameterError(f"threads must be a whole number >= 1 or None, got "
                                  f"{threads!r}")
+        if phones_engine not in LIVE_PHONE_ENGINES:
+            raise ParameterError(f"phones_engine: expected one of "
+                                 f"{', '.join(LIVE_PHONE_ENGINES)}, got {phones_engine!r}")
+        self.phones_engine = phones_engine
         self.threads = None if threads is None else int(threads)
         self.model = model if isinstance(model, Model) else Model.load(model)
         self.sample_rate = int(sample_rate)
@@ -491,6 +510,7 @@ class Stream:
         from animegraph.baselines.ppg_forward import loud_level
         from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
         from ingest.speech import ctc
+        from ingest.speech.engines import recognizer
 
         first_posterior = int(round(start_s * FRAME_RATE))
         count = int(np.ceil(len(audio) / self.sample_rate * FRAME_RATE - 1e-9))
@@ -499,8 +519,8 @@ class Stream:
         if self._transcript is not None:  # the transcript's phones, placed by its path
             segments = window_segments(self._transcript, probs, first_posterior, audio,
                                        self.sample_rate)
-        else:
-            segments = ctc.recognize(audio, self.sample_rate)
+        else:  # hama's phones from the posteriors remembered above
+            segments = recognizer(self.phones_engine)(audio, self.sample_rate)
         # Known phones are ranked by phonetic context first, as offline (synthesis.path);
         # unlike offline the guide stays blended: a short window's animes alone followed
         # the recording much less closely (docs/results/live.md, "With a transcript").
