@@ -17,8 +17,8 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   and ppg-ridge reads them as its posteriorgram. With ``phones_engine="auto"`` the
   window's phones are recognised as offline's default recognises an utterance's
   (:func:`ingest.speech.engines.recognize_auto`: hama names them, from the same
-  posteriors, and PocketSphinx places them on the window's audio). A window starts on a 20 ms frame (when the frame rate
-  allows), so that its rows are the track's;
+  posteriors, and PocketSphinx places them on the window's audio). A window starts on a
+  20 ms frame (when the frame rate allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended) from those phones given as labels, except that the guide's share is
