@@ -99,6 +99,9 @@ TEXT: list = []
 #: Also score the held-out clips played back to back as one stream, and each clip's
 #: frames after its first second (``--joined``).
 JOINED: list = []
+#: Phone engines the quality runs also stream each clip with (``--phones-engine``'s second
+#: and later): rows ``live-LA-ENGINE``, paired with the first engine's ``live-LA``.
+OTHER_ENGINES: list = []
 #: Speech for latency and drift with --db (eSpeak NG).
 SENTENCES = ("Please bring the blue box to the table.",
              "We were away a year ago when the rain came down on the hills.",
@@ -175,10 +178,11 @@ def guides(train) -> tuple[object, list[str]]:
     return (None if not got else got[0] if len(got) == 1 else tuple(got)), missing
 
 
-def live_motion(model, audio, sr, lookahead_ms, guide, text=None
+def live_motion(model, audio, sr, lookahead_ms, guide, text=None, phones_engine=None
                 ) -> tuple[np.ndarray, Stream]:
+    window = {**WINDOW, **({"phones_engine": phones_engine} if phones_engine else {})}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
-                    backlog_ms=None, text=text, **WINDOW)
+                    backlog_ms=None, text=text, **window)
     step = int(CHUNK_S * sr)
     parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
     parts.append(stream.close().motion)
@@ -205,6 +209,9 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     rows = {"offline": [], "offline-hama": [], "loudness": [],
             **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
+    for engine in OTHER_ENGINES:
+        rows.update({f"live-{la:g}-{engine}": [] for la in lookaheads})
+        cpu.update({f"live-{la:g}-{engine}": [] for la in lookaheads})
     if JOINED:  # the clips back to back as one stream, and every clip after its first s
         rows.update({f"joined-{la:g}": [] for la in lookaheads})
         rows.update({f"{k}-after1s": [] for k in ("offline", *(f"live-{la:g}"
@@ -272,6 +279,11 @@ def score(model, guide, loud, test, lookaheads, rows: dict, cpu: dict,
             cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
             if JOINED:
                 rows[f"live-{la:g}-after1s"].append(mouth_r(model, motion, clip, 1.0))
+            for engine in OTHER_ENGINES:
+                motion, stream = live_motion(model, audio, sr, la, guide,
+                                             phones_engine=engine)
+                rows[f"live-{la:g}-{engine}"].append(mouth_r(model, motion, clip))
+                cpu[f"live-{la:g}-{engine}"].append(stream.stats.cpu_s / (len(audio) / sr))
         if JOINED:  # scored below, once the fold's clips are joined
             for la in lookaheads:
                 rows[f"joined-{la:g}"].append(np.nan)
@@ -496,10 +508,11 @@ def main() -> int:
     parser.add_argument("--guide-share", type=float, default=None,
                         help="the guide's share of each window's motion (the stream's "
                         "default, LIVE_GUIDE_SHARE, if not given)")
-    parser.add_argument("--phones-engine", choices=("hama", "auto"), default=None,
+    parser.add_argument("--phones-engine", choices=("hama", "auto"), nargs="+", default=None,
                         help="how the stream's windows recognise their phones (the stream's "
                         "default if not given; auto: hama names them, PocketSphinx places "
-                        "them, as offline)")
+                        "them, as offline); a second engine: also the quality of live at "
+                        "each look-ahead with it, paired (rows live-LA-ENGINE)")
     args = parser.parse_args()
     unpaced_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
     args.lookaheads = args.lookaheads or [40, 80, 120, 200, 300]
@@ -511,8 +524,9 @@ def main() -> int:
                                      ("posterior_context_ms", args.posterior_context),
                                      ("settle_ms", args.settle), ("threads", args.threads),
                                      ("guide_share", args.guide_share),
-                                     ("phones_engine", args.phones_engine))
+                                     ("phones_engine", (args.phones_engine or [None])[0]))
                    if v is not None})
+    OTHER_ENGINES.extend((args.phones_engine or [])[1:])
     if WINDOW.get("threads") == 0:
         WINDOW["threads"] = None  # no cap
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)
