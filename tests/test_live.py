@@ -624,6 +624,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", "-", "--rate", "16000", "--threads", "-1"], 2, "or 0 for no cap"),
         (["--source", "-", "--rate", "16000", "--guide-share", "1.5", "--record",
           str(tmp_path)], 2, "guide_share must be a number in [0, 1]"),
+        (["--source", "-", "--rate", "16000", "--phones-engine", "pocketsphinx"], 2,
+         "invalid choice"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")
