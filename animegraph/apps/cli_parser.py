@@ -670,10 +670,10 @@ def _add_live(sub) -> None:
                       "alone; 0.65 by default, chosen on a calibration split: "
                       "docs/results/live.md, \"The guide's share, live\"; offline's is 0.5)")
     live.add_argument("--phones-engine", choices=("hama", "auto"), default=None,
-                      help="how each window's phones are recognised: hama names and places "
-                      "them (the default), or auto, as offline's default engine: hama names them "
-                      "and PocketSphinx places them (docs/results/live.md, \"Placing the "
-                      "phones\")")
+                      help="how each window's phones are recognised: auto (the default; hama "
+                      "with --low-latency), as offline's default engine: hama names them and "
+                      "PocketSphinx places them; or hama naming and placing them "
+                      "(docs/results/live.md, \"Placing the phones\")")
     live.add_argument("--livelink", default=None, metavar="HOST:PORT",
                       help="send Live Link Face packets over UDP (Unreal listens on 11111); "
                       "ARKit databases")

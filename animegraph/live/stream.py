@@ -12,13 +12,12 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   every 20 ms of audio, computed once (:class:`animegraph.live.frontend.PosteriorTrack`:
   each update the model hears only the frames not settled yet and a context before
   them), and hands the window's rows to :mod:`ingest.speech.ctc`
-  (:func:`~ingest.speech.ctc.remember`); the window's phones are recognised from them
-  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`: hama names and places them)
-  and ppg-ridge reads them as its posteriorgram. With ``phones_engine="auto"`` the
-  window's phones are recognised as offline's default recognises an utterance's
-  (:func:`ingest.speech.engines.recognize_auto`: hama names them, from the same
-  posteriors, and PocketSphinx places them on the window's audio). A window starts on a
-  20 ms frame (when the frame rate allows), so that its rows are the track's;
+  (:func:`~ingest.speech.ctc.remember`); ppg-ridge reads them as its posteriorgram, and
+  the window's phones are recognised as offline's default recognises an utterance's
+  (:func:`ingest.speech.engines.recognize_auto`: hama names them from those posteriors,
+  and PocketSphinx places them on the window's audio; at ``--low-latency`` hama places
+  them too, CTC greedy decoding, :func:`ingest.speech.ctc.recognize`). A window starts
+  on a 20 ms frame (when the frame rate allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended) from those phones given as labels, except that the guide's share is
@@ -76,11 +75,12 @@ DEFAULT_HOP_MS = 80.0
 DEFAULT_CONTEXT_MS = 300.0
 #: ``animegraph live``'s default setting, and ``--low-latency``'s: frames sooner (a 40 ms
 #: look-ahead and hop; hama hearing 300 ms of context, a frame settled 40 ms after it: a
-#: third less CPU) for a mouth that follows the offline output less closely
-#: (docs/results/live.md, "Latency" and "Quality against the offline default").
+#: third less CPU; hama placing its phones, without PocketSphinx's share of an update)
+#: for a mouth that follows the offline output less closely (docs/results/live.md,
+#: "Latency", "Quality against the offline default" and "Placing the phones").
 DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
 LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
-               "settle_ms": 40.0}
+               "settle_ms": 40.0, "phones_engine": "hama"}
 #: The guide's share of each window's motion by default (``Stream(guide_share=...)``,
 #: ``--guide-share``); offline keeps its plain mean (0.5,
 #: :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a short window the animes are less
@@ -116,9 +116,11 @@ DEFAULT_THREADS = 1
 #: How a window's phones are recognised (``Stream(phones_engine=...)``, ``--phones-engine``):
 #: ``"hama"`` names and places them (CTC greedy decoding of the track's posteriors);
 #: ``"auto"``, offline's default (:mod:`ingest.speech.engines`), has PocketSphinx place
-#: hama's phones on the window's audio.
+#: hama's phones on the window's audio. ``"auto"`` by default: paired, it gained on
+#: talkingface (within and across speakers) and was level on GRID and FACEGOOD, for about
+#: a tenth more CPU (docs/results/live.md, "Placing the phones").
 LIVE_PHONE_ENGINES = ("hama", "auto")
-DEFAULT_PHONE_ENGINE = "hama"
+DEFAULT_PHONE_ENGINE = "auto"
 #: Frames at the start of an update cross-faded from the previous window's estimate.
 FADE_FRAMES = 3
 #: With ``emotion="auto"``: the speech is classified again every this many seconds, over
@@ -225,9 +227,9 @@ class Stream:
         libraries take (the cores). hama hears a window in one piece, on one thread.
     phones_engine : {"hama", "auto"}
         How the window's phones are recognised (:data:`LIVE_PHONE_ENGINES`): ``"hama"``
-        names and places them; ``"auto"`` as offline's default engine, hama naming them
-        and PocketSphinx placing them on the window's audio (hama's own timing where
-        PocketSphinx finds no path). A transcript's phones are placed by its path either
+        names and places them; ``"auto"`` (the default) as offline's default engine, hama
+        naming them and PocketSphinx placing them on the window's audio (hama's own
+        timing where PocketSphinx finds no path). A transcript's phones are placed by its path either
         way.
 
     Raises
