@@ -6,6 +6,7 @@ Usage::
                                             talkingface-across grid]
                                  [--grid-db DB] [--text]
                                  [--joined] [--guide-share S]
+                                 [--phones-engine hama|auto [hama|auto]]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
 
@@ -34,7 +35,9 @@ Usage::
   transcripts given up while the stream ran, and those its end test reported. With
   ``--joined``, also the held-out clips played back to back as one stream (each clip's
   frames scored: the steady state, where the stream has a past), and each clip scored
-  after its first second (offline and live).
+  after its first second (offline and live). ``--phones-engine`` sets who places the
+  stream's phones (``Stream(phones_engine=...)``); a second engine also streams each clip
+  with it, paired in the same run (rows ``live-LA-ENGINE``).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
