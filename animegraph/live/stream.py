@@ -229,8 +229,8 @@ class Stream:
         How the window's phones are recognised (:data:`LIVE_PHONE_ENGINES`): ``"hama"``
         names and places them; ``"auto"`` (the default) as offline's default engine, hama
         naming them and PocketSphinx placing them on the window's audio (hama's own
-        timing where PocketSphinx finds no path). A transcript's phones are placed by its path either
-        way.
+        timing where PocketSphinx finds no path). A transcript's phones are placed by
+        its path either way.
 
     Raises
     ------
