@@ -6,6 +6,7 @@ Usage::
                                             talkingface-across grid]
                                  [--grid-db DB] [--text]
                                  [--joined] [--guide-share S]
+                                 [--phones-engine hama|auto [hama|auto]]
                                  [--lookaheads 40 80 120 200 300]
                                  [--latency-seconds 20] [--drift-seconds 120] [--json OUT]
     python scripts/bench_live.py --quality --db DB [--sentences 3] [--unpaced] ...
@@ -35,7 +36,9 @@ Usage::
   transcripts given up while the stream ran, and those its end test reported. With
   ``--joined``, also the held-out clips played back to back as one stream (each clip's
   frames scored: the steady state, where the stream has a past), and each clip scored
-  after its first second (offline and live).
+  after its first second (offline and live). ``--phones-engine`` sets who places the
+  stream's phones (``Stream(phones_engine=...)``); a second engine also streams each clip
+  with it, paired in the same run (rows ``live-LA-ENGINE``).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
@@ -101,6 +104,9 @@ TEXT: list = []
 #: Also score the held-out clips played back to back as one stream, and each clip's
 #: frames after its first second (``--joined``).
 JOINED: list = []
+#: Phone engines the quality runs also stream each clip with (``--phones-engine``'s second
+#: and later): rows ``live-LA-ENGINE``, paired with the first engine's ``live-LA``.
+OTHER_ENGINES: list = []
 #: Speech for latency and drift with --db (eSpeak NG).
 SENTENCES = ("Please bring the blue box to the table.",
              "We were away a year ago when the rain came down on the hills.",
@@ -177,10 +183,11 @@ def guides(train) -> tuple[object, list[str]]:
     return (None if not got else got[0] if len(got) == 1 else tuple(got)), missing
 
 
-def live_motion(model, audio, sr, lookahead_ms, guide, text=None
+def live_motion(model, audio, sr, lookahead_ms, guide, text=None, phones_engine=None
                 ) -> tuple[np.ndarray, Stream]:
+    window = {**WINDOW, **({"phones_engine": phones_engine} if phones_engine else {})}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
-                    backlog_ms=None, text=text, **WINDOW)
+                    backlog_ms=None, text=text, **window)
     step = int(CHUNK_S * sr)
     parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
     parts.append(stream.close().motion)
@@ -207,6 +214,9 @@ def quality(name: str, tmp: Path, lookaheads, facegood_seconds: float,
     rows = {"offline": [], "offline-hama": [], "loudness": [],
             **{f"live-{la:g}": [] for la in lookaheads}}
     cpu = {f"live-{la:g}": [] for la in lookaheads}
+    for engine in OTHER_ENGINES:
+        rows.update({f"live-{la:g}-{engine}": [] for la in lookaheads})
+        cpu.update({f"live-{la:g}-{engine}": [] for la in lookaheads})
     if JOINED:  # the clips back to back as one stream, and every clip after its first s
         rows.update({f"joined-{la:g}": [] for la in lookaheads})
         rows.update({f"{k}-after1s": [] for k in ("offline", *(f"live-{la:g}"
@@ -275,6 +285,11 @@ def score(model, guide, loud, test, lookaheads, rows: dict, cpu: dict,
             cpu[f"live-{la:g}"].append(stream.stats.cpu_s / (len(audio) / sr))
             if JOINED:
                 rows[f"live-{la:g}-after1s"].append(mouth_r(model, motion, clip, 1.0))
+            for engine in OTHER_ENGINES:
+                motion, stream = live_motion(model, audio, sr, la, guide,
+                                             phones_engine=engine)
+                rows[f"live-{la:g}-{engine}"].append(mouth_r(model, motion, clip))
+                cpu[f"live-{la:g}-{engine}"].append(stream.stats.cpu_s / (len(audio) / sr))
         if JOINED:  # scored below, once the fold's clips are joined
             for la in lookaheads:
                 rows[f"joined-{la:g}"].append(np.nan)
@@ -362,6 +377,7 @@ PARTS = (("hama's call", "ingest/speech/ctc.py", "phone_probs"),
          ("the guide", "animegraph/synthesis/guide.py", "guide_trajectory"),
          ("DTW of new phones", "animegraph/synthesis/audio.py", "candidate_costs"),
          ("phones recognised", "ingest/speech/ctc.py", "recognize"),
+         ("phones placed by PocketSphinx", "ingest/speech/sphinx.py", "align_phones"),
          ("phones' features", "animegraph/synthesis/pipeline.py", "query_phones"),
          ("search", "animegraph/search/solve.py", "search"),
          ("k-best blend", "animegraph/synthesis/assemble.py", "blend_k_best"))
@@ -502,6 +518,11 @@ def main() -> int:
     parser.add_argument("--guide-share", type=float, default=None,
                         help="the guide's share of each window's motion (if not given "
                         "the stream's default, by the database: default_guide_share)")
+    parser.add_argument("--phones-engine", choices=("hama", "auto"), nargs="+", default=None,
+                        help="how the stream's windows recognise their phones (the stream's "
+                        "default if not given; auto: hama names them, PocketSphinx places "
+                        "them, as offline); a second engine: also the quality of live at "
+                        "each look-ahead with it, paired (rows live-LA-ENGINE)")
     args = parser.parse_args()
     # --unpaced and the drift stream run at one look-ahead: the first the user names.
     first_lookahead = args.lookaheads[0] if args.lookaheads else DEFAULT_LOOKAHEAD_MS
@@ -513,8 +534,10 @@ def main() -> int:
     WINDOW.update({k: v for k, v in (("hop_ms", args.hop), ("context_ms", args.context),
                                      ("posterior_context_ms", args.posterior_context),
                                      ("settle_ms", args.settle), ("threads", args.threads),
-                                     ("guide_share", args.guide_share))
+                                     ("guide_share", args.guide_share),
+                                     ("phones_engine", (args.phones_engine or [None])[0]))
                    if v is not None})
+    OTHER_ENGINES.extend((args.phones_engine or [])[1:])
     if WINDOW.get("threads") == 0:
         WINDOW["threads"] = None  # no cap
     print(f"# stream window {WINDOW or 'defaults'}", flush=True)

@@ -130,7 +130,7 @@ def test_a_window_heard_as_silence_is_synthesized_as_offline_silence(model, monk
     monkeypatch.setattr(ctc, "recognize", recognized)
     rng = np.random.default_rng(1)
     noise = (0.01 * rng.standard_normal(32000)).astype(np.float32)
-    stream = Stream(model, sample_rate=16000, backlog_ms=None)
+    stream = Stream(model, sample_rate=16000, backlog_ms=None, phones_engine="hama")
     batches, _ = _play(stream, noise)
     motion = np.concatenate([b.motion for b in batches])
     assert heard and all(set(h) == {"SIL"} for h in heard)  # hama heard only silence
@@ -194,7 +194,7 @@ def test_noise_before_the_first_word_is_not_heard_as_speech(model, speech, monke
 
     def play(db):
         monkeypatch.setattr(live_stream, "SPEECH_OVER_NOISE_DB", db)
-        stream = Stream(model, sample_rate=sr, backlog_ms=None)
+        stream = Stream(model, sample_rate=sr, backlog_ms=None, phones_engine="hama")
         heard.clear()
         stream.push(noisy[:sr])  # windows of the noise alone
         in_noise, level = list(heard), stream.level()
@@ -672,6 +672,8 @@ def test_live_command_bad_input_is_one_line(tiny_db, tmp_path):
         (["--source", "-", "--rate", "16000", "--threads", "-1"], 2, "or 0 for no cap"),
         (["--source", "-", "--rate", "16000", "--guide-share", "1.5", "--record",
           str(tmp_path)], 2, "guide_share must be a number in [0, 1]"),
+        (["--source", "-", "--rate", "16000", "--phones-engine", "pocketsphinx"], 2,
+         "invalid choice"),
     ]
     for args, status, words in cases:
         out = _live(["--db", db, *args], input="")

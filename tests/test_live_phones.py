@@ -365,6 +365,47 @@ def test_stream_scores_fewer_phones_than_it_synthesizes(model, speech):
     assert memory.hits > 0.3 * (memory.hits + memory.misses), (memory.hits, memory.misses)
 
 
+def _placed(stream, audio):
+    """The phone starts (s) of every window of ``stream`` played ``audio``: the places
+    of the phones whose animes it chose (kept by :class:`animegraph.live.window.
+    PhoneMemory`, read after every push)."""
+    step = int(0.02 * stream.sample_rate)
+    starts: set[float] = set()
+    for k in range(0, len(audio), step):
+        stream.push(audio[k:k + step])
+        starts |= {round(kept.start_s, 4) for kept in stream._memory._kept if kept.start_s}
+    stream.close()
+    return np.array(sorted(starts))
+
+
+def test_stream_places_hamas_phones_as_offline_places_them(model, speech):
+    """``phones_engine="auto"``: a window's phones are placed by PocketSphinx, as the
+    offline default engine places an utterance's; the live boundaries then lie closer
+    to offline's than hama's own placement of the same phones does."""
+    from animegraph.live import Stream
+    from ingest.speech.segment import segment
+
+    audio, sr = speech
+    offline = np.array([s.start for s in segment(audio, sr, engine="auto")[0][1:]])
+
+    def distance(engine):  # each offline boundary's distance to the nearest live one
+        live = _placed(Stream(model, sample_rate=sr, backlog_ms=None,
+                              phones_engine=engine), audio)
+        return np.array([np.abs(live - b).min() for b in offline])
+
+    auto, hama = distance("auto"), distance("hama")
+    assert np.median(auto) < 0.002 and np.mean(auto <= 0.01) >= 0.8, (auto, hama)
+    assert np.median(auto) < np.median(hama) and np.mean(auto <= 0.01) > np.mean(
+        hama <= 0.01), (auto, hama)
+
+
+def test_stream_refuses_an_unknown_phone_engine(model):
+    from animegraph.live import Stream
+
+    with pytest.raises(ParameterError, match="phones_engine"):
+        Stream(model, phones_engine="pocketsphinx")
+
+
 # --- the command ----------------------------------------------------------------------------
 
 

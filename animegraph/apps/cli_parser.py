@@ -670,6 +670,11 @@ def _add_live(sub) -> None:
                       "alone); by default 0.65 (chosen on a calibration split of one "
                       "speaker) for a database of one recording session, offline's 0.5 for "
                       "several (docs/results/live.md, \"The guide's share, live\")")
+    live.add_argument("--phones-engine", choices=("hama", "auto"), default=None,
+                      help="how each window's phones are recognised: auto (the default; hama "
+                      "with --low-latency), as offline's default engine: hama names them and "
+                      "PocketSphinx places them; or hama naming and placing them "
+                      "(docs/results/live.md, \"Placing the phones\")")
     live.add_argument("--livelink", default=None, metavar="HOST:PORT",
                       help="send Live Link Face packets over UDP (Unreal listens on 11111); "
                       "ARKit databases")

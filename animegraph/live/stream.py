@@ -12,11 +12,12 @@ Live, each update re-synthesizes a bounded *window* with the same code:
   every 20 ms of audio, computed once (:class:`animegraph.live.frontend.PosteriorTrack`:
   each update the model hears only the frames not settled yet and a context before
   them), and hands the window's rows to :mod:`ingest.speech.ctc`
-  (:func:`~ingest.speech.ctc.remember`); the window's phones are recognised from them
-  (CTC greedy decoding, :func:`ingest.speech.ctc.recognize`; the offline default also has
-  PocketSphinx place hama's phones, left out here for its cost) and ppg-ridge reads
-  them as its posteriorgram. A window starts on a 20 ms frame (when the frame rate
-  allows), so that its rows are the track's;
+  (:func:`~ingest.speech.ctc.remember`); ppg-ridge reads them as its posteriorgram, and
+  the window's phones are recognised as offline's default recognises an utterance's
+  (:func:`ingest.speech.engines.recognize_auto`: hama names them from those posteriors,
+  and PocketSphinx places them on the window's audio; at ``--low-latency`` hama places
+  them too, CTC greedy decoding, :func:`ingest.speech.ctc.recognize`). A window starts
+  on a 20 ms frame (when the frame rate allows), so that its rows are the track's;
 * the window is synthesized as the offline path synthesizes an utterance (k-best
   :data:`~animegraph.synthesis.path.AUDIO_ONLY_K_BEST`, no context ranking, the guide
   blended) from those phones given as labels, except that the guide's share is
@@ -75,11 +76,12 @@ DEFAULT_HOP_MS = 80.0
 DEFAULT_CONTEXT_MS = 300.0
 #: ``animegraph live``'s default setting, and ``--low-latency``'s: frames sooner (a 40 ms
 #: look-ahead and hop; hama hearing 300 ms of context, a frame settled 40 ms after it: a
-#: third less CPU) for a mouth that follows the offline output less closely
-#: (docs/results/live.md, "Latency" and "Quality against the offline default").
+#: third less CPU; hama placing its phones, without PocketSphinx's share of an update)
+#: for a mouth that follows the offline output less closely (docs/results/live.md,
+#: "Latency", "Quality against the offline default" and "Placing the phones").
 DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
 LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
-               "settle_ms": 40.0}
+               "settle_ms": 40.0, "phones_engine": "hama"}
 #: The guide's share of each window's motion by default for a database of one recording
 #: session (:func:`default_guide_share`; ``Stream(guide_share=...)``, ``--guide-share``);
 #: offline keeps its plain mean (0.5, :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a
@@ -111,6 +113,14 @@ DEFAULT_BACKLOG_MS = 400.0
 #: OpenBLAS's threads (which wait spinning) and the DTW's took a quarter more CPU for
 #: little less wall time (docs/results/live.md, "CPU").
 DEFAULT_THREADS = 1
+#: How a window's phones are recognised (``Stream(phones_engine=...)``, ``--phones-engine``):
+#: ``"hama"`` names and places them (CTC greedy decoding of the track's posteriors);
+#: ``"auto"``, offline's default (:mod:`ingest.speech.engines`), has PocketSphinx place
+#: hama's phones on the window's audio. ``"auto"`` by default: paired, it gained on
+#: talkingface (within and across speakers) and was level on GRID and FACEGOOD, for about
+#: a tenth more CPU (docs/results/live.md, "Placing the phones").
+LIVE_PHONE_ENGINES = ("hama", "auto")
+DEFAULT_PHONE_ENGINE = "auto"
 #: Frames at the start of an update cross-faded from the previous window's estimate.
 FADE_FRAMES = 3
 #: With ``emotion="auto"``: the speech is classified again every this many seconds, over
@@ -220,12 +230,18 @@ class Stream:
         Threads an update may run at once: the DTW's (numba's, for the updating thread)
         and BLAS's (the whole process' while an update runs). None: as many as the
         libraries take (the cores). hama hears a window in one piece, on one thread.
+    phones_engine : {"hama", "auto"}
+        How the window's phones are recognised (:data:`LIVE_PHONE_ENGINES`): ``"hama"``
+        names and places them; ``"auto"`` (the default) as offline's default engine, hama
+        naming them and PocketSphinx placing them on the window's audio (hama's own
+        timing where PocketSphinx finds no path). A transcript's phones are placed by
+        its path either way.
 
     Raises
     ------
     ParameterError
-        On an unsupported rate or a look-ahead, hop, context or guide share out of
-        range, or an empty ``text``.
+        On an unsupported rate, a look-ahead, hop, context or guide share out of
+        range, an unknown ``phones_engine``, or an empty ``text``.
     DataError
         A ``text`` with no pronounceable word.
     """
@@ -237,7 +253,8 @@ class Stream:
                  backlog_ms: float | None = DEFAULT_BACKLOG_MS,
                  posterior_context_ms: float = CONTEXT_S * 1000,
                  settle_ms: float = SETTLE_S * 1000, text: str | None = None,
-                 threads: int | None = DEFAULT_THREADS) -> None:
+                 threads: int | None = DEFAULT_THREADS,
+                 phones_engine: str = DEFAULT_PHONE_ENGINE) -> None:
         from animegraph.synthesis import Model
         from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
 
@@ -256,6 +273,10 @@ class Stream:
                 threads, int | np.integer) or threads < 1):
             raise ParameterError(f"threads must be a whole number >= 1 or None, got "
                                  f"{threads!r}")
+        if phones_engine not in LIVE_PHONE_ENGINES:
+            raise ParameterError(f"phones_engine: expected one of "
+                                 f"{', '.join(LIVE_PHONE_ENGINES)}, got {phones_engine!r}")
+        self.phones_engine = phones_engine
         self.threads = None if threads is None else int(threads)
         self.model = model if isinstance(model, Model) else Model.load(model)
         self.sample_rate = int(sample_rate)
@@ -501,6 +522,7 @@ class Stream:
         from animegraph.baselines.ppg_forward import loud_level
         from animegraph.synthesis.path import KNOWN_PHONES_CONTEXT
         from ingest.speech import ctc
+        from ingest.speech.engines import recognizer
 
         first_posterior = int(round(start_s * FRAME_RATE))
         count = int(np.ceil(len(audio) / self.sample_rate * FRAME_RATE - 1e-9))
@@ -509,8 +531,8 @@ class Stream:
         if self._transcript is not None:  # the transcript's phones, placed by its path
             segments = window_segments(self._transcript, probs, first_posterior, audio,
                                        self.sample_rate)
-        else:
-            segments = ctc.recognize(audio, self.sample_rate)
+        else:  # hama's phones from the posteriors remembered above
+            segments = recognizer(self.phones_engine)(audio, self.sample_rate)
         # Known phones are ranked by phonetic context first, as offline (synthesis.path);
         # unlike offline the guide stays blended: a short window's animes alone followed
         # the recording much less closely (docs/results/live.md, "With a transcript").

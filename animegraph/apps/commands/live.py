@@ -45,7 +45,8 @@ def cmd_live(args: argparse.Namespace) -> int:
     try:
         setting = dict(LOW_LATENCY if args.low_latency else DEFAULT_SETTING)
         for name, given in (("lookahead_ms", args.lookahead), ("hop_ms", args.hop),
-                            ("guide_share", args.guide_share)):
+                            ("guide_share", args.guide_share),
+                            ("phones_engine", args.phones_engine)):
             if given is not None:
                 setting[name] = given
         stream = Stream(model, sample_rate=source.sample_rate, **setting,
