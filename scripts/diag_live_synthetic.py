@@ -5,6 +5,7 @@ Usage::
 
     python scripts/diag_live_synthetic.py [--work DIR] [--lookahead 120]
                                           [--variants base fade ...]
+    python scripts/diag_live_synthetic.py --agreement WAV [WAV ...]
 
 The split is ``scripts/bench_live.py --quality synthetic``'s (its generated corpus, held-out
 clips and database; with ``--work`` the corpus and database are kept there and reused).
@@ -30,8 +31,14 @@ changed (a diagnosis reaching into the stream; not a way to run it):
 * ``settled``: every frame's posteriors as the track settles them (the window's newest
   rows not tentative);
 * ``future``: every frame's posteriors heard with :data:`FUTURE_MS` of audio after it;
+* ``wide``: and with all the clip before it (10 s of context);
 * ``fade``: the cross-fade between two windows :data:`FADE_S` long, whatever the frame rate;
 * ``nosmooth``: the k-best blend not low-passed, offline nor live (on both sides).
+
+``--agreement``: for recordings (any split's), hama's posteriors as a stream's track
+settles them (after 120, 300, 600 ms) against the whole clip's, after the first second,
+and the phones recognised from them against the whole clip's phones and (a synthetic
+clip's ``.phones.csv`` beside it) the true ones: :func:`agreement`.
 """
 
 from __future__ import annotations
@@ -53,7 +60,7 @@ FADE_S = 0.12
 #: ``future``: each frame's posteriors heard with this much audio after it (ms).
 FUTURE_MS = 600.0
 VARIANTS = ("base", "offpost", "fade", "nosmooth", "level", "longctx", "settled",
-            "future")
+            "future", "wide")
 
 
 def the_split(work: Path):
@@ -85,12 +92,14 @@ def the_split(work: Path):
     return db, guide, test
 
 
-def settled_rows(model, audio, sr, lookahead, settle_ms: float | None = None) -> np.ndarray:
+def settled_rows(model, audio, sr, lookahead, settle_ms: float | None = None,
+                 context_ms: float | None = None) -> np.ndarray:
     """Every frame's posteriors as the stream's track leaves them once settled (after
-    ``settle_ms``, the track's default if None)."""
+    ``settle_ms``, hearing ``context_ms`` before; the track's defaults if None)."""
     from animegraph.live import Stream
 
-    extra = {} if settle_ms is None else {"settle_ms": settle_ms}
+    extra = {k: v for k, v in (("settle_ms", settle_ms), ("posterior_context_ms", context_ms))
+             if v is not None}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead, backlog_ms=None, **extra)
     rows: dict[int, np.ndarray] = {}
     track, update = stream._track, stream._track.update
@@ -126,24 +135,51 @@ def track_rows(audio: np.ndarray, sr: int, settle_s: float, hop_s: float = 0.08
     return np.stack([rows[f] for f in range(max(rows) + 1)])
 
 
+def edit_rate(said: list[str], truth: list[str]) -> float:
+    """Phone error rate: the edit distance of ``said`` to ``truth`` over ``len(truth)``."""
+    d = np.arange(len(truth) + 1)
+    for i, x in enumerate(said, 1):
+        prev, d[0] = d.copy(), i
+        for j, y in enumerate(truth, 1):
+            d[j] = min(prev[j] + 1, d[j - 1] + 1, prev[j - 1] + (x != y))
+    return float(d[-1]) / max(1, len(truth))
+
+
 def agreement(paths, settles=(0.12, 0.3, 0.6)) -> None:
     """For each WAV: the track's posteriors (settled after each of ``settles`` s) against
-    the whole clip's, after its first second: mean total variation per 20 ms frame."""
+    the whole clip's, after its first second (mean total variation per 20 ms frame); the
+    phones recognised from each (CTC, :func:`ingest.speech.ctc.recognize`) against those
+    of the whole clip's and, where the corpus gives them (``<clip>.phones.csv``), against
+    the true ones (phone error rate, silences left out)."""
     from animegraph.live.frontend import to_model_rate
+    from ingest.formats.phones_csv import read_phones_csv
     from ingest.formats.wav import read_wav
     from ingest.speech import ctc
+
+    def said(audio, sr, rows):
+        ctc.remember(audio, sr, rows)
+        return [p.phone for p in ctc.recognize(audio, sr) if p.phone != "SIL"]
 
     for path in paths:
         audio, sr = read_wav(path)
         x = to_model_rate(audio, sr)
         whole = ctc.phone_probs((x * (0.9 / max(1e-9, np.abs(x).max()))).astype(np.float32))
-        out = []
+        labels = Path(path).with_suffix(".phones.csv")
+        truth = ([p.phone for p in read_phones_csv(labels) if p.phone != "SIL"]
+                 if labels.is_file() else None)
+        heard = said(audio, sr, whole)
+        out = [] if truth is None else [f"whole clip: error {edit_rate(heard, truth):.2f}"]
         for settle in settles:
             rows = track_rows(audio, sr, settle)
             n = min(len(rows), len(whole))
             tv = 0.5 * np.abs(rows[:n] - whole[:n]).sum(axis=1)
-            out.append(f"settled {settle * 1000:g} ms {tv[50:].mean():.3f}")
-        print(f"{Path(path).name}: total variation after 1 s: " + ", ".join(out), flush=True)
+            live_said = said(audio, sr, rows[:n])
+            line = (f"settled {settle * 1000:g} ms: variation {tv[50:].mean():.3f}, "
+                    f"phones against the whole clip's {edit_rate(live_said, heard):.2f}")
+            if truth is not None:
+                line += f", error {edit_rate(live_said, truth):.2f}"
+            out.append(line)
+        print(f"{Path(path).name}: " + "; ".join(out), flush=True)
 
 
 def live(model, audio, sr, lookahead, guide, share, variant, whole_probs):
@@ -154,10 +190,11 @@ def live(model, audio, sr, lookahead, guide, share, variant, whole_probs):
     extra = {"posterior_context_ms": 10000.0} if variant == "longctx" else {}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead, guide=guide,
                     backlog_ms=None, guide_share=share, **extra)
-    if variant in ("offpost", "settled", "future"):
+    if variant in ("offpost", "settled", "future", "wide"):
         rows = (whole_probs if variant == "offpost"
                 else settled_rows(model, audio, sr, lookahead,
-                                  FUTURE_MS if variant == "future" else None))
+                                  FUTURE_MS if variant in ("future", "wide") else None,
+                                  10000.0 if variant == "wide" else None))
         stream._track.posteriors = lambda first, count: rows[
             np.clip(np.arange(first, first + count), 0, len(rows) - 1)]
     if variant == "level":  # the clip's peak known from its first sample
