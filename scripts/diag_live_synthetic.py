@@ -27,7 +27,9 @@ changed (a diagnosis reaching into the stream; not a way to run it):
   it, scaled to its peak) for the windows;
 * ``level``: the stream's level (hama's scale, the pauses' threshold) the clip's peak from
   its first sample;
-* ``longctx``: hama hearing 10 s before the first unsettled frame (all the clip so far);
+* ``longctx``: hama hearing 10 s before the first unsettled frame (all the clip so far;
+  at the stream's start the track has it hear silence before the first sample, up to
+  the context's worth);
 * ``settled``: every frame's posteriors as the track settles them (the window's newest
   rows not tentative);
 * ``future``: every frame's posteriors heard with :data:`FUTURE_MS` of audio after it;
@@ -225,16 +227,23 @@ def main() -> int:
     if args.agreement:
         agreement(args.agreement)
         return 0
+    if args.work is not None:
+        args.work.mkdir(parents=True, exist_ok=True)
+        return run(args, args.work)
     import tempfile
 
+    with tempfile.TemporaryDirectory(prefix="diag-synth-") as tmp:
+        return run(args, Path(tmp))
+
+
+def run(args, work: Path) -> int:
+    """Score the variants on the split kept in (or built into) ``work``; print them."""
     from animegraph.live.frontend import to_model_rate
     from animegraph.live.stream import LIVE_GUIDE_SHARE
     from animegraph.synthesis import Model, assemble, synthesize
     from animegraph.synthesis.path import AUDIO_ONLY_K_BEST
     from ingest.speech import ctc
 
-    work = args.work or Path(tempfile.mkdtemp(prefix="diag-synth-"))
-    work.mkdir(parents=True, exist_ok=True)
     db, guide, test = the_split(work)
     model = Model.load(db)
     s = LIVE_GUIDE_SHARE
