@@ -653,7 +653,7 @@ def _add_live(sub) -> None:
     live.add_argument("--low-latency", action="store_true",
                       help="frames sooner, following the offline output less closely: "
                       "look-ahead 40 ms, an update every 40 ms, hama hearing 300 ms of "
-                      "context and settling a frame 40 ms after it (docs/results/live.md)")
+                      "context and settling a frame 80 ms after it (docs/results/live.md)")
     live.add_argument("--threads", type=_thread_cap, default=1, metavar="N",
                       help="threads an update may run at once (the DTW's, BLAS's; 1: the "
                       "stream within one core, docs/results/live.md; 0: no cap)")

@@ -36,7 +36,9 @@ import numpy as np
 #: variation per frame 0.14 with 600 / 120 ms, 0.22 with 300 / 40 ms) and, more, with the
 #: offline motion: 300 / 40 ms cut the synthetic split's live mouth R by 0.1 at every
 #: look-ahead while saving a third of the CPU (docs/results/live.md). The default keeps
-#: the windowed stream's quality.
+#: the windowed stream's quality. The model's cost is a straight line in the audio a
+#: call hears (1 ms a call and 43 ms per second heard, on the calling thread only;
+#: ``scripts/bench_hama.py``), and no part of it carries over from one call to the next.
 CONTEXT_S = 0.6
 SETTLE_S = 0.12
 #: hama's frame rate (Hz) and rate (Hz) of the audio it hears.

@@ -75,13 +75,20 @@ DEFAULT_HOP_MS = 80.0
 #: 300 ms here followed the offline output as closely as 600 ms, docs/results/live.md).
 DEFAULT_CONTEXT_MS = 300.0
 #: ``animegraph live``'s default setting, and ``--low-latency``'s: frames sooner (a 40 ms
-#: look-ahead and hop; hama hearing 300 ms of context, a frame settled 40 ms after it: a
-#: third less CPU; hama placing its phones, without PocketSphinx's share of an update)
+#: look-ahead and hop; hama hearing 300 ms of context, a frame settled 80 ms after it;
+#: hama placing its phones, without PocketSphinx's share of an update)
 #: for a mouth that follows the offline output less closely (docs/results/live.md,
-#: "Latency", "Quality against the offline default" and "Placing the phones").
+#: "Latency" and "Quality against the offline default"). Its hama is on each update's
+#: critical path, and costs 43 ms per second of audio it hears (one thread, no state
+#: kept between calls): at a 40 ms hop, 600 ms of context would cost 14 ms more an update
+#: and more than a core in all, for +0.007 on GRID; settling a frame 80 ms after it
+#: (after the frame is sent: the windows after it hear it settled) costs 2.4 ms, for
+#: +0.005 on GRID and +0.007 on FACEGOOD. Most of this setting's loss against the
+#: default's at the same look-ahead is the hop, not hama (the results page, "The
+#: low-latency setting: hama's context and its cost").
 DEFAULT_SETTING = {"lookahead_ms": DEFAULT_LOOKAHEAD_MS, "hop_ms": DEFAULT_HOP_MS}
 LOW_LATENCY = {"lookahead_ms": 40.0, "hop_ms": 40.0, "posterior_context_ms": 300.0,
-               "settle_ms": 40.0, "phones_engine": "hama"}
+               "settle_ms": 80.0, "phones_engine": "hama"}
 #: The guide's share of each window's motion by default for a database of one recording
 #: session (:func:`default_guide_share`; ``Stream(guide_share=...)``, ``--guide-share``);
 #: offline keeps its plain mean (0.5, :data:`animegraph.synthesis.guide.GUIDE_BLEND`). In a
