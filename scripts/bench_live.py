@@ -33,8 +33,9 @@ Usage::
   runs) and the live stream given it (``Stream(text=...)``, the guide blended); the
   transcripts given up while the stream ran, and those its end test reported. With
   ``--joined``, also the held-out clips played back to back as one stream (each clip's
-  frames scored: the steady state, where the stream has a past), and each clip scored
-  after its first second (offline and live).
+  frames scored: the steady state, where the stream has a past; each clip starting on a
+  frame of the stream, :func:`join_clips`), and each clip scored after its first second
+  (offline and live).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
   (:class:`animegraph.live.sources.FileSource`) through :func:`animegraph.live.run.run`
   at each look-ahead: for every frame, the wall time from the arrival of the chunk that
