@@ -35,8 +35,9 @@ Usage::
   runs) and the live stream given it (``Stream(text=...)``, the guide blended); the
   transcripts given up while the stream ran, and those its end test reported. With
   ``--joined``, also the held-out clips played back to back as one stream (each clip's
-  frames scored: the steady state, where the stream has a past), and each clip scored
-  after its first second (offline and live). ``--phones-engine`` sets who places the
+  frames scored: the steady state, where the stream has a past; each clip starting on a
+  frame of the stream, :func:`join_clips`), and each clip scored after its first second
+  (offline and live). ``--phones-engine`` sets who places the
   stream's phones (``Stream(phones_engine=...)``); a second engine also streams each clip
   with it, paired in the same run (rows ``live-LA-ENGINE``).
 * **Latency and CPU** (``--latency-seconds``): held-out speech played at real-time pace
@@ -317,20 +318,49 @@ def score(model, guide, loud, test, lookaheads, rows: dict, cpu: dict,
 
 def joined(model, test, lookahead_ms: float, guide) -> list[float]:
     """Each clip's mouth R in one stream of the held-out clips played back to back (the
-    steady state: a live stream is long, its start-up happens once); clips at another
-    rate than the first are left out (NaN)."""
-    sr = test[0].sample_rate
-    parts, at = [], []
-    for clip in test:
-        at.append(sum(len(a) for a in parts) / sr if clip.sample_rate == sr else None)
-        if clip.sample_rate == sr:
-            parts.append(clip.audio.astype(np.float32) / 32768.0)
-    motion, _ = live_motion(model, np.concatenate(parts), sr, lookahead_ms, guide)
+    steady state: a live stream is long, its start-up happens once), over the frames a
+    stream of the clip alone sends; clips at another rate than the first are left out
+    (NaN)."""
+    audio, sr, firsts = join_clips(test, model.graph.fps)
+    motion, _ = live_motion(model, audio, sr, lookahead_ms, guide)
     fps = model.graph.fps
-    return [np.nan if t is None else
-            mouth_r(model, motion[int(round(t * fps)): int(round(t * fps)) + len(clip.motion)],
-                    clip)
-            for clip, t in zip(test, at, strict=True)]
+    return [np.nan if k is None else
+            mouth_r(model, motion[k: k + int(round(len(clip.audio) / sr * fps))], clip)
+            for clip, k in zip(test, firsts, strict=True)]
+
+
+def join_clips(test, fps: float) -> tuple[np.ndarray, int, list]:
+    """The clips' audio back to back (float32, at the first clip's rate) with each clip
+    starting on a frame of the stream (the index of its first frame; None for a clip at
+    another rate, left out) and of hama's 20 ms frames, as a clip streamed alone does:
+    a clip is padded to the next such start with its own last samples mirrored (its
+    room's noise: less than 40 ms at 16 kHz and 25 fps).
+
+    Joined end to end, a clip started between two frames: its frames were the stream's
+    at up to half a frame from the clip's own (20 ms at 25 fps) and GRID's clips lost
+    0.009 of mouth R as one stream for that alone (docs/results/live.md, "The clips as
+    one stream")."""
+    from math import gcd, lcm
+
+    from animegraph.live.frontend import FRAME_RATE
+
+    sr = test[0].sample_rate
+    if float(fps).is_integer():  # the least step on both frame grids, in samples
+        step = lcm(sr // gcd(sr, int(fps)), sr // gcd(sr, FRAME_RATE))
+    else:
+        step = sr / fps  # only the frames: no whole number of samples is on both
+    parts, firsts, at = [], [], 0
+    for clip in test:
+        if clip.sample_rate != sr:
+            firsts.append(None)
+            continue
+        start = int(round(np.ceil(at / step - 1e-9) * step))
+        if start > at:  # the clip before padded with its own end, mirrored
+            parts[-1] = np.pad(parts[-1], (0, start - at), mode="symmetric")
+        firsts.append(int(round(start / sr * fps)))
+        parts.append(clip.audio.astype(np.float32) / 32768.0)
+        at = start + len(parts[-1])
+    return np.concatenate(parts), sr, firsts
 
 
 def paced(model, guide, wav: Path, lookahead_ms: float) -> dict:

@@ -907,3 +907,36 @@ def test_bench_live_unpaced_and_drift_run_at_the_first_lookahead_given(tiny_db, 
     assert got["unpaced"]["seconds"] == pytest.approx(len(u.audio) / u.sample_rate)
     assert got["drift"]["lookahead_ms"] == 40
     assert got["drift"]["frames"] == got["drift"]["expected_frames"] > 0
+
+
+@pytest.mark.parametrize("fps", [25.0, 30.0, 120.0])
+def test_bench_joins_each_clip_on_its_own_frames(fps):
+    """``bench_live.py --joined`` plays held-out clips back to back as one stream and scores
+    each clip's frames from the index it gives. Each clip starts on a frame of the stream
+    and of hama's 20 ms frames, as it does streamed alone: joined end to end, a clip began
+    between two frames (GRID's 2.978 s clips at 25 fps) and its frames were scored up to
+    half a frame off its own. The pad before it is the clip before's own end, mirrored."""
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import bench_live
+
+    rng = np.random.default_rng(0)
+    clips = [SimpleNamespace(audio=rng.integers(-3000, 3000, n).astype(np.int16),
+                             sample_rate=16000) for n in (47648, 47648, 30001, 47648)]
+    clips.insert(2, SimpleNamespace(audio=np.zeros(1000, np.int16), sample_rate=22050))
+    joined, rate, firsts = bench_live.join_clips(clips, fps)
+    assert rate == 16000 and firsts[0] == 0 and firsts[2] is None  # another rate: left out
+    end = 0
+    for clip, first in zip(clips, firsts, strict=True):
+        if first is None:
+            continue
+        at = first / fps * rate  # the clip's first sample: on both frame grids
+        assert at == int(at) and int(at) % (rate // 50) == 0
+        at = int(at)
+        assert 0 <= at - end < rate // 10
+        np.testing.assert_array_equal(joined[at: at + len(clip.audio)],
+                                      clip.audio / np.float32(32768.0))
+        np.testing.assert_array_equal(joined[end:at], joined[end - 1: 2 * end - at - 1: -1])
+        end = at + len(clip.audio)
+    assert len(joined) == end
