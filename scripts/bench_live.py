@@ -120,20 +120,27 @@ TALKINGFACE_LONG = ("dfrf_cnn2", "edtalk_pose_source2")
 TALKINGFACE_CUT = 0.7
 
 
+def synthetic_split(corpus: Path) -> tuple[list, list, object]:
+    """The synthetic split: the default eSpeak NG corpus (generated in ``corpus`` unless it
+    is there), its last parallel sentence and last two single ones held out: (database
+    clips, held-out clips, head reference)."""
+    if not (corpus / "corpus.json").is_file():
+        generate_corpus(corpus, CorpusConfig(sentences=14, parallel=4, variations=3, seed=3),
+                        workers=2)
+    meta = json.loads((corpus / "corpus.json").read_text())
+    clips, reference = prepare_sources(discover([corpus]), IngestConfig(), workers=2)
+    singles = sorted({c.sentence_id for c in clips} - set(meta["parallel_sentences"]))
+    held = {meta["parallel_sentences"][-1], *singles[-2:]}
+    train = [c for c in clips if c.sentence_id not in held]
+    test = [c for c in clips if c.sentence_id in held]
+    return train, test, reference
+
+
 def split(name: str, tmp: Path, facegood_seconds: float) -> list[tuple]:
     """The folds of a split: (fold name, train clips, held-out clips, head reference) each
     (one fold but for talkingface's two)."""
     if name == "synthetic":
-        corpus = tmp / "corpus"
-        generate_corpus(corpus, CorpusConfig(sentences=14, parallel=4, variations=3, seed=3),
-                        workers=2)
-        meta = json.loads((corpus / "corpus.json").read_text())
-        clips, reference = prepare_sources(discover([corpus]), IngestConfig(), workers=2)
-        singles = sorted({c.sentence_id for c in clips} - set(meta["parallel_sentences"]))
-        held = {meta["parallel_sentences"][-1], *singles[-2:]}
-        train = [c for c in clips if c.sentence_id not in held]
-        test = [c for c in clips if c.sentence_id in held]
-        return [(name, train, test, reference)]
+        return [(name, *synthetic_split(tmp / "corpus"))]
     if name == "facegood":
         clips, reference = prepare_sources(discover([SHARED / "facegood"]), IngestConfig(),
                                            workers=2)
@@ -189,10 +196,33 @@ def live_motion(model, audio, sr, lookahead_ms, guide, text=None, phones_engine=
     window = {**WINDOW, **({"phones_engine": phones_engine} if phones_engine else {})}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead_ms, guide=guide,
                     backlog_ms=None, text=text, **window)
-    step = int(CHUNK_S * sr)
+    return play(stream, audio), stream
+
+
+def play(stream: Stream, audio: np.ndarray) -> np.ndarray:
+    """``audio`` (float, ``(n_samples,)``) pushed into ``stream`` in :data:`CHUNK_S` chunks
+    and closed: every frame it sends, ``(n_frames, n_channels)``."""
+    step = int(CHUNK_S * stream.sample_rate)
     parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
     parts.append(stream.close().motion)
-    return np.concatenate(parts), stream
+    return np.concatenate(parts)
+
+
+def settled_posteriors(stream: Stream, audio: np.ndarray) -> np.ndarray:
+    """Every 20 ms frame's hama posteriors as ``stream``'s track leaves them (settled, or
+    the last computed), ``audio`` played through it: ``(n_frames, n_phones)``. For the
+    diagnoses that give a stream posteriors it could not have (``diag_live_*.py``)."""
+    rows: dict[int, np.ndarray] = {}
+    track, update = stream._track, stream._track.update
+
+    def keep(*a, **k):
+        update(*a, **k)
+        for f in range(track._first, track.frames):
+            rows[f] = track._rows[f - track._first].copy()
+
+    track.update = keep
+    play(stream, audio)
+    return np.stack([rows.get(f, rows[min(rows)]) for f in range(max(rows) + 1)])
 
 
 def mouth_r(model, pred, clip, skip_s: float = 0.0) -> float:

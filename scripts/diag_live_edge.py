@@ -46,10 +46,13 @@ from animegraph.synthesis import Model
 from animegraph.synthesis.guide import guide_trajectory
 from ingest.speech import ctc
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import bench_live  # noqa: E402  (the bench's stream played and its settled posteriors)
+from bench_live import play  # noqa: E402
+
 VARIANTS = ("base", "post", "post+seg", "post+ext", "post+extg", "post+gfut", "gonly",
             "aonly")
-#: The stream is pushed 20 ms at a time, as bench_live.py pushes it.
-CHUNK_S = 0.02
 
 
 def swapped(stream: Stream, flags: frozenset, future_s: float, full: np.ndarray,
@@ -110,27 +113,10 @@ def swapped(stream: Stream, flags: frozenset, future_s: float, full: np.ndarray,
     return stream
 
 
-def play(stream: Stream, audio: np.ndarray) -> np.ndarray:
-    step = int(CHUNK_S * stream.sample_rate)
-    parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
-    parts.append(stream.close().motion)
-    return np.concatenate(parts)
-
-
 def settled_posteriors(model, guide, audio, sr, setting) -> np.ndarray:
     """Every frame's posteriors as the stream's track leaves them (settled)."""
     stream = Stream(model, sample_rate=sr, guide=guide, backlog_ms=None, **setting)
-    rows: dict[int, np.ndarray] = {}
-    track, update = stream._track, stream._track.update
-
-    def keep(*a, **k):
-        update(*a, **k)
-        for f in range(track._first, track.frames):
-            rows[f] = track._rows[f - track._first].copy()
-
-    track.update = keep
-    play(stream, audio)
-    return np.stack([rows.get(f, rows[min(rows)]) for f in range(max(rows) + 1)])
+    return bench_live.settled_posteriors(stream, audio)
 
 
 def mouth_r(model, pred, clip) -> float:

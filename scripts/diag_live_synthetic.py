@@ -46,7 +46,6 @@ clip's ``.phones.csv`` beside it) the true ones: :func:`agreement`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -69,20 +68,10 @@ def the_split(work: Path):
     """The synthetic split's database (built once in ``work``), guide and held-out clips."""
     from animegraph.baselines.base import save_model
     from animegraph.live import stored_guide
-    from ingest.corpus.synthetic import CorpusConfig, generate_corpus
-    from ingest.pipeline import IngestConfig, build_database, prepare_sources
-    from ingest.readers import discover
+    from ingest.pipeline import build_database
 
-    corpus, db = work / "corpus", work / "db"
-    if not (corpus / "corpus.json").is_file():
-        generate_corpus(corpus, CorpusConfig(sentences=14, parallel=4, variations=3, seed=3),
-                        workers=2)
-    meta = json.loads((corpus / "corpus.json").read_text())
-    clips, reference = prepare_sources(discover([corpus]), IngestConfig(), workers=2)
-    singles = sorted({c.sentence_id for c in clips} - set(meta["parallel_sentences"]))
-    held = {meta["parallel_sentences"][-1], *singles[-2:]}
-    train = [c for c in clips if c.sentence_id not in held]
-    test = [c for c in clips if c.sentence_id in held]
+    db = work / "db"
+    train, test, reference = bench_live.synthetic_split(work / "corpus")
     test = test[::max(1, -(-len(test) // 8))]  # as the bench's --max-clips 8
     if not db.is_dir():
         build_database(db, train, reference=reference)
@@ -103,20 +92,7 @@ def settled_rows(model, audio, sr, lookahead, settle_ms: float | None = None,
     extra = {k: v for k, v in (("settle_ms", settle_ms), ("posterior_context_ms", context_ms))
              if v is not None}
     stream = Stream(model, sample_rate=sr, lookahead_ms=lookahead, backlog_ms=None, **extra)
-    rows: dict[int, np.ndarray] = {}
-    track, update = stream._track, stream._track.update
-
-    def keep(*a, **k):
-        update(*a, **k)
-        for f in range(track._first, track.frames):
-            rows[f] = track._rows[f - track._first].copy()
-
-    track.update = keep
-    step = int(bench_live.CHUNK_S * sr)
-    for k in range(0, len(audio), step):
-        stream.push(audio[k:k + step])
-    stream.close()
-    return np.stack([rows[f] for f in range(max(rows) + 1)])
+    return bench_live.settled_posteriors(stream, audio)
 
 
 def track_rows(audio: np.ndarray, sr: int, settle_s: float, hop_s: float = 0.08
@@ -206,12 +182,9 @@ def live(model, audio, sr, lookahead, guide, share, variant, whole_probs):
     if variant == "fade":
         stream_module.FADE_FRAMES = max(1, int(round(FADE_S * model.graph.fps)))
     try:
-        step = int(bench_live.CHUNK_S * sr)
-        parts = [stream.push(audio[k:k + step]).motion for k in range(0, len(audio), step)]
-        parts.append(stream.close().motion)
+        return bench_live.play(stream, audio)
     finally:
         stream_module.FADE_FRAMES = fade
-    return np.concatenate(parts)
 
 
 def main() -> int:

@@ -74,7 +74,8 @@ MAX_LIVE_ALIGN_LOSS = 0.9
 #: gives the transcript up, in place of offline's :data:`ingest.speech.ctc.MIN_PHONE_SHARE`
 #: (0.5), which right transcripts of eSpeak NG speech fell just below at ``--low-latency``
 #: with their path in place (0.48-0.49, the alignment under its threshold): free
-#: recognition on posteriors settled 40 ms after their frame hears more phone onsets.
+#: recognition on posteriors settled 40 ms after their frame (that setting's value when
+#: this was measured; it settles 80 ms after since) hears more phone onsets.
 #: Rule: the 1st percentile of the worst share of the right transcripts the alignment test
 #: keeps (0.465), less 0.05, rounded down to a tenth, on clips that are not the reported
 #: ones (GRID's database clips every 32nd from the 4th, 20, and the synthetic corpus'
